@@ -1,0 +1,1 @@
+//! Solid mechanics for femu.

@@ -1,0 +1,83 @@
+//! The resolved content of an Abaqus/CalculiX input deck, independent of the file syntax.
+//!
+//! Sets named in the deck are resolved to indices by the reader; what is left here is what a
+//! solver needs: the mesh, one material per element, boundary conditions and loads of one step.
+
+use crate::mesh::Mesh;
+
+/// A `*MATERIAL` with `*HYPERELASTIC, NEO HOOKE`: Abaqus form
+/// `W = C10 (I1bar - 3) + (1/D1) (J - 1)^2` (MPa, MPa^-1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct MaterialDef {
+    pub name: String,
+    pub c10: f64,
+    pub d1: f64,
+}
+
+/// A prescribed displacement of one degree of freedom (0 = x, 1 = y) of one node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundaryCondition {
+    pub node: usize,
+    pub dof: usize,
+    /// Prescribed displacement at the end of the step (mm).
+    pub value: f64,
+}
+
+/// A follower pressure (MPa) on face `face` (0-based: `P1` is 0) of element `element`;
+/// positive pushes into the element, as in Abaqus `*DLOAD ... Pn`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FacePressure {
+    pub element: usize,
+    pub face: usize,
+    pub magnitude: f64,
+}
+
+/// A concentrated force (N per mm of thickness) on one dof (0 = x, 1 = y) of one node.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointLoad {
+    pub node: usize,
+    pub dof: usize,
+    pub magnitude: f64,
+}
+
+/// `*STEP` / `*STATIC` settings (load-factor increments over the step period).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepDef {
+    pub nlgeom: bool,
+    /// Maximum number of increments (`INC=`, default 100 as in Abaqus).
+    pub max_increments: usize,
+    pub initial_increment: f64,
+    pub period: f64,
+    pub min_increment: f64,
+    pub max_increment: f64,
+}
+
+impl Default for StepDef {
+    fn default() -> Self {
+        StepDef {
+            nlgeom: true,
+            max_increments: 100,
+            initial_increment: 1.0,
+            period: 1.0,
+            min_increment: 1e-5,
+            max_increment: 1.0,
+        }
+    }
+}
+
+/// A deck resolved to indices: mesh, materials, one material per element, one static step.
+#[derive(Debug, Clone, Default)]
+pub struct Deck {
+    pub mesh: Mesh,
+    pub materials: Vec<MaterialDef>,
+    /// Index into `materials` for each element.
+    pub element_material: Vec<usize>,
+    /// Name of the region (the `*SOLID SECTION` ELSET) of each element, as an index into
+    /// `region_names`.
+    pub element_region: Vec<usize>,
+    pub region_names: Vec<String>,
+    pub step: StepDef,
+    pub boundaries: Vec<BoundaryCondition>,
+    pub pressures: Vec<FacePressure>,
+    pub point_loads: Vec<PointLoad>,
+}

@@ -1,0 +1,24 @@
+//! Mesh model and mesh I/O for `femu`.
+//!
+//! The first crate of the pipeline (geometry and mesh → mechanics → DIC → identification → report).
+//! It knows nothing about mechanics: a [`Mesh`] is nodes, elements and named sets, and a [`Deck`] is
+//! the resolved content of an Abaqus/CalculiX input deck (materials and loads as plain numbers).
+//!
+//! Node numbering of the elements (counter-clockwise, as in Abaqus):
+//!
+//! ```text
+//!   Quad4 (CPE4, CPE4H)          Tri3 (CPE3)
+//!   4 ---- P3 ---- 3              3
+//!   |              |              | \
+//!   P4            P2             P3   P2
+//!   |              |              |     \
+//!   1 ---- P1 ---- 2              1 -P1- 2
+//! ```
+//!
+//! Face `Pn` joins local nodes `n` and `n+1` (the last face closes back to node 1).
+
+pub mod deck;
+pub mod mesh;
+
+pub use deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
+pub use mesh::{Element, ElementKind, Mesh, MeshError};
