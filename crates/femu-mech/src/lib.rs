@@ -1,1 +1,21 @@
-//! Solid mechanics for femu.
+//! Finite-strain plane-strain solid mechanics for `femu`.
+//!
+//! - [`material`]: compressible Neo-Hookean (Abaqus form, seed Eq. 1), stress and tangent.
+//! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
+//! - [`load`]: follower pressure with load stiffness.
+//! - [`model`]: a checked model built from a resolved deck.
+//! - [`solver`]: incremental Newton–Raphson with line search and cut-back, sparse LU reused.
+//! - [`output`]: displacements CSV, VTU with LE and Cauchy stress, summary JSON.
+
+pub mod build;
+pub mod element;
+pub mod linear;
+pub mod load;
+pub mod material;
+pub mod model;
+pub mod reference;
+pub mod solver;
+
+pub use material::{Hyperelastic, NeoHookean};
+pub use model::{Model, ModelError};
+pub use solver::{SolveError, SolveReport, Solution, SolverOptions, StaticSolver};

@@ -1,0 +1,422 @@
+//! Plane-strain finite-strain solid elements: CPE4 (Q4, 2x2 Gauss), CPE4H (Q4 with constant
+//! pressure, mean dilatation), CPE3 (linear triangle).
+//!
+//! Total Lagrangian form. With `F = I + Σ_a u_a ⊗ ∇_X N_a` at each Gauss point, the element
+//! residual and tangent are
+//!
+//! ```text
+//! f_ai  = Σ_g w_g P_iJ ∂N_a/∂X_J
+//! K_aibk = Σ_g w_g A_iJkL ∂N_a/∂X_J ∂N_b/∂X_L
+//! ```
+//!
+//! Local dof `2a + i` is component `i` of local node `a`. Node order and faces are drawn in the
+//! `femu-mesh` crate documentation.
+
+use crate::material::{cof2, det2, Hyperelastic, NonPositiveJacobian, Tensor2, DCOF};
+use femu_mesh::ElementKind;
+
+/// Largest number of nodes of an element, and of local dofs.
+pub const MAX_NODES: usize = 4;
+pub const MAX_DOFS: usize = 8;
+
+/// Reference-configuration data of one integration point.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct GaussPoint {
+    /// `∂N_a/∂X_J` for each node a.
+    pub dn_dx: [[f64; 2]; MAX_NODES],
+    /// Gauss weight times the reference Jacobian determinant (area weight, mm²).
+    pub weight: f64,
+}
+
+/// Precomputed reference geometry of one element (computed once per mesh).
+#[derive(Debug, Clone, Copy)]
+pub struct ElementGeometry {
+    pub kind: ElementKind,
+    pub n_nodes: usize,
+    pub n_gauss: usize,
+    pub gauss: [GaussPoint; 4],
+    /// Reference area (mm²).
+    pub area: f64,
+}
+
+/// The element's reference map is singular or inverted at a Gauss point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BadReferenceGeometry {
+    pub gauss_point: usize,
+    pub det_j: f64,
+}
+
+const G: f64 = 0.577_350_269_189_625_8; // 1/sqrt(3)
+const QUAD_GAUSS: [[f64; 2]; 4] = [[-G, -G], [G, -G], [G, G], [-G, G]];
+
+/// Q4 shape-function derivatives with respect to (ξ, η) at a point.
+fn quad_dn_dxi(xi: f64, eta: f64) -> [[f64; 2]; 4] {
+    [
+        [-0.25 * (1.0 - eta), -0.25 * (1.0 - xi)],
+        [0.25 * (1.0 - eta), -0.25 * (1.0 + xi)],
+        [0.25 * (1.0 + eta), 0.25 * (1.0 + xi)],
+        [-0.25 * (1.0 + eta), 0.25 * (1.0 - xi)],
+    ]
+}
+
+/// Q4 shape functions at (ξ, η).
+pub fn quad_shape(xi: f64, eta: f64) -> [f64; 4] {
+    [
+        0.25 * (1.0 - xi) * (1.0 - eta),
+        0.25 * (1.0 + xi) * (1.0 - eta),
+        0.25 * (1.0 + xi) * (1.0 + eta),
+        0.25 * (1.0 - xi) * (1.0 + eta),
+    ]
+}
+
+fn gauss_point(x: &[[f64; 2]; MAX_NODES], dn: &[[f64; 2]], w: f64, g: usize) -> Result<GaussPoint, BadReferenceGeometry> {
+    // Jacobian of the reference map J0 = ∂X/∂ξ.
+    let mut j0 = [0.0; 4];
+    for (a, d) in dn.iter().enumerate() {
+        j0[0] += x[a][0] * d[0];
+        j0[1] += x[a][0] * d[1];
+        j0[2] += x[a][1] * d[0];
+        j0[3] += x[a][1] * d[1];
+    }
+    let det = det2(&j0);
+    if !(det > 0.0) {
+        return Err(BadReferenceGeometry { gauss_point: g, det_j: det });
+    }
+    // ∂N/∂X = ∂N/∂ξ J0^-1
+    let inv = [j0[3] / det, -j0[1] / det, -j0[2] / det, j0[0] / det];
+    let mut gp = GaussPoint { weight: w * det, ..Default::default() };
+    for (a, d) in dn.iter().enumerate() {
+        gp.dn_dx[a] = [d[0] * inv[0] + d[1] * inv[2], d[0] * inv[1] + d[1] * inv[3]];
+    }
+    Ok(gp)
+}
+
+impl ElementGeometry {
+    /// Computes the Gauss-point gradients and weights from the reference node coordinates.
+    pub fn new(kind: ElementKind, x: &[[f64; 2]; MAX_NODES]) -> Result<Self, BadReferenceGeometry> {
+        let mut geo = ElementGeometry {
+            kind,
+            n_nodes: kind.node_count(),
+            n_gauss: 0,
+            gauss: [GaussPoint::default(); 4],
+            area: 0.0,
+        };
+        match kind {
+            ElementKind::Cpe4 | ElementKind::Cpe4h => {
+                geo.n_gauss = 4;
+                for (g, p) in QUAD_GAUSS.iter().enumerate() {
+                    geo.gauss[g] = gauss_point(x, &quad_dn_dxi(p[0], p[1]), 1.0, g)?;
+                }
+            }
+            ElementKind::Cpe3 => {
+                geo.n_gauss = 1;
+                let dn = [[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0]];
+                geo.gauss[0] = gauss_point(x, &dn, 0.5, 0)?;
+            }
+        }
+        geo.area = geo.gauss[..geo.n_gauss].iter().map(|g| g.weight).sum();
+        Ok(geo)
+    }
+
+    /// Deformation gradient `[F11, F12, F21, F22]` at Gauss point g for local displacements u.
+    #[inline]
+    pub fn deformation_gradient(&self, g: usize, u: &[[f64; 2]]) -> Tensor2 {
+        let gp = &self.gauss[g];
+        let mut f = [1.0, 0.0, 0.0, 1.0];
+        for a in 0..self.n_nodes {
+            let d = gp.dn_dx[a];
+            f[0] += u[a][0] * d[0];
+            f[1] += u[a][0] * d[1];
+            f[2] += u[a][1] * d[0];
+            f[3] += u[a][1] * d[1];
+        }
+        f
+    }
+}
+
+/// What an element evaluation fills: energy, internal force and (optionally) tangent.
+pub struct ElementResult<'a> {
+    pub energy: f64,
+    /// Internal force, length `2 n_nodes`.
+    pub force: &'a mut [f64],
+    /// Tangent, row-major `2n x 2n`, or `None` when only the residual is needed.
+    pub stiffness: Option<&'a mut [f64]>,
+}
+
+/// An element formulation (one per deck element type).
+pub trait SolidElement: Sync {
+    /// Energy, internal force and tangent at local displacements `u`.
+    fn evaluate(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+        out: &mut ElementResult,
+    ) -> Result<(), NonPositiveJacobian>;
+
+    /// Element-average Cauchy stress `[σxx, σyy, σzz, σxy]` at local displacements `u`.
+    fn cauchy_stress(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+    ) -> Result<[f64; 4], NonPositiveJacobian>;
+}
+
+/// CPE4 and CPE3: displacement-only, every Gauss point evaluates the full material.
+#[derive(Debug, Clone, Copy)]
+pub struct DisplacementElement;
+
+/// CPE4H: Q4 displacements with a constant pressure per element (Q1P0, mean dilatation;
+/// Simo, Taylor & Pister 1985). The element energy is
+/// `Π_e = Σ_g w_g W_iso(F_g) + V_e U(θ)` with `θ = (1/V_e) Σ_g w_g J_g`;
+/// the pressure `p = U'(θ)` is condensed out, so only displacements remain.
+#[derive(Debug, Clone, Copy)]
+pub struct MeanDilatationElement;
+
+/// The formulation of a deck element type.
+pub fn formulation(kind: ElementKind) -> &'static dyn SolidElement {
+    match kind {
+        ElementKind::Cpe4 | ElementKind::Cpe3 => &DisplacementElement,
+        ElementKind::Cpe4h => &MeanDilatationElement,
+    }
+}
+
+/// Adds `w P:∇N` to the force and `w ∇N A ∇N` to the stiffness.
+#[inline]
+fn add_gauss_contribution(
+    n: usize,
+    dn: &[[f64; 2]; MAX_NODES],
+    w: f64,
+    pk1: &Tensor2,
+    tangent: Option<&[[f64; 4]; 4]>,
+    force: &mut [f64],
+    stiffness: Option<&mut [f64]>,
+) {
+    for a in 0..n {
+        force[2 * a] += w * (pk1[0] * dn[a][0] + pk1[1] * dn[a][1]);
+        force[2 * a + 1] += w * (pk1[2] * dn[a][0] + pk1[3] * dn[a][1]);
+    }
+    if let (Some(k), Some(at)) = (stiffness, tangent) {
+        let nd = 2 * n;
+        for a in 0..n {
+            for i in 0..2 {
+                let row = (2 * a + i) * nd;
+                for b in 0..n {
+                    for kk in 0..2 {
+                        let mut s = 0.0;
+                        for jj in 0..2 {
+                            for ll in 0..2 {
+                                s += at[2 * i + jj][2 * kk + ll] * dn[a][jj] * dn[b][ll];
+                            }
+                        }
+                        k[row + 2 * b + kk] += w * s;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl SolidElement for DisplacementElement {
+    fn evaluate(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+        out: &mut ElementResult,
+    ) -> Result<(), NonPositiveJacobian> {
+        let n = geo.n_nodes;
+        out.energy = 0.0;
+        out.force[..2 * n].fill(0.0);
+        let want_k = out.stiffness.is_some();
+        if let Some(k) = out.stiffness.as_deref_mut() {
+            k[..4 * n * n].fill(0.0);
+        }
+        for g in 0..geo.n_gauss {
+            let f = geo.deformation_gradient(g, u);
+            let r = mat.response(&f, want_k)?;
+            let gp = &geo.gauss[g];
+            out.energy += gp.weight * r.energy;
+            add_gauss_contribution(
+                n,
+                &gp.dn_dx,
+                gp.weight,
+                &r.pk1,
+                want_k.then_some(&r.tangent),
+                out.force,
+                out.stiffness.as_deref_mut(),
+            );
+        }
+        Ok(())
+    }
+
+    fn cauchy_stress(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+    ) -> Result<[f64; 4], NonPositiveJacobian> {
+        let mut s = [0.0; 4];
+        for g in 0..geo.n_gauss {
+            let f = geo.deformation_gradient(g, u);
+            let r = mat.response(&f, false)?;
+            let c = crate::material::cauchy_from_pk1(&f, &r.pk1, r.tau33);
+            let w = geo.gauss[g].weight / geo.area;
+            for k in 0..4 {
+                s[k] += w * c[k];
+            }
+        }
+        Ok(s)
+    }
+}
+
+impl MeanDilatationElement {
+    /// Mean dilatation θ of the element.
+    fn mean_dilatation(geo: &ElementGeometry, u: &[[f64; 2]]) -> Result<f64, NonPositiveJacobian> {
+        let mut theta = 0.0;
+        for g in 0..geo.n_gauss {
+            let j = det2(&geo.deformation_gradient(g, u));
+            if !(j > 0.0) {
+                return Err(NonPositiveJacobian(j));
+            }
+            theta += geo.gauss[g].weight * j;
+        }
+        Ok(theta / geo.area)
+    }
+}
+
+impl SolidElement for MeanDilatationElement {
+    fn evaluate(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+        out: &mut ElementResult,
+    ) -> Result<(), NonPositiveJacobian> {
+        let n = geo.n_nodes;
+        let nd = 2 * n;
+        out.force[..nd].fill(0.0);
+        let want_k = out.stiffness.is_some();
+        if let Some(k) = out.stiffness.as_deref_mut() {
+            k[..nd * nd].fill(0.0);
+        }
+        let theta = Self::mean_dilatation(geo, u)?;
+        let [uvol, p, dp] = mat.volumetric(theta);
+        out.energy = geo.area * uvol;
+        // g_ai = Σ_g w_g ∂J_g/∂u_ai = V_e ∂θ/∂u_ai
+        let mut gvec = [0.0; MAX_DOFS];
+        for g in 0..geo.n_gauss {
+            let gp = &geo.gauss[g];
+            let f = geo.deformation_gradient(g, u);
+            let r = mat.response_isochoric(&f, want_k)?;
+            out.energy += gp.weight * r.energy;
+            let c = cof2(&f);
+            // Pressure part of the stress, P_vol = p cof(F); tangent p dcof/dF.
+            let mut pk1 = r.pk1;
+            for k in 0..4 {
+                pk1[k] += p * c[k];
+            }
+            let mut at = r.tangent;
+            if want_k {
+                for (a, row) in at.iter_mut().enumerate() {
+                    for (b, v) in row.iter_mut().enumerate() {
+                        *v += p * DCOF[a][b];
+                    }
+                }
+            }
+            add_gauss_contribution(
+                n,
+                &gp.dn_dx,
+                gp.weight,
+                &pk1,
+                want_k.then_some(&at),
+                out.force,
+                out.stiffness.as_deref_mut(),
+            );
+            for a in 0..n {
+                let d = gp.dn_dx[a];
+                gvec[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
+                gvec[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
+            }
+        }
+        if let Some(k) = out.stiffness.as_deref_mut() {
+            let s = dp / geo.area;
+            for r in 0..nd {
+                for c in 0..nd {
+                    k[r * nd + c] += s * gvec[r] * gvec[c];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn cauchy_stress(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+    ) -> Result<[f64; 4], NonPositiveJacobian> {
+        let theta = Self::mean_dilatation(geo, u)?;
+        let p = mat.volumetric(theta)[1];
+        let mut s = [0.0; 4];
+        for g in 0..geo.n_gauss {
+            let f = geo.deformation_gradient(g, u);
+            let r = mat.response_isochoric(&f, false)?;
+            let c = crate::material::cauchy_from_pk1(&f, &r.pk1, r.tau33);
+            let w = geo.gauss[g].weight / geo.area;
+            for k in 0..4 {
+                s[k] += w * c[k];
+            }
+        }
+        s[0] += p;
+        s[1] += p;
+        s[2] += p;
+        Ok(s)
+    }
+}
+
+/// Element-average logarithmic strain `[LExx, LEyy, LEzz, LExy]`.
+pub fn element_log_strain(geo: &ElementGeometry, u: &[[f64; 2]]) -> [f64; 4] {
+    let mut s = [0.0; 4];
+    for g in 0..geo.n_gauss {
+        let le = crate::material::log_strain(&geo.deformation_gradient(g, u));
+        let w = geo.gauss[g].weight / geo.area;
+        for k in 0..4 {
+            s[k] += w * le[k];
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unit_square_geometry() {
+        let x = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]];
+        let geo = ElementGeometry::new(ElementKind::Cpe4, &x).unwrap();
+        assert!((geo.area - 2.0).abs() < 1e-14);
+        // Σ_a ∂N_a/∂X = 0 and Σ_a X_a ⊗ ∂N_a/∂X = I at every Gauss point.
+        for g in 0..4 {
+            let gp = &geo.gauss[g];
+            let mut m = [0.0; 4];
+            for a in 0..4 {
+                m[0] += x[a][0] * gp.dn_dx[a][0];
+                m[1] += x[a][0] * gp.dn_dx[a][1];
+                m[2] += x[a][1] * gp.dn_dx[a][0];
+                m[3] += x[a][1] * gp.dn_dx[a][1];
+            }
+            for (k, e) in [1.0, 0.0, 0.0, 1.0].iter().enumerate() {
+                assert!((m[k] - e).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn inverted_reference_element_is_reported() {
+        let x = [[0.0, 0.0], [0.0, 1.0], [1.0, 1.0], [1.0, 0.0]];
+        assert!(ElementGeometry::new(ElementKind::Cpe4, &x).is_err());
+    }
+}

@@ -1,0 +1,166 @@
+//! Sparse direct solver: faer's sparse LU, symbolic analysis once per pattern, numeric
+//! factorization per Newton iteration with a workspace allocated once.
+//!
+//! LU rather than Cholesky because follower pressure on an open boundary and (later) the
+//! force-controlled rigid bodies make the tangent unsymmetric.
+
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Conj, MatMut, Par};
+
+/// A compressed-sparse-column pattern (square), built once per mesh.
+#[derive(Debug, Clone)]
+pub struct CscPattern {
+    pub n: usize,
+    pub col_ptr: Vec<usize>,
+    pub row_idx: Vec<usize>,
+}
+
+impl CscPattern {
+    /// Builds the pattern from (row, col) pairs (duplicates allowed).
+    pub fn from_pairs(n: usize, pairs: &mut Vec<(usize, usize)>) -> Self {
+        pairs.sort_unstable_by_key(|&(r, c)| (c, r));
+        pairs.dedup();
+        let mut col_ptr = vec![0usize; n + 1];
+        let mut row_idx = Vec::with_capacity(pairs.len());
+        for &(r, c) in pairs.iter() {
+            col_ptr[c + 1] += 1;
+            row_idx.push(r);
+        }
+        for c in 0..n {
+            col_ptr[c + 1] += col_ptr[c];
+        }
+        CscPattern { n, col_ptr, row_idx }
+    }
+
+    /// Number of stored entries.
+    pub fn nnz(&self) -> usize {
+        self.row_idx.len()
+    }
+
+    /// Position of entry (r, c) in the value array.
+    pub fn position(&self, r: usize, c: usize) -> Option<usize> {
+        let range = self.col_ptr[c]..self.col_ptr[c + 1];
+        self.row_idx[range.clone()]
+            .binary_search(&r)
+            .ok()
+            .map(|k| range.start + k)
+    }
+
+    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
+        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
+    }
+
+    /// `y = A x` for values on this pattern.
+    pub fn mul_vec(&self, values: &[f64], x: &[f64], y: &mut [f64]) {
+        y.fill(0.0);
+        for c in 0..self.n {
+            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
+                y[self.row_idx[k]] += values[k] * x[c];
+            }
+        }
+    }
+}
+
+/// The linear solve failed (a singular tangent: a mechanism, or a structural instability).
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum LinearSolveError {
+    #[error("the tangent matrix is singular (no pivot at column {0})")]
+    Singular(usize),
+    #[error("sparse factorization failed: {0}")]
+    Other(String),
+}
+
+/// Sparse LU with reused symbolic factorization and workspace.
+pub struct SparseLu {
+    symbolic: SymbolicLu<usize>,
+    numeric: NumericLu<usize, f64>,
+    mem: MemBuffer,
+    par: Par,
+    factorized: bool,
+}
+
+impl std::fmt::Debug for SparseLu {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SparseLu").field("factorized", &self.factorized).finish()
+    }
+}
+
+impl SparseLu {
+    /// Symbolic analysis (column ordering, elimination structure) of `pattern`.
+    pub fn new(pattern: &CscPattern) -> Result<Self, LinearSolveError> {
+        let symbolic = factorize_symbolic_lu(pattern.symbolic(), Default::default())
+            .map_err(|e| LinearSolveError::Other(format!("{e:?}")))?;
+        let par = Par::rayon(0);
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_lu_scratch::<f64>(par, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, par),
+        ]);
+        Ok(SparseLu {
+            symbolic,
+            numeric: NumericLu::new(),
+            mem: MemBuffer::new(req),
+            par,
+            factorized: false,
+        })
+    }
+
+    /// Numeric factorization of the matrix with `values` on `pattern`.
+    pub fn factorize(&mut self, pattern: &CscPattern, values: &[f64]) -> Result<(), LinearSolveError> {
+        self.factorized = false;
+        let a = SparseColMatRef::new(pattern.symbolic(), values);
+        let stack = MemStack::new(&mut self.mem);
+        self.symbolic
+            .factorize_numeric_lu(&mut self.numeric, a, self.par, stack, Default::default())
+            .map_err(|e| match e {
+                faer::sparse::linalg::LuError::SymbolicSingular { index } => LinearSolveError::Singular(index),
+                other => LinearSolveError::Other(format!("{other:?}")),
+            })?;
+        self.factorized = true;
+        Ok(())
+    }
+
+    /// Solves `A x = rhs` in place with the last factorization.
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        assert!(self.factorized, "solve before factorize");
+        let n = rhs.len();
+        let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
+        let stack = MemStack::new(&mut self.mem);
+        lu.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1), self.par, stack);
+    }
+
+    /// Solves `A^T x = rhs` in place (adjoint sensitivities).
+    pub fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
+        assert!(self.factorized, "solve before factorize");
+        let n = rhs.len();
+        let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
+        let stack = MemStack::new(&mut self.mem);
+        lu.solve_transpose_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1), self.par, stack);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn solves_small_unsymmetric_system() {
+        // [[4, 1, 0], [2, 5, 1], [0, 1, 3]]
+        let mut pairs = vec![(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
+        let p = CscPattern::from_pairs(3, &mut pairs);
+        let mut v = vec![0.0; p.nnz()];
+        for &(r, c, x) in &[(0, 0, 4.0), (0, 1, 1.0), (1, 0, 2.0), (1, 1, 5.0), (1, 2, 1.0), (2, 1, 1.0), (2, 2, 3.0)] {
+            v[p.position(r, c).unwrap()] = x;
+        }
+        let mut lu = SparseLu::new(&p).unwrap();
+        lu.factorize(&p, &v).unwrap();
+        let x = [1.0, -2.0, 0.5];
+        let mut b = [0.0; 3];
+        p.mul_vec(&v, &x, &mut b);
+        lu.solve_in_place(&mut b);
+        for k in 0..3 {
+            assert!((b[k] - x[k]).abs() < 1e-13);
+        }
+    }
+}

@@ -1,0 +1,283 @@
+//! Hyperelastic materials for plane strain (F33 = 1).
+//!
+//! Every material is written through the invariants `I1 = tr(F^T F)` (3D, so it includes
+//! `F33^2 = 1`) and `J = det F`, which gives the first Piola–Kirchhoff stress and its consistent
+//! tangent in closed form:
+//!
+//! ```text
+//! P = 2 W_I F + W_J cof(F)
+//! A = dP/dF = 4 W_II F⊗F + 2 W_IJ (F⊗cof + cof⊗F) + W_JJ cof⊗cof + 2 W_I 𝕀 + W_J dcof/dF
+//! ```
+//!
+//! where `cof(F) = J F^-T` is linear in F in two dimensions. The isochoric and volumetric parts
+//! are kept apart so that the hybrid element (CPE4H) can replace `U(J)` by `U(θ)` with the
+//! element's mean dilatation θ.
+
+/// A 2x2 in-plane tensor stored row-major: `[F11, F12, F21, F22]`.
+pub type Tensor2 = [f64; 4];
+/// A fourth-order in-plane tensor `A[(iJ)][(kL)]`, indices as in [`Tensor2`].
+pub type Tensor4 = [[f64; 4]; 4];
+
+/// Determinant of a 2x2 tensor.
+#[inline]
+pub fn det2(f: &Tensor2) -> f64 {
+    f[0] * f[3] - f[1] * f[2]
+}
+
+/// Cofactor `J F^-T` of a 2x2 tensor (the derivative of `det F`).
+#[inline]
+pub fn cof2(f: &Tensor2) -> Tensor2 {
+    [f[3], -f[2], -f[1], f[0]]
+}
+
+/// `d cof(F)_α / d F_β` (constant in 2D): cof = [F22, -F21, -F12, F11].
+pub const DCOF: Tensor4 = [
+    [0.0, 0.0, 0.0, 1.0],
+    [0.0, 0.0, -1.0, 0.0],
+    [0.0, -1.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0, 0.0],
+];
+
+/// Energy, stress and tangent of a material point.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct StressResponse {
+    /// Strain energy density W (MPa).
+    pub energy: f64,
+    /// First Piola–Kirchhoff stress (in-plane).
+    pub pk1: Tensor2,
+    /// Kirchhoff stress `τ33 = F33 ∂W/∂F33` out of plane (the constraint stress of plane strain).
+    pub tau33: f64,
+    /// `dP/dF` (only filled when asked for).
+    pub tangent: Tensor4,
+}
+
+/// Derivatives of W with respect to the invariants (I1, J).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct InvariantDerivatives {
+    pub w: f64,
+    pub w_i: f64,
+    pub w_j: f64,
+    pub w_ii: f64,
+    pub w_ij: f64,
+    pub w_jj: f64,
+}
+
+/// Error of a material evaluation: the element is inverted at this point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NonPositiveJacobian(pub f64);
+
+/// A hyperelastic material of plane strain, split as `W = W_iso(F) + U(J)`.
+pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
+    /// Isochoric part through its invariant derivatives at `(I1, J)`.
+    fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives;
+    /// Volumetric part `(U, U', U'')` at J.
+    fn volumetric(&self, j: f64) -> [f64; 3];
+
+    /// Full energy, stress and (if `tangent`) consistent tangent at F.
+    fn response(
+        &self,
+        f: &Tensor2,
+        tangent: bool,
+    ) -> Result<StressResponse, NonPositiveJacobian> {
+        let j = det2(f);
+        if !(j > 0.0) {
+            return Err(NonPositiveJacobian(j));
+        }
+        let i1 = f.iter().map(|v| v * v).sum::<f64>() + 1.0;
+        let mut d = self.isochoric(i1, j);
+        let [u, du, ddu] = self.volumetric(j);
+        d.w += u;
+        d.w_j += du;
+        d.w_jj += ddu;
+        Ok(assemble_response(f, j, &d, tangent))
+    }
+
+    /// Isochoric energy, stress and tangent only (the hybrid element adds the volumetric part).
+    fn response_isochoric(
+        &self,
+        f: &Tensor2,
+        tangent: bool,
+    ) -> Result<StressResponse, NonPositiveJacobian> {
+        let j = det2(f);
+        if !(j > 0.0) {
+            return Err(NonPositiveJacobian(j));
+        }
+        let i1 = f.iter().map(|v| v * v).sum::<f64>() + 1.0;
+        let d = self.isochoric(i1, j);
+        Ok(assemble_response(f, j, &d, tangent))
+    }
+}
+
+/// Builds P, τ33 and A from the invariant derivatives (see the module documentation).
+fn assemble_response(f: &Tensor2, j: f64, d: &InvariantDerivatives, tangent: bool) -> StressResponse {
+    let c = cof2(f);
+    let mut pk1 = [0.0; 4];
+    for a in 0..4 {
+        pk1[a] = 2.0 * d.w_i * f[a] + d.w_j * c[a];
+    }
+    // τ33 = F33 ∂W/∂F33 with F33 = 1: ∂I1/∂F33 = 2 F33, ∂J3/∂F33 = J2 (J3 = J2 F33).
+    let tau33 = 2.0 * d.w_i + d.w_j * j;
+    let mut a4 = [[0.0; 4]; 4];
+    if tangent {
+        for a in 0..4 {
+            for b in 0..4 {
+                a4[a][b] = 4.0 * d.w_ii * f[a] * f[b]
+                    + 2.0 * d.w_ij * (f[a] * c[b] + c[a] * f[b])
+                    + d.w_jj * c[a] * c[b]
+                    + d.w_j * DCOF[a][b];
+            }
+            a4[a][a] += 2.0 * d.w_i;
+        }
+    }
+    StressResponse {
+        energy: d.w,
+        pk1,
+        tau33,
+        tangent: a4,
+    }
+}
+
+/// Compressible Neo-Hookean material in the Abaqus form (seed Eq. 1):
+/// `W = C10 (I1bar - 3) + (1/D) (J - 1)^2`, `I1bar = J^(-2/3) I1`.
+///
+/// Small-strain equivalents: shear modulus `μ = 2 C10`, bulk modulus `K = 2/D` (the seed's
+/// "K = D/2" is a typo). Units: C10 in MPa, D in MPa^-1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeoHookean {
+    pub c10: f64,
+    pub d: f64,
+}
+
+impl NeoHookean {
+    /// A Neo-Hookean material; C10 > 0 and D > 0 (compressible) are required.
+    pub fn new(c10: f64, d: f64) -> Result<Self, String> {
+        if !(c10 > 0.0 && c10.is_finite()) {
+            return Err(format!("C10 must be positive and finite, got {c10}"));
+        }
+        if !(d > 0.0 && d.is_finite()) {
+            return Err(format!("D must be positive and finite (compressible), got {d}"));
+        }
+        Ok(NeoHookean { c10, d })
+    }
+
+    /// Small-strain shear modulus μ = 2 C10 (MPa).
+    pub fn shear_modulus(&self) -> f64 {
+        2.0 * self.c10
+    }
+
+    /// Small-strain bulk modulus K = 2/D (MPa).
+    pub fn bulk_modulus(&self) -> f64 {
+        2.0 / self.d
+    }
+}
+
+impl Hyperelastic for NeoHookean {
+    fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
+        let jm23 = j.powf(-2.0 / 3.0);
+        let jm53 = jm23 / j;
+        let jm83 = jm53 / j;
+        InvariantDerivatives {
+            w: self.c10 * (jm23 * i1 - 3.0),
+            w_i: self.c10 * jm23,
+            w_j: -2.0 / 3.0 * self.c10 * i1 * jm53,
+            w_ii: 0.0,
+            w_ij: -2.0 / 3.0 * self.c10 * jm53,
+            w_jj: 10.0 / 9.0 * self.c10 * i1 * jm83,
+        }
+    }
+
+    fn volumetric(&self, j: f64) -> [f64; 3] {
+        let jm1 = j - 1.0;
+        [jm1 * jm1 / self.d, 2.0 * jm1 / self.d, 2.0 / self.d]
+    }
+}
+
+/// Cauchy stress `[σxx, σyy, σzz, σxy]` from a response at F (J = det F).
+pub fn cauchy_from_pk1(f: &Tensor2, pk1: &Tensor2, tau33: f64) -> [f64; 4] {
+    let j = det2(f);
+    // τ = P F^T
+    let txx = pk1[0] * f[0] + pk1[1] * f[1];
+    let txy = pk1[0] * f[2] + pk1[1] * f[3];
+    let tyy = pk1[2] * f[2] + pk1[3] * f[3];
+    [txx / j, tyy / j, tau33 / j, txy / j]
+}
+
+/// Logarithmic (Hencky) strain `LE = ln V = ½ ln(F F^T)` as `[LExx, LEyy, LEzz, LExy]`
+/// (LEzz = 0 in plane strain) — Abaqus' LE, shown in the seed's Fig. 3.
+pub fn log_strain(f: &Tensor2) -> [f64; 4] {
+    let bxx = f[0] * f[0] + f[1] * f[1];
+    let bxy = f[0] * f[2] + f[1] * f[3];
+    let byy = f[2] * f[2] + f[3] * f[3];
+    let mean = 0.5 * (bxx + byy);
+    let half_diff = 0.5 * (bxx - byy);
+    let r = (half_diff * half_diff + bxy * bxy).sqrt();
+    let l1 = mean + r;
+    let l2 = mean - r;
+    let (e1, e2) = (0.5 * l1.ln(), 0.5 * l2.ln());
+    if r < 1e-14 * mean.abs().max(1.0) {
+        return [e1, e1, 0.0, 0.0];
+    }
+    // Eigenvector of the larger eigenvalue: (cos φ, sin φ), 2φ = atan2(2 bxy, bxx - byy).
+    let phi = 0.5 * (2.0 * bxy).atan2(bxx - byy);
+    let (s, c) = phi.sin_cos();
+    [
+        e1 * c * c + e2 * s * s,
+        e1 * s * s + e2 * c * c,
+        0.0,
+        (e1 - e2) * s * c,
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mat() -> NeoHookean {
+        NeoHookean::new(1.75e-3, 18.0).unwrap()
+    }
+
+    #[test]
+    fn stress_free_reference() {
+        let r = mat().response(&[1.0, 0.0, 0.0, 1.0], true).unwrap();
+        assert!(r.energy.abs() < 1e-15);
+        assert!(r.pk1.iter().all(|v| v.abs() < 1e-15));
+        assert!(r.tau33.abs() < 1e-15);
+    }
+
+    #[test]
+    fn small_strain_moduli() {
+        // Uniaxial-strain-free simple shear γ: σxy ≈ μ γ with μ = 2 C10.
+        let m = mat();
+        let g = 1e-6;
+        let r = m.response(&[1.0, g, 0.0, 1.0], false).unwrap();
+        let s = cauchy_from_pk1(&[1.0, g, 0.0, 1.0], &r.pk1, r.tau33);
+        assert!((s[3] / g - m.shear_modulus()).abs() < 1e-6 * m.shear_modulus());
+        // Equibiaxial in-plane + plane strain: mean stress ≈ K (2 e) with volumetric strain 2 e.
+        let e = 1e-7;
+        let f = [1.0 + e, 0.0, 0.0, 1.0 + e];
+        let r = m.response(&f, false).unwrap();
+        let s = cauchy_from_pk1(&f, &r.pk1, r.tau33);
+        let p = (s[0] + s[1] + s[2]) / 3.0;
+        assert!((p / (2.0 * e) - m.bulk_modulus()).abs() < 1e-5 * m.bulk_modulus());
+    }
+
+    #[test]
+    fn log_strain_of_rotated_stretch() {
+        let (s, c) = 0.3f64.sin_cos();
+        // F = R diag(2, 0.5): V = R diag R^T, LE = R diag(ln 2, ln 0.5) R^T.
+        let f = [c * 2.0, -s * 0.5, s * 2.0, c * 0.5];
+        let le = log_strain(&f);
+        let (a, b) = (2f64.ln(), 0.5f64.ln());
+        let exp = [a * c * c + b * s * s, a * s * s + b * c * c, 0.0, (a - b) * s * c];
+        for k in 0..4 {
+            assert!((le[k] - exp[k]).abs() < 1e-12, "{k}: {le:?} vs {exp:?}");
+        }
+    }
+
+    #[test]
+    fn rejects_bad_parameters() {
+        assert!(NeoHookean::new(-1.0, 1.0).is_err());
+        assert!(NeoHookean::new(1.0, 0.0).is_err());
+        assert!(NeoHookean::new(f64::NAN, 1.0).is_err());
+    }
+}

@@ -1,0 +1,139 @@
+//! A mechanical model ready to solve: mesh, precomputed element geometry, materials per
+//! element, prescribed displacements and loads of one static step.
+
+use crate::element::{ElementGeometry, MAX_NODES};
+use crate::load::PressureFace;
+use crate::material::NeoHookean;
+use femu_mesh::{BoundaryCondition, Deck, Mesh, PointLoad, StepDef};
+
+/// Problems found while building a model.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("element {label}: the reference element is inverted or degenerate (det J = {det_j:.3e} at Gauss point {gauss_point})")]
+    InvertedElement { label: i64, gauss_point: usize, det_j: f64 },
+    #[error("material '{name}': {message}")]
+    BadMaterial { name: String, message: String },
+    #[error("element {label}: no material assigned")]
+    NoMaterial { label: i64 },
+    #[error("pressure on element {label}: face {face} does not exist")]
+    BadFace { label: i64, face: usize },
+    #[error("node {0}: prescribed dof must be 0 (x) or 1 (y)")]
+    BadDof(i64),
+    #[error("the model has no prescribed displacement: rigid-body motion is not restrained")]
+    Unrestrained,
+}
+
+/// A named material of the model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedMaterial {
+    pub name: String,
+    pub law: NeoHookean,
+}
+
+/// Everything the static solver needs.
+#[derive(Debug, Clone)]
+pub struct Model {
+    pub mesh: Mesh,
+    pub geometry: Vec<ElementGeometry>,
+    pub materials: Vec<NamedMaterial>,
+    pub element_material: Vec<usize>,
+    pub region_names: Vec<String>,
+    pub element_region: Vec<usize>,
+    pub constraints: Vec<BoundaryCondition>,
+    pub pressures: Vec<PressureFace>,
+    pub point_loads: Vec<PointLoad>,
+    pub step: StepDef,
+}
+
+impl Model {
+    /// Builds and checks a model from a resolved deck.
+    pub fn from_deck(deck: Deck) -> Result<Model, ModelError> {
+        let Deck {
+            mesh,
+            materials,
+            element_material,
+            element_region,
+            region_names,
+            step,
+            boundaries,
+            pressures,
+            point_loads,
+        } = deck;
+        let materials = materials
+            .into_iter()
+            .map(|m| {
+                NeoHookean::new(m.c10, m.d1)
+                    .map(|law| NamedMaterial { name: m.name.clone(), law })
+                    .map_err(|message| ModelError::BadMaterial { name: m.name, message })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut geometry = Vec::with_capacity(mesh.elements.len());
+        for (e, el) in mesh.elements.iter().enumerate() {
+            if element_material.get(e).is_none_or(|&m| m >= materials.len()) {
+                return Err(ModelError::NoMaterial { label: mesh.element_labels[e] });
+            }
+            let (x, _) = mesh.element_coords(e);
+            let geo = ElementGeometry::new(el.kind, &x).map_err(|b| ModelError::InvertedElement {
+                label: mesh.element_labels[e],
+                gauss_point: b.gauss_point + 1,
+                det_j: b.det_j,
+            })?;
+            geometry.push(geo);
+        }
+        let mut faces = Vec::with_capacity(pressures.len());
+        for p in &pressures {
+            let el = &mesh.elements[p.element];
+            if p.face >= el.face_count() {
+                return Err(ModelError::BadFace { label: mesh.element_labels[p.element], face: p.face + 1 });
+            }
+            let n = el.kind.node_count();
+            let local = [p.face, (p.face + 1) % n];
+            faces.push(PressureFace {
+                element: p.element,
+                local,
+                nodes: [el.conn[local[0]], el.conn[local[1]]],
+                pressure: p.magnitude,
+            });
+        }
+        for b in &boundaries {
+            if b.dof > 1 {
+                return Err(ModelError::BadDof(mesh.node_labels[b.node]));
+            }
+        }
+        if boundaries.is_empty() {
+            return Err(ModelError::Unrestrained);
+        }
+        Ok(Model {
+            mesh,
+            geometry,
+            materials,
+            element_material,
+            region_names,
+            element_region,
+            constraints: boundaries,
+            pressures: faces,
+            point_loads,
+            step,
+        })
+    }
+
+    /// Number of nodes.
+    pub fn node_count(&self) -> usize {
+        self.mesh.nodes.len()
+    }
+
+    /// Local displacements of element `e` gathered from the global vector `u` (2 per node).
+    #[inline]
+    pub fn gather(&self, e: usize, u: &[f64]) -> [[f64; 2]; MAX_NODES] {
+        let mut ue = [[0.0; 2]; MAX_NODES];
+        for (a, &n) in self.mesh.elements[e].nodes().iter().enumerate() {
+            ue[a] = [u[2 * n], u[2 * n + 1]];
+        }
+        ue
+    }
+
+    /// Sets the C10 and D of material `m` (used by identification and sensitivity studies).
+    pub fn set_material(&mut self, m: usize, law: NeoHookean) {
+        self.materials[m].law = law;
+    }
+}

@@ -1,0 +1,724 @@
+//! Static nonlinear solver: load increments, Newton–Raphson with line search and automatic
+//! cut-back, sparse LU whose pattern and symbolic analysis are built once per model.
+//!
+//! Residual `R(u, λ) = f_int(u) - λ f_ext(u)` on the free dofs; prescribed displacements are set
+//! to `λ ū` and eliminated. One increment converges when both
+//! `‖R‖₂ ≤ rtol · max(‖λ f_ext‖₂, ‖reactions‖₂)` and the energy norm
+//! `|δu · R| ≤ etol · |δu₀ · R₀|` hold (δu₀, R₀: first iteration of the increment).
+
+use crate::element::{formulation, ElementResult, MAX_DOFS};
+use crate::linear::{CscPattern, LinearSolveError, SparseLu};
+use crate::model::Model;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+const NONE: usize = usize::MAX;
+const KE: usize = MAX_DOFS * MAX_DOFS;
+
+/// Newton and increment settings.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct SolverOptions {
+    /// Relative force-residual tolerance.
+    pub residual_tolerance: f64,
+    /// Relative energy-norm tolerance.
+    pub energy_tolerance: f64,
+    /// Newton iterations per increment before a cut-back.
+    pub max_iterations: usize,
+    /// Backtracking line search on the directional residual.
+    pub line_search: bool,
+    /// Increment growth factor after an easy increment (≤ 5 iterations).
+    pub growth: f64,
+    /// Increment reduction factor on a cut-back (Abaqus uses 0.25).
+    pub cutback: f64,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        SolverOptions {
+            residual_tolerance: 1e-8,
+            energy_tolerance: 1e-16,
+            max_iterations: 20,
+            line_search: true,
+            growth: 1.5,
+            cutback: 0.25,
+        }
+    }
+}
+
+/// One Newton iteration, as printed in the Newton table.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct IterationRecord {
+    pub iteration: usize,
+    /// ‖R‖₂ on the free dofs after the iteration's update (N).
+    pub residual_norm: f64,
+    /// The force scale the residual is compared with (N).
+    pub reference_force: f64,
+    /// |δu · R| before the update (N·mm).
+    pub energy_norm: f64,
+    /// Line-search step length α.
+    pub step_length: f64,
+    /// max |δu| (mm).
+    pub max_correction: f64,
+}
+
+/// One attempted increment.
+#[derive(Debug, Clone, Serialize)]
+pub struct IncrementRecord {
+    pub increment: usize,
+    /// Load factor at the end of the increment (if converged).
+    pub lambda: f64,
+    pub dlambda: f64,
+    pub converged: bool,
+    /// Why the attempt was cut back, if it was.
+    pub failure: Option<String>,
+    pub iterations: Vec<IterationRecord>,
+}
+
+/// Diagnostics of a solve.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct SolveReport {
+    pub increments: Vec<IncrementRecord>,
+    pub converged_increments: usize,
+    pub cutbacks: usize,
+    pub newton_iterations: usize,
+    pub factorizations: usize,
+    pub equations: usize,
+    pub matrix_nonzeros: usize,
+    /// Load factor reached (1 when the step completed).
+    pub lambda: f64,
+    /// Sum of reaction forces on the prescribed dofs (N per mm).
+    pub reaction_total: [f64; 2],
+    pub wall_time_s: f64,
+    pub setup_time_s: f64,
+    /// Whether the solve started from a given displacement.
+    pub warm_start: bool,
+}
+
+/// A converged (or partially converged, see [`SolveError`]) state.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// Nodal displacements, `[ux0, uy0, ux1, uy1, ...]` (mm).
+    pub u: Vec<f64>,
+    /// Reaction forces at prescribed dofs (zero elsewhere), same layout (N per mm).
+    pub reactions: Vec<f64>,
+    pub report: SolveReport,
+}
+
+/// Why a solve did not reach the end of the step.
+#[derive(Debug, thiserror::Error)]
+pub enum SolveError {
+    #[error("Newton did not converge: {reason} (load factor reached {lambda:.4}, increment size {dlambda:.3e} below the minimum {min:.3e})")]
+    NotConverged {
+        reason: String,
+        lambda: f64,
+        dlambda: f64,
+        min: f64,
+        /// The last converged state and the full increment history.
+        partial: Box<Solution>,
+    },
+    #[error("more than {max} increments needed (load factor reached {lambda:.4})")]
+    TooManyIncrements { max: usize, lambda: f64, partial: Box<Solution> },
+    #[error("linear solver setup failed: {0}")]
+    Setup(#[from] LinearSolveError),
+}
+
+/// Why one Newton attempt failed (the increment is cut back).
+#[derive(Debug, Clone)]
+enum AttemptFailure {
+    Inverted { element_label: i64, det: f64 },
+    Singular(String),
+    Diverged(String),
+}
+
+impl std::fmt::Display for AttemptFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            AttemptFailure::Inverted { element_label, det } => {
+                write!(f, "element {element_label} inverted (J = {det:.3e})")
+            }
+            AttemptFailure::Singular(s) => write!(f, "{s}"),
+            AttemptFailure::Diverged(s) => write!(f, "{s}"),
+        }
+    }
+}
+
+/// The static solver of one model: dof numbering, sparse pattern, symbolic factorization and
+/// every buffer, built once; [`StaticSolver::solve`] can then be called many times (e.g. with
+/// other material parameters) without allocating inside Newton iterations.
+pub struct StaticSolver {
+    pub options: SolverOptions,
+    /// Equation number of each dof (`usize::MAX` for prescribed dofs).
+    eq: Vec<usize>,
+    n_eq: usize,
+    pattern: CscPattern,
+    /// For element e, `slots[e*64 + r*nd + c]` is the position of local entry (r, c) in `values`.
+    slots: Vec<usize>,
+    /// Pressure faces of each element (CSR: `face_ptr[e]..face_ptr[e+1]` into `face_idx`).
+    face_ptr: Vec<usize>,
+    face_idx: Vec<usize>,
+    /// Prescribed dofs and their end-of-step values.
+    prescribed: Vec<(usize, f64)>,
+    /// Dead nodal forces at λ = 1 (2 per node).
+    point_force: Vec<f64>,
+    ke: Vec<f64>,
+    fe: Vec<f64>,
+    /// Assembled tangent values on `pattern`.
+    values: Vec<f64>,
+    /// Full residual (2 per node): f_int - λ f_ext.
+    residual: Vec<f64>,
+    /// External force at the current state (2 per node), for the reference force.
+    fext: Vec<f64>,
+    rhs: Vec<f64>,
+    du: Vec<f64>,
+    u_trial: Vec<f64>,
+    u_conv: Vec<f64>,
+    u_prev: Vec<f64>,
+    lu: SparseLu,
+    setup_time_s: f64,
+}
+
+impl std::fmt::Debug for StaticSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("StaticSolver")
+            .field("equations", &self.n_eq)
+            .field("nonzeros", &self.pattern.nnz())
+            .finish()
+    }
+}
+
+impl StaticSolver {
+    /// Numbers the dofs, builds the sparse pattern and its symbolic LU.
+    pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
+        let t0 = Instant::now();
+        let n_dof = 2 * model.node_count();
+        let mut eq = vec![0usize; n_dof];
+        let mut prescribed = Vec::with_capacity(model.constraints.len());
+        for bc in &model.constraints {
+            let d = 2 * bc.node + bc.dof;
+            if eq[d] == NONE {
+                // A repeated condition: the last value wins, as in Abaqus.
+                if let Some(p) = prescribed.iter_mut().find(|p: &&mut (usize, f64)| p.0 == d) {
+                    p.1 = bc.value;
+                }
+                continue;
+            }
+            eq[d] = NONE;
+            prescribed.push((d, bc.value));
+        }
+        let mut n_eq = 0;
+        for e in eq.iter_mut() {
+            if *e != NONE {
+                *e = n_eq;
+                n_eq += 1;
+            }
+        }
+        let n_el = model.mesh.elements.len();
+        let mut pairs = Vec::with_capacity(n_el * KE);
+        let elem_eqs = |e: usize| {
+            let mut dofs = [NONE; MAX_DOFS];
+            for (a, &n) in model.mesh.elements[e].nodes().iter().enumerate() {
+                dofs[2 * a] = eq[2 * n];
+                dofs[2 * a + 1] = eq[2 * n + 1];
+            }
+            dofs
+        };
+        for e in 0..n_el {
+            let dofs = elem_eqs(e);
+            for &r in dofs.iter().filter(|&&r| r != NONE) {
+                for &c in dofs.iter().filter(|&&c| c != NONE) {
+                    pairs.push((r, c));
+                }
+            }
+        }
+        let pattern = CscPattern::from_pairs(n_eq, &mut pairs);
+        drop(pairs);
+        let mut slots = vec![NONE; n_el * KE];
+        for e in 0..n_el {
+            let dofs = elem_eqs(e);
+            let nd = 2 * model.mesh.elements[e].kind.node_count();
+            for r in 0..nd {
+                for c in 0..nd {
+                    if dofs[r] != NONE && dofs[c] != NONE {
+                        slots[e * KE + r * nd + c] = pattern.position(dofs[r], dofs[c]).expect("entry in pattern");
+                    }
+                }
+            }
+        }
+        let mut face_ptr = vec![0usize; n_el + 1];
+        for f in &model.pressures {
+            face_ptr[f.element + 1] += 1;
+        }
+        for e in 0..n_el {
+            face_ptr[e + 1] += face_ptr[e];
+        }
+        let mut fill = face_ptr.clone();
+        let mut face_idx = vec![0usize; model.pressures.len()];
+        for (k, f) in model.pressures.iter().enumerate() {
+            face_idx[fill[f.element]] = k;
+            fill[f.element] += 1;
+        }
+        let mut point_force = vec![0.0; n_dof];
+        for p in &model.point_loads {
+            point_force[2 * p.node + p.dof] += p.magnitude;
+        }
+        let lu = SparseLu::new(&pattern)?;
+        let nnz = pattern.nnz();
+        Ok(StaticSolver {
+            options,
+            eq,
+            n_eq,
+            pattern,
+            slots,
+            face_ptr,
+            face_idx,
+            prescribed,
+            point_force,
+            ke: vec![0.0; n_el * KE],
+            fe: vec![0.0; n_el * MAX_DOFS],
+            values: vec![0.0; nnz],
+            residual: vec![0.0; n_dof],
+            fext: vec![0.0; n_dof],
+            rhs: vec![0.0; n_eq],
+            du: vec![0.0; n_eq],
+            u_trial: vec![0.0; n_dof],
+            u_conv: vec![0.0; n_dof],
+            u_prev: vec![0.0; n_dof],
+            lu,
+            setup_time_s: t0.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Number of equations (free dofs).
+    pub fn equations(&self) -> usize {
+        self.n_eq
+    }
+
+    /// Equation number of each dof (`None` for a prescribed dof).
+    pub fn equation_of(&self, dof: usize) -> Option<usize> {
+        (self.eq[dof] != NONE).then_some(self.eq[dof])
+    }
+
+    /// The sparse pattern of the tangent on the free dofs.
+    pub fn pattern(&self) -> &CscPattern {
+        &self.pattern
+    }
+
+    /// Assembles the residual (always) and the tangent (if `with_tangent`) at `u`, load factor
+    /// `lambda`. Element loop in parallel; scatter serial.
+    fn assemble(&mut self, model: &Model, u: &[f64], lambda: f64, with_tangent: bool) -> Result<(), AttemptFailure> {
+        let face_ptr = &self.face_ptr;
+        let face_idx = &self.face_idx;
+        let failed = self
+            .fe
+            .par_chunks_mut(MAX_DOFS)
+            .zip(self.ke.par_chunks_mut(KE))
+            .enumerate()
+            .map(|(e, (fe, ke))| {
+                let geo = &model.geometry[e];
+                let ue = model.gather(e, u);
+                let mat = &model.materials[model.element_material[e]].law;
+                let mut out = ElementResult { energy: 0.0, force: fe, stiffness: with_tangent.then_some(ke) };
+                if let Err(j) = formulation(geo.kind).evaluate(geo, mat, &ue[..geo.n_nodes], &mut out) {
+                    return Some((e, j.0));
+                }
+                let nd = 2 * geo.n_nodes;
+                for &k in &face_idx[face_ptr[e]..face_ptr[e + 1]] {
+                    let face = &model.pressures[k];
+                    let [la, lb] = face.local;
+                    let [na, nb] = face.nodes;
+                    let xa = [model.mesh.nodes[na][0] + u[2 * na], model.mesh.nodes[na][1] + u[2 * na + 1]];
+                    let xb = [model.mesh.nodes[nb][0] + u[2 * nb], model.mesh.nodes[nb][1] + u[2 * nb + 1]];
+                    let f = face.external_force(xa, xb, lambda);
+                    let ld = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
+                    for i in 0..4 {
+                        out.force[ld[i]] -= f[i];
+                    }
+                    if let Some(k) = out.stiffness.as_deref_mut() {
+                        let kl = face.load_stiffness(lambda);
+                        for i in 0..4 {
+                            for j in 0..4 {
+                                k[ld[i] * nd + ld[j]] += kl[i][j];
+                            }
+                        }
+                    }
+                }
+                None
+            })
+            .find_any(|r| r.is_some())
+            .flatten();
+        if let Some((e, det)) = failed {
+            return Err(AttemptFailure::Inverted { element_label: model.mesh.element_labels[e], det });
+        }
+        // External force (for the reference force scale): pressure part recomputed cheaply.
+        self.fext.fill(0.0);
+        for face in &model.pressures {
+            let [na, nb] = face.nodes;
+            let xa = [model.mesh.nodes[na][0] + u[2 * na], model.mesh.nodes[na][1] + u[2 * na + 1]];
+            let xb = [model.mesh.nodes[nb][0] + u[2 * nb], model.mesh.nodes[nb][1] + u[2 * nb + 1]];
+            let f = face.external_force(xa, xb, lambda);
+            self.fext[2 * na] += f[0];
+            self.fext[2 * na + 1] += f[1];
+            self.fext[2 * nb] += f[2];
+            self.fext[2 * nb + 1] += f[3];
+        }
+        for (fx, p) in self.fext.iter_mut().zip(&self.point_force) {
+            *fx += lambda * p;
+        }
+        for (r, p) in self.residual.iter_mut().zip(&self.point_force) {
+            *r = -lambda * p;
+        }
+        if with_tangent {
+            self.values.fill(0.0);
+        }
+        for (e, el) in model.mesh.elements.iter().enumerate() {
+            let nd = 2 * el.kind.node_count();
+            let fe = &self.fe[e * MAX_DOFS..];
+            for (a, &n) in el.nodes().iter().enumerate() {
+                self.residual[2 * n] += fe[2 * a];
+                self.residual[2 * n + 1] += fe[2 * a + 1];
+            }
+            if with_tangent {
+                let ke = &self.ke[e * KE..e * KE + nd * nd];
+                let slots = &self.slots[e * KE..e * KE + nd * nd];
+                for (s, v) in slots.iter().zip(ke) {
+                    if *s != NONE {
+                        self.values[*s] += v;
+                    }
+                }
+            }
+        }
+        for (d, &q) in self.eq.iter().enumerate() {
+            if q != NONE {
+                self.rhs[q] = -self.residual[d];
+            }
+        }
+        Ok(())
+    }
+
+    /// ‖R‖ on free dofs and the reference force scale.
+    fn norms(&self) -> (f64, f64) {
+        let mut r2 = 0.0;
+        let mut f2 = 0.0;
+        let mut reac2 = 0.0;
+        for (d, &q) in self.eq.iter().enumerate() {
+            if q != NONE {
+                r2 += self.residual[d] * self.residual[d];
+                f2 += self.fext[d] * self.fext[d];
+            } else {
+                reac2 += self.residual[d] * self.residual[d];
+            }
+        }
+        (r2.sqrt(), f2.sqrt().max(reac2.sqrt()))
+    }
+
+    fn set_prescribed(&self, u: &mut [f64], lambda: f64) {
+        for &(d, v) in &self.prescribed {
+            u[d] = lambda * v;
+        }
+    }
+
+    fn add_free(&self, u: &[f64], alpha: f64, out: &mut [f64]) {
+        out.copy_from_slice(u);
+        for (d, &q) in self.eq.iter().enumerate() {
+            if q != NONE {
+                out[d] += alpha * self.du[q];
+            }
+        }
+    }
+
+    /// Newton iterations at load factor `lambda` starting from `u` (prescribed dofs already set).
+    fn newton(&mut self, model: &Model, u: &mut Vec<f64>, lambda: f64, record: &mut IncrementRecord) -> Result<(), AttemptFailure> {
+        let opt = self.options;
+        self.assemble(model, u, lambda, true)?;
+        let (mut rnorm, mut fref) = self.norms();
+        let floor = 1e-300;
+        let mut energy0 = 0.0;
+        for it in 0..opt.max_iterations {
+            if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
+                return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
+            }
+            self.lu
+                .factorize(&self.pattern, &self.values)
+                .map_err(|e| AttemptFailure::Singular(e.to_string()))?;
+            record.iterations.push(IterationRecord {
+                iteration: it + 1,
+                residual_norm: f64::NAN,
+                reference_force: fref,
+                energy_norm: 0.0,
+                step_length: 1.0,
+                max_correction: 0.0,
+            });
+            self.du.copy_from_slice(&self.rhs);
+            self.lu.solve_in_place(&mut self.du);
+            // s0 = δu · R (negative for a descent direction)
+            let s0: f64 = -self.du.iter().zip(&self.rhs).map(|(a, b)| a * b).sum::<f64>();
+            let energy = s0.abs();
+            if it == 0 {
+                energy0 = energy.max(floor);
+            }
+            let max_du = self.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if !max_du.is_finite() {
+                return Err(AttemptFailure::Diverged("non-finite Newton correction".into()));
+            }
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..8 {
+                let mut trial = std::mem::take(&mut self.u_trial);
+                self.add_free(u, alpha, &mut trial);
+                let res = self.assemble(model, &trial, lambda, true);
+                self.u_trial = trial;
+                match res {
+                    Err(AttemptFailure::Inverted { .. }) if opt.line_search => {
+                        alpha *= 0.5;
+                        continue;
+                    }
+                    Err(e) => return Err(e),
+                    Ok(()) => {}
+                }
+                let (rn, fr) = self.norms();
+                if !opt.line_search || rn < rnorm || !rn.is_finite() {
+                    accepted = rn.is_finite();
+                    if accepted {
+                        rnorm = rn;
+                        fref = fr;
+                    }
+                    break;
+                }
+                // s(α) = δu · R(u + α δu); accept when it dropped enough (Crisfield 0.8).
+                let s: f64 = -self.du.iter().zip(&self.rhs).map(|(a, b)| a * b).sum::<f64>();
+                if s.abs() <= 0.8 * s0.abs() || alpha < 0.02 {
+                    rnorm = rn;
+                    fref = fr;
+                    accepted = true;
+                    break;
+                }
+                let ratio = if (s0 - s).abs() > 0.0 { s0 / (s0 - s) } else { 0.5 };
+                alpha *= ratio.clamp(0.1, 0.9);
+            }
+            if !accepted {
+                return Err(AttemptFailure::Diverged(format!(
+                    "line search failed at iteration {} (|R| = {rnorm:.3e})",
+                    it + 1
+                )));
+            }
+            std::mem::swap(u, &mut self.u_trial);
+            let last = record.iterations.last_mut().expect("pushed above");
+            last.residual_norm = rnorm;
+            last.reference_force = fref;
+            last.energy_norm = energy;
+            last.step_length = alpha;
+            last.max_correction = alpha * max_du;
+            let res_ok = rnorm <= opt.residual_tolerance * fref.max(floor);
+            let energy_ok = energy * alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
+            let stagnated = rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor);
+            if (res_ok && energy_ok) || stagnated {
+                return Ok(());
+            }
+            if !rnorm.is_finite() || rnorm > 1e10 * fref.max(1e-12) {
+                return Err(AttemptFailure::Diverged(format!("residual blew up to {rnorm:.3e}")));
+            }
+        }
+        Err(AttemptFailure::Diverged(format!(
+            "{} iterations without convergence (|R| = {rnorm:.3e}, reference force {fref:.3e})",
+            opt.max_iterations
+        )))
+    }
+
+    /// Reaction forces (prescribed dofs) from the last assembly.
+    fn reactions(&self) -> Vec<f64> {
+        let mut r = vec![0.0; self.residual.len()];
+        for &(d, _) in &self.prescribed {
+            r[d] = self.residual[d];
+        }
+        r
+    }
+
+    fn solution(&self, u: &[f64], report: SolveReport) -> Solution {
+        let reactions = self.reactions();
+        let mut report = report;
+        report.reaction_total = [
+            reactions.iter().step_by(2).sum(),
+            reactions.iter().skip(1).step_by(2).sum(),
+        ];
+        Solution { u: u.to_vec(), reactions, report }
+    }
+
+    /// Solves the step of `model` from zero displacement.
+    pub fn solve(&mut self, model: &Model) -> Result<Solution, SolveError> {
+        self.solve_with(model, None, &mut |_| {})
+    }
+
+    /// Solves the step; `initial` (2 per node) is a warm start tried at the full load first
+    /// (the identification calls the solver many times with nearby parameters); `on_increment`
+    /// is called after every attempted increment (progress lines).
+    pub fn solve_with(
+        &mut self,
+        model: &Model,
+        initial: Option<&[f64]>,
+        on_increment: &mut dyn FnMut(&IncrementRecord),
+    ) -> Result<Solution, SolveError> {
+        let t0 = Instant::now();
+        let n_dof = 2 * model.node_count();
+        let mut report = SolveReport {
+            equations: self.n_eq,
+            matrix_nonzeros: self.pattern.nnz(),
+            setup_time_s: self.setup_time_s,
+            ..Default::default()
+        };
+        let mut u = vec![0.0; n_dof];
+        if let Some(u0) = initial {
+            report.warm_start = true;
+            u.copy_from_slice(u0);
+            self.set_prescribed(&mut u, 1.0);
+            let mut rec = IncrementRecord {
+                increment: 1,
+                lambda: 1.0,
+                dlambda: 1.0,
+                converged: false,
+                failure: None,
+                iterations: Vec::new(),
+            };
+            let outcome = self.newton(model, &mut u, 1.0, &mut rec);
+            rec.converged = outcome.is_ok();
+            rec.failure = outcome.as_ref().err().map(|e| format!("warm start: {e}"));
+            report.newton_iterations += rec.iterations.len();
+            report.factorizations += rec.iterations.len();
+            on_increment(&rec);
+            report.increments.push(rec);
+            if outcome.is_ok() {
+                report.converged_increments = 1;
+                report.lambda = 1.0;
+                report.wall_time_s = t0.elapsed().as_secs_f64();
+                return Ok(self.solution(&u, report));
+            }
+            report.cutbacks += 1;
+            u.fill(0.0);
+        }
+        let step = model.step;
+        let period = if step.period > 0.0 { step.period } else { 1.0 };
+        let min_inc = (step.min_increment / period).max(1e-12);
+        let max_inc = (step.max_increment / period).clamp(min_inc, 1.0);
+        let mut dlambda = (step.initial_increment / period).clamp(min_inc, max_inc);
+        let mut lambda = 0.0;
+        let mut last_dlambda = 0.0;
+        self.u_conv.fill(0.0);
+        self.u_prev.fill(0.0);
+        let mut increment = 0;
+        let mut attempts = 0;
+        while lambda < 1.0 - 1e-12 {
+            attempts += 1;
+            if report.converged_increments >= step.max_increments.max(1) || attempts > 10 * step.max_increments.max(1) {
+                report.lambda = lambda;
+                report.wall_time_s = t0.elapsed().as_secs_f64();
+                let partial = Box::new(self.solution(&self.u_conv.clone(), report));
+                return Err(SolveError::TooManyIncrements { max: step.max_increments, lambda, partial });
+            }
+            increment += 1;
+            let target = (lambda + dlambda).min(1.0);
+            let dl = target - lambda;
+            // Predictor: linear extrapolation of the last converged increment.
+            u.copy_from_slice(&self.u_conv);
+            if last_dlambda > 0.0 {
+                let s = dl / last_dlambda;
+                for d in 0..n_dof {
+                    u[d] += s * (self.u_conv[d] - self.u_prev[d]);
+                }
+            }
+            self.set_prescribed(&mut u, target);
+            let mut rec = IncrementRecord {
+                increment,
+                lambda: target,
+                dlambda: dl,
+                converged: false,
+                failure: None,
+                iterations: Vec::new(),
+            };
+            let mut outcome = self.newton(model, &mut u, target, &mut rec);
+            if outcome.is_err() && last_dlambda > 0.0 && rec.iterations.is_empty() {
+                // The extrapolated predictor inverted an element: retry from the last state.
+                u.copy_from_slice(&self.u_conv);
+                self.set_prescribed(&mut u, target);
+                outcome = self.newton(model, &mut u, target, &mut rec);
+            }
+            report.newton_iterations += rec.iterations.len();
+            report.factorizations += rec.iterations.len();
+            match outcome {
+                Ok(()) => {
+                    rec.converged = true;
+                    let iters = rec.iterations.len();
+                    on_increment(&rec);
+                    report.increments.push(rec);
+                    report.converged_increments += 1;
+                    std::mem::swap(&mut self.u_prev, &mut self.u_conv);
+                    self.u_conv.copy_from_slice(&u);
+                    lambda = target;
+                    last_dlambda = dl;
+                    if iters <= 5 {
+                        dlambda = (dl * self.options.growth).min(max_inc);
+                    } else {
+                        dlambda = dl;
+                    }
+                }
+                Err(failure) => {
+                    rec.failure = Some(failure.to_string());
+                    on_increment(&rec);
+                    report.increments.push(rec);
+                    report.cutbacks += 1;
+                    dlambda = dl * self.options.cutback;
+                    if dlambda < min_inc {
+                        // Re-assemble at the last converged state so reactions are consistent.
+                        let uc = self.u_conv.clone();
+                        let _ = self.assemble(model, &uc, lambda, false);
+                        report.lambda = lambda;
+                        report.wall_time_s = t0.elapsed().as_secs_f64();
+                        let partial = Box::new(self.solution(&uc, report));
+                        return Err(SolveError::NotConverged {
+                            reason: failure.to_string(),
+                            lambda,
+                            dlambda,
+                            min: min_inc,
+                            partial,
+                        });
+                    }
+                }
+            }
+        }
+        report.lambda = 1.0;
+        report.wall_time_s = t0.elapsed().as_secs_f64();
+        Ok(self.solution(&u, report))
+    }
+
+    /// Assembles residual and tangent at a given state (λ = 1) and factorizes the tangent, so
+    /// that [`StaticSolver::solve_tangent`] can be used (sensitivities).
+    pub fn factorize_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
+        self.assemble(model, u, 1.0, true).map_err(|e| e.to_string())?;
+        self.lu.factorize(&self.pattern, &self.values).map_err(|e| e.to_string())
+    }
+
+    /// Solves `K_T x = rhs` on the free dofs with the last factorized tangent.
+    pub fn solve_tangent(&mut self, rhs: &mut [f64]) {
+        self.lu.solve_in_place(rhs);
+    }
+
+    /// The full residual `f_int - λ f_ext` (2 per node) at the last assembled state.
+    pub fn residual(&self) -> &[f64] {
+        &self.residual
+    }
+
+    /// Assembles only the residual at `u` and λ = 1 and returns it (2 per node).
+    pub fn residual_at(&mut self, model: &Model, u: &[f64]) -> Result<&[f64], String> {
+        self.assemble(model, u, 1.0, false).map_err(|e| e.to_string())?;
+        Ok(&self.residual)
+    }
+
+    /// The tangent on the free dofs at the last assembly with tangent (values on [`Self::pattern`]).
+    pub fn tangent_values(&self) -> &[f64] {
+        &self.values
+    }
+
+    /// Assembles residual and tangent at `u`, λ = 1 (for derivative checks).
+    pub fn assemble_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
+        self.assemble(model, u, 1.0, true).map_err(|e| e.to_string())
+    }
+}
