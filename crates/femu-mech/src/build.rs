@@ -31,9 +31,19 @@ impl DeckBuilder {
     /// the set becomes a region of the same name.
     pub fn material(mut self, elset: &str, c10: f64, d: f64) -> Self {
         let m = self.deck.materials.len();
-        self.deck.materials.push(MaterialDef { name: elset.to_string(), c10, d1: d });
+        self.deck.materials.push(MaterialDef {
+            name: elset.to_string(),
+            c10,
+            d1: d,
+        });
         self.deck.region_names.push(elset.to_string());
-        let set = self.deck.mesh.element_sets.get(elset).cloned().unwrap_or_default();
+        let set = self
+            .deck
+            .mesh
+            .element_sets
+            .get(elset)
+            .cloned()
+            .unwrap_or_default();
         for e in set {
             self.deck.element_material[e] = m;
             self.deck.element_region[e] = m;
@@ -44,24 +54,45 @@ impl DeckBuilder {
     /// The same material on every element (region `ALL`).
     pub fn material_everywhere(mut self, c10: f64, d: f64) -> Self {
         let n = self.deck.mesh.elements.len();
-        self.deck.mesh.element_sets.insert("ALL".into(), (0..n).collect());
+        self.deck
+            .mesh
+            .element_sets
+            .insert("ALL".into(), (0..n).collect());
         self.material("ALL", c10, d)
     }
 
     /// Prescribes displacement `value` on dof `dof` (0 = x, 1 = y) of every node of `nset`.
     pub fn displacement(mut self, nset: &str, dof: usize, value: f64) -> Self {
-        for &node in self.deck.mesh.node_sets.get(nset).map(Vec::as_slice).unwrap_or(&[]) {
-            self.deck.boundaries.push(BoundaryCondition { node, dof, value });
+        for &node in self
+            .deck
+            .mesh
+            .node_sets
+            .get(nset)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
+        {
+            self.deck
+                .boundaries
+                .push(BoundaryCondition { node, dof, value });
         }
         self
     }
 
     /// Prescribes a displacement computed from the reference position on every node of `nset`.
     pub fn displacement_field(mut self, nset: &str, f: impl Fn([f64; 2]) -> [f64; 2]) -> Self {
-        for &node in self.deck.mesh.node_sets.get(nset).map(Vec::as_slice).unwrap_or(&[]) {
+        for &node in self
+            .deck
+            .mesh
+            .node_sets
+            .get(nset)
+            .map(Vec::as_slice)
+            .unwrap_or(&[])
+        {
             let u = f(self.deck.mesh.nodes[node]);
             for (dof, value) in u.into_iter().enumerate() {
-                self.deck.boundaries.push(BoundaryCondition { node, dof, value });
+                self.deck
+                    .boundaries
+                    .push(BoundaryCondition { node, dof, value });
             }
         }
         self
@@ -75,7 +106,11 @@ impl DeckBuilder {
     /// Follower pressure `p` (MPa) on every face of surface `surface`.
     pub fn pressure(mut self, surface: &str, p: f64) -> Self {
         for &(element, face) in self.surfaces.get(surface).map(Vec::as_slice).unwrap_or(&[]) {
-            self.deck.pressures.push(FacePressure { element, face, magnitude: p });
+            self.deck.pressures.push(FacePressure {
+                element,
+                face,
+                magnitude: p,
+            });
         }
         self
     }

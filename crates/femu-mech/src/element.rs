@@ -69,7 +69,12 @@ pub fn quad_shape(xi: f64, eta: f64) -> [f64; 4] {
     ]
 }
 
-fn gauss_point(x: &[[f64; 2]; MAX_NODES], dn: &[[f64; 2]], w: f64, g: usize) -> Result<GaussPoint, BadReferenceGeometry> {
+fn gauss_point(
+    x: &[[f64; 2]; MAX_NODES],
+    dn: &[[f64; 2]],
+    w: f64,
+    g: usize,
+) -> Result<GaussPoint, BadReferenceGeometry> {
     // Jacobian of the reference map J0 = ∂X/∂ξ.
     let mut j0 = [0.0; 4];
     for (a, d) in dn.iter().enumerate() {
@@ -80,11 +85,17 @@ fn gauss_point(x: &[[f64; 2]; MAX_NODES], dn: &[[f64; 2]], w: f64, g: usize) -> 
     }
     let det = det2(&j0);
     if !(det > 0.0) {
-        return Err(BadReferenceGeometry { gauss_point: g, det_j: det });
+        return Err(BadReferenceGeometry {
+            gauss_point: g,
+            det_j: det,
+        });
     }
     // ∂N/∂X = ∂N/∂ξ J0^-1
     let inv = [j0[3] / det, -j0[1] / det, -j0[2] / det, j0[0] / det];
-    let mut gp = GaussPoint { weight: w * det, ..Default::default() };
+    let mut gp = GaussPoint {
+        weight: w * det,
+        ..Default::default()
+    };
     for (a, d) in dn.iter().enumerate() {
         gp.dn_dx[a] = [d[0] * inv[0] + d[1] * inv[2], d[0] * inv[1] + d[1] * inv[3]];
     }

@@ -18,4 +18,4 @@ pub mod solver;
 
 pub use material::{Hyperelastic, NeoHookean};
 pub use model::{Model, ModelError};
-pub use solver::{SolveError, SolveReport, Solution, SolverOptions, StaticSolver};
+pub use solver::{Solution, SolveError, SolveReport, SolverOptions, StaticSolver};

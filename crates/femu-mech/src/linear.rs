@@ -1,12 +1,18 @@
 //! Sparse direct solver: faer's sparse LU, symbolic analysis once per pattern, numeric
 //! factorization per Newton iteration with a workspace allocated once.
 //!
-//! LU rather than Cholesky because follower pressure on an open boundary and (later) the
-//! force-controlled rigid bodies make the tangent unsymmetric.
+//! [`TangentSolver`] checks the symmetry of every tangent: a symmetric one (hyperelastic
+//! elements, dead loads, follower pressure on closed outlines, which is conservative) is
+//! factorized by supernodal LDLᵀ with an AMD ordering; an unsymmetric one (pressure on part of an
+//! outline, force-controlled rigid bodies) by sparse LU with partial pivoting.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, LdltRef, SymbolicCholesky, SymmetricOrdering,
+};
 use faer::sparse::linalg::lu::{factorize_symbolic_lu, LuRef, NumericLu, SymbolicLu};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::Side;
 use faer::{Conj, MatMut, Par};
 
 /// A compressed-sparse-column pattern (square), built once per mesh.
@@ -31,7 +37,11 @@ impl CscPattern {
         for c in 0..n {
             col_ptr[c + 1] += col_ptr[c];
         }
-        CscPattern { n, col_ptr, row_idx }
+        CscPattern {
+            n,
+            col_ptr,
+            row_idx,
+        }
     }
 
     /// Number of stored entries.
@@ -83,7 +93,9 @@ pub struct SparseLu {
 
 impl std::fmt::Debug for SparseLu {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SparseLu").field("factorized", &self.factorized).finish()
+        f.debug_struct("SparseLu")
+            .field("factorized", &self.factorized)
+            .finish()
     }
 }
 
@@ -107,14 +119,20 @@ impl SparseLu {
     }
 
     /// Numeric factorization of the matrix with `values` on `pattern`.
-    pub fn factorize(&mut self, pattern: &CscPattern, values: &[f64]) -> Result<(), LinearSolveError> {
+    pub fn factorize(
+        &mut self,
+        pattern: &CscPattern,
+        values: &[f64],
+    ) -> Result<(), LinearSolveError> {
         self.factorized = false;
         let a = SparseColMatRef::new(pattern.symbolic(), values);
         let stack = MemStack::new(&mut self.mem);
         self.symbolic
             .factorize_numeric_lu(&mut self.numeric, a, self.par, stack, Default::default())
             .map_err(|e| match e {
-                faer::sparse::linalg::LuError::SymbolicSingular { index } => LinearSolveError::Singular(index),
+                faer::sparse::linalg::LuError::SymbolicSingular { index } => {
+                    LinearSolveError::Singular(index)
+                }
                 other => LinearSolveError::Other(format!("{other:?}")),
             })?;
         self.factorized = true;
@@ -127,7 +145,12 @@ impl SparseLu {
         let n = rhs.len();
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
         let stack = MemStack::new(&mut self.mem);
-        lu.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1), self.par, stack);
+        lu.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            self.par,
+            stack,
+        );
     }
 
     /// Solves `A^T x = rhs` in place (adjoint sensitivities).
@@ -136,7 +159,205 @@ impl SparseLu {
         let n = rhs.len();
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
         let stack = MemStack::new(&mut self.mem);
-        lu.solve_transpose_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1), self.par, stack);
+        lu.solve_transpose_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            self.par,
+            stack,
+        );
+    }
+}
+
+/// Sparse LDLᵀ (no pivoting; for symmetric tangents, definite or mildly indefinite).
+pub struct SparseLdlt {
+    symbolic: SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    mem: MemBuffer,
+    par: Par,
+    factorized: bool,
+}
+
+impl SparseLdlt {
+    /// Symbolic analysis with an approximate-minimum-degree ordering; only the lower triangle of
+    /// the pattern is read.
+    pub fn new(pattern: &CscPattern) -> Result<Self, LinearSolveError> {
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            Default::default(),
+        )
+        .map_err(|e| LinearSolveError::Other(format!("{e:?}")))?;
+        let par = Par::rayon(0);
+        let req = StackReq::any_of(&[
+            symbolic.factorize_numeric_ldlt_scratch::<f64>(par, Default::default()),
+            symbolic.solve_in_place_scratch::<f64>(1, par),
+        ]);
+        Ok(SparseLdlt {
+            l_values: vec![0.0; symbolic.len_val()],
+            symbolic,
+            mem: MemBuffer::new(req),
+            par,
+            factorized: false,
+        })
+    }
+
+    /// Numeric factorization (lower triangle of `values`).
+    pub fn factorize(
+        &mut self,
+        pattern: &CscPattern,
+        values: &[f64],
+    ) -> Result<(), LinearSolveError> {
+        self.factorized = false;
+        let a = SparseColMatRef::new(pattern.symbolic(), values);
+        let stack = MemStack::new(&mut self.mem);
+        self.symbolic
+            .factorize_numeric_ldlt(
+                &mut self.l_values,
+                a,
+                Side::Lower,
+                Default::default(),
+                self.par,
+                stack,
+                Default::default(),
+            )
+            .map_err(|e| LinearSolveError::Other(format!("LDLT: {e:?}")))?;
+        if self.l_values.iter().any(|v| !v.is_finite()) {
+            return Err(LinearSolveError::Other(
+                "LDLT produced non-finite factors".into(),
+            ));
+        }
+        self.factorized = true;
+        Ok(())
+    }
+
+    /// Solves `A x = rhs` in place.
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        assert!(self.factorized, "solve before factorize");
+        let n = rhs.len();
+        let ldlt = LdltRef::new(&self.symbolic, &self.l_values);
+        let stack = MemStack::new(&mut self.mem);
+        ldlt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            self.par,
+            stack,
+        );
+    }
+}
+
+/// Which factorization the last [`TangentSolver::factorize`] used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub enum Factorization {
+    Ldlt,
+    Lu,
+}
+
+/// Factorizes Newton tangents on one pattern, choosing LDLᵀ for symmetric values and LU
+/// otherwise; both symbolic analyses are made at most once.
+pub struct TangentSolver {
+    /// Position of the transposed entry of each stored entry.
+    transpose: Vec<usize>,
+    ldlt: SparseLdlt,
+    lu: Option<SparseLu>,
+    last: Option<Factorization>,
+    /// Relative asymmetry above which LU is used.
+    pub symmetry_tolerance: f64,
+}
+
+impl std::fmt::Debug for TangentSolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TangentSolver")
+            .field("last", &self.last)
+            .finish()
+    }
+}
+
+impl TangentSolver {
+    /// Symbolic analysis for `pattern` (structurally symmetric).
+    pub fn new(pattern: &CscPattern) -> Result<Self, LinearSolveError> {
+        let mut transpose = vec![usize::MAX; pattern.nnz()];
+        for c in 0..pattern.n {
+            for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
+                let r = pattern.row_idx[k];
+                transpose[k] = pattern.position(c, r).ok_or_else(|| {
+                    LinearSolveError::Other("pattern is not structurally symmetric".into())
+                })?;
+            }
+        }
+        Ok(TangentSolver {
+            transpose,
+            ldlt: SparseLdlt::new(pattern)?,
+            lu: None,
+            last: None,
+            symmetry_tolerance: 1e-12,
+        })
+    }
+
+    /// max |A - Aᵀ| / max |A|.
+    pub fn asymmetry(&self, values: &[f64]) -> f64 {
+        let mut amax = 0.0f64;
+        let mut dmax = 0.0f64;
+        for (k, &t) in self.transpose.iter().enumerate() {
+            amax = amax.max(values[k].abs());
+            dmax = dmax.max((values[k] - values[t]).abs());
+        }
+        if amax > 0.0 {
+            dmax / amax
+        } else {
+            0.0
+        }
+    }
+
+    /// Factorizes `values`: LDLᵀ if symmetric and it succeeds, LU otherwise.
+    pub fn factorize(
+        &mut self,
+        pattern: &CscPattern,
+        values: &[f64],
+    ) -> Result<Factorization, LinearSolveError> {
+        self.last = None;
+        if self.asymmetry(values) <= self.symmetry_tolerance
+            && self.ldlt.factorize(pattern, values).is_ok()
+        {
+            self.last = Some(Factorization::Ldlt);
+            return Ok(Factorization::Ldlt);
+        }
+        if self.lu.is_none() {
+            self.lu = Some(SparseLu::new(pattern)?);
+        }
+        self.lu
+            .as_mut()
+            .expect("created above")
+            .factorize(pattern, values)?;
+        self.last = Some(Factorization::Lu);
+        Ok(Factorization::Lu)
+    }
+
+    /// Solves `A x = rhs` in place with the last factorization.
+    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        match self.last {
+            Some(Factorization::Ldlt) => self.ldlt.solve_in_place(rhs),
+            Some(Factorization::Lu) => self.lu.as_mut().expect("factorized").solve_in_place(rhs),
+            None => panic!("solve before factorize"),
+        }
+    }
+
+    /// Solves `Aᵀ x = rhs` in place with the last factorization.
+    pub fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
+        match self.last {
+            Some(Factorization::Ldlt) => self.ldlt.solve_in_place(rhs),
+            Some(Factorization::Lu) => self
+                .lu
+                .as_mut()
+                .expect("factorized")
+                .solve_transpose_in_place(rhs),
+            None => panic!("solve before factorize"),
+        }
+    }
+
+    /// The factorization used last.
+    pub fn last(&self) -> Option<Factorization> {
+        self.last
     }
 }
 
@@ -150,7 +371,15 @@ mod tests {
         let mut pairs = vec![(0, 0), (0, 1), (1, 0), (1, 1), (1, 2), (2, 1), (2, 2)];
         let p = CscPattern::from_pairs(3, &mut pairs);
         let mut v = vec![0.0; p.nnz()];
-        for &(r, c, x) in &[(0, 0, 4.0), (0, 1, 1.0), (1, 0, 2.0), (1, 1, 5.0), (1, 2, 1.0), (2, 1, 1.0), (2, 2, 3.0)] {
+        for &(r, c, x) in &[
+            (0, 0, 4.0),
+            (0, 1, 1.0),
+            (1, 0, 2.0),
+            (1, 1, 5.0),
+            (1, 2, 1.0),
+            (2, 1, 1.0),
+            (2, 2, 3.0),
+        ] {
             v[p.position(r, c).unwrap()] = x;
         }
         let mut lu = SparseLu::new(&p).unwrap();
@@ -162,5 +391,17 @@ mod tests {
         for k in 0..3 {
             assert!((b[k] - x[k]).abs() < 1e-13);
         }
+        let mut ts = TangentSolver::new(&p).unwrap();
+        assert_eq!(ts.factorize(&p, &v).unwrap(), Factorization::Lu);
+        p.mul_vec(&v, &x, &mut b);
+        ts.solve_in_place(&mut b);
+        assert!(b.iter().zip(&x).all(|(a, e)| (a - e).abs() < 1e-13));
+        // Symmetrize: LDLT is chosen.
+        v[p.position(1, 0).unwrap()] = 1.0;
+        v[p.position(2, 1).unwrap()] = 1.0;
+        assert_eq!(ts.factorize(&p, &v).unwrap(), Factorization::Ldlt);
+        p.mul_vec(&v, &x, &mut b);
+        ts.solve_in_place(&mut b);
+        assert!(b.iter().zip(&x).all(|(a, e)| (a - e).abs() < 1e-13));
     }
 }

@@ -47,14 +47,24 @@ mod tests {
     #[test]
     fn pressure_on_bottom_face_pushes_up() {
         // Bottom face of a CCW element runs +x; pressure pushes into the element (+y).
-        let f = PressureFace { element: 0, local: [0, 1], nodes: [0, 1], pressure: 2.0 };
+        let f = PressureFace {
+            element: 0,
+            local: [0, 1],
+            nodes: [0, 1],
+            pressure: 2.0,
+        };
         let r = f.external_force([0.0, 0.0], [3.0, 0.0], 1.0);
         assert_eq!(r, [0.0, 3.0, 0.0, 3.0]);
     }
 
     #[test]
     fn load_stiffness_matches_finite_differences() {
-        let f = PressureFace { element: 0, local: [0, 1], nodes: [0, 1], pressure: 0.7 };
+        let f = PressureFace {
+            element: 0,
+            local: [0, 1],
+            nodes: [0, 1],
+            pressure: 0.7,
+        };
         let x = [0.3, -0.2, 1.4, 0.5];
         let k = f.load_stiffness(0.9);
         let h = 1e-6;

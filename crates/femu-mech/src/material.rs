@@ -74,11 +74,7 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
     fn volumetric(&self, j: f64) -> [f64; 3];
 
     /// Full energy, stress and (if `tangent`) consistent tangent at F.
-    fn response(
-        &self,
-        f: &Tensor2,
-        tangent: bool,
-    ) -> Result<StressResponse, NonPositiveJacobian> {
+    fn response(&self, f: &Tensor2, tangent: bool) -> Result<StressResponse, NonPositiveJacobian> {
         let j = det2(f);
         if !(j > 0.0) {
             return Err(NonPositiveJacobian(j));
@@ -109,7 +105,12 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
 }
 
 /// Builds P, τ33 and A from the invariant derivatives (see the module documentation).
-fn assemble_response(f: &Tensor2, j: f64, d: &InvariantDerivatives, tangent: bool) -> StressResponse {
+fn assemble_response(
+    f: &Tensor2,
+    j: f64,
+    d: &InvariantDerivatives,
+    tangent: bool,
+) -> StressResponse {
     let c = cof2(f);
     let mut pk1 = [0.0; 4];
     for a in 0..4 {
@@ -155,7 +156,9 @@ impl NeoHookean {
             return Err(format!("C10 must be positive and finite, got {c10}"));
         }
         if !(d > 0.0 && d.is_finite()) {
-            return Err(format!("D must be positive and finite (compressible), got {d}"));
+            return Err(format!(
+                "D must be positive and finite (compressible), got {d}"
+            ));
         }
         Ok(NeoHookean { c10, d })
     }
@@ -268,7 +271,12 @@ mod tests {
         let f = [c * 2.0, -s * 0.5, s * 2.0, c * 0.5];
         let le = log_strain(&f);
         let (a, b) = (2f64.ln(), 0.5f64.ln());
-        let exp = [a * c * c + b * s * s, a * s * s + b * c * c, 0.0, (a - b) * s * c];
+        let exp = [
+            a * c * c + b * s * s,
+            a * s * s + b * c * c,
+            0.0,
+            (a - b) * s * c,
+        ];
         for k in 0..4 {
             assert!((le[k] - exp[k]).abs() < 1e-12, "{k}: {le:?} vs {exp:?}");
         }

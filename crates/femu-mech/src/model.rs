@@ -10,7 +10,11 @@ use femu_mesh::{BoundaryCondition, Deck, Mesh, PointLoad, StepDef};
 #[derive(Debug, thiserror::Error)]
 pub enum ModelError {
     #[error("element {label}: the reference element is inverted or degenerate (det J = {det_j:.3e} at Gauss point {gauss_point})")]
-    InvertedElement { label: i64, gauss_point: usize, det_j: f64 },
+    InvertedElement {
+        label: i64,
+        gauss_point: usize,
+        det_j: f64,
+    },
     #[error("material '{name}': {message}")]
     BadMaterial { name: String, message: String },
     #[error("element {label}: no material assigned")]
@@ -63,28 +67,43 @@ impl Model {
             .into_iter()
             .map(|m| {
                 NeoHookean::new(m.c10, m.d1)
-                    .map(|law| NamedMaterial { name: m.name.clone(), law })
-                    .map_err(|message| ModelError::BadMaterial { name: m.name, message })
+                    .map(|law| NamedMaterial {
+                        name: m.name.clone(),
+                        law,
+                    })
+                    .map_err(|message| ModelError::BadMaterial {
+                        name: m.name,
+                        message,
+                    })
             })
             .collect::<Result<Vec<_>, _>>()?;
         let mut geometry = Vec::with_capacity(mesh.elements.len());
         for (e, el) in mesh.elements.iter().enumerate() {
-            if element_material.get(e).is_none_or(|&m| m >= materials.len()) {
-                return Err(ModelError::NoMaterial { label: mesh.element_labels[e] });
+            if element_material
+                .get(e)
+                .is_none_or(|&m| m >= materials.len())
+            {
+                return Err(ModelError::NoMaterial {
+                    label: mesh.element_labels[e],
+                });
             }
             let (x, _) = mesh.element_coords(e);
-            let geo = ElementGeometry::new(el.kind, &x).map_err(|b| ModelError::InvertedElement {
-                label: mesh.element_labels[e],
-                gauss_point: b.gauss_point + 1,
-                det_j: b.det_j,
-            })?;
+            let geo =
+                ElementGeometry::new(el.kind, &x).map_err(|b| ModelError::InvertedElement {
+                    label: mesh.element_labels[e],
+                    gauss_point: b.gauss_point + 1,
+                    det_j: b.det_j,
+                })?;
             geometry.push(geo);
         }
         let mut faces = Vec::with_capacity(pressures.len());
         for p in &pressures {
             let el = &mesh.elements[p.element];
             if p.face >= el.face_count() {
-                return Err(ModelError::BadFace { label: mesh.element_labels[p.element], face: p.face + 1 });
+                return Err(ModelError::BadFace {
+                    label: mesh.element_labels[p.element],
+                    face: p.face + 1,
+                });
             }
             let n = el.kind.node_count();
             let local = [p.face, (p.face + 1) % n];

@@ -50,7 +50,10 @@ impl ThickCylinder {
     }
 
     fn layer_at(&self, r: f64) -> &Layer {
-        self.layers.iter().find(|l| r < l.r_to).unwrap_or(self.layers.last().unwrap())
+        self.layers
+            .iter()
+            .find(|l| r < l.r_to)
+            .unwrap_or(self.layers.last().unwrap())
     }
 
     /// λ_r such that P_rr(λ_r, λ_θ) = target (P_rr increases monotonically with λ_r).
@@ -92,8 +95,16 @@ impl ThickCylinder {
             for k in 0..steps_per_layer {
                 let rr = r0 + k as f64 * h;
                 let k1 = self.rhs(layer, rr, y);
-                let k2 = self.rhs(layer, rr + 0.5 * h, [y[0] + 0.5 * h * k1[0], y[1] + 0.5 * h * k1[1]]);
-                let k3 = self.rhs(layer, rr + 0.5 * h, [y[0] + 0.5 * h * k2[0], y[1] + 0.5 * h * k2[1]]);
+                let k2 = self.rhs(
+                    layer,
+                    rr + 0.5 * h,
+                    [y[0] + 0.5 * h * k1[0], y[1] + 0.5 * h * k1[1]],
+                );
+                let k3 = self.rhs(
+                    layer,
+                    rr + 0.5 * h,
+                    [y[0] + 0.5 * h * k2[0], y[1] + 0.5 * h * k2[1]],
+                );
                 let k4 = self.rhs(layer, rr + h, [y[0] + h * k3[0], y[1] + h * k3[1]]);
                 for i in 0..2 {
                     y[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
@@ -141,7 +152,10 @@ impl ThickCylinder {
         let ro = self.r_out();
         let coarse = self.solve(2000).last().copied().unwrap() - ro;
         let fine = self.solve(4000).last().copied().unwrap() - ro;
-        debug_assert!((coarse - fine).abs() <= 1e-8 * fine.abs() + 1e-13 * ro, "{coarse} vs {fine}");
+        debug_assert!(
+            (coarse - fine).abs() <= 1e-8 * fine.abs() + 1e-13 * ro,
+            "{coarse} vs {fine}"
+        );
         fine
     }
 }
@@ -158,7 +172,11 @@ mod tests {
         let k = 2.0 / d;
         let lam = k - 2.0 / 3.0 * mu;
         let (a, b, p) = (1.0, 2.0, 1e-6);
-        let cyl = ThickCylinder { r_in: a, layers: vec![Layer { r_to: b, c10, d }], pressure: p };
+        let cyl = ThickCylinder {
+            r_in: a,
+            layers: vec![Layer { r_to: b, c10, d }],
+            pressure: p,
+        };
         // u = A r + B / r, u(a) = 0, σ_rr(b) = 2(λ+μ) A - 2μ B / b² = -p.
         let bb = -p / (2.0 * (lam + mu) * (-1.0 / (a * a)) - 2.0 * mu / (b * b));
         let aa = -bb / (a * a);

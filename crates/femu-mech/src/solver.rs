@@ -7,7 +7,7 @@
 //! `|δu · R| ≤ etol · |δu₀ · R₀|` hold (δu₀, R₀: first iteration of the increment).
 
 use crate::element::{formulation, ElementResult, MAX_DOFS};
-use crate::linear::{CscPattern, LinearSolveError, SparseLu};
+use crate::linear::{CscPattern, Factorization, LinearSolveError, TangentSolver};
 use crate::model::Model;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -93,6 +93,8 @@ pub struct SolveReport {
     pub setup_time_s: f64,
     /// Whether the solve started from a given displacement.
     pub warm_start: bool,
+    /// The factorization of the last Newton iteration (LDLT for symmetric tangents, LU otherwise).
+    pub factorization: Option<Factorization>,
 }
 
 /// A converged (or partially converged, see [`SolveError`]) state.
@@ -118,7 +120,11 @@ pub enum SolveError {
         partial: Box<Solution>,
     },
     #[error("more than {max} increments needed (load factor reached {lambda:.4})")]
-    TooManyIncrements { max: usize, lambda: f64, partial: Box<Solution> },
+    TooManyIncrements {
+        max: usize,
+        lambda: f64,
+        partial: Box<Solution>,
+    },
     #[error("linear solver setup failed: {0}")]
     Setup(#[from] LinearSolveError),
 }
@@ -174,8 +180,9 @@ pub struct StaticSolver {
     u_trial: Vec<f64>,
     u_conv: Vec<f64>,
     u_prev: Vec<f64>,
-    lu: SparseLu,
+    lu: TangentSolver,
     setup_time_s: f64,
+    last_factorization: Option<Factorization>,
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -240,7 +247,9 @@ impl StaticSolver {
             for r in 0..nd {
                 for c in 0..nd {
                     if dofs[r] != NONE && dofs[c] != NONE {
-                        slots[e * KE + r * nd + c] = pattern.position(dofs[r], dofs[c]).expect("entry in pattern");
+                        slots[e * KE + r * nd + c] = pattern
+                            .position(dofs[r], dofs[c])
+                            .expect("entry in pattern");
                     }
                 }
             }
@@ -262,7 +271,7 @@ impl StaticSolver {
         for p in &model.point_loads {
             point_force[2 * p.node + p.dof] += p.magnitude;
         }
-        let lu = SparseLu::new(&pattern)?;
+        let lu = TangentSolver::new(&pattern)?;
         let nnz = pattern.nnz();
         Ok(StaticSolver {
             options,
@@ -286,6 +295,7 @@ impl StaticSolver {
             u_prev: vec![0.0; n_dof],
             lu,
             setup_time_s: t0.elapsed().as_secs_f64(),
+            last_factorization: None,
         })
     }
 
@@ -306,7 +316,13 @@ impl StaticSolver {
 
     /// Assembles the residual (always) and the tangent (if `with_tangent`) at `u`, load factor
     /// `lambda`. Element loop in parallel; scatter serial.
-    fn assemble(&mut self, model: &Model, u: &[f64], lambda: f64, with_tangent: bool) -> Result<(), AttemptFailure> {
+    fn assemble(
+        &mut self,
+        model: &Model,
+        u: &[f64],
+        lambda: f64,
+        with_tangent: bool,
+    ) -> Result<(), AttemptFailure> {
         let face_ptr = &self.face_ptr;
         let face_idx = &self.face_idx;
         let failed = self
@@ -318,8 +334,14 @@ impl StaticSolver {
                 let geo = &model.geometry[e];
                 let ue = model.gather(e, u);
                 let mat = &model.materials[model.element_material[e]].law;
-                let mut out = ElementResult { energy: 0.0, force: fe, stiffness: with_tangent.then_some(ke) };
-                if let Err(j) = formulation(geo.kind).evaluate(geo, mat, &ue[..geo.n_nodes], &mut out) {
+                let mut out = ElementResult {
+                    energy: 0.0,
+                    force: fe,
+                    stiffness: with_tangent.then_some(ke),
+                };
+                if let Err(j) =
+                    formulation(geo.kind).evaluate(geo, mat, &ue[..geo.n_nodes], &mut out)
+                {
                     return Some((e, j.0));
                 }
                 let nd = 2 * geo.n_nodes;
@@ -327,8 +349,14 @@ impl StaticSolver {
                     let face = &model.pressures[k];
                     let [la, lb] = face.local;
                     let [na, nb] = face.nodes;
-                    let xa = [model.mesh.nodes[na][0] + u[2 * na], model.mesh.nodes[na][1] + u[2 * na + 1]];
-                    let xb = [model.mesh.nodes[nb][0] + u[2 * nb], model.mesh.nodes[nb][1] + u[2 * nb + 1]];
+                    let xa = [
+                        model.mesh.nodes[na][0] + u[2 * na],
+                        model.mesh.nodes[na][1] + u[2 * na + 1],
+                    ];
+                    let xb = [
+                        model.mesh.nodes[nb][0] + u[2 * nb],
+                        model.mesh.nodes[nb][1] + u[2 * nb + 1],
+                    ];
                     let f = face.external_force(xa, xb, lambda);
                     let ld = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
                     for i in 0..4 {
@@ -348,14 +376,23 @@ impl StaticSolver {
             .find_any(|r| r.is_some())
             .flatten();
         if let Some((e, det)) = failed {
-            return Err(AttemptFailure::Inverted { element_label: model.mesh.element_labels[e], det });
+            return Err(AttemptFailure::Inverted {
+                element_label: model.mesh.element_labels[e],
+                det,
+            });
         }
         // External force (for the reference force scale): pressure part recomputed cheaply.
         self.fext.fill(0.0);
         for face in &model.pressures {
             let [na, nb] = face.nodes;
-            let xa = [model.mesh.nodes[na][0] + u[2 * na], model.mesh.nodes[na][1] + u[2 * na + 1]];
-            let xb = [model.mesh.nodes[nb][0] + u[2 * nb], model.mesh.nodes[nb][1] + u[2 * nb + 1]];
+            let xa = [
+                model.mesh.nodes[na][0] + u[2 * na],
+                model.mesh.nodes[na][1] + u[2 * na + 1],
+            ];
+            let xb = [
+                model.mesh.nodes[nb][0] + u[2 * nb],
+                model.mesh.nodes[nb][1] + u[2 * nb + 1],
+            ];
             let f = face.external_force(xa, xb, lambda);
             self.fext[2 * na] += f[0];
             self.fext[2 * na + 1] += f[1];
@@ -428,7 +465,13 @@ impl StaticSolver {
     }
 
     /// Newton iterations at load factor `lambda` starting from `u` (prescribed dofs already set).
-    fn newton(&mut self, model: &Model, u: &mut Vec<f64>, lambda: f64, record: &mut IncrementRecord) -> Result<(), AttemptFailure> {
+    fn newton(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        lambda: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<(), AttemptFailure> {
         let opt = self.options;
         self.assemble(model, u, lambda, true)?;
         let (mut rnorm, mut fref) = self.norms();
@@ -438,9 +481,11 @@ impl StaticSolver {
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
             }
-            self.lu
+            let kind = self
+                .lu
                 .factorize(&self.pattern, &self.values)
                 .map_err(|e| AttemptFailure::Singular(e.to_string()))?;
+            self.last_factorization = Some(kind);
             record.iterations.push(IterationRecord {
                 iteration: it + 1,
                 residual_norm: f64::NAN,
@@ -452,14 +497,21 @@ impl StaticSolver {
             self.du.copy_from_slice(&self.rhs);
             self.lu.solve_in_place(&mut self.du);
             // s0 = δu · R (negative for a descent direction)
-            let s0: f64 = -self.du.iter().zip(&self.rhs).map(|(a, b)| a * b).sum::<f64>();
+            let s0: f64 = -self
+                .du
+                .iter()
+                .zip(&self.rhs)
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
             let energy = s0.abs();
             if it == 0 {
                 energy0 = energy.max(floor);
             }
             let max_du = self.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             if !max_du.is_finite() {
-                return Err(AttemptFailure::Diverged("non-finite Newton correction".into()));
+                return Err(AttemptFailure::Diverged(
+                    "non-finite Newton correction".into(),
+                ));
             }
             let mut alpha = 1.0;
             let mut accepted = false;
@@ -486,14 +538,23 @@ impl StaticSolver {
                     break;
                 }
                 // s(α) = δu · R(u + α δu); accept when it dropped enough (Crisfield 0.8).
-                let s: f64 = -self.du.iter().zip(&self.rhs).map(|(a, b)| a * b).sum::<f64>();
+                let s: f64 = -self
+                    .du
+                    .iter()
+                    .zip(&self.rhs)
+                    .map(|(a, b)| a * b)
+                    .sum::<f64>();
                 if s.abs() <= 0.8 * s0.abs() || alpha < 0.02 {
                     rnorm = rn;
                     fref = fr;
                     accepted = true;
                     break;
                 }
-                let ratio = if (s0 - s).abs() > 0.0 { s0 / (s0 - s) } else { 0.5 };
+                let ratio = if (s0 - s).abs() > 0.0 {
+                    s0 / (s0 - s)
+                } else {
+                    0.5
+                };
                 alpha *= ratio.clamp(0.1, 0.9);
             }
             if !accepted {
@@ -516,7 +577,9 @@ impl StaticSolver {
                 return Ok(());
             }
             if !rnorm.is_finite() || rnorm > 1e10 * fref.max(1e-12) {
-                return Err(AttemptFailure::Diverged(format!("residual blew up to {rnorm:.3e}")));
+                return Err(AttemptFailure::Diverged(format!(
+                    "residual blew up to {rnorm:.3e}"
+                )));
             }
         }
         Err(AttemptFailure::Diverged(format!(
@@ -537,11 +600,16 @@ impl StaticSolver {
     fn solution(&self, u: &[f64], report: SolveReport) -> Solution {
         let reactions = self.reactions();
         let mut report = report;
+        report.factorization = self.last_factorization;
         report.reaction_total = [
             reactions.iter().step_by(2).sum(),
             reactions.iter().skip(1).step_by(2).sum(),
         ];
-        Solution { u: u.to_vec(), reactions, report }
+        Solution {
+            u: u.to_vec(),
+            reactions,
+            report,
+        }
     }
 
     /// Solves the step of `model` from zero displacement.
@@ -608,11 +676,17 @@ impl StaticSolver {
         let mut attempts = 0;
         while lambda < 1.0 - 1e-12 {
             attempts += 1;
-            if report.converged_increments >= step.max_increments.max(1) || attempts > 10 * step.max_increments.max(1) {
+            if report.converged_increments >= step.max_increments.max(1)
+                || attempts > 10 * step.max_increments.max(1)
+            {
                 report.lambda = lambda;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
                 let partial = Box::new(self.solution(&self.u_conv.clone(), report));
-                return Err(SolveError::TooManyIncrements { max: step.max_increments, lambda, partial });
+                return Err(SolveError::TooManyIncrements {
+                    max: step.max_increments,
+                    lambda,
+                    partial,
+                });
             }
             increment += 1;
             let target = (lambda + dlambda).min(1.0);
@@ -692,8 +766,12 @@ impl StaticSolver {
     /// Assembles residual and tangent at a given state (λ = 1) and factorizes the tangent, so
     /// that [`StaticSolver::solve_tangent`] can be used (sensitivities).
     pub fn factorize_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
-        self.assemble(model, u, 1.0, true).map_err(|e| e.to_string())?;
-        self.lu.factorize(&self.pattern, &self.values).map_err(|e| e.to_string())
+        self.assemble(model, u, 1.0, true)
+            .map_err(|e| e.to_string())?;
+        self.lu
+            .factorize(&self.pattern, &self.values)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
     }
 
     /// Solves `K_T x = rhs` on the free dofs with the last factorized tangent.
@@ -708,7 +786,8 @@ impl StaticSolver {
 
     /// Assembles only the residual at `u` and λ = 1 and returns it (2 per node).
     pub fn residual_at(&mut self, model: &Model, u: &[f64]) -> Result<&[f64], String> {
-        self.assemble(model, u, 1.0, false).map_err(|e| e.to_string())?;
+        self.assemble(model, u, 1.0, false)
+            .map_err(|e| e.to_string())?;
         Ok(&self.residual)
     }
 
@@ -719,6 +798,7 @@ impl StaticSolver {
 
     /// Assembles residual and tangent at `u`, λ = 1 (for derivative checks).
     pub fn assemble_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
-        self.assemble(model, u, 1.0, true).map_err(|e| e.to_string())
+        self.assemble(model, u, 1.0, true)
+            .map_err(|e| e.to_string())
     }
 }

@@ -12,7 +12,10 @@ use rand::{Rng, SeedableRng};
 
 /// Table 1 quadriceps (C10 = 1.75 kPa, D = 18 MPa^-1) and a stiffer-bulk variant.
 fn materials() -> [NeoHookean; 2] {
-    [NeoHookean::new(1.75e-3, 18.0).unwrap(), NeoHookean::new(0.8e-3, 0.5).unwrap()]
+    [
+        NeoHookean::new(1.75e-3, 18.0).unwrap(),
+        NeoHookean::new(0.8e-3, 0.5).unwrap(),
+    ]
 }
 
 fn random_f(rng: &mut impl Rng) -> Tensor2 {
@@ -32,7 +35,10 @@ fn random_f(rng: &mut impl Rng) -> Tensor2 {
 /// Relative error of `a` against `b`, scaled by the largest entry of `b`.
 fn rel_err(a: &[f64], b: &[f64]) -> f64 {
     let scale = b.iter().fold(0.0f64, |m, v| m.max(v.abs())).max(1e-300);
-    a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / scale
+    a.iter()
+        .zip(b)
+        .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        / scale
 }
 
 #[test]
@@ -45,7 +51,14 @@ fn material_stress_and_tangent_match_finite_differences() {
         for _ in 0..50 {
             let f = random_f(&mut rng);
             for iso in [false, true] {
-                let eval = |f: &Tensor2| if iso { mat.response_isochoric(f, true) } else { mat.response(f, true) }.unwrap();
+                let eval = |f: &Tensor2| {
+                    if iso {
+                        mat.response_isochoric(f, true)
+                    } else {
+                        mat.response(f, true)
+                    }
+                    .unwrap()
+                };
                 let r = eval(&f);
                 let mut p_fd = [0.0; 4];
                 let mut a_fd = [[0.0; 4]; 4];
@@ -60,7 +73,12 @@ fn material_stress_and_tangent_match_finite_differences() {
                         a_fd[a][b] = (rp.pk1[a] - rm.pk1[a]) / (2.0 * h);
                     }
                 }
-                assert!(rel_err(&r.pk1, &p_fd) < 1e-7, "P vs dW/dF: {:?} {:?}", r.pk1, p_fd);
+                assert!(
+                    rel_err(&r.pk1, &p_fd) < 1e-7,
+                    "P vs dW/dF: {:?} {:?}",
+                    r.pk1,
+                    p_fd
+                );
                 let a: Vec<f64> = r.tangent.iter().flatten().copied().collect();
                 let afd: Vec<f64> = a_fd.iter().flatten().copied().collect();
                 assert!(rel_err(&a, &afd) < 1e-7, "A vs dP/dF (iso={iso})");
@@ -93,7 +111,11 @@ fn element_force_and_stiffness_match_finite_differences() {
                 let eval = |u: &[[f64; 2]; 4]| {
                     let mut f = [0.0; 8];
                     let mut k = [0.0; 64];
-                    let mut out = ElementResult { energy: 0.0, force: &mut f, stiffness: Some(&mut k) };
+                    let mut out = ElementResult {
+                        energy: 0.0,
+                        force: &mut f,
+                        stiffness: Some(&mut k),
+                    };
                     el.evaluate(&geo, &mat, &u[..n], &mut out).unwrap();
                     (out.energy, f, k)
                 };
@@ -113,11 +135,17 @@ fn element_force_and_stiffness_match_finite_differences() {
                     }
                 }
                 assert!(rel_err(&f0[..nd], &f_fd) < 1e-6, "{kind:?}: force vs dΠ/du");
-                assert!(rel_err(&k0[..nd * nd], &k_fd) < 1e-6, "{kind:?}: stiffness vs df/du");
+                assert!(
+                    rel_err(&k0[..nd * nd], &k_fd) < 1e-6,
+                    "{kind:?}: stiffness vs df/du"
+                );
                 // Energy-derived tangent is symmetric.
                 for r in 0..nd {
                     for c in 0..nd {
-                        assert!((k0[r * nd + c] - k0[c * nd + r]).abs() < 1e-12 * k0.iter().fold(0.0f64, |m, v| m.max(v.abs())));
+                        assert!(
+                            (k0[r * nd + c] - k0[c * nd + r]).abs()
+                                < 1e-12 * k0.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+                        );
                     }
                 }
             }
@@ -154,7 +182,9 @@ fn global_tangent_with_follower_pressure_matches_finite_differences() {
         let mut max_err = 0.0f64;
         let kmax = k.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         for d in 0..n_dof {
-            let Some(c) = solver.equation_of(d) else { continue };
+            let Some(c) = solver.equation_of(d) else {
+                continue;
+            };
             let mut up = u.clone();
             up[d] += h;
             let rp = solver.residual_at(&model, &up).unwrap().to_vec();
@@ -172,6 +202,9 @@ fn global_tangent_with_follower_pressure_matches_finite_differences() {
                 max_err = max_err.max((kv - col[r]).abs());
             }
         }
-        assert!(max_err < 1e-6 * kmax, "{kind:?}: global tangent error {max_err:.3e} (max entry {kmax:.3e})");
+        assert!(
+            max_err < 1e-6 * kmax,
+            "{kind:?}: global tangent error {max_err:.3e} (max entry {kmax:.3e})"
+        );
     }
 }

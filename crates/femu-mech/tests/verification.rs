@@ -20,7 +20,11 @@ fn solve(deck: Deck) -> (Model, Solution) {
 }
 
 fn rectangle(kind: ElementKind, nx: usize, ny: usize) -> GeneratedMesh {
-    let quad_kind = if kind == ElementKind::Cpe3 { ElementKind::Cpe4 } else { kind };
+    let quad_kind = if kind == ElementKind::Cpe3 {
+        ElementKind::Cpe4
+    } else {
+        kind
+    };
     let g = generate::rectangle(2.0, 1.0, nx, ny, quad_kind);
     if kind == ElementKind::Cpe3 {
         generate::split_into_triangles(&g)
@@ -39,7 +43,12 @@ fn closed_form_cauchy(c10: f64, d: f64, f: [f64; 4]) -> [f64; 4] {
     let i1 = bxx + byy + 1.0;
     let s = 2.0 * c10 * j.powf(-5.0 / 3.0);
     let p = 2.0 / d * (j - 1.0);
-    [s * (bxx - i1 / 3.0) + p, s * (byy - i1 / 3.0) + p, s * (1.0 - i1 / 3.0) + p, s * bxy]
+    [
+        s * (bxx - i1 / 3.0) + p,
+        s * (byy - i1 / 3.0) + p,
+        s * (1.0 - i1 / 3.0) + p,
+        s * bxy,
+    ]
 }
 
 /// Patch test: every node on the boundary of a distorted mesh follows `u = (F - I) X`; the
@@ -57,7 +66,12 @@ fn patch_test_on_distorted_mesh() {
                 x[1] += 0.1 * ((k as f64 * 2.3).cos());
             }
         }
-        let affine = move |x: [f64; 2]| [(f[0] - 1.0) * x[0] + f[1] * x[1], f[2] * x[0] + (f[3] - 1.0) * x[1]];
+        let affine = move |x: [f64; 2]| {
+            [
+                (f[0] - 1.0) * x[0] + f[1] * x[1],
+                f[2] * x[0] + (f[3] - 1.0) * x[1],
+            ]
+        };
         let deck = DeckBuilder::new(g)
             .material_everywhere(1.75e-3, 18.0)
             .displacement_field("LEFT", affine)
@@ -69,18 +83,30 @@ fn patch_test_on_distorted_mesh() {
         let mut max_err = 0.0f64;
         for (n, x) in model.mesh.nodes.iter().enumerate() {
             let e = affine(*x);
-            max_err = max_err.max((sol.u[2 * n] - e[0]).abs()).max((sol.u[2 * n + 1] - e[1]).abs());
+            max_err = max_err
+                .max((sol.u[2 * n] - e[0]).abs())
+                .max((sol.u[2 * n + 1] - e[1]).abs());
         }
-        assert!(max_err < 1e-10, "{kind:?}: patch test error {max_err:.3e} mm");
+        assert!(
+            max_err < 1e-10,
+            "{kind:?}: patch test error {max_err:.3e} mm"
+        );
         // Constant stress equal to the closed form.
         let sc = closed_form_cauchy(1.75e-3, 18.0, f);
         for e in 0..model.mesh.elements.len() {
             let geo = &model.geometry[e];
             let s = formulation(geo.kind)
-                .cauchy_stress(geo, &model.materials[0].law, &model.gather(e, &sol.u)[..geo.n_nodes])
+                .cauchy_stress(
+                    geo,
+                    &model.materials[0].law,
+                    &model.gather(e, &sol.u)[..geo.n_nodes],
+                )
                 .unwrap();
             for k in 0..4 {
-                assert!((s[k] - sc[k]).abs() < 1e-9 * 1.75e-3, "{kind:?} element {e}: {s:?} vs {sc:?}");
+                assert!(
+                    (s[k] - sc[k]).abs() < 1e-9 * 1.75e-3,
+                    "{kind:?} element {e}: {s:?} vs {sc:?}"
+                );
             }
         }
     }
@@ -110,21 +136,39 @@ fn uniaxial_plane_strain_stretch_matches_closed_form() {
             .displacement("LEFT", 0, 0.0)
             .displacement("BOTTOM", 1, 0.0)
             .displacement("RIGHT", 0, (l1 - 1.0) * 2.0)
-            .step(StepDef { initial_increment: 0.25, ..Default::default() })
+            .step(StepDef {
+                initial_increment: 0.25,
+                ..Default::default()
+            })
             .build();
         let (model, sol) = solve(deck);
         let top = &model.mesh.node_sets["TOP"];
         for &n in top {
-            assert!((sol.u[2 * n + 1] - (l2 - 1.0)).abs() < 1e-9, "{kind:?}: uy at top");
+            assert!(
+                (sol.u[2 * n + 1] - (l2 - 1.0)).abs() < 1e-9,
+                "{kind:?}: uy at top"
+            );
         }
         let right = &model.mesh.node_sets["RIGHT"];
         let force: f64 = right.iter().map(|&n| sol.reactions[2 * n]).sum();
         let p11 = sc[0] * l2; // P = σ J F^-T: P11 = σxx λ1 λ2 / λ1
-        assert!((force - p11 * 1.0).abs() < 1e-8 * p11.abs(), "{kind:?}: reaction {force} vs {p11}");
+        assert!(
+            (force - p11 * 1.0).abs() < 1e-8 * p11.abs(),
+            "{kind:?}: reaction {force} vs {p11}"
+        );
         let geo = &model.geometry[0];
-        let s = formulation(kind).cauchy_stress(geo, &model.materials[0].law, &model.gather(0, &sol.u)[..geo.n_nodes]).unwrap();
+        let s = formulation(kind)
+            .cauchy_stress(
+                geo,
+                &model.materials[0].law,
+                &model.gather(0, &sol.u)[..geo.n_nodes],
+            )
+            .unwrap();
         for k in 0..4 {
-            assert!((s[k] - sc[k]).abs() < 1e-8 * sc[0].abs(), "{kind:?}: stress {s:?} vs {sc:?}");
+            assert!(
+                (s[k] - sc[k]).abs() < 1e-8 * sc[0].abs(),
+                "{kind:?}: stress {s:?} vs {sc:?}"
+            );
         }
     }
 }
@@ -146,11 +190,23 @@ fn biaxial_and_simple_shear_match_closed_form() {
             .build();
         let (model, sol) = solve(deck);
         let sc = closed_form_cauchy(c10, d, [l1, 0.0, 0.0, l2]);
-        let fx: f64 = model.mesh.node_sets["RIGHT"].iter().map(|&n| sol.reactions[2 * n]).sum();
-        let fy: f64 = model.mesh.node_sets["TOP"].iter().map(|&n| sol.reactions[2 * n + 1]).sum();
+        let fx: f64 = model.mesh.node_sets["RIGHT"]
+            .iter()
+            .map(|&n| sol.reactions[2 * n])
+            .sum();
+        let fy: f64 = model.mesh.node_sets["TOP"]
+            .iter()
+            .map(|&n| sol.reactions[2 * n + 1])
+            .sum();
         // P11 = σxx λ2, P22 = σyy λ1; edges of reference length H = 1 and W = 2.
-        assert!((fx - sc[0] * l2).abs() < 1e-8 * sc[0].abs().max(sc[1].abs()), "{kind:?} biaxial fx");
-        assert!((fy - sc[1] * l1 * 2.0).abs() < 1e-8 * sc[0].abs().max(sc[1].abs()), "{kind:?} biaxial fy");
+        assert!(
+            (fx - sc[0] * l2).abs() < 1e-8 * sc[0].abs().max(sc[1].abs()),
+            "{kind:?} biaxial fx"
+        );
+        assert!(
+            (fy - sc[1] * l1 * 2.0).abs() < 1e-8 * sc[0].abs().max(sc[1].abs()),
+            "{kind:?} biaxial fy"
+        );
 
         let shear = move |x: [f64; 2]| [gamma * x[1], 0.0];
         let deck = DeckBuilder::new(rectangle(kind, 3, 3))
@@ -162,17 +218,36 @@ fn biaxial_and_simple_shear_match_closed_form() {
             .build();
         let (model, sol) = solve(deck);
         let sc = closed_form_cauchy(c10, d, [1.0, gamma, 0.0, 1.0]);
-        assert!((sc[3] - 2.0 * c10 * gamma).abs() < 1e-15, "closed form σxy = μ γ");
+        assert!(
+            (sc[3] - 2.0 * c10 * gamma).abs() < 1e-15,
+            "closed form σxy = μ γ"
+        );
         for e in 0..model.mesh.elements.len() {
             let geo = &model.geometry[e];
-            let s = formulation(kind).cauchy_stress(geo, &model.materials[0].law, &model.gather(e, &sol.u)[..geo.n_nodes]).unwrap();
+            let s = formulation(kind)
+                .cauchy_stress(
+                    geo,
+                    &model.materials[0].law,
+                    &model.gather(e, &sol.u)[..geo.n_nodes],
+                )
+                .unwrap();
             for k in 0..4 {
-                assert!((s[k] - sc[k]).abs() < 1e-9 * c10, "{kind:?} shear stress {s:?} vs {sc:?}");
+                assert!(
+                    (s[k] - sc[k]).abs() < 1e-9 * c10,
+                    "{kind:?} shear stress {s:?} vs {sc:?}"
+                );
             }
         }
         // x-reaction on the top edge: P12 W = σxy W (J = 1, corner terms cancel).
-        let fx: f64 = model.mesh.node_sets["TOP"].iter().map(|&n| sol.reactions[2 * n]).sum();
-        assert!((fx - sc[3] * 2.0).abs() < 1e-9 * c10, "{kind:?} shear reaction {fx} vs {}", sc[3] * 2.0);
+        let fx: f64 = model.mesh.node_sets["TOP"]
+            .iter()
+            .map(|&n| sol.reactions[2 * n])
+            .sum();
+        assert!(
+            (fx - sc[3] * 2.0).abs() < 1e-9 * c10,
+            "{kind:?} shear reaction {fx} vs {}",
+            sc[3] * 2.0
+        );
     }
 }
 
@@ -182,8 +257,16 @@ fn cylinder() -> ThickCylinder {
     ThickCylinder {
         r_in: 14.0,
         layers: vec![
-            Layer { r_to: 40.0, c10: 1.75e-3, d: 18.0 },
-            Layer { r_to: 60.0, c10: 0.8e-3, d: 30.8 },
+            Layer {
+                r_to: 40.0,
+                c10: 1.75e-3,
+                d: 18.0,
+            },
+            Layer {
+                r_to: 60.0,
+                c10: 0.8e-3,
+                d: 30.8,
+            },
         ],
         pressure: 2.666e-3,
     }
@@ -226,7 +309,14 @@ fn thick_cylinder_converges_to_radial_reference() {
         let rates: Vec<f64> = errors.windows(2).map(|w| (w[0] / w[1]).log2()).collect();
         println!("{kind:?}: reference u_r(R_out) = {reference:.8e} mm; relative errors {errors:?}; observed rates {rates:.3?}");
         let last = *rates.last().unwrap();
-        assert!((1.7..2.3).contains(&last), "{kind:?}: observed rate {last:.3}");
-        assert!(*errors.last().unwrap() < 1e-3, "{kind:?}: finest error {:.3e}", errors.last().unwrap());
+        assert!(
+            (1.7..2.3).contains(&last),
+            "{kind:?}: observed rate {last:.3}"
+        );
+        assert!(
+            *errors.last().unwrap() < 1e-3,
+            "{kind:?}: finest error {:.3e}",
+            errors.last().unwrap()
+        );
     }
 }

@@ -57,11 +57,16 @@ pub fn rectangle(w: f64, h: f64, nx: usize, ny: usize, kind: ElementKind) -> Gen
         }
     }
     m.element_sets.insert("ALL".into(), all);
-    m.node_sets.insert("LEFT".into(), (0..=ny).map(|j| id(0, j)).collect());
-    m.node_sets.insert("RIGHT".into(), (0..=ny).map(|j| id(nx, j)).collect());
-    m.node_sets.insert("BOTTOM".into(), (0..=nx).map(|i| id(i, 0)).collect());
-    m.node_sets.insert("TOP".into(), (0..=nx).map(|i| id(i, ny)).collect());
-    m.node_sets.insert("ALL".into(), (0..m.nodes.len()).collect());
+    m.node_sets
+        .insert("LEFT".into(), (0..=ny).map(|j| id(0, j)).collect());
+    m.node_sets
+        .insert("RIGHT".into(), (0..=ny).map(|j| id(nx, j)).collect());
+    m.node_sets
+        .insert("BOTTOM".into(), (0..=nx).map(|i| id(i, 0)).collect());
+    m.node_sets
+        .insert("TOP".into(), (0..=nx).map(|i| id(i, ny)).collect());
+    m.node_sets
+        .insert("ALL".into(), (0..m.nodes.len()).collect());
     g
 }
 
@@ -104,7 +109,10 @@ pub fn split_into_triangles(g: &GeneratedMesh) -> GeneratedMesh {
         out.mesh.element_sets.insert(name.clone(), v);
     }
     for (name, faces) in &g.surfaces {
-        out.surfaces.insert(name.clone(), faces.iter().map(|&(e, f)| face_map[e][f]).collect());
+        out.surfaces.insert(
+            name.clone(),
+            faces.iter().map(|&(e, f)| face_map[e][f]).collect(),
+        );
     }
     out
 }
@@ -112,23 +120,38 @@ pub fn split_into_triangles(g: &GeneratedMesh) -> GeneratedMesh {
 /// Builds a ring mesh; `radius(i, j)` gives the radial parameter `s ∈ [0, 1]` of node row `j`
 /// on ray `i`, `outer(phi)` the skin point on the ray at angle `phi` from `center`, and
 /// `region(i, j)` the region index of element `(i, j)`.
-fn ring(
+/// The structured grid of a ring mesh: inner circle, counts and element kind.
+struct RingGrid {
     center: [f64; 2],
     r_inner: f64,
     n_theta: usize,
     n_rows: usize,
     kind: ElementKind,
+}
+
+fn ring(
+    grid: RingGrid,
     outer: impl Fn(f64) -> [f64; 2],
     radius: impl Fn(usize, usize) -> f64,
     region: impl Fn(usize, usize) -> usize,
     region_names: &[&str],
 ) -> GeneratedMesh {
+    let RingGrid {
+        center,
+        r_inner,
+        n_theta,
+        n_rows,
+        kind,
+    } = grid;
     let mut g = GeneratedMesh::default();
     let m = &mut g.mesh;
     let id = |i: usize, j: usize| (i % n_theta) * (n_rows + 1) + j;
     for i in 0..n_theta {
         let phi = 2.0 * std::f64::consts::PI * i as f64 / n_theta as f64;
-        let a = [center[0] + r_inner * phi.cos(), center[1] + r_inner * phi.sin()];
+        let a = [
+            center[0] + r_inner * phi.cos(),
+            center[1] + r_inner * phi.sin(),
+        ];
         let b = outer(phi);
         for j in 0..=n_rows {
             let s = radius(i, j);
@@ -158,8 +181,12 @@ fn ring(
             m.element_sets.insert((*name).to_string(), set);
         }
     }
-    m.node_sets.insert("INNER".into(), (0..n_theta).map(|i| id(i, 0)).collect());
-    m.node_sets.insert("OUTER".into(), (0..n_theta).map(|i| id(i, n_rows)).collect());
+    m.node_sets
+        .insert("INNER".into(), (0..n_theta).map(|i| id(i, 0)).collect());
+    m.node_sets.insert(
+        "OUTER".into(),
+        (0..n_theta).map(|i| id(i, n_rows)).collect(),
+    );
     g.surfaces.insert("OUTER".into(), skin);
     g.surfaces.insert("INNER".into(), bone);
     g
@@ -179,11 +206,13 @@ pub fn annulus(
 ) -> GeneratedMesh {
     let s_mid = (r_mid - r_in) / (r_out - r_in);
     ring(
-        [0.0, 0.0],
-        r_in,
-        n_theta,
-        rows_inner + rows_outer,
-        kind,
+        RingGrid {
+            center: [0.0, 0.0],
+            r_inner: r_in,
+            n_theta,
+            n_rows: rows_inner + rows_outer,
+            kind,
+        },
         |phi| [r_out * phi.cos(), r_out * phi.sin()],
         |_, j| {
             if j <= rows_inner {
@@ -258,11 +287,13 @@ pub fn thigh_like(p: &ThighLikeParams) -> GeneratedMesh {
     };
     let (mr, fr) = (p.muscle_rows, p.fat_rows);
     ring(
-        c,
-        r_f,
-        n_theta,
-        rows,
-        p.kind,
+        RingGrid {
+            center: c,
+            r_inner: r_f,
+            n_theta,
+            n_rows: rows,
+            kind: p.kind,
+        },
         outer,
         move |i, j| {
             let sf = s_fat(i);
@@ -304,13 +335,19 @@ mod tests {
         let a = annulus(1.0, 1.5, 2.0, 32, 3, 3, ElementKind::Cpe4h);
         a.mesh.check_orientation().unwrap();
         assert_eq!(a.mesh.boundary_faces().len(), 64);
-        let th = thigh_like(&ThighLikeParams { n_theta: 96, muscle_rows: 10, fat_rows: 3, ..Default::default() });
+        let th = thigh_like(&ThighLikeParams {
+            n_theta: 96,
+            muscle_rows: 10,
+            fat_rows: 3,
+            ..Default::default()
+        });
         th.mesh.check_orientation().unwrap();
         assert_eq!(th.mesh.element_sets.len(), 5);
         let total: f64 = (0..th.mesh.elements.len())
             .map(|e| {
                 let (x, _) = th.mesh.element_coords(e);
-                0.5 * ((x[2][0] - x[0][0]) * (x[3][1] - x[1][1]) - (x[3][0] - x[1][0]) * (x[2][1] - x[0][1]))
+                0.5 * ((x[2][0] - x[0][0]) * (x[3][1] - x[1][1])
+                    - (x[3][0] - x[1][0]) * (x[2][1] - x[0][1]))
             })
             .sum();
         let exact = std::f64::consts::PI * (70.0 * 60.0 - 14.0 * 14.0);

@@ -18,7 +18,14 @@
 //! Face `Pn` joins local nodes `n` and `n+1` (the last face closes back to node 1).
 
 pub mod deck;
+pub mod generate;
+pub mod inp;
 pub mod mesh;
+pub mod msh;
+pub mod vtu;
 
 pub use deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
+pub use inp::{read_inp, write_inp, write_inp_file, InpError};
 pub use mesh::{Element, ElementKind, Mesh, MeshError};
+pub use msh::{read_msh, MshError, MshModel};
+pub use vtu::{write_vtu, write_vtu_with_int_cells, VtuField, VtuIntField};

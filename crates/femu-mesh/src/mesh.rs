@@ -97,7 +97,11 @@ pub enum MeshError {
     #[error("element {label}: node index {node} does not exist")]
     MissingNode { label: i64, node: usize },
     #[error("element {label} is inverted or degenerate (signed area {area:.3e} mm^2 at its corner {corner})")]
-    Inverted { label: i64, area: f64, corner: usize },
+    Inverted {
+        label: i64,
+        area: f64,
+        corner: usize,
+    },
     #[error("element set '{0}' is not defined")]
     UnknownElementSet(String),
     #[error("node set '{0}' is not defined")]
@@ -184,7 +188,10 @@ impl Mesh {
             for f in 0..el.face_count() {
                 let [a, b] = el.face_nodes(f);
                 let key = (a.min(b), a.max(b));
-                count.entry(key).and_modify(|v| v.2 += 1).or_insert((e, f, 1));
+                count
+                    .entry(key)
+                    .and_modify(|v| v.2 += 1)
+                    .or_insert((e, f, 1));
             }
         }
         let mut faces: Vec<(usize, usize)> = count
@@ -219,10 +226,31 @@ impl Mesh {
         (lo, hi)
     }
 
+    /// The node set `name`, compared case-insensitively as set names are in Abaqus decks (the
+    /// deck reader keys sets by the spelling of their first definition).
+    pub fn node_set(&self, name: &str) -> Option<&[usize]> {
+        find_set(&self.node_sets, name)
+    }
+
+    /// The element set `name`, compared case-insensitively (see [`Mesh::node_set`]).
+    pub fn element_set(&self, name: &str) -> Option<&[usize]> {
+        find_set(&self.element_sets, name)
+    }
+
     /// Index of the node with deck label `label`.
     pub fn node_index(&self, label: i64) -> Option<usize> {
         self.node_labels.iter().position(|&l| l == label)
     }
+}
+
+fn find_set<'a>(sets: &'a BTreeMap<String, Vec<usize>>, name: &str) -> Option<&'a [usize]> {
+    sets.get(name)
+        .or_else(|| {
+            sets.iter()
+                .find(|(k, _)| k.eq_ignore_ascii_case(name))
+                .map(|(_, v)| v)
+        })
+        .map(Vec::as_slice)
 }
 
 #[cfg(test)]
@@ -244,6 +272,9 @@ mod tests {
         assert!(m.check_orientation().is_ok());
         assert_eq!(m.boundary_faces().len(), 4);
         assert_eq!(m.find_face(3, 0), Some((0, 3)));
+        m.node_sets.insert("Femur".into(), vec![0, 1]);
+        assert_eq!(m.node_set("FEMUR"), Some(&[0, 1][..]));
+        assert_eq!(m.element_set("femur"), None);
         m.elements[0].conn = [0, 3, 2, 1];
         assert!(matches!(
             m.check_orientation(),

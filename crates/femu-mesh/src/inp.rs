@@ -1,0 +1,1878 @@
+//! Abaqus/CalculiX input decks (`.inp`): a reader for the subset femu solves, a writer whose
+//! output both femu and CalculiX 2.20 (`ccx`) accept, and a reader for the displacements that
+//! `ccx` prints into its `.dat` file.
+//!
+//! # Subset read by [`parse_inp`]
+//!
+//! Keywords and parameter names are case-insensitive (blanks inside a keyword are ignored, so
+//! `*SOLID SECTION` and `*SOLIDSECTION` are the same), `**` lines and blank lines are comments,
+//! and a data line that ends with `,` continues on the next data line. Set, surface and
+//! material names are case-insensitive as in Abaqus; the spelling of their first definition is
+//! kept (region names, the keys of [`Mesh::node_sets`] and [`Mesh::element_sets`]).
+//!
+//! | keyword | use |
+//! |---|---|
+//! | `*HEADING` | text ignored |
+//! | `*NODE[, NSET=]` | `label, x, y[, z]` (z ignored) |
+//! | `*ELEMENT, TYPE=CPE4\|CPE4H\|CPE3[, ELSET=]` | `label, n1, n2, n3[, n4]` |
+//! | `*NSET, NSET=[, GENERATE]`, `*ELSET, ELSET=[, GENERATE]` | labels or names of sets defined earlier; `first, last[, step]` with `GENERATE` |
+//! | `*SURFACE, NAME=[, TYPE=ELEMENT]` | `element or element set, S1..S4` |
+//! | `*MATERIAL, NAME=` then `*HYPERELASTIC, NEO HOOKE` | `C10, D1` (C10 > 0, D1 > 0: compressible) |
+//! | `*SOLID SECTION, ELSET=, MATERIAL=` | optional thickness line; must be 1 (per-mm plane strain) |
+//! | `*BOUNDARY` (model or step data) | `node or node set, first dof[, last dof][, value]`; dofs above 2 ignored |
+//! | `*STEP[, NLGEOM[=YES\|NO]][, INC=n]` … `*END STEP` | exactly one step |
+//! | `*STATIC` | `initial, period, min, max` (Abaqus defaults for missing values) |
+//! | `*DLOAD` | `element or element set, P1..P4, pressure` or `surface, P, pressure` |
+//! | `*CLOAD` | `node or node set, dof (1 or 2), force` |
+//! | `*NODE PRINT`, `*NODE FILE`, `*EL PRINT`, `*EL FILE`, `*OUTPUT`, `*NODE OUTPUT`, `*ELEMENT OUTPUT`, `*CONTACT OUTPUT` | accepted, data skipped |
+//!
+//! Any other keyword or parameter is an error naming it and its line: femu never silently skips
+//! something that could change the physics.
+//!
+//! `NLGEOM` absent from `*STEP` reads as `true`: CalculiX switches geometric nonlinearity on for
+//! hyperelastic materials unless the deck says `NLGEOM=NO` (checked with ccx 2.20), and every
+//! material femu reads is hyperelastic.
+//!
+//! Repeated loads or boundary conditions on the same node dof or element face replace the
+//! earlier value (Abaqus `OP=MOD`).
+
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::fs;
+use std::io::{self, BufWriter, Write};
+use std::path::Path;
+
+use crate::deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
+use crate::mesh::{Element, ElementKind, Mesh, MeshError};
+
+/// An error reading a deck (or a ccx `.dat` file): names the file and, where there is one, the
+/// 1-based line.
+#[derive(Debug, thiserror::Error)]
+pub enum InpError {
+    /// The file could not be read.
+    #[error("{file}: {source}")]
+    Io {
+        file: String,
+        #[source]
+        source: io::Error,
+    },
+    /// Something wrong on one line.
+    #[error("{file}:{line}: {message}")]
+    Line {
+        file: String,
+        line: usize,
+        message: String,
+    },
+    /// Something wrong with the deck as a whole (e.g. no `*STEP`).
+    #[error("{file}: {message}")]
+    Deck { file: String, message: String },
+}
+
+type Result<T> = std::result::Result<T, InpError>;
+
+/// Reads and resolves an input deck. See the [module documentation](self) for the subset.
+pub fn read_inp(path: &Path) -> Result<Deck> {
+    let file = path.display().to_string();
+    let text = fs::read_to_string(path).map_err(|source| InpError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse_inp(&text, &file)
+}
+
+/// Parses and resolves the text of an input deck; `file_name` is only used in error messages.
+pub fn parse_inp(text: &str, file_name: &str) -> Result<Deck> {
+    let blocks = lex(text, file_name)?;
+    let mut p = Parser::new(file_name);
+    for b in &blocks {
+        p.block(b)?;
+    }
+    p.finish()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lexing: keyword blocks with their parameters and (continuation-joined) data records.
+
+struct Field<'a> {
+    text: &'a str,
+    line: usize,
+}
+
+struct Record<'a> {
+    line: usize,
+    fields: Vec<Field<'a>>,
+}
+
+struct Param {
+    /// Upper case, blanks removed.
+    key: String,
+    value: Option<String>,
+}
+
+struct Block<'a> {
+    line: usize,
+    /// Keyword without `*`, upper case, blanks removed (`SOLIDSECTION`).
+    key: String,
+    /// Keyword as shown in messages (`*SOLID SECTION`).
+    display: String,
+    params: Vec<Param>,
+    data: Vec<Record<'a>>,
+}
+
+fn squash(s: &str) -> String {
+    s.chars()
+        .filter(|c| !c.is_whitespace())
+        .collect::<String>()
+        .to_ascii_uppercase()
+}
+
+fn lex<'a>(text: &'a str, file: &str) -> Result<Vec<Block<'a>>> {
+    let mut blocks: Vec<Block<'a>> = Vec::new();
+    // Whether the last data record ended with a comma and continues on the next data line.
+    let mut continued = false;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let t = raw.trim_start_matches('\u{feff}').trim();
+        if t.is_empty() || t.starts_with("**") {
+            continue;
+        }
+        if let Some(kw) = t.strip_prefix('*') {
+            continued = false;
+            let mut parts = kw.split(',');
+            let name = parts.next().unwrap_or("").trim();
+            let display = format!(
+                "*{}",
+                name.split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" ")
+                    .to_ascii_uppercase()
+            );
+            let mut params = Vec::new();
+            for part in parts {
+                let part = part.trim();
+                if part.is_empty() {
+                    continue;
+                }
+                let (key, value) = match part.split_once('=') {
+                    Some((k, v)) => (squash(k), Some(v.trim().to_string())),
+                    None => (squash(part), None),
+                };
+                params.push(Param { key, value });
+            }
+            blocks.push(Block {
+                line,
+                key: squash(name),
+                display,
+                params,
+                data: Vec::new(),
+            });
+            continue;
+        }
+        let Some(block) = blocks.last_mut() else {
+            return Err(InpError::Line {
+                file: file.to_string(),
+                line,
+                message: "data line before the first keyword".to_string(),
+            });
+        };
+        let mut fields: Vec<Field<'a>> = t
+            .split(',')
+            .map(|s| Field {
+                text: s.trim(),
+                line,
+            })
+            .collect();
+        let ends_with_comma = t.ends_with(',');
+        if ends_with_comma {
+            fields.pop();
+        }
+        match (continued, block.data.last_mut()) {
+            (true, Some(rec)) => rec.fields.extend(fields),
+            _ => block.data.push(Record { line, fields }),
+        }
+        continued = ends_with_comma;
+    }
+    Ok(blocks)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Parsing and resolution.
+
+/// A node or element given by label, or a set (or surface) given by name.
+enum Target {
+    Label(i64),
+    Name(String),
+}
+
+struct SetDef {
+    /// Spelling of the first definition.
+    name: String,
+    /// Member labels with the line that named them.
+    members: Vec<(i64, usize)>,
+}
+
+struct RawElement {
+    kind: ElementKind,
+    nodes: [i64; 4],
+    line: usize,
+}
+
+struct RawMaterial {
+    name: String,
+    line: usize,
+    neo_hooke: Option<(f64, f64)>,
+}
+
+struct RawSection {
+    elset: String,
+    material: String,
+    line: usize,
+}
+
+struct RawSurface {
+    name: String,
+    faces: Vec<(Target, usize, usize)>, // target, 0-based face, line
+}
+
+struct RawBoundary {
+    target: Target,
+    first: usize,
+    last: usize,
+    value: f64,
+    line: usize,
+}
+
+struct RawDload {
+    target: Target,
+    /// 0-based face, or `None` for `P` on a surface.
+    face: Option<usize>,
+    magnitude: f64,
+    line: usize,
+}
+
+struct RawCload {
+    target: Target,
+    dof: usize,
+    magnitude: f64,
+    line: usize,
+}
+
+#[derive(PartialEq)]
+enum State {
+    Model,
+    InStep,
+    AfterStep,
+}
+
+struct Parser<'f> {
+    file: &'f str,
+    nodes: Vec<[f64; 2]>,
+    node_labels: Vec<i64>,
+    node_map: HashMap<i64, usize>,
+    elements: Vec<RawElement>,
+    element_labels: Vec<i64>,
+    element_map: HashMap<i64, usize>,
+    nsets: Vec<SetDef>,
+    nset_map: HashMap<String, usize>,
+    elsets: Vec<SetDef>,
+    elset_map: HashMap<String, usize>,
+    surfaces: Vec<RawSurface>,
+    surface_map: HashMap<String, usize>,
+    materials: Vec<RawMaterial>,
+    material_map: HashMap<String, usize>,
+    current_material: Option<usize>,
+    sections: Vec<RawSection>,
+    boundaries: Vec<RawBoundary>,
+    dloads: Vec<RawDload>,
+    cloads: Vec<RawCload>,
+    state: State,
+    step_line: usize,
+    step: StepDef,
+    static_seen: bool,
+}
+
+const OUTPUT_REQUESTS: &[&str] = &[
+    "NODEPRINT",
+    "NODEFILE",
+    "ELPRINT",
+    "ELFILE",
+    "OUTPUT",
+    "NODEOUTPUT",
+    "ELEMENTOUTPUT",
+    "CONTACTOUTPUT",
+];
+
+/// Keywords that would change the physics if they were skipped.
+const PHYSICS_KEYWORDS: &[&str] = &[
+    "PLASTIC",
+    "ELASTIC",
+    "FRICTION",
+    "CONTACTPAIR",
+    "CONTACT",
+    "SURFACEINTERACTION",
+    "SURFACEBEHAVIOR",
+    "DYNAMIC",
+    "AMPLITUDE",
+    "ORIENTATION",
+    "DENSITY",
+    "EXPANSION",
+    "VISCOELASTIC",
+    "HYPERFOAM",
+    "USERMATERIAL",
+    "DEPVAR",
+    "CREEP",
+    "EQUATION",
+    "MPC",
+    "TIE",
+    "COUPLING",
+    "KINEMATICCOUPLING",
+    "DISTRIBUTINGCOUPLING",
+    "RIGIDBODY",
+    "TRANSFORM",
+    "INITIALCONDITIONS",
+    "TEMPERATURE",
+    "DAMPING",
+    "FREQUENCY",
+    "BUCKLE",
+    "VISCO",
+    "HEATTRANSFER",
+    "COUPLEDTEMPERATURE-DISPLACEMENT",
+    "SHELLSECTION",
+    "BEAMSECTION",
+    "MEMBRANESECTION",
+    "SPRING",
+    "DASHPOT",
+    "GAP",
+    "DSLOAD",
+    "DFLUX",
+    "CFLUX",
+    "FILM",
+    "RADIATE",
+    "MASS",
+    "PRE-TENSIONSECTION",
+    "CONTROLS",
+    "CHANGEFRICTION",
+    "MODELCHANGE",
+];
+
+const SUPPORTED: &str = "*HEADING, *NODE, *ELEMENT, *NSET, *ELSET, *SURFACE, *MATERIAL, \
+*HYPERELASTIC, *SOLID SECTION, *BOUNDARY, *STEP, *STATIC, *DLOAD, *CLOAD, *END STEP and \
+output requests";
+
+impl<'f> Parser<'f> {
+    fn new(file: &'f str) -> Self {
+        Parser {
+            file,
+            nodes: Vec::new(),
+            node_labels: Vec::new(),
+            node_map: HashMap::new(),
+            elements: Vec::new(),
+            element_labels: Vec::new(),
+            element_map: HashMap::new(),
+            nsets: Vec::new(),
+            nset_map: HashMap::new(),
+            elsets: Vec::new(),
+            elset_map: HashMap::new(),
+            surfaces: Vec::new(),
+            surface_map: HashMap::new(),
+            materials: Vec::new(),
+            material_map: HashMap::new(),
+            current_material: None,
+            sections: Vec::new(),
+            boundaries: Vec::new(),
+            dloads: Vec::new(),
+            cloads: Vec::new(),
+            state: State::Model,
+            step_line: 0,
+            step: StepDef::default(),
+            static_seen: false,
+        }
+    }
+
+    fn err(&self, line: usize, message: impl Into<String>) -> InpError {
+        InpError::Line {
+            file: self.file.to_string(),
+            line,
+            message: message.into(),
+        }
+    }
+
+    // --- field helpers -------------------------------------------------------------------------
+
+    fn num(&self, f: &Field) -> Result<f64> {
+        if f.text.is_empty() {
+            return Err(self.err(f.line, "a number is missing (empty field)"));
+        }
+        let s = f.text.replace(['d', 'D'], "e");
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(self.err(f.line, format!("cannot read '{}' as a number", f.text))),
+        }
+    }
+
+    fn opt_num(&self, fields: &[Field], i: usize) -> Result<Option<f64>> {
+        match fields.get(i) {
+            Some(f) if !f.text.is_empty() => self.num(f).map(Some),
+            _ => Ok(None),
+        }
+    }
+
+    fn int(&self, f: &Field, what: &str) -> Result<i64> {
+        if f.text.is_empty() {
+            return Err(self.err(f.line, format!("{what} is missing (empty field)")));
+        }
+        f.text.parse::<i64>().map_err(|_| {
+            self.err(
+                f.line,
+                format!("cannot read '{}' as {what} (an integer)", f.text),
+            )
+        })
+    }
+
+    fn dof(&self, f: &Field) -> Result<usize> {
+        let d = self.int(f, "a degree of freedom")?;
+        if d < 1 {
+            return Err(self.err(
+                f.line,
+                format!("degree of freedom {d} does not exist (dofs start at 1)"),
+            ));
+        }
+        Ok(d as usize)
+    }
+
+    fn target(&self, f: &Field, what: &str) -> Result<Target> {
+        if f.text.is_empty() {
+            return Err(self.err(f.line, format!("{what} is missing (empty field)")));
+        }
+        Ok(match f.text.parse::<i64>() {
+            Ok(l) => Target::Label(l),
+            Err(_) => Target::Name(f.text.to_string()),
+        })
+    }
+
+    fn max_fields(&self, b: &Block, r: &Record, n: usize, form: &str) -> Result<()> {
+        if let Some(extra) = r
+            .fields
+            .get(n..)
+            .and_then(|x| x.iter().find(|f| !f.text.is_empty()))
+        {
+            return Err(self.err(
+                extra.line,
+                format!(
+                    "{}: too many values on the data line (expected '{form}')",
+                    b.display
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    // --- parameter helpers ---------------------------------------------------------------------
+
+    fn check_params(&self, b: &Block, allowed: &[&str]) -> Result<()> {
+        for p in &b.params {
+            if !allowed.contains(&p.key.as_str()) {
+                return Err(self.err(
+                    b.line,
+                    format!(
+                        "{}: parameter '{}' is not supported{}",
+                        b.display,
+                        p.key,
+                        if allowed.is_empty() {
+                            String::new()
+                        } else {
+                            format!(" (supported: {})", allowed.join(", "))
+                        }
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn param<'b>(b: &'b Block, key: &str) -> Option<&'b Param> {
+        b.params.iter().find(|p| p.key == key)
+    }
+
+    fn value<'b>(&self, b: &'b Block, key: &str) -> Result<Option<&'b str>> {
+        match Self::param(b, key) {
+            None => Ok(None),
+            Some(Param { value: Some(v), .. }) if !v.is_empty() => Ok(Some(v.as_str())),
+            Some(_) => Err(self.err(
+                b.line,
+                format!("{}: parameter {key} needs a value ({key}=...)", b.display),
+            )),
+        }
+    }
+
+    fn required(&self, b: &'_ Block, key: &str) -> Result<String> {
+        self.value(b, key)?.map(str::to_string).ok_or_else(|| {
+            self.err(
+                b.line,
+                format!("{}: parameter {key}= is required", b.display),
+            )
+        })
+    }
+
+    /// `OP=MOD` (the default) is accepted; `OP=NEW` would remove earlier definitions.
+    fn check_op(&self, b: &Block) -> Result<()> {
+        if let Some(op) = self.value(b, "OP")? {
+            if !op.eq_ignore_ascii_case("MOD") {
+                return Err(self.err(
+                    b.line,
+                    format!("{}: OP={op} is not supported (only OP=MOD)", b.display),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn no_data(&self, b: &Block) -> Result<()> {
+        match b.data.first() {
+            Some(r) => Err(self.err(r.line, format!("{} takes no data lines", b.display))),
+            None => Ok(()),
+        }
+    }
+
+    // --- blocks --------------------------------------------------------------------------------
+
+    fn block(&mut self, b: &Block) -> Result<()> {
+        if b.key != "HYPERELASTIC" {
+            self.current_material = None;
+        }
+        let model_data = matches!(
+            b.key.as_str(),
+            "NODE"
+                | "ELEMENT"
+                | "NSET"
+                | "ELSET"
+                | "SURFACE"
+                | "MATERIAL"
+                | "HYPERELASTIC"
+                | "SOLIDSECTION"
+                | "HEADING"
+        );
+        let step_data = matches!(b.key.as_str(), "STATIC" | "DLOAD" | "CLOAD" | "ENDSTEP")
+            || OUTPUT_REQUESTS.contains(&b.key.as_str());
+        if model_data && self.state != State::Model {
+            return Err(self.err(
+                b.line,
+                format!(
+                    "{} is model data and must come before *STEP (line {})",
+                    b.display, self.step_line
+                ),
+            ));
+        }
+        if step_data && self.state != State::InStep && !OUTPUT_REQUESTS.contains(&b.key.as_str()) {
+            return Err(self.err(
+                b.line,
+                format!("{} must be inside *STEP ... *END STEP", b.display),
+            ));
+        }
+        match b.key.as_str() {
+            "HEADING" => Ok(()),
+            "NODE" => self.node(b),
+            "ELEMENT" => self.element(b),
+            "NSET" => self.set(b, false),
+            "ELSET" => self.set(b, true),
+            "SURFACE" => self.surface(b),
+            "MATERIAL" => self.material(b),
+            "HYPERELASTIC" => self.hyperelastic(b),
+            "SOLIDSECTION" => self.solid_section(b),
+            "BOUNDARY" => self.boundary(b),
+            "STEP" => self.step(b),
+            "STATIC" => self.static_(b),
+            "DLOAD" => self.dload(b),
+            "CLOAD" => self.cload(b),
+            "ENDSTEP" => {
+                self.check_params(b, &[])?;
+                self.no_data(b)?;
+                if !self.static_seen {
+                    return Err(self.err(
+                        b.line,
+                        format!(
+                            "the *STEP on line {} has no *STATIC procedure",
+                            self.step_line
+                        ),
+                    ));
+                }
+                self.state = State::AfterStep;
+                Ok(())
+            }
+            k if OUTPUT_REQUESTS.contains(&k) => Ok(()),
+            k if PHYSICS_KEYWORDS.contains(&k) => Err(self.err(
+                b.line,
+                format!(
+                    "{} is not supported (it would change the physics)",
+                    b.display
+                ),
+            )),
+            _ => Err(self.err(
+                b.line,
+                format!("{} is not supported (femu reads {SUPPORTED})", b.display),
+            )),
+        }
+    }
+
+    fn set_entry(&mut self, elset: bool, name: &str) -> usize {
+        let (sets, map) = if elset {
+            (&mut self.elsets, &mut self.elset_map)
+        } else {
+            (&mut self.nsets, &mut self.nset_map)
+        };
+        *map.entry(name.to_ascii_uppercase()).or_insert_with(|| {
+            sets.push(SetDef {
+                name: name.to_string(),
+                members: Vec::new(),
+            });
+            sets.len() - 1
+        })
+    }
+
+    fn node(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["NSET"])?;
+        let nset = self.value(b, "NSET")?.map(|s| self.set_entry(false, s));
+        for r in &b.data {
+            if r.fields.len() < 3 {
+                return Err(self.err(
+                    r.line,
+                    format!(
+                        "*NODE: expected 'label, x, y', got {} value(s)",
+                        r.fields.len()
+                    ),
+                ));
+            }
+            self.max_fields(b, r, 4, "label, x, y[, z]")?;
+            let label = self.int(&r.fields[0], "a node label")?;
+            let x = self.num(&r.fields[1])?;
+            let y = self.num(&r.fields[2])?;
+            self.opt_num(&r.fields, 3)?;
+            if self.node_map.insert(label, self.nodes.len()).is_some() {
+                return Err(self.err(r.line, format!("node {label} is defined twice")));
+            }
+            self.nodes.push([x, y]);
+            self.node_labels.push(label);
+            if let Some(s) = nset {
+                self.nsets[s].members.push((label, r.line));
+            }
+        }
+        Ok(())
+    }
+
+    fn element(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["TYPE", "ELSET"])?;
+        let ty = self.required(b, "TYPE")?;
+        let kind = ElementKind::from_deck_name(&ty).ok_or_else(|| {
+            self.err(
+                b.line,
+                format!("unknown element type '{ty}' in *ELEMENT (supported: CPE4, CPE4H, CPE3)"),
+            )
+        })?;
+        let elset = self.value(b, "ELSET")?.map(|s| self.set_entry(true, s));
+        let n = kind.node_count();
+        for r in &b.data {
+            let label = self.int(&r.fields[0], "an element label")?;
+            let given = r
+                .fields
+                .iter()
+                .skip(1)
+                .filter(|f| !f.text.is_empty())
+                .count();
+            if r.fields.len() != n + 1 || given != n {
+                return Err(self.err(
+                    r.line,
+                    format!(
+                        "*ELEMENT, TYPE={}: element {label} needs {n} node labels, got {given}",
+                        kind.deck_name()
+                    ),
+                ));
+            }
+            let mut nodes = [0i64; 4];
+            for (k, f) in r.fields[1..].iter().enumerate() {
+                nodes[k] = self.int(f, "a node label")?;
+            }
+            if self
+                .element_map
+                .insert(label, self.elements.len())
+                .is_some()
+            {
+                return Err(self.err(r.line, format!("element {label} is defined twice")));
+            }
+            self.elements.push(RawElement {
+                kind,
+                nodes,
+                line: r.line,
+            });
+            self.element_labels.push(label);
+            if let Some(s) = elset {
+                self.elsets[s].members.push((label, r.line));
+            }
+        }
+        Ok(())
+    }
+
+    fn set(&mut self, b: &Block, elset: bool) -> Result<()> {
+        let key = if elset { "ELSET" } else { "NSET" };
+        self.check_params(b, &[key, "GENERATE", "UNSORTED", "INTERNAL"])?;
+        let name = self.required(b, key)?;
+        let generate = Self::param(b, "GENERATE").is_some();
+        let mut members: Vec<(i64, usize)> = Vec::new();
+        for r in &b.data {
+            if generate {
+                if r.fields.len() < 2 {
+                    return Err(self.err(
+                        r.line,
+                        format!("{}, GENERATE: expected 'first, last[, step]'", b.display),
+                    ));
+                }
+                self.max_fields(b, r, 3, "first, last[, step]")?;
+                let first = self.int(&r.fields[0], "a label")?;
+                let last = self.int(&r.fields[1], "a label")?;
+                let step = match r.fields.get(2) {
+                    Some(f) if !f.text.is_empty() => self.int(f, "a step")?,
+                    _ => 1,
+                };
+                if step < 1 || last < first {
+                    return Err(self.err(
+                        r.line,
+                        format!(
+                            "{}, GENERATE: need first <= last and step >= 1, got {first}, {last}, {step}",
+                            b.display
+                        ),
+                    ));
+                }
+                if (last as i128 - first as i128) / step as i128 > 100_000_000 {
+                    return Err(
+                        self.err(r.line, format!("{}, GENERATE: range too large", b.display))
+                    );
+                }
+                members.extend((first..=last).step_by(step as usize).map(|l| (l, r.line)));
+            } else {
+                for f in &r.fields {
+                    if f.text.is_empty() {
+                        continue;
+                    }
+                    match self.target(f, "a label")? {
+                        Target::Label(l) => members.push((l, f.line)),
+                        Target::Name(other) => {
+                            let map = if elset {
+                                &self.elset_map
+                            } else {
+                                &self.nset_map
+                            };
+                            let Some(&i) = map.get(&other.to_ascii_uppercase()) else {
+                                return Err(self.err(
+                                    f.line,
+                                    format!(
+                                        "{}: {} set '{other}' is not defined (sets must be defined before they are used)",
+                                        b.display,
+                                        if elset { "element" } else { "node" }
+                                    ),
+                                ));
+                            };
+                            let sets = if elset { &self.elsets } else { &self.nsets };
+                            members.extend(sets[i].members.iter().copied());
+                        }
+                    }
+                }
+            }
+        }
+        let s = self.set_entry(elset, &name);
+        let sets = if elset {
+            &mut self.elsets
+        } else {
+            &mut self.nsets
+        };
+        sets[s].members.extend(members);
+        Ok(())
+    }
+
+    fn surface(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["NAME", "TYPE"])?;
+        let name = self.required(b, "NAME")?;
+        if let Some(t) = self.value(b, "TYPE")? {
+            if !t.eq_ignore_ascii_case("ELEMENT") {
+                return Err(self.err(
+                    b.line,
+                    format!("*SURFACE, TYPE={t} is not supported (only TYPE=ELEMENT)"),
+                ));
+            }
+        }
+        let mut faces = Vec::new();
+        for r in &b.data {
+            self.max_fields(b, r, 2, "element or element set, Sn")?;
+            let target = self.target(&r.fields[0], "an element or element set")?;
+            let face_field = r
+                .fields
+                .get(1)
+                .filter(|f| !f.text.is_empty())
+                .ok_or_else(|| self.err(r.line, "*SURFACE: the face (S1..S4) is missing"))?;
+            let face = face_number(face_field.text, 'S').ok_or_else(|| {
+                self.err(
+                    face_field.line,
+                    format!("*SURFACE: face '{}' is not S1..S4", face_field.text),
+                )
+            })?;
+            faces.push((target, face, r.line));
+        }
+        let key = name.to_ascii_uppercase();
+        match self.surface_map.get(&key) {
+            Some(&i) => self.surfaces[i].faces.extend(faces),
+            None => {
+                self.surface_map.insert(key, self.surfaces.len());
+                self.surfaces.push(RawSurface { name, faces });
+            }
+        }
+        Ok(())
+    }
+
+    fn material(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["NAME"])?;
+        self.no_data(b)?;
+        let name = self.required(b, "NAME")?;
+        let key = name.to_ascii_uppercase();
+        if let Some(&i) = self.material_map.get(&key) {
+            return Err(self.err(
+                b.line,
+                format!(
+                    "material '{name}' is defined twice (first on line {})",
+                    self.materials[i].line
+                ),
+            ));
+        }
+        self.material_map.insert(key, self.materials.len());
+        self.current_material = Some(self.materials.len());
+        self.materials.push(RawMaterial {
+            name,
+            line: b.line,
+            neo_hooke: None,
+        });
+        Ok(())
+    }
+
+    fn hyperelastic(&mut self, b: &Block) -> Result<()> {
+        let Some(m) = self.current_material else {
+            return Err(self.err(b.line, "*HYPERELASTIC must follow a *MATERIAL definition"));
+        };
+        if Self::param(b, "NEOHOOKE").is_none() || b.params.len() != 1 {
+            let given: Vec<&str> = b.params.iter().map(|p| p.key.as_str()).collect();
+            return Err(self.err(
+                b.line,
+                format!(
+                    "only *HYPERELASTIC, NEO HOOKE is supported (parameters given: {})",
+                    if given.is_empty() {
+                        "none, which means POLYNOMIAL".to_string()
+                    } else {
+                        given.join(", ")
+                    }
+                ),
+            ));
+        }
+        if self.materials[m].neo_hooke.is_some() {
+            return Err(self.err(
+                b.line,
+                format!(
+                    "material '{}' has two *HYPERELASTIC definitions",
+                    self.materials[m].name
+                ),
+            ));
+        }
+        let r = match b.data.as_slice() {
+            [r] => r,
+            [] => {
+                return Err(self.err(
+                    b.line,
+                    "*HYPERELASTIC, NEO HOOKE needs a data line 'C10, D1'",
+                ))
+            }
+            [_, r2, ..] => {
+                return Err(self.err(
+                    r2.line,
+                    "*HYPERELASTIC: one data line 'C10, D1' expected (temperature-dependent data is not supported)",
+                ))
+            }
+        };
+        self.max_fields(b, r, 2, "C10, D1")?;
+        let c10 = self.num(&r.fields[0])?;
+        let d1 = self.opt_num(&r.fields, 1)?.unwrap_or(0.0);
+        if c10 <= 0.0 {
+            return Err(self.err(r.line, format!("*HYPERELASTIC: C10 must be > 0, got {c10}")));
+        }
+        if d1 < 0.0 {
+            return Err(self.err(r.line, format!("*HYPERELASTIC: D1 must be > 0, got {d1}")));
+        }
+        if d1 == 0.0 {
+            return Err(self.err(
+                r.line,
+                "*HYPERELASTIC: D1 = 0 (or missing) means incompressible, which femu does not \
+                 support: give D1 > 0 (compressible neo-Hooke)",
+            ));
+        }
+        self.materials[m].neo_hooke = Some((c10, d1));
+        Ok(())
+    }
+
+    fn solid_section(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["ELSET", "MATERIAL"])?;
+        let elset = self.required(b, "ELSET")?;
+        let material = self.required(b, "MATERIAL")?;
+        match b.data.as_slice() {
+            [] => {}
+            [r] => {
+                self.max_fields(b, r, 1, "thickness")?;
+                if let Some(t) = self.opt_num(&r.fields, 0)? {
+                    if t != 1.0 {
+                        return Err(self.err(
+                            r.line,
+                            format!(
+                                "*SOLID SECTION: thickness {t} is not supported: femu works per mm \
+                                 of plane-strain thickness (give 1 or nothing)"
+                            ),
+                        ));
+                    }
+                }
+            }
+            [_, r2, ..] => {
+                return Err(self.err(
+                    r2.line,
+                    "*SOLID SECTION: at most one data line (the thickness) is expected",
+                ))
+            }
+        }
+        self.sections.push(RawSection {
+            elset,
+            material,
+            line: b.line,
+        });
+        Ok(())
+    }
+
+    fn boundary(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["OP", "TYPE"])?;
+        self.check_op(b)?;
+        if let Some(t) = self.value(b, "TYPE")? {
+            if !t.eq_ignore_ascii_case("DISPLACEMENT") {
+                return Err(self.err(
+                    b.line,
+                    format!("*BOUNDARY, TYPE={t} is not supported (only TYPE=DISPLACEMENT)"),
+                ));
+            }
+        }
+        for r in &b.data {
+            self.max_fields(b, r, 4, "node or node set, first dof, last dof, value")?;
+            let target = self.target(&r.fields[0], "a node or node set")?;
+            let Some(ff) = r.fields.get(1).filter(|f| !f.text.is_empty()) else {
+                return Err(self.err(r.line, "*BOUNDARY: the first degree of freedom is missing"));
+            };
+            if ff.text.parse::<i64>().is_err() && ff.text.chars().all(|c| c.is_ascii_alphabetic()) {
+                return Err(self.err(
+                    ff.line,
+                    format!(
+                        "*BOUNDARY: boundary type '{}' is not supported: give 'node or set, first dof, last dof, value'",
+                        ff.text
+                    ),
+                ));
+            }
+            let first = self.dof(ff)?;
+            let last = match r.fields.get(2) {
+                Some(f) if !f.text.is_empty() => self.dof(f)?,
+                _ => first,
+            };
+            if last < first {
+                return Err(self.err(
+                    r.line,
+                    format!("*BOUNDARY: last dof {last} is smaller than first dof {first}"),
+                ));
+            }
+            let value = self.opt_num(&r.fields, 3)?.unwrap_or(0.0);
+            self.boundaries.push(RawBoundary {
+                target,
+                first,
+                last,
+                value,
+                line: r.line,
+            });
+        }
+        Ok(())
+    }
+
+    fn step(&mut self, b: &Block) -> Result<()> {
+        match self.state {
+            State::Model => {}
+            State::InStep => {
+                return Err(self.err(
+                    b.line,
+                    format!(
+                        "*STEP inside the step of line {} (missing *END STEP?)",
+                        self.step_line
+                    ),
+                ))
+            }
+            State::AfterStep => {
+                return Err(self.err(
+                    b.line,
+                    format!(
+                        "a second *STEP is not supported: femu solves exactly one step (the first is on line {})",
+                        self.step_line
+                    ),
+                ))
+            }
+        }
+        self.check_params(b, &["NLGEOM", "INC", "NAME", "AMPLITUDE"])?;
+        self.no_data(b)?;
+        self.state = State::InStep;
+        self.step_line = b.line;
+        self.step.nlgeom = match Self::param(b, "NLGEOM").and_then(|p| p.value.as_deref()) {
+            None => true,
+            Some(v) if v.eq_ignore_ascii_case("YES") => true,
+            Some(v) if v.eq_ignore_ascii_case("NO") => false,
+            Some(v) => return Err(self.err(b.line, format!("*STEP: NLGEOM={v} is not YES or NO"))),
+        };
+        if let Some(inc) = self.value(b, "INC")? {
+            self.step.max_increments = match inc.parse::<usize>() {
+                Ok(n) if n >= 1 => n,
+                _ => {
+                    return Err(self.err(
+                        b.line,
+                        format!("*STEP: INC={inc} is not a positive integer"),
+                    ))
+                }
+            };
+        }
+        if let Some(a) = self.value(b, "AMPLITUDE")? {
+            if !a.eq_ignore_ascii_case("RAMP") {
+                return Err(self.err(
+                    b.line,
+                    format!("*STEP: AMPLITUDE={a} is not supported (loads are ramped: only RAMP)"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn static_(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &[])?;
+        if self.static_seen {
+            return Err(self.err(b.line, "a second *STATIC in the step"));
+        }
+        self.static_seen = true;
+        let r = match b.data.as_slice() {
+            [] => None,
+            [r] => Some(r),
+            [_, r2, ..] => return Err(self.err(r2.line, "*STATIC: one data line expected")),
+        };
+        let fields: &[Field] = r.map(|r| r.fields.as_slice()).unwrap_or(&[]);
+        if let Some(r) = r {
+            self.max_fields(b, r, 4, "initial, period, min, max")?;
+        }
+        let initial = self.opt_num(fields, 0)?;
+        let period = self.opt_num(fields, 1)?.unwrap_or(1.0);
+        let initial = initial.unwrap_or(period);
+        let min = self
+            .opt_num(fields, 2)?
+            .unwrap_or((1e-5 * period).min(initial));
+        let max = self.opt_num(fields, 3)?.unwrap_or(period);
+        let line = r.map(|r| r.line).unwrap_or(b.line);
+        for (name, v) in [
+            ("initial increment", initial),
+            ("period", period),
+            ("minimum increment", min),
+            ("maximum increment", max),
+        ] {
+            if v <= 0.0 {
+                return Err(self.err(line, format!("*STATIC: {name} must be > 0, got {v}")));
+            }
+        }
+        if min > max {
+            return Err(self.err(
+                line,
+                format!("*STATIC: minimum increment {min} is larger than maximum {max}"),
+            ));
+        }
+        self.step.initial_increment = initial;
+        self.step.period = period;
+        self.step.min_increment = min;
+        self.step.max_increment = max;
+        Ok(())
+    }
+
+    fn dload(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["OP"])?;
+        self.check_op(b)?;
+        for r in &b.data {
+            self.max_fields(b, r, 3, "element or element set, Pn, magnitude")?;
+            if r.fields.len() < 3 {
+                return Err(self.err(
+                    r.line,
+                    "*DLOAD: expected 'element or element set, Pn, magnitude'",
+                ));
+            }
+            let target = self.target(&r.fields[0], "an element or element set")?;
+            let t = &r.fields[1];
+            let face = if t.text.eq_ignore_ascii_case("P") {
+                None
+            } else {
+                Some(face_number(t.text, 'P').ok_or_else(|| {
+                    self.err(
+                        t.line,
+                        format!(
+                            "*DLOAD: load type '{}' is not supported (only pressure P1..P4 on an \
+                             element face, or P on a *SURFACE)",
+                            t.text
+                        ),
+                    )
+                })?)
+            };
+            let magnitude = self.num(&r.fields[2])?;
+            self.dloads.push(RawDload {
+                target,
+                face,
+                magnitude,
+                line: r.line,
+            });
+        }
+        Ok(())
+    }
+
+    fn cload(&mut self, b: &Block) -> Result<()> {
+        self.check_params(b, &["OP"])?;
+        self.check_op(b)?;
+        for r in &b.data {
+            self.max_fields(b, r, 3, "node or node set, dof, magnitude")?;
+            if r.fields.len() < 3 {
+                return Err(self.err(
+                    r.line,
+                    "*CLOAD: expected 'node or node set, dof, magnitude'",
+                ));
+            }
+            let target = self.target(&r.fields[0], "a node or node set")?;
+            let dof = self.dof(&r.fields[1])?;
+            if dof > 2 {
+                return Err(self.err(
+                    r.fields[1].line,
+                    format!("*CLOAD: dof {dof} does not exist in plane strain (only 1 and 2)"),
+                ));
+            }
+            let magnitude = self.num(&r.fields[2])?;
+            self.cloads.push(RawCload {
+                target,
+                dof,
+                magnitude,
+                line: r.line,
+            });
+        }
+        Ok(())
+    }
+
+    // --- resolution ----------------------------------------------------------------------------
+
+    fn resolve_set(
+        &self,
+        set: &SetDef,
+        map: &HashMap<i64, usize>,
+        what: &str,
+    ) -> Result<Vec<usize>> {
+        let mut out = Vec::with_capacity(set.members.len());
+        for &(label, line) in &set.members {
+            match map.get(&label) {
+                Some(&i) => out.push(i),
+                None => {
+                    return Err(self.err(
+                        line,
+                        format!("set '{}': {what} {label} is not defined", set.name),
+                    ))
+                }
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        Ok(out)
+    }
+
+    fn finish(self) -> Result<Deck> {
+        match self.state {
+            State::Model => {
+                return Err(InpError::Deck {
+                    file: self.file.to_string(),
+                    message: "the deck has no *STEP (femu solves exactly one static step)"
+                        .to_string(),
+                })
+            }
+            State::InStep => return Err(self.err(self.step_line, "this *STEP has no *END STEP")),
+            State::AfterStep => {}
+        }
+        if self.elements.is_empty() {
+            return Err(InpError::Deck {
+                file: self.file.to_string(),
+                message: "the deck defines no elements (*ELEMENT)".to_string(),
+            });
+        }
+
+        // Mesh.
+        let mut mesh = Mesh {
+            nodes: self.nodes.clone(),
+            node_labels: self.node_labels.clone(),
+            element_labels: self.element_labels.clone(),
+            ..Mesh::default()
+        };
+        for (e, raw) in self.elements.iter().enumerate() {
+            let mut conn = [usize::MAX; 4];
+            let n = raw.kind.node_count();
+            for (slot, label) in conn.iter_mut().zip(&raw.nodes[..n]) {
+                *slot = *self.node_map.get(label).ok_or_else(|| {
+                    self.err(
+                        raw.line,
+                        format!(
+                            "element {} refers to node {label}, which is not defined",
+                            self.element_labels[e]
+                        ),
+                    )
+                })?;
+            }
+            mesh.elements.push(Element {
+                kind: raw.kind,
+                conn,
+            });
+        }
+        let mut nsets: HashMap<String, Vec<usize>> = HashMap::new();
+        for s in &self.nsets {
+            let idx = self.resolve_set(s, &self.node_map, "node")?;
+            nsets.insert(s.name.to_ascii_uppercase(), idx.clone());
+            mesh.node_sets.insert(s.name.clone(), idx);
+        }
+        let mut elsets: HashMap<String, Vec<usize>> = HashMap::new();
+        for s in &self.elsets {
+            let idx = self.resolve_set(s, &self.element_map, "element")?;
+            elsets.insert(s.name.to_ascii_uppercase(), idx.clone());
+            mesh.element_sets.insert(s.name.clone(), idx);
+        }
+        mesh.check_orientation().map_err(|e| {
+            let label = match &e {
+                MeshError::Inverted { label, .. } | MeshError::MissingNode { label, .. } => {
+                    Some(*label)
+                }
+                _ => None,
+            };
+            match label.and_then(|l| self.element_map.get(&l)) {
+                Some(&i) => self.err(self.elements[i].line, e.to_string()),
+                None => InpError::Deck {
+                    file: self.file.to_string(),
+                    message: e.to_string(),
+                },
+            }
+        })?;
+
+        // Materials and sections.
+        let mut materials = Vec::with_capacity(self.materials.len());
+        for m in &self.materials {
+            let Some((c10, d1)) = m.neo_hooke else {
+                return Err(self.err(
+                    m.line,
+                    format!(
+                        "material '{}' has no *HYPERELASTIC, NEO HOOKE definition",
+                        m.name
+                    ),
+                ));
+            };
+            materials.push(MaterialDef {
+                name: m.name.clone(),
+                c10,
+                d1,
+            });
+        }
+        let n_el = mesh.elements.len();
+        let mut element_material = vec![usize::MAX; n_el];
+        let mut element_region = vec![usize::MAX; n_el];
+        let mut region_names = Vec::with_capacity(self.sections.len());
+        for (r, s) in self.sections.iter().enumerate() {
+            let Some(&mat) = self.material_map.get(&s.material.to_ascii_uppercase()) else {
+                return Err(self.err(
+                    s.line,
+                    format!("*SOLID SECTION: material '{}' is not defined", s.material),
+                ));
+            };
+            let Some(members) = elsets.get(&s.elset.to_ascii_uppercase()) else {
+                return Err(self.err(
+                    s.line,
+                    format!("*SOLID SECTION: element set '{}' is not defined", s.elset),
+                ));
+            };
+            for &e in members {
+                if element_region[e] != usize::MAX {
+                    return Err(self.err(
+                        s.line,
+                        format!(
+                            "element {} is in two *SOLID SECTIONs (lines {} and {})",
+                            mesh.element_labels[e], self.sections[element_region[e]].line, s.line
+                        ),
+                    ));
+                }
+                element_region[e] = r;
+                element_material[e] = mat;
+            }
+            region_names.push(s.elset.clone());
+        }
+        if let Some(e) = element_region.iter().position(|&r| r == usize::MAX) {
+            return Err(self.err(
+                self.elements[e].line,
+                format!("element {} has no *SOLID SECTION", mesh.element_labels[e]),
+            ));
+        }
+
+        // Boundary conditions and loads (later definitions replace earlier ones).
+        let nodes_of = |t: &Target, line: usize, kw: &str| -> Result<Vec<usize>> {
+            match t {
+                Target::Label(l) => self
+                    .node_map
+                    .get(l)
+                    .map(|&i| vec![i])
+                    .ok_or_else(|| self.err(line, format!("{kw}: node {l} is not defined"))),
+                Target::Name(n) => nsets
+                    .get(&n.to_ascii_uppercase())
+                    .cloned()
+                    .ok_or_else(|| self.err(line, format!("{kw}: node set '{n}' is not defined"))),
+            }
+        };
+        let mut boundaries: Vec<BoundaryCondition> = Vec::new();
+        let mut bc_index: HashMap<(usize, usize), usize> = HashMap::new();
+        for bc in &self.boundaries {
+            for node in nodes_of(&bc.target, bc.line, "*BOUNDARY")? {
+                for dof in bc.first..=bc.last.min(2) {
+                    let c = BoundaryCondition {
+                        node,
+                        dof: dof - 1,
+                        value: bc.value,
+                    };
+                    match bc_index.get(&(node, dof - 1)) {
+                        Some(&i) => boundaries[i] = c,
+                        None => {
+                            bc_index.insert((node, dof - 1), boundaries.len());
+                            boundaries.push(c);
+                        }
+                    }
+                }
+            }
+        }
+        let mut point_loads: Vec<PointLoad> = Vec::new();
+        let mut cl_index: HashMap<(usize, usize), usize> = HashMap::new();
+        for cl in &self.cloads {
+            for node in nodes_of(&cl.target, cl.line, "*CLOAD")? {
+                let c = PointLoad {
+                    node,
+                    dof: cl.dof - 1,
+                    magnitude: cl.magnitude,
+                };
+                match cl_index.get(&(node, cl.dof - 1)) {
+                    Some(&i) => point_loads[i] = c,
+                    None => {
+                        cl_index.insert((node, cl.dof - 1), point_loads.len());
+                        point_loads.push(c);
+                    }
+                }
+            }
+        }
+        let elements_of = |t: &Target, line: usize, kw: &str| -> Result<Vec<usize>> {
+            match t {
+                Target::Label(l) => self
+                    .element_map
+                    .get(l)
+                    .map(|&i| vec![i])
+                    .ok_or_else(|| self.err(line, format!("{kw}: element {l} is not defined"))),
+                Target::Name(n) => elsets.get(&n.to_ascii_uppercase()).cloned().ok_or_else(|| {
+                    self.err(line, format!("{kw}: element set '{n}' is not defined"))
+                }),
+            }
+        };
+        let check_face = |e: usize, face: usize, line: usize, kw: &str, p: char| -> Result<()> {
+            let el = &mesh.elements[e];
+            if face >= el.face_count() {
+                return Err(self.err(
+                    line,
+                    format!(
+                        "{kw}: element {} is a {} with faces {p}1..{p}{}, not {p}{}",
+                        mesh.element_labels[e],
+                        el.kind.deck_name(),
+                        el.face_count(),
+                        face + 1
+                    ),
+                ));
+            }
+            Ok(())
+        };
+        let mut pressures: Vec<FacePressure> = Vec::new();
+        let mut p_index: HashMap<(usize, usize), usize> = HashMap::new();
+        for dl in &self.dloads {
+            let mut faces: Vec<(usize, usize)> = Vec::new();
+            match dl.face {
+                Some(face) => {
+                    for e in elements_of(&dl.target, dl.line, "*DLOAD")? {
+                        check_face(e, face, dl.line, "*DLOAD", 'P')?;
+                        faces.push((e, face));
+                    }
+                }
+                None => {
+                    let Target::Name(name) = &dl.target else {
+                        return Err(self.err(
+                            dl.line,
+                            "*DLOAD: load type P needs a surface name (use P1..P4 on an element)",
+                        ));
+                    };
+                    let Some(&si) = self.surface_map.get(&name.to_ascii_uppercase()) else {
+                        return Err(
+                            self.err(dl.line, format!("*DLOAD: surface '{name}' is not defined"))
+                        );
+                    };
+                    for (t, face, line) in &self.surfaces[si].faces {
+                        let kw = format!("*SURFACE '{}'", self.surfaces[si].name);
+                        for e in elements_of(t, *line, &kw)? {
+                            check_face(e, *face, *line, &kw, 'S')?;
+                            faces.push((e, *face));
+                        }
+                    }
+                }
+            }
+            for (element, face) in faces {
+                let p = FacePressure {
+                    element,
+                    face,
+                    magnitude: dl.magnitude,
+                };
+                match p_index.get(&(element, face)) {
+                    Some(&i) => pressures[i] = p,
+                    None => {
+                        p_index.insert((element, face), pressures.len());
+                        pressures.push(p);
+                    }
+                }
+            }
+        }
+
+        Ok(Deck {
+            mesh,
+            materials,
+            element_material,
+            element_region,
+            region_names,
+            step: self.step,
+            boundaries,
+            pressures,
+            point_loads,
+        })
+    }
+}
+
+/// `P3` → face 2 (0-based), for prefix `P` or `S`.
+fn face_number(text: &str, prefix: char) -> Option<usize> {
+    let rest = text
+        .strip_prefix(prefix)
+        .or_else(|| text.strip_prefix(prefix.to_ascii_lowercase()))?;
+    match rest.parse::<usize>() {
+        Ok(n @ 1..=4) => Some(n - 1),
+        _ => None,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Writer.
+
+/// Full-precision, shortest round-trip text of a float (`0.1`, `1e-5`).
+fn fmt_f64(v: f64) -> String {
+    format!("{v:?}")
+}
+
+fn invalid(msg: String) -> io::Error {
+    io::Error::new(io::ErrorKind::InvalidInput, msg)
+}
+
+/// A name that both our reader and ccx read back unchanged: starts with a letter, then
+/// letters, digits, `_`, `-`, `.`; at most 80 characters.
+fn check_name(kind: &str, name: &str) -> io::Result<()> {
+    let ok = name.len() <= 80
+        && name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'));
+    if ok {
+        Ok(())
+    } else {
+        Err(invalid(format!(
+            "cannot write {kind} name '{name}' to a deck: use a letter, then letters, digits, _ - . (at most 80 characters)"
+        )))
+    }
+}
+
+fn write_labels(w: &mut impl Write, labels: impl Iterator<Item = i64>) -> io::Result<()> {
+    let labels: Vec<i64> = labels.collect();
+    for chunk in labels.chunks(8) {
+        let line: Vec<String> = chunk.iter().map(|l| l.to_string()).collect();
+        writeln!(w, "{}", line.join(", "))?;
+    }
+    Ok(())
+}
+
+/// Name of the node set of all nodes that [`write_inp`] defines and prints.
+pub const ALL_NODES_SET: &str = "NALL";
+
+/// Writes `deck` as an input deck that [`read_inp`] and CalculiX 2.20 both accept.
+///
+/// Layout: `*NODE, NSET=NALL` (all nodes, full precision), one `*ELEMENT` block per (element
+/// type, region) with `ELSET=` the region, `*NSET` / `*ELSET` for the other sets of the mesh
+/// (a mesh node set named `NALL` is replaced by all nodes), `*MATERIAL` +
+/// `*HYPERELASTIC, NEO HOOKE`, one `*SOLID SECTION` per region, zero `*BOUNDARY` conditions as
+/// model data, then `*STEP, NLGEOM[=NO], INC=`, `*STATIC`, the nonzero `*BOUNDARY` values,
+/// `*DLOAD` (`label, Pn, value`), `*CLOAD`, `*NODE PRINT, NSET=NALL` / `U`,
+/// `*NODE FILE` / `U` and `*END STEP`.
+///
+/// Errors (`InvalidInput`) if the deck is inconsistent (lengths, indices, a region with two
+/// materials), holds a non-finite number, or a name cannot be written.
+pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
+    let mesh = &deck.mesh;
+    let n_el = mesh.elements.len();
+    let n_nodes = mesh.nodes.len();
+    if mesh.node_labels.len() != n_nodes
+        || mesh.element_labels.len() != n_el
+        || deck.element_region.len() != n_el
+        || deck.element_material.len() != n_el
+    {
+        return Err(invalid(
+            "deck is inconsistent: node_labels, element_labels, element_region and element_material must match the mesh".to_string(),
+        ));
+    }
+    for (e, el) in mesh.elements.iter().enumerate() {
+        if el.nodes().iter().any(|&n| n >= n_nodes) {
+            return Err(invalid(format!(
+                "element {} refers to a node index that does not exist",
+                mesh.element_labels[e]
+            )));
+        }
+    }
+    // Region → material, checking that every region has one material.
+    let mut region_material: Vec<Option<usize>> = vec![None; deck.region_names.len()];
+    for e in 0..n_el {
+        let (r, m) = (deck.element_region[e], deck.element_material[e]);
+        if r >= deck.region_names.len() || m >= deck.materials.len() {
+            return Err(invalid(format!(
+                "element {}: region or material index out of range",
+                mesh.element_labels[e]
+            )));
+        }
+        match region_material[r] {
+            None => region_material[r] = Some(m),
+            Some(m0) if m0 != m => {
+                return Err(invalid(format!(
+                    "region '{}' has elements of two materials ('{}' and '{}'): a deck needs one material per *SOLID SECTION",
+                    deck.region_names[r], deck.materials[m0].name, deck.materials[m].name
+                )))
+            }
+            Some(_) => {}
+        }
+    }
+    // Names: valid and unique (case-insensitively) per namespace.
+    let unique = |kind: &str, names: &mut dyn Iterator<Item = &String>| -> io::Result<()> {
+        let mut seen = HashSet::new();
+        for n in names {
+            check_name(kind, n)?;
+            if !seen.insert(n.to_ascii_uppercase()) {
+                return Err(invalid(format!(
+                    "two {kind}s named '{n}' (names are case-insensitive in a deck)"
+                )));
+            }
+        }
+        Ok(())
+    };
+    unique("region", &mut deck.region_names.iter())?;
+    unique("material", &mut deck.materials.iter().map(|m| &m.name))?;
+    let is_region = |name: &str| {
+        deck.region_names
+            .iter()
+            .any(|r| r.eq_ignore_ascii_case(name))
+    };
+    let extra_elsets: Vec<(&String, &Vec<usize>)> = mesh
+        .element_sets
+        .iter()
+        .filter(|(n, _)| !is_region(n))
+        .collect();
+    let nsets: Vec<(&String, &Vec<usize>)> = mesh
+        .node_sets
+        .iter()
+        .filter(|(n, _)| !n.eq_ignore_ascii_case(ALL_NODES_SET))
+        .collect();
+    unique(
+        "element set",
+        &mut deck
+            .region_names
+            .iter()
+            .chain(extra_elsets.iter().map(|(n, _)| *n)),
+    )?;
+    unique("node set", &mut nsets.iter().map(|(n, _)| *n))?;
+    for (n, s) in &extra_elsets {
+        if s.iter().any(|&e| e >= n_el) {
+            return Err(invalid(format!(
+                "element set '{n}' has an index out of range"
+            )));
+        }
+    }
+    for (n, s) in &nsets {
+        if s.iter().any(|&i| i >= n_nodes) {
+            return Err(invalid(format!("node set '{n}' has an index out of range")));
+        }
+    }
+    let finite = |what: &str, v: f64| -> io::Result<()> {
+        if v.is_finite() {
+            Ok(())
+        } else {
+            Err(invalid(format!("{what} is not finite ({v})")))
+        }
+    };
+
+    writeln!(w, "*HEADING")?;
+    writeln!(w, "femu deck (plane strain, mm, N, MPa)")?;
+    writeln!(w, "*NODE, NSET={ALL_NODES_SET}")?;
+    for (i, p) in mesh.nodes.iter().enumerate() {
+        finite("node coordinate", p[0])?;
+        finite("node coordinate", p[1])?;
+        writeln!(
+            w,
+            "{}, {}, {}",
+            mesh.node_labels[i],
+            fmt_f64(p[0]),
+            fmt_f64(p[1])
+        )?;
+    }
+    // One *ELEMENT block per (type, region), in order of first appearance.
+    let mut groups: BTreeMap<(usize, ElementKind), Vec<usize>> = BTreeMap::new();
+    for (e, el) in mesh.elements.iter().enumerate() {
+        groups
+            .entry((deck.element_region[e], el.kind))
+            .or_default()
+            .push(e);
+    }
+    for ((r, kind), elems) in &groups {
+        writeln!(
+            w,
+            "*ELEMENT, TYPE={}, ELSET={}",
+            kind.deck_name(),
+            deck.region_names[*r]
+        )?;
+        for &e in elems {
+            let nodes: Vec<String> = mesh.elements[e]
+                .nodes()
+                .iter()
+                .map(|&n| mesh.node_labels[n].to_string())
+                .collect();
+            writeln!(w, "{}, {}", mesh.element_labels[e], nodes.join(", "))?;
+        }
+    }
+    for (name, set) in &extra_elsets {
+        writeln!(w, "*ELSET, ELSET={name}")?;
+        write_labels(w, set.iter().map(|&e| mesh.element_labels[e]))?;
+    }
+    for (name, set) in &nsets {
+        writeln!(w, "*NSET, NSET={name}")?;
+        write_labels(w, set.iter().map(|&n| mesh.node_labels[n]))?;
+    }
+    for m in &deck.materials {
+        finite("C10", m.c10)?;
+        finite("D1", m.d1)?;
+        writeln!(w, "*MATERIAL, NAME={}", m.name)?;
+        writeln!(w, "*HYPERELASTIC, NEO HOOKE")?;
+        writeln!(w, "{}, {}", fmt_f64(m.c10), fmt_f64(m.d1))?;
+    }
+    for (r, name) in deck.region_names.iter().enumerate() {
+        if let Some(m) = region_material[r] {
+            writeln!(
+                w,
+                "*SOLID SECTION, ELSET={name}, MATERIAL={}",
+                deck.materials[m].name
+            )?;
+            writeln!(w, "1.0")?;
+        }
+    }
+    for bc in &deck.boundaries {
+        if bc.node >= n_nodes || bc.dof > 1 {
+            return Err(invalid(format!(
+                "boundary condition on node index {} dof {} does not exist",
+                bc.node, bc.dof
+            )));
+        }
+        finite("boundary value", bc.value)?;
+    }
+    let zero_bcs: Vec<&BoundaryCondition> =
+        deck.boundaries.iter().filter(|b| b.value == 0.0).collect();
+    if !zero_bcs.is_empty() {
+        writeln!(w, "*BOUNDARY")?;
+        for b in zero_bcs {
+            writeln!(
+                w,
+                "{}, {}, {}",
+                mesh.node_labels[b.node],
+                b.dof + 1,
+                b.dof + 1
+            )?;
+        }
+    }
+    let s = &deck.step;
+    for (what, v) in [
+        ("initial increment", s.initial_increment),
+        ("period", s.period),
+        ("minimum increment", s.min_increment),
+        ("maximum increment", s.max_increment),
+    ] {
+        finite(what, v)?;
+    }
+    writeln!(
+        w,
+        "*STEP, NLGEOM{}, INC={}",
+        if s.nlgeom { "" } else { "=NO" },
+        s.max_increments.max(1)
+    )?;
+    writeln!(w, "*STATIC")?;
+    writeln!(
+        w,
+        "{}, {}, {}, {}",
+        fmt_f64(s.initial_increment),
+        fmt_f64(s.period),
+        fmt_f64(s.min_increment),
+        fmt_f64(s.max_increment)
+    )?;
+    let moved: Vec<&BoundaryCondition> =
+        deck.boundaries.iter().filter(|b| b.value != 0.0).collect();
+    if !moved.is_empty() {
+        writeln!(w, "*BOUNDARY")?;
+        for b in moved {
+            writeln!(
+                w,
+                "{}, {}, {}, {}",
+                mesh.node_labels[b.node],
+                b.dof + 1,
+                b.dof + 1,
+                fmt_f64(b.value)
+            )?;
+        }
+    }
+    if !deck.pressures.is_empty() {
+        writeln!(w, "*DLOAD")?;
+        for p in &deck.pressures {
+            if p.element >= n_el || p.face >= mesh.elements[p.element].face_count() {
+                return Err(invalid(format!(
+                    "pressure on element index {} face {} does not exist",
+                    p.element, p.face
+                )));
+            }
+            finite("pressure", p.magnitude)?;
+            writeln!(
+                w,
+                "{}, P{}, {}",
+                mesh.element_labels[p.element],
+                p.face + 1,
+                fmt_f64(p.magnitude)
+            )?;
+        }
+    }
+    if !deck.point_loads.is_empty() {
+        writeln!(w, "*CLOAD")?;
+        for l in &deck.point_loads {
+            if l.node >= n_nodes || l.dof > 1 {
+                return Err(invalid(format!(
+                    "point load on node index {} dof {} does not exist",
+                    l.node, l.dof
+                )));
+            }
+            finite("point load", l.magnitude)?;
+            writeln!(
+                w,
+                "{}, {}, {}",
+                mesh.node_labels[l.node],
+                l.dof + 1,
+                fmt_f64(l.magnitude)
+            )?;
+        }
+    }
+    writeln!(w, "*NODE PRINT, NSET={ALL_NODES_SET}")?;
+    writeln!(w, "U")?;
+    writeln!(w, "*NODE FILE")?;
+    writeln!(w, "U")?;
+    writeln!(w, "*END STEP")?;
+    Ok(())
+}
+
+/// Writes `deck` to the file `path` with [`write_inp`].
+pub fn write_inp_file(deck: &Deck, path: &Path) -> io::Result<()> {
+    let mut w = BufWriter::new(fs::File::create(path)?);
+    write_inp(deck, &mut w)?;
+    w.flush()
+}
+
+// ---------------------------------------------------------------------------------------------
+// CalculiX .dat output.
+
+/// Reads the displacements of the last `displacements (vx,vy,vz) for set NALL and time ...`
+/// block of a CalculiX `.dat` file (written by `*NODE PRINT, NSET=NALL` / `U`): `(node label,
+/// [ux, uy])` in file order. ccx prints 7 significant digits.
+pub fn read_ccx_dat_displacements(path: &Path) -> Result<Vec<(i64, [f64; 2])>> {
+    let file = path.display().to_string();
+    let text = fs::read_to_string(path).map_err(|source| InpError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse_ccx_dat_displacements(&text, &file)
+}
+
+/// The text version of [`read_ccx_dat_displacements`]; `file_name` is used in messages.
+pub fn parse_ccx_dat_displacements(text: &str, file_name: &str) -> Result<Vec<(i64, [f64; 2])>> {
+    let header = format!("displacements (vx,vy,vz) for set {ALL_NODES_SET} and time");
+    let lines: Vec<&str> = text.lines().collect();
+    let Some(start) = lines
+        .iter()
+        .rposition(|l| l.trim_start().starts_with(&header))
+    else {
+        return Err(InpError::Deck {
+            file: file_name.to_string(),
+            message: format!(
+                "no '{header} ...' block (did the deck have *NODE PRINT, NSET={ALL_NODES_SET} / U, and did ccx finish an increment?)"
+            ),
+        });
+    };
+    let mut out = Vec::new();
+    for (i, l) in lines.iter().enumerate().skip(start + 1) {
+        let t = l.trim();
+        if t.is_empty() {
+            if out.is_empty() {
+                continue;
+            }
+            break;
+        }
+        let cols: Vec<&str> = t.split_whitespace().collect();
+        let parsed = (|| {
+            let label = cols.first()?.parse::<i64>().ok()?;
+            let ux = fortran_float(cols.get(1)?)?;
+            let uy = fortran_float(cols.get(2)?)?;
+            Some((label, [ux, uy]))
+        })();
+        match parsed {
+            Some(row) => out.push(row),
+            None if out.is_empty() => {
+                return Err(InpError::Line {
+                    file: file_name.to_string(),
+                    line: i + 1,
+                    message: format!("cannot read '{t}' as 'node ux uy uz'"),
+                })
+            }
+            // The next block (e.g. stresses) starts without a blank line.
+            None => break,
+        }
+    }
+    Ok(out)
+}
+
+/// Parses a Fortran `E` float, including the `1.234567-100` form (three-digit exponent without
+/// `E`). Non-finite values (`NaN`) are returned as such.
+fn fortran_float(s: &str) -> Option<f64> {
+    if let Ok(v) = s.parse::<f64>() {
+        return Some(v);
+    }
+    let pos = s.rfind(['+', '-']).filter(|&p| p > 0)?;
+    format!("{}E{}", &s[..pos], &s[pos..]).parse().ok()
+}
+
+#[cfg(test)]
+mod tests;
