@@ -1,4 +1,7 @@
 //! Building decks and models in code (tests, benchmarks, generated meshes), without a file.
+//!
+//! Unknown set names panic: the builder is for programs, whose set names are fixed in code;
+//! user input goes through the deck reader and its errors.
 
 use femu_mesh::generate::GeneratedMesh;
 use femu_mesh::{BoundaryCondition, Deck, FacePressure, MaterialDef, StepDef};
@@ -40,10 +43,9 @@ impl DeckBuilder {
         let set = self
             .deck
             .mesh
-            .element_sets
-            .get(elset)
-            .cloned()
-            .unwrap_or_default();
+            .element_set(elset)
+            .unwrap_or_else(|| panic!("DeckBuilder: unknown element set '{elset}'"))
+            .to_vec();
         for e in set {
             self.deck.element_material[e] = m;
             self.deck.element_region[e] = m;
@@ -61,16 +63,18 @@ impl DeckBuilder {
         self.material("ALL", c10, d)
     }
 
+    /// The nodes of a set; an unknown name is a programming error of the caller.
+    fn node_set(&self, nset: &str) -> Vec<usize> {
+        self.deck
+            .mesh
+            .node_set(nset)
+            .unwrap_or_else(|| panic!("DeckBuilder: unknown node set '{nset}'"))
+            .to_vec()
+    }
+
     /// Prescribes displacement `value` on dof `dof` (0 = x, 1 = y) of every node of `nset`.
     pub fn displacement(mut self, nset: &str, dof: usize, value: f64) -> Self {
-        for &node in self
-            .deck
-            .mesh
-            .node_sets
-            .get(nset)
-            .map(Vec::as_slice)
-            .unwrap_or(&[])
-        {
+        for node in self.node_set(nset) {
             self.deck
                 .boundaries
                 .push(BoundaryCondition { node, dof, value });
@@ -80,14 +84,7 @@ impl DeckBuilder {
 
     /// Prescribes a displacement computed from the reference position on every node of `nset`.
     pub fn displacement_field(mut self, nset: &str, f: impl Fn([f64; 2]) -> [f64; 2]) -> Self {
-        for &node in self
-            .deck
-            .mesh
-            .node_sets
-            .get(nset)
-            .map(Vec::as_slice)
-            .unwrap_or(&[])
-        {
+        for node in self.node_set(nset) {
             let u = f(self.deck.mesh.nodes[node]);
             for (dof, value) in u.into_iter().enumerate() {
                 self.deck
@@ -105,7 +102,12 @@ impl DeckBuilder {
 
     /// Follower pressure `p` (MPa) on every face of surface `surface`.
     pub fn pressure(mut self, surface: &str, p: f64) -> Self {
-        for &(element, face) in self.surfaces.get(surface).map(Vec::as_slice).unwrap_or(&[]) {
+        let faces = self
+            .surfaces
+            .get(surface)
+            .unwrap_or_else(|| panic!("DeckBuilder: unknown surface '{surface}'"))
+            .clone();
+        for (element, face) in faces {
             self.deck.pressures.push(FacePressure {
                 element,
                 face,
