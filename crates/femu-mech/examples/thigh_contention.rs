@@ -49,6 +49,11 @@ fn main() {
         umax,
         sol.report.reaction_total
     );
+    let r = &sol.report;
+    println!(
+        "assembly {:.3}s factorization {:.3}s triangular {:.3}s ({:?})",
+        r.assembly_time_s, r.factorization_time_s, r.triangular_solve_time_s, r.factorization
+    );
     // warm start from the solution with slightly changed parameters
     let mut m2 = model.clone();
     m2.materials[1].law.c10 *= 1.01;

@@ -128,3 +128,154 @@ impl DeckBuilder {
         self.deck
     }
 }
+
+/// Material of one region of a Gmsh model (C10 in MPa, D in MPa^-1).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RegionMaterial {
+    pub region: String,
+    pub c10: f64,
+    pub d: f64,
+}
+
+/// Prescribed displacement of every node of a physical curve (dofs 0 = x, 1 = y).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurveDisplacement {
+    pub curve: String,
+    pub dofs: Vec<usize>,
+    pub value: f64,
+}
+
+/// Follower pressure (MPa) on every edge of a physical curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CurvePressure {
+    pub curve: String,
+    pub pressure: f64,
+}
+
+/// What a Gmsh mesh needs to become a deck: materials per physical surface, conditions and
+/// loads per physical curve.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MshSetup {
+    /// Element type given to the quadrilaterals (CPE4 or CPE4H); triangles stay CPE3.
+    pub quad_kind: femu_mesh::ElementKind,
+    pub materials: Vec<RegionMaterial>,
+    pub displacements: Vec<CurveDisplacement>,
+    pub pressures: Vec<CurvePressure>,
+    pub step: StepDef,
+}
+
+/// A Gmsh model that cannot be set up as described.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SetupError {
+    #[error("region '{name}' is not a physical surface of the mesh (available: {available})")]
+    UnknownRegion { name: String, available: String },
+    #[error("curve '{name}' is not a physical curve of the mesh (available: {available})")]
+    UnknownCurve { name: String, available: String },
+    #[error("element {label} belongs to no region with a material")]
+    NoMaterial { label: i64 },
+    #[error("curve '{curve}': edge between nodes {a} and {b} is not on the boundary of the mesh")]
+    NotABoundaryEdge { curve: String, a: i64, b: i64 },
+    #[error("dof {0} does not exist (plane strain has dofs 1 and 2)")]
+    BadDof(usize),
+}
+
+/// Turns a Gmsh model and its setup into a deck.
+pub fn deck_from_msh(msh: femu_mesh::MshModel, setup: &MshSetup) -> Result<Deck, SetupError> {
+    use std::collections::HashMap;
+    let femu_mesh::MshModel {
+        mut mesh,
+        edge_sets,
+    } = msh;
+    for el in mesh.elements.iter_mut() {
+        if el.kind.node_count() == 4 {
+            el.kind = setup.quad_kind;
+        }
+    }
+    let n = mesh.elements.len();
+    let names = |keys: Vec<&String>| keys.into_iter().cloned().collect::<Vec<_>>().join(", ");
+    let mut deck = Deck {
+        element_material: vec![usize::MAX; n],
+        element_region: vec![usize::MAX; n],
+        step: setup.step,
+        ..Default::default()
+    };
+    for (m, rm) in setup.materials.iter().enumerate() {
+        let set = mesh
+            .element_set(&rm.region)
+            .ok_or_else(|| SetupError::UnknownRegion {
+                name: rm.region.clone(),
+                available: names(mesh.element_sets.keys().collect()),
+            })?
+            .to_vec();
+        deck.materials.push(MaterialDef {
+            name: rm.region.clone(),
+            c10: rm.c10,
+            d1: rm.d,
+        });
+        deck.region_names.push(rm.region.clone());
+        for e in set {
+            deck.element_material[e] = m;
+            deck.element_region[e] = m;
+        }
+    }
+    if let Some(e) = deck.element_material.iter().position(|&m| m == usize::MAX) {
+        return Err(SetupError::NoMaterial {
+            label: mesh.element_labels[e],
+        });
+    }
+    let curve = |name: &str| {
+        edge_sets
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(name))
+            .map(|(_, v)| v)
+            .ok_or_else(|| SetupError::UnknownCurve {
+                name: name.to_string(),
+                available: names(edge_sets.keys().collect()),
+            })
+    };
+    for d in &setup.displacements {
+        let edges = curve(&d.curve)?;
+        let mut nodes: Vec<usize> = edges.iter().flatten().copied().collect();
+        nodes.sort_unstable();
+        nodes.dedup();
+        for &dof in &d.dofs {
+            if dof > 1 {
+                return Err(SetupError::BadDof(dof + 1));
+            }
+            for &node in &nodes {
+                deck.boundaries.push(BoundaryCondition {
+                    node,
+                    dof,
+                    value: d.value,
+                });
+            }
+        }
+    }
+    let boundary: HashMap<(usize, usize), (usize, usize)> = mesh
+        .boundary_faces()
+        .into_iter()
+        .map(|(e, f)| {
+            let [a, b] = mesh.elements[e].face_nodes(f);
+            ((a.min(b), a.max(b)), (e, f))
+        })
+        .collect();
+    for p in &setup.pressures {
+        for &[a, b] in curve(&p.curve)? {
+            let &(element, face) =
+                boundary
+                    .get(&(a.min(b), a.max(b)))
+                    .ok_or(SetupError::NotABoundaryEdge {
+                        curve: p.curve.clone(),
+                        a: mesh.node_labels[a],
+                        b: mesh.node_labels[b],
+                    })?;
+            deck.pressures.push(FacePressure {
+                element,
+                face,
+                magnitude: p.pressure,
+            });
+        }
+    }
+    deck.mesh = mesh;
+    Ok(deck)
+}

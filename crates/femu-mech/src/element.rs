@@ -209,19 +209,24 @@ fn add_gauss_contribution(
         force[2 * a + 1] += w * (pk1[2] * dn[a][0] + pk1[3] * dn[a][1]);
     }
     if let (Some(k), Some(at)) = (stiffness, tangent) {
+        // Two-stage contraction: T[b][k][iJ] = Σ_L A[iJ][kL] ∂N_b/∂X_L, then
+        // K[(a,i),(b,k)] += w Σ_J ∂N_a/∂X_J T[b][k][iJ].
         let nd = 2 * n;
+        let mut t = [[[0.0; 4]; 2]; MAX_NODES];
+        for b in 0..n {
+            for kk in 0..2 {
+                for ij in 0..4 {
+                    t[b][kk][ij] = at[ij][2 * kk] * dn[b][0] + at[ij][2 * kk + 1] * dn[b][1];
+                }
+            }
+        }
         for a in 0..n {
             for i in 0..2 {
-                let row = (2 * a + i) * nd;
+                let row = &mut k[(2 * a + i) * nd..(2 * a + i + 1) * nd];
                 for b in 0..n {
                     for kk in 0..2 {
-                        let mut s = 0.0;
-                        for jj in 0..2 {
-                            for ll in 0..2 {
-                                s += at[2 * i + jj][2 * kk + ll] * dn[a][jj] * dn[b][ll];
-                            }
-                        }
-                        k[row + 2 * b + kk] += w * s;
+                        row[2 * b + kk] +=
+                            w * (dn[a][0] * t[b][kk][2 * i] + dn[a][1] * t[b][kk][2 * i + 1]);
                     }
                 }
             }

@@ -13,6 +13,7 @@ pub mod linear;
 pub mod load;
 pub mod material;
 pub mod model;
+pub mod output;
 pub mod reference;
 pub mod solver;
 

@@ -73,6 +73,107 @@ impl CscPattern {
     }
 }
 
+/// The node adjacency graph of a mesh (CSR, sorted, each node adjacent to itself): the sparse
+/// pattern and the fill-reducing ordering are computed on it, a quarter of the size of the dof
+/// graph, then expanded to the two dofs of each node.
+#[derive(Debug, Clone)]
+pub struct NodeGraph {
+    pub ptr: Vec<usize>,
+    pub adj: Vec<usize>,
+}
+
+impl NodeGraph {
+    /// Nodes are adjacent when they share an element.
+    pub fn from_elements<'a>(n_nodes: usize, elements: impl Iterator<Item = &'a [usize]>) -> Self {
+        let mut lists: Vec<Vec<usize>> = (0..n_nodes).map(|n| vec![n]).collect();
+        for nodes in elements {
+            for &a in nodes {
+                for &b in nodes {
+                    if a != b {
+                        lists[a].push(b);
+                    }
+                }
+            }
+        }
+        let mut ptr = Vec::with_capacity(n_nodes + 1);
+        let mut adj = Vec::new();
+        ptr.push(0);
+        for mut l in lists {
+            l.sort_unstable();
+            l.dedup();
+            adj.extend_from_slice(&l);
+            ptr.push(adj.len());
+        }
+        NodeGraph { ptr, adj }
+    }
+
+    /// The pattern on the free dofs, `eq[2 n + i]` being the equation of dof i of node n
+    /// (`usize::MAX` if prescribed). Equations must be numbered node by node (increasing with
+    /// the node index), so that rows come out sorted.
+    pub fn dof_pattern(&self, eq: &[usize], n_eq: usize) -> CscPattern {
+        let mut col_ptr = vec![0usize; n_eq + 1];
+        let mut row_idx = Vec::with_capacity(4 * self.adj.len());
+        for node in 0..self.ptr.len() - 1 {
+            for i in 0..2 {
+                let c = eq[2 * node + i];
+                if c == usize::MAX {
+                    continue;
+                }
+                for &m in &self.adj[self.ptr[node]..self.ptr[node + 1]] {
+                    for k in 0..2 {
+                        let r = eq[2 * m + k];
+                        if r != usize::MAX {
+                            row_idx.push(r);
+                        }
+                    }
+                }
+                col_ptr[c + 1] = row_idx.len();
+            }
+        }
+        debug_assert!(col_ptr.windows(2).all(|w| w[0] <= w[1]));
+        CscPattern {
+            n: n_eq,
+            col_ptr,
+            row_idx,
+        }
+    }
+
+    /// Approximate-minimum-degree ordering of the node graph expanded to free dofs:
+    /// `order[k]` is the equation eliminated k-th.
+    pub fn fill_reducing_dof_order(
+        &self,
+        eq: &[usize],
+        n_eq: usize,
+    ) -> Result<Vec<usize>, LinearSolveError> {
+        let n = self.ptr.len() - 1;
+        let mut perm = vec![0usize; n];
+        let mut perm_inv = vec![0usize; n];
+        let a = SymbolicSparseColMatRef::new_checked(n, n, &self.ptr, None, &self.adj);
+        let mut mem = MemBuffer::new(faer::sparse::linalg::amd::order_scratch::<usize>(
+            n,
+            self.adj.len(),
+        ));
+        faer::sparse::linalg::amd::order(
+            &mut perm,
+            &mut perm_inv,
+            a,
+            Default::default(),
+            MemStack::new(&mut mem),
+        )
+        .map_err(|e| LinearSolveError::Other(format!("AMD ordering: {e:?}")))?;
+        let mut order = Vec::with_capacity(n_eq);
+        for &node in &perm {
+            for i in 0..2 {
+                let q = eq[2 * node + i];
+                if q != usize::MAX {
+                    order.push(q);
+                }
+            }
+        }
+        Ok(order)
+    }
+}
+
 /// The linear solve failed (a singular tangent: a mechanism, or a structural instability).
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum LinearSolveError {
@@ -178,13 +279,27 @@ pub struct SparseLdlt {
 }
 
 impl SparseLdlt {
-    /// Symbolic analysis with an approximate-minimum-degree ordering; only the lower triangle of
-    /// the pattern is read.
-    pub fn new(pattern: &CscPattern) -> Result<Self, LinearSolveError> {
+    /// Symbolic analysis with the given elimination order (`order[k]`: the row eliminated
+    /// k-th), or an approximate-minimum-degree ordering of the pattern; only the lower triangle
+    /// of the pattern is read.
+    pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
+        let inverse: Option<Vec<usize>> = order.map(|o| {
+            let mut inv = vec![0usize; o.len()];
+            for (k, &q) in o.iter().enumerate() {
+                inv[q] = k;
+            }
+            inv
+        });
+        let ordering = match (order, &inverse) {
+            (Some(fwd), Some(inv)) => {
+                SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, pattern.n))
+            }
+            _ => SymmetricOrdering::Amd,
+        };
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic(),
             Side::Lower,
-            SymmetricOrdering::Amd,
+            ordering,
             Default::default(),
         )
         .map_err(|e| LinearSolveError::Other(format!("{e:?}")))?;
@@ -274,8 +389,9 @@ impl std::fmt::Debug for TangentSolver {
 }
 
 impl TangentSolver {
-    /// Symbolic analysis for `pattern` (structurally symmetric).
-    pub fn new(pattern: &CscPattern) -> Result<Self, LinearSolveError> {
+    /// Symbolic analysis for `pattern` (structurally symmetric), with an optional elimination
+    /// order for the LDLᵀ (see [`SparseLdlt::new`]).
+    pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
         let mut transpose = vec![usize::MAX; pattern.nnz()];
         for c in 0..pattern.n {
             for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
@@ -287,7 +403,7 @@ impl TangentSolver {
         }
         Ok(TangentSolver {
             transpose,
-            ldlt: SparseLdlt::new(pattern)?,
+            ldlt: SparseLdlt::new(pattern, order)?,
             lu: None,
             last: None,
             symmetry_tolerance: 1e-12,
@@ -391,7 +507,7 @@ mod tests {
         for k in 0..3 {
             assert!((b[k] - x[k]).abs() < 1e-13);
         }
-        let mut ts = TangentSolver::new(&p).unwrap();
+        let mut ts = TangentSolver::new(&p, None).unwrap();
         assert_eq!(ts.factorize(&p, &v).unwrap(), Factorization::Lu);
         p.mul_vec(&v, &x, &mut b);
         ts.solve_in_place(&mut b);

@@ -4,10 +4,11 @@
 //! Residual `R(u, λ) = f_int(u) - λ f_ext(u)` on the free dofs; prescribed displacements are set
 //! to `λ ū` and eliminated. One increment converges when both
 //! `‖R‖₂ ≤ rtol · max(‖λ f_ext‖₂, ‖reactions‖₂)` and the energy norm
-//! `|δu · R| ≤ etol · |δu₀ · R₀|` hold (δu₀, R₀: first iteration of the increment).
+//! `|δu · R| ≤ etol · |δu₀ · R₀|` hold (δu: the correction just applied, δu₀, R₀: first
+//! iteration of the increment).
 
 use crate::element::{formulation, ElementResult, MAX_DOFS};
-use crate::linear::{CscPattern, Factorization, LinearSolveError, TangentSolver};
+use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, TangentSolver};
 use crate::model::Model;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -21,7 +22,10 @@ const KE: usize = MAX_DOFS * MAX_DOFS;
 pub struct SolverOptions {
     /// Relative force-residual tolerance.
     pub residual_tolerance: f64,
-    /// Relative energy-norm tolerance.
+    /// Relative energy-norm tolerance: the energy `|δu·R|` of the last applied correction over
+    /// that of the first. Newton converges quadratically, so when the correction of energy ratio
+    /// 1e-9 has been applied the remaining error is far smaller still (the next ratio is
+    /// typically below 1e-17).
     pub energy_tolerance: f64,
     /// Newton iterations per increment before a cut-back.
     pub max_iterations: usize,
@@ -37,7 +41,7 @@ impl Default for SolverOptions {
     fn default() -> Self {
         SolverOptions {
             residual_tolerance: 1e-8,
-            energy_tolerance: 1e-16,
+            energy_tolerance: 1e-9,
             max_iterations: 20,
             line_search: true,
             growth: 1.5,
@@ -90,7 +94,14 @@ pub struct SolveReport {
     /// Sum of reaction forces on the prescribed dofs (N per mm).
     pub reaction_total: [f64; 2],
     pub wall_time_s: f64,
+    /// Pattern, dof numbering and symbolic factorization (once per model).
     pub setup_time_s: f64,
+    /// Time in element loops and scatter.
+    pub assembly_time_s: f64,
+    /// Time in numeric factorizations.
+    pub factorization_time_s: f64,
+    /// Time in triangular solves.
+    pub triangular_solve_time_s: f64,
     /// Whether the solve started from a given displacement.
     pub warm_start: bool,
     /// The factorization of the last Newton iteration (LDLT for symmetric tangents, LU otherwise).
@@ -183,6 +194,7 @@ pub struct StaticSolver {
     lu: TangentSolver,
     setup_time_s: f64,
     last_factorization: Option<Factorization>,
+    timers: [f64; 3],
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -199,29 +211,38 @@ impl StaticSolver {
     pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
         let t0 = Instant::now();
         let n_dof = 2 * model.node_count();
-        let mut eq = vec![0usize; n_dof];
-        let mut prescribed = Vec::with_capacity(model.constraints.len());
+        let mut eq = vec![NONE; n_dof];
+        let mut prescribed: Vec<(usize, f64)> = Vec::with_capacity(model.constraints.len());
         for bc in &model.constraints {
             let d = 2 * bc.node + bc.dof;
-            if eq[d] == NONE {
-                // A repeated condition: the last value wins, as in Abaqus.
-                if let Some(p) = prescribed.iter_mut().find(|p: &&mut (usize, f64)| p.0 == d) {
-                    p.1 = bc.value;
-                }
+            if eq[d] != NONE {
+                // `eq` temporarily holds the index into `prescribed` of a prescribed dof.
+                prescribed[eq[d]].1 = bc.value; // a repeated condition: the last value wins
                 continue;
             }
-            eq[d] = NONE;
+            eq[d] = prescribed.len();
             prescribed.push((d, bc.value));
         }
+        let mut is_prescribed = vec![false; n_dof];
+        for &(d, _) in &prescribed {
+            is_prescribed[d] = true;
+        }
         let mut n_eq = 0;
-        for e in eq.iter_mut() {
-            if *e != NONE {
+        for (e, &fixed) in eq.iter_mut().zip(&is_prescribed) {
+            if fixed {
+                *e = NONE;
+            } else {
                 *e = n_eq;
                 n_eq += 1;
             }
         }
         let n_el = model.mesh.elements.len();
-        let mut pairs = Vec::with_capacity(n_el * KE);
+        let graph = NodeGraph::from_elements(
+            model.node_count(),
+            model.mesh.elements.iter().map(|e| e.nodes()),
+        );
+        let pattern = graph.dof_pattern(&eq, n_eq);
+        let ordering = graph.fill_reducing_dof_order(&eq, n_eq)?;
         let elem_eqs = |e: usize| {
             let mut dofs = [NONE; MAX_DOFS];
             for (a, &n) in model.mesh.elements[e].nodes().iter().enumerate() {
@@ -230,30 +251,20 @@ impl StaticSolver {
             }
             dofs
         };
-        for e in 0..n_el {
-            let dofs = elem_eqs(e);
-            for &r in dofs.iter().filter(|&&r| r != NONE) {
-                for &c in dofs.iter().filter(|&&c| c != NONE) {
-                    pairs.push((r, c));
-                }
-            }
-        }
-        let pattern = CscPattern::from_pairs(n_eq, &mut pairs);
-        drop(pairs);
         let mut slots = vec![NONE; n_el * KE];
-        for e in 0..n_el {
+        slots.par_chunks_mut(KE).enumerate().for_each(|(e, slots)| {
             let dofs = elem_eqs(e);
             let nd = 2 * model.mesh.elements[e].kind.node_count();
             for r in 0..nd {
                 for c in 0..nd {
                     if dofs[r] != NONE && dofs[c] != NONE {
-                        slots[e * KE + r * nd + c] = pattern
+                        slots[r * nd + c] = pattern
                             .position(dofs[r], dofs[c])
                             .expect("entry in pattern");
                     }
                 }
             }
-        }
+        });
         let mut face_ptr = vec![0usize; n_el + 1];
         for f in &model.pressures {
             face_ptr[f.element + 1] += 1;
@@ -271,7 +282,7 @@ impl StaticSolver {
         for p in &model.point_loads {
             point_force[2 * p.node + p.dof] += p.magnitude;
         }
-        let lu = TangentSolver::new(&pattern)?;
+        let lu = TangentSolver::new(&pattern, Some(&ordering))?;
         let nnz = pattern.nnz();
         Ok(StaticSolver {
             options,
@@ -296,6 +307,7 @@ impl StaticSolver {
             lu,
             setup_time_s: t0.elapsed().as_secs_f64(),
             last_factorization: None,
+            timers: [0.0; 3],
         })
     }
 
@@ -317,6 +329,19 @@ impl StaticSolver {
     /// Assembles the residual (always) and the tangent (if `with_tangent`) at `u`, load factor
     /// `lambda`. Element loop in parallel; scatter serial.
     fn assemble(
+        &mut self,
+        model: &Model,
+        u: &[f64],
+        lambda: f64,
+        with_tangent: bool,
+    ) -> Result<(), AttemptFailure> {
+        let t0 = Instant::now();
+        let result = self.assemble_untimed(model, u, lambda, with_tangent);
+        self.timers[0] += t0.elapsed().as_secs_f64();
+        result
+    }
+
+    fn assemble_untimed(
         &mut self,
         model: &Model,
         u: &[f64],
@@ -481,11 +506,13 @@ impl StaticSolver {
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
             }
+            let t_fact = Instant::now();
             let kind = self
                 .lu
                 .factorize(&self.pattern, &self.values)
                 .map_err(|e| AttemptFailure::Singular(e.to_string()))?;
             self.last_factorization = Some(kind);
+            self.timers[1] += t_fact.elapsed().as_secs_f64();
             record.iterations.push(IterationRecord {
                 iteration: it + 1,
                 residual_norm: f64::NAN,
@@ -495,7 +522,9 @@ impl StaticSolver {
                 max_correction: 0.0,
             });
             self.du.copy_from_slice(&self.rhs);
+            let t_solve = Instant::now();
             self.lu.solve_in_place(&mut self.du);
+            self.timers[2] += t_solve.elapsed().as_secs_f64();
             // s0 = δu · R (negative for a descent direction)
             let s0: f64 = -self
                 .du
@@ -601,6 +630,9 @@ impl StaticSolver {
         let reactions = self.reactions();
         let mut report = report;
         report.factorization = self.last_factorization;
+        report.assembly_time_s = self.timers[0];
+        report.factorization_time_s = self.timers[1];
+        report.triangular_solve_time_s = self.timers[2];
         report.reaction_total = [
             reactions.iter().step_by(2).sum(),
             reactions.iter().skip(1).step_by(2).sum(),
@@ -627,6 +659,7 @@ impl StaticSolver {
         on_increment: &mut dyn FnMut(&IncrementRecord),
     ) -> Result<Solution, SolveError> {
         let t0 = Instant::now();
+        self.timers = [0.0; 3];
         let n_dof = 2 * model.node_count();
         let mut report = SolveReport {
             equations: self.n_eq,

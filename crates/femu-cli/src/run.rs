@@ -1,0 +1,326 @@
+//! `femu solve` and `femu demo`: read or build a model, solve it, write the output folder.
+
+use crate::study;
+use crate::QuadElement;
+use anyhow::{bail, Context, Result};
+use femu_mech::build::DeckBuilder;
+use femu_mech::output::{peak_memory_mb, write_displacements_csv, write_result_vtu};
+use femu_mech::solver::IncrementRecord;
+use femu_mech::{Model, Solution, SolveError, SolveReport, SolverOptions, StaticSolver};
+use femu_mesh::generate::{thigh_like, ThighLikeParams};
+use femu_mesh::Deck;
+use serde::Serialize;
+use std::path::Path;
+use std::time::Instant;
+
+/// Seed Table 1: (region, C10 in kPa, D in MPa^-1).
+pub const TABLE1: [(&str, f64, f64); 5] = [
+    ("FAT", 0.8, 30.8),
+    ("ISCHIO", 3.0, 18.0),
+    ("QUADRICEPS", 1.75, 18.0),
+    ("GRACILIS", 2.2, 18.0),
+    ("SARTORIUS", 3.75, 18.0),
+];
+
+/// The contention pressure of the seed: 20 mmHg in MPa.
+pub const CONTENTION_MPA: f64 = 20.0 * study::MMHG_IN_MPA;
+
+/// The thigh-like contention deck used by the demo and the benchmark.
+pub fn thigh_contention_deck(n_theta: usize, kind: femu_mesh::ElementKind) -> Deck {
+    let defaults = ThighLikeParams::default();
+    let scale = n_theta as f64 / defaults.n_theta as f64;
+    let params = ThighLikeParams {
+        n_theta,
+        muscle_rows: ((defaults.muscle_rows as f64 * scale).round() as usize).max(4),
+        fat_rows: ((defaults.fat_rows as f64 * scale).round() as usize).max(2),
+        kind,
+        ..defaults
+    };
+    let mut b = DeckBuilder::new(thigh_like(&params));
+    for (name, c10_kpa, d) in TABLE1 {
+        b = b.material(name, c10_kpa * 1e-3, d);
+    }
+    b.fix("INNER").pressure("OUTER", CONTENTION_MPA).build()
+}
+
+#[derive(Serialize)]
+struct MaterialSummary {
+    name: String,
+    c10_kpa: f64,
+    d_per_mpa: f64,
+    elements: usize,
+}
+
+#[derive(Serialize)]
+struct Timings {
+    read_s: f64,
+    setup_s: f64,
+    solve_s: f64,
+    assembly_s: f64,
+    factorization_s: f64,
+    triangular_solve_s: f64,
+    output_s: f64,
+    total_s: f64,
+}
+
+#[derive(Serialize)]
+struct Summary<'a> {
+    femu_version: &'static str,
+    command: &'a str,
+    input: String,
+    status: &'static str,
+    error: Option<String>,
+    nodes: usize,
+    elements: usize,
+    element_types: std::collections::BTreeMap<&'static str, usize>,
+    materials: Vec<MaterialSummary>,
+    prescribed_dofs: usize,
+    pressure_faces: usize,
+    load_factor: f64,
+    max_displacement_mm: f64,
+    reaction_force_total_n_per_mm: [f64; 2],
+    increments: usize,
+    newton_iterations: usize,
+    cutbacks: usize,
+    solver_options: SolverOptions,
+    report: &'a SolveReport,
+    timings: Timings,
+    peak_memory_mb: Option<f64>,
+}
+
+/// Prints one line per increment (unless quiet) and, if asked, the Newton table.
+fn progress(quiet: bool, table: bool) -> impl FnMut(&IncrementRecord) {
+    move |rec: &IncrementRecord| {
+        if quiet {
+            return;
+        }
+        if table {
+            for it in &rec.iterations {
+                eprintln!(
+                    "    iteration {:>2}: |R| = {:.3e} (ref {:.3e}), energy {:.3e}, step {:.2}, max|du| {:.3e} mm",
+                    it.iteration, it.residual_norm, it.reference_force, it.energy_norm, it.step_length, it.max_correction
+                );
+            }
+        }
+        match &rec.failure {
+            None => eprintln!(
+                "increment {:>3}: load factor {:.4} (+{:.4}), {} Newton iterations",
+                rec.increment,
+                rec.lambda,
+                rec.dlambda,
+                rec.iterations.len()
+            ),
+            Some(why) => eprintln!(
+                "increment {:>3}: load factor {:.4} (+{:.4}) cut back: {why}",
+                rec.increment, rec.lambda, rec.dlambda
+            ),
+        }
+    }
+}
+
+/// Solves `deck` and writes `displacements.csv`, `result.vtu`, `summary.json` into `out`.
+/// A solve that stops midway still writes the last converged state, then returns the error.
+pub fn solve_deck(
+    deck: Deck,
+    input: &str,
+    command: &str,
+    out: &Path,
+    read_s: f64,
+    table: bool,
+    quiet: bool,
+) -> Result<()> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let model = Model::from_deck(deck).with_context(|| format!("invalid model in {input}"))?;
+    let options = SolverOptions::default();
+    let mut solver = StaticSolver::new(&model, options)?;
+    let setup_s = t0.elapsed().as_secs_f64();
+    if !quiet {
+        eprintln!(
+            "{input}: {} nodes, {} elements, {} equations; solving",
+            model.node_count(),
+            model.mesh.elements.len(),
+            solver.equations()
+        );
+    }
+    let t1 = Instant::now();
+    let mut on_increment = progress(quiet, table);
+    let outcome = solver.solve_with(&model, None, &mut on_increment);
+    let solve_s = t1.elapsed().as_secs_f64();
+    let (solution, error): (Solution, Option<SolveError>) = match outcome {
+        Ok(s) => (s, None),
+        Err(SolveError::NotConverged { ref partial, .. })
+        | Err(SolveError::TooManyIncrements { ref partial, .. }) => {
+            let p = (**partial).clone();
+            (p, Some(outcome.unwrap_err()))
+        }
+        Err(e) => return Err(e.into()),
+    };
+    let t2 = Instant::now();
+    write_displacements_csv(&out.join("displacements.csv"), &model, &solution.u)
+        .with_context(|| format!("cannot write {}", out.join("displacements.csv").display()))?;
+    write_result_vtu(&out.join("result.vtu"), &model, &solution)
+        .with_context(|| format!("cannot write {}", out.join("result.vtu").display()))?;
+    let output_s = t2.elapsed().as_secs_f64();
+    let mut element_types = std::collections::BTreeMap::new();
+    for el in &model.mesh.elements {
+        *element_types.entry(el.kind.deck_name()).or_insert(0) += 1;
+    }
+    let materials = model
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(m, nm)| MaterialSummary {
+            name: nm.name.clone(),
+            c10_kpa: nm.law.c10 * 1e3,
+            d_per_mpa: nm.law.d,
+            elements: model.element_material.iter().filter(|&&x| x == m).count(),
+        })
+        .collect();
+    let r = &solution.report;
+    let max_u = solution
+        .u
+        .chunks_exact(2)
+        .map(|c| c[0].hypot(c[1]))
+        .fold(0.0f64, f64::max);
+    let summary = Summary {
+        femu_version: env!("CARGO_PKG_VERSION"),
+        command,
+        input: input.to_string(),
+        status: if error.is_none() {
+            "converged"
+        } else {
+            "not converged"
+        },
+        error: error.as_ref().map(|e| e.to_string()),
+        nodes: model.node_count(),
+        elements: model.mesh.elements.len(),
+        element_types,
+        materials,
+        prescribed_dofs: model.constraints.len(),
+        pressure_faces: model.pressures.len(),
+        load_factor: r.lambda,
+        max_displacement_mm: max_u,
+        reaction_force_total_n_per_mm: r.reaction_total,
+        increments: r.converged_increments,
+        newton_iterations: r.newton_iterations,
+        cutbacks: r.cutbacks,
+        solver_options: options,
+        report: r,
+        timings: Timings {
+            read_s,
+            setup_s,
+            solve_s,
+            assembly_s: r.assembly_time_s,
+            factorization_s: r.factorization_time_s,
+            triangular_solve_s: r.triangular_solve_time_s,
+            output_s,
+            total_s: read_s + t0.elapsed().as_secs_f64(),
+        },
+        peak_memory_mb: peak_memory_mb(),
+    };
+    let json = serde_json::to_string_pretty(&summary)?;
+    std::fs::write(out.join("summary.json"), json)
+        .with_context(|| format!("cannot write {}", out.join("summary.json").display()))?;
+    if !quiet {
+        eprintln!(
+            "{}: max |u| = {max_u:.4} mm, reaction {:.3e}, {:.3e} N/mm; {} increments, {} Newton iterations; solve {:.3} s; results in {}",
+            summary.status,
+            r.reaction_total[0],
+            r.reaction_total[1],
+            r.converged_increments,
+            r.newton_iterations,
+            solve_s,
+            out.display()
+        );
+    }
+    match error {
+        None => Ok(()),
+        Some(e) => Err(anyhow::Error::new(e).context(format!(
+            "the solve stopped at load factor {:.4}; the last converged state is in {}",
+            r.lambda,
+            out.display()
+        ))),
+    }
+}
+
+/// `femu solve INPUT [--study S] --out DIR`.
+pub fn solve(
+    input: &Path,
+    study_file: Option<&Path>,
+    out: &Path,
+    table: bool,
+    quiet: bool,
+) -> Result<()> {
+    let t0 = Instant::now();
+    let ext = input
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let deck = match ext.as_str() {
+        "inp" => {
+            if study_file.is_some() {
+                bail!("--study is for .msh inputs; a deck carries its own materials and loads");
+            }
+            femu_mesh::read_inp(input)?
+        }
+        "msh" => {
+            let Some(sf) = study_file else {
+                bail!(
+                    "{}: a Gmsh mesh needs --study STUDY.toml naming materials and loads",
+                    input.display()
+                );
+            };
+            let setup = study::read(sf)?;
+            let msh = femu_mesh::read_msh(input)?;
+            femu_mech::build::deck_from_msh(msh, &setup)
+                .with_context(|| format!("setting up {} with {}", input.display(), sf.display()))?
+        }
+        _ => bail!(
+            "{}: unknown input type (expected .inp or .msh)",
+            input.display()
+        ),
+    };
+    let read_s = t0.elapsed().as_secs_f64();
+    solve_deck(
+        deck,
+        &input.display().to_string(),
+        "solve",
+        out,
+        read_s,
+        table,
+        quiet,
+    )
+}
+
+/// `femu demo`: the contention test on the built-in thigh-like section.
+pub fn demo(out: &Path, element: QuadElement, n_theta: usize, quiet: bool) -> Result<()> {
+    if n_theta < 16 {
+        bail!("--n-theta must be at least 16, got {n_theta}");
+    }
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let t0 = Instant::now();
+    let deck = thigh_contention_deck(n_theta, element.kind());
+    let deck_path = out.join("model.inp");
+    femu_mesh::write_inp_file(&deck, &deck_path)
+        .with_context(|| format!("cannot write {}", deck_path.display()))?;
+    if !quiet {
+        eprintln!(
+            "demo: contention test, 20 mmHg follower pressure on the skin, femur fixed, Table 1 materials; deck written to {}",
+            deck_path.display()
+        );
+    }
+    let read_s = t0.elapsed().as_secs_f64();
+    solve_deck(
+        deck,
+        "built-in thigh-like section",
+        "demo",
+        out,
+        read_s,
+        false,
+        quiet,
+    )
+}

@@ -1,0 +1,131 @@
+//! Result files of a solve (conventions.md): `displacements.csv`, `result.vtu` and the
+//! element fields they carry (logarithmic strain LE as in the seed's Fig. 3, Cauchy stress).
+
+use crate::element::{element_log_strain, formulation};
+use crate::model::Model;
+use crate::solver::Solution;
+use femu_mesh::{write_vtu_with_int_cells, VtuField, VtuIntField};
+use rayon::prelude::*;
+use std::io::{self, Write};
+use std::path::Path;
+
+/// Element-average fields of a deformed state.
+#[derive(Debug, Clone)]
+pub struct ElementFields {
+    /// Logarithmic strain `[LExx, LEyy, LEzz, LExy]` per element.
+    pub log_strain: Vec<[f64; 4]>,
+    /// Cauchy stress `[σxx, σyy, σzz, σxy]` per element (MPa).
+    pub cauchy_stress: Vec<[f64; 4]>,
+    /// Volume ratio J = det F, averaged over the Gauss points.
+    pub volume_ratio: Vec<f64>,
+}
+
+/// Computes LE, Cauchy stress and J for every element (in parallel). An element inverted in
+/// `u` gets NaN stress entries (never the case for a converged state).
+pub fn element_fields(model: &Model, u: &[f64]) -> ElementFields {
+    let rows: Vec<([f64; 4], [f64; 4], f64)> = (0..model.mesh.elements.len())
+        .into_par_iter()
+        .map(|e| {
+            let geo = &model.geometry[e];
+            let ue = model.gather(e, u);
+            let ue = &ue[..geo.n_nodes];
+            let mat = &model.materials[model.element_material[e]].law;
+            let le = element_log_strain(geo, ue);
+            let s = formulation(geo.kind)
+                .cauchy_stress(geo, mat, ue)
+                .unwrap_or([f64::NAN; 4]);
+            let j = (0..geo.n_gauss)
+                .map(|g| {
+                    let f = geo.deformation_gradient(g, ue);
+                    geo.gauss[g].weight * (f[0] * f[3] - f[1] * f[2])
+                })
+                .sum::<f64>()
+                / geo.area;
+            (le, s, j)
+        })
+        .collect();
+    ElementFields {
+        log_strain: rows.iter().map(|r| r.0).collect(),
+        cauchy_stress: rows.iter().map(|r| r.1).collect(),
+        volume_ratio: rows.iter().map(|r| r.2).collect(),
+    }
+}
+
+/// Writes `node,x,y,ux,uy` with the deck's node labels, full double precision.
+pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Result<()> {
+    let mut w = io::BufWriter::new(std::fs::File::create(path)?);
+    writeln!(w, "node,x,y,ux,uy")?;
+    for (n, x) in model.mesh.nodes.iter().enumerate() {
+        writeln!(
+            w,
+            "{},{:.12e},{:.12e},{:.12e},{:.12e}",
+            model.mesh.node_labels[n],
+            x[0],
+            x[1],
+            u[2 * n],
+            u[2 * n + 1]
+        )?;
+    }
+    w.flush()
+}
+
+/// Writes the ParaView file: point fields `displacement` and `reaction_force`; cell fields `LE`,
+/// `S` (Cauchy stress, components xx, yy, zz, xy), `J`, and the integer `region` and `material`.
+pub fn write_result_vtu(path: &Path, model: &Model, solution: &Solution) -> io::Result<()> {
+    let fields = element_fields(model, &solution.u);
+    let disp: Vec<[f64; 2]> = solution.u.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    let reaction: Vec<f64> = solution
+        .reactions
+        .chunks_exact(2)
+        .flat_map(|c| [c[0], c[1], 0.0])
+        .collect();
+    let le: Vec<f64> = fields.log_strain.iter().flatten().copied().collect();
+    let s: Vec<f64> = fields.cauchy_stress.iter().flatten().copied().collect();
+    let region: Vec<i32> = model.element_region.iter().map(|&r| r as i32).collect();
+    let material: Vec<i32> = model.element_material.iter().map(|&m| m as i32).collect();
+    write_vtu_with_int_cells(
+        path,
+        &model.mesh,
+        Some(&disp),
+        &[VtuField {
+            name: "reaction_force",
+            components: 3,
+            data: &reaction,
+        }],
+        &[
+            VtuField {
+                name: "LE",
+                components: 4,
+                data: &le,
+            },
+            VtuField {
+                name: "S",
+                components: 4,
+                data: &s,
+            },
+            VtuField {
+                name: "J",
+                components: 1,
+                data: &fields.volume_ratio,
+            },
+        ],
+        &[
+            VtuIntField {
+                name: "region",
+                data: &region,
+            },
+            VtuIntField {
+                name: "material",
+                data: &material,
+            },
+        ],
+    )
+}
+
+/// Peak resident memory of this process so far (MB), from `/proc/self/status` (Linux).
+pub fn peak_memory_mb() -> Option<f64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb / 1024.0)
+}
