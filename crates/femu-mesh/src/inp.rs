@@ -1475,8 +1475,45 @@ fn face_number(text: &str, prefix: char) -> Option<usize> {
 // Writer.
 
 /// Full-precision, shortest round-trip text of a float (`0.1`, `1e-5`).
+/// A number in at most 20 characters: CalculiX 2.20 reads only the first 20 characters of a
+/// data field (a longer `1.000000000000000e-15` is silently read as 0.1). Shortest round-trip
+/// form when it fits, otherwise the most significant digits that fit (at least 13 significant digits).
 fn fmt_f64(v: f64) -> String {
-    format!("{v:?}")
+    let s = format!("{v:?}");
+    if s.len() <= 20 {
+        return s;
+    }
+    (0..=15)
+        .rev()
+        .map(|digits| format!("{v:.digits$e}"))
+        .find(|s| s.len() <= 20)
+        .unwrap_or_else(|| format!("{v:.6e}"))
+}
+
+#[cfg(test)]
+mod number_format_tests {
+    use super::fmt_f64;
+
+    #[test]
+    fn numbers_fit_in_twenty_characters_and_round_trip() {
+        for v in [
+            1.0e-15,
+            1.1225928992184071e-15,
+            -1.1225928992184071e-15,
+            -1.2345678901234567e-100,
+            123456.78901234567,
+            0.1 + 0.2,
+            -0.0,
+            2.666e-3,
+            1.0e300,
+        ] {
+            let s = fmt_f64(v);
+            assert!(s.len() <= 20, "{s}");
+            let back: f64 = s.parse().unwrap();
+            // At least 13 significant digits survive: relative error below 5e-13.
+            assert!((back - v).abs() <= 5e-13 * v.abs(), "{v} -> {s}");
+        }
+    }
 }
 
 fn invalid(msg: String) -> io::Error {
