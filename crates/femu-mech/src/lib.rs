@@ -8,6 +8,7 @@
 //! - [`output`]: displacements CSV, VTU with LE and Cauchy stress, summary JSON.
 
 pub mod build;
+pub mod contact;
 pub mod element;
 pub mod linear;
 pub mod load;

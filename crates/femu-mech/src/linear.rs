@@ -44,6 +44,34 @@ impl CscPattern {
         }
     }
 
+    /// This pattern bordered by extra rows and columns: border `(q, rows)` is the equation `q`
+    /// (numbered after every equation of `self`, in increasing order) coupled with the sorted
+    /// equations `rows` of `self`; the result is `n_total x n_total` and structurally symmetric.
+    pub fn bordered(&self, n_total: usize, borders: &[(usize, Vec<usize>)]) -> CscPattern {
+        let mut extra: Vec<Vec<usize>> = vec![Vec::new(); self.n];
+        for (q, rows) in borders {
+            for &r in rows {
+                extra[r].push(*q);
+            }
+        }
+        let mut col_ptr = Vec::with_capacity(n_total + 1);
+        let mut row_idx = Vec::with_capacity(self.nnz() + 2 * borders.iter().map(|b| b.1.len() + 1).sum::<usize>());
+        col_ptr.push(0);
+        for c in 0..self.n {
+            row_idx.extend_from_slice(&self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]]);
+            row_idx.extend_from_slice(&extra[c]);
+            col_ptr.push(row_idx.len());
+        }
+        for (q, rows) in borders {
+            debug_assert_eq!(*q, col_ptr.len() - 1, "borders are numbered after the base equations");
+            row_idx.extend_from_slice(rows);
+            row_idx.push(*q);
+            col_ptr.push(row_idx.len());
+        }
+        debug_assert_eq!(col_ptr.len(), n_total + 1);
+        CscPattern { n: n_total, col_ptr, row_idx }
+    }
+
     /// Number of stored entries.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()

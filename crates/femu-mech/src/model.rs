@@ -1,6 +1,7 @@
 //! A mechanical model ready to solve: mesh, precomputed element geometry, materials per
 //! element, prescribed displacements and loads of one static step.
 
+use crate::contact::RigidContact;
 use crate::element::{ElementGeometry, MAX_NODES};
 use crate::load::PressureFace;
 use crate::material::NeoHookean;
@@ -46,6 +47,9 @@ pub struct Model {
     pub constraints: Vec<BoundaryCondition>,
     pub pressures: Vec<PressureFace>,
     pub point_loads: Vec<PointLoad>,
+    /// Rigid bodies in frictionless contact (plate, indenter); each adds its travel to the
+    /// unknowns of the state (after the nodal displacements).
+    pub contacts: Vec<RigidContact>,
     pub step: StepDef,
 }
 
@@ -122,6 +126,8 @@ impl Model {
         if boundaries.is_empty() {
             return Err(ModelError::Unrestrained);
         }
+        // (A model with only rigid-body supports would be restrained by contact; the thigh is
+        // always held by its femur, so an unrestrained deck is an input error.)
         Ok(Model {
             mesh,
             geometry,
@@ -132,6 +138,7 @@ impl Model {
             constraints: boundaries,
             pressures: faces,
             point_loads,
+            contacts: Vec::new(),
             step,
         })
     }
@@ -139,6 +146,11 @@ impl Model {
     /// Number of nodes.
     pub fn node_count(&self) -> usize {
         self.mesh.nodes.len()
+    }
+
+    /// Length of the state vector: two displacements per node, then one travel per rigid body.
+    pub fn state_len(&self) -> usize {
+        2 * self.mesh.nodes.len() + self.contacts.len()
     }
 
     /// Local displacements of element `e` gathered from the global vector `u` (2 per node).

@@ -7,6 +7,7 @@
 //! `|δu · R| ≤ etol · |δu₀ · R₀|` hold (δu: the correction just applied, δu₀, R₀: first
 //! iteration of the increment).
 
+use crate::contact::{BodyState, TravelControl};
 use crate::element::{formulation, ElementResult, MAX_DOFS};
 use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, TangentSolver};
 use crate::model::Model;
@@ -77,6 +78,9 @@ pub struct IncrementRecord {
     /// Why the attempt was cut back, if it was.
     pub failure: Option<String>,
     pub iterations: Vec<IterationRecord>,
+    /// Travel (mm) and contact force (N/mm) of each rigid body at the end of a converged
+    /// increment: the force–displacement curve.
+    pub bodies: Vec<[f64; 2]>,
 }
 
 /// Diagnostics of a solve.
@@ -113,13 +117,17 @@ pub struct SolveReport {
 pub struct Solution {
     /// Nodal displacements, `[ux0, uy0, ux1, uy1, ...]` (mm).
     pub u: Vec<f64>,
+    /// The whole state: `u` followed by the travel of each rigid body beyond first contact (mm).
+    pub state: Vec<f64>,
+    /// Contact results per rigid body.
+    pub bodies: Vec<BodyState>,
     /// Reaction forces at prescribed dofs (zero elsewhere), same layout (N per mm).
     pub reactions: Vec<f64>,
     pub report: SolveReport,
 }
 
 /// Why a solve did not reach the end of the step.
-#[derive(Debug, thiserror::Error)]
+#[derive(thiserror::Error)]
 pub enum SolveError {
     #[error("Newton did not converge: {reason} (load factor reached {lambda:.4}, increment size {dlambda:.3e} below the minimum {min:.3e})")]
     NotConverged {
@@ -138,6 +146,13 @@ pub enum SolveError {
     },
     #[error("linear solver setup failed: {0}")]
     Setup(#[from] LinearSolveError),
+}
+
+impl std::fmt::Debug for SolveError {
+    /// The message only: the partial solution inside would print every nodal value.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "SolveError({self})")
+    }
 }
 
 /// Why one Newton attempt failed (the increment is cut back).
@@ -195,6 +210,17 @@ pub struct StaticSolver {
     setup_time_s: f64,
     last_factorization: Option<Factorization>,
     timers: [f64; 3],
+    /// Per rigid body and candidate node: positions of (xx, xy, yx, yy, xt, yt, tx, ty).
+    contact_slots: Vec<Vec<[usize; 8]>>,
+    /// Per rigid body: position of (t, t).
+    contact_tt: Vec<usize>,
+    /// Per rigid body: the multiplier estimates λ̂ of its candidate nodes.
+    multipliers: Vec<Vec<f64>>,
+    /// Per rigid body: the penalty ε (set at the start of each solve).
+    penalties: Vec<f64>,
+    augmentations: Vec<usize>,
+    /// Count and fingerprint of the active contact nodes at the last assembly.
+    active_set: (usize, u64),
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -210,7 +236,8 @@ impl StaticSolver {
     /// Numbers the dofs, builds the sparse pattern and its symbolic LU.
     pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
         let t0 = Instant::now();
-        let n_dof = 2 * model.node_count();
+        let n_nodes_dof = 2 * model.node_count();
+        let n_dof = model.state_len();
         let mut eq = vec![NONE; n_dof];
         let mut prescribed: Vec<(usize, f64)> = Vec::with_capacity(model.constraints.len());
         for bc in &model.constraints {
@@ -222,6 +249,11 @@ impl StaticSolver {
             }
             eq[d] = prescribed.len();
             prescribed.push((d, bc.value));
+        }
+        for (b, c) in model.contacts.iter().enumerate() {
+            if let TravelControl::Displacement(t) = c.control {
+                prescribed.push((n_nodes_dof + b, t));
+            }
         }
         let mut is_prescribed = vec![false; n_dof];
         for &(d, _) in &prescribed {
@@ -241,8 +273,29 @@ impl StaticSolver {
             model.node_count(),
             model.mesh.elements.iter().map(|e| e.nodes()),
         );
-        let pattern = graph.dof_pattern(&eq, n_eq);
-        let ordering = graph.fill_reducing_dof_order(&eq, n_eq)?;
+        let n_eq_nodes = eq[..n_nodes_dof].iter().filter(|&&q| q != NONE).count();
+        let base = graph.dof_pattern(&eq[..n_nodes_dof], n_eq_nodes);
+        let mut ordering = graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes)?;
+        // Bordered system: each force-controlled body couples its travel with the free dofs of
+        // its candidate nodes; the travels are numbered and eliminated last.
+        let borders: Vec<(usize, Vec<usize>)> = model
+            .contacts
+            .iter()
+            .enumerate()
+            .filter(|(b, _)| eq[n_nodes_dof + b] != NONE)
+            .map(|(b, c)| {
+                let mut rows: Vec<usize> = c
+                    .nodes
+                    .iter()
+                    .flat_map(|&n| [eq[2 * n], eq[2 * n + 1]])
+                    .filter(|&q| q != NONE)
+                    .collect();
+                rows.sort_unstable();
+                (eq[n_nodes_dof + b], rows)
+            })
+            .collect();
+        let pattern = base.bordered(n_eq, &borders);
+        ordering.extend(borders.iter().map(|b| b.0));
         let elem_eqs = |e: usize| {
             let mut dofs = [NONE; MAX_DOFS];
             for (a, &n) in model.mesh.elements[e].nodes().iter().enumerate() {
@@ -278,6 +331,43 @@ impl StaticSolver {
             face_idx[fill[f.element]] = k;
             fill[f.element] += 1;
         }
+        let contact_slots: Vec<Vec<[usize; 8]>> = model
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(b, c)| {
+                let qt = eq[n_nodes_dof + b];
+                c.nodes
+                    .iter()
+                    .map(|&n| {
+                        let (qx, qy) = (eq[2 * n], eq[2 * n + 1]);
+                        let pos = |r: usize, col: usize| {
+                            if r == NONE || col == NONE {
+                                NONE
+                            } else {
+                                pattern.position(r, col).expect("contact entry in pattern")
+                            }
+                        };
+                        [
+                            pos(qx, qx),
+                            pos(qx, qy),
+                            pos(qy, qx),
+                            pos(qy, qy),
+                            pos(qx, qt),
+                            pos(qy, qt),
+                            pos(qt, qx),
+                            pos(qt, qy),
+                        ]
+                    })
+                    .collect()
+            })
+            .collect();
+        let contact_tt: Vec<usize> = (0..model.contacts.len())
+            .map(|b| {
+                let qt = eq[n_nodes_dof + b];
+                if qt == NONE { NONE } else { pattern.position(qt, qt).expect("(t, t) in pattern") }
+            })
+            .collect();
         let mut point_force = vec![0.0; n_dof];
         for p in &model.point_loads {
             point_force[2 * p.node + p.dof] += p.magnitude;
@@ -308,6 +398,12 @@ impl StaticSolver {
             setup_time_s: t0.elapsed().as_secs_f64(),
             last_factorization: None,
             timers: [0.0; 3],
+            multipliers: model.contacts.iter().map(|c| vec![0.0; c.nodes.len()]).collect(),
+            penalties: vec![0.0; model.contacts.len()],
+            augmentations: vec![0; model.contacts.len()],
+            active_set: (0, 0),
+            contact_slots,
+            contact_tt,
         })
     }
 
@@ -450,12 +546,151 @@ impl StaticSolver {
                 }
             }
         }
+        self.add_contact(model, u, lambda, with_tangent);
         for (d, &q) in self.eq.iter().enumerate() {
             if q != NONE {
                 self.rhs[q] = -self.residual[d];
             }
         }
         Ok(())
+    }
+
+    /// Adds the rigid-body contact terms (see [`crate::contact`]) and, under force control,
+    /// the applied force on the travel equation.
+    fn add_contact(&mut self, model: &Model, u: &[f64], lambda: f64, with_tangent: bool) {
+        let base = 2 * model.node_count();
+        self.active_set = (0, 0);
+        for (b, c) in model.contacts.iter().enumerate() {
+            let tdof = base + b;
+            let t = c.first_contact + u[tdof];
+            if let TravelControl::Force(f) = c.control {
+                self.residual[tdof] -= lambda * f;
+                self.fext[tdof] += lambda * f;
+            }
+            let eps = self.penalties[b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let x = [model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]];
+                let gap = c.body.gap(x, t);
+                let trial = self.multipliers[b][k] - eps * gap.g;
+                if trial < 0.0 {
+                    continue;
+                }
+                let lam = trial;
+                self.active_set.0 += 1;
+                self.active_set.1 = self.active_set.1.wrapping_mul(31).wrapping_add(k as u64 + 1);
+                self.residual[2 * n] -= lam * gap.dg_dx[0];
+                self.residual[2 * n + 1] -= lam * gap.dg_dx[1];
+                self.residual[tdof] -= lam * gap.dg_dt;
+                if with_tangent {
+                    let s = &self.contact_slots[b][k];
+                    let kxx = [
+                        eps * gap.dg_dx[0] * gap.dg_dx[0] - lam * gap.d2g_dxdx[0][0],
+                        eps * gap.dg_dx[0] * gap.dg_dx[1] - lam * gap.d2g_dxdx[0][1],
+                        eps * gap.dg_dx[1] * gap.dg_dx[0] - lam * gap.d2g_dxdx[1][0],
+                        eps * gap.dg_dx[1] * gap.dg_dx[1] - lam * gap.d2g_dxdx[1][1],
+                    ];
+                    let kxt = [
+                        eps * gap.dg_dx[0] * gap.dg_dt - lam * gap.d2g_dxdt[0],
+                        eps * gap.dg_dx[1] * gap.dg_dt - lam * gap.d2g_dxdt[1],
+                    ];
+                    let vals = [kxx[0], kxx[1], kxx[2], kxx[3], kxt[0], kxt[1], kxt[0], kxt[1]];
+                    for (pos, v) in s.iter().zip(vals) {
+                        if *pos != NONE {
+                            self.values[*pos] += v;
+                        }
+                    }
+                    if self.contact_tt[b] != NONE {
+                        self.values[self.contact_tt[b]] += eps * gap.dg_dt * gap.dg_dt - lam * gap.d2g_dtdt;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Contact results of every body at state `u`.
+    fn body_states(&self, model: &Model, u: &[f64]) -> Vec<BodyState> {
+        let base = 2 * model.node_count();
+        model
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(b, c)| {
+                let t = c.first_contact + u[base + b];
+                let eps = self.penalties[b];
+                let mut st = BodyState {
+                    name: c.name.clone(),
+                    travel: u[base + b],
+                    penalty: eps,
+                    penetration_limit: c.penetration_tolerance * c.element_size,
+                    augmentations: self.augmentations[b],
+                    ..Default::default()
+                };
+                for (k, &n) in c.nodes.iter().enumerate() {
+                    let x = [model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]];
+                    let gap = c.body.gap(x, t);
+                    let lam = (self.multipliers[b][k] - eps * gap.g).max(0.0);
+                    st.force -= lam * gap.dg_dt;
+                    if lam > 0.0 {
+                        st.active_nodes += 1;
+                    }
+                    st.max_penetration = st.max_penetration.max(-gap.g);
+                    st.node_forces.push(lam);
+                    st.node_gaps.push(gap.g);
+                }
+                st
+            })
+            .collect()
+    }
+
+    /// Sets each body's penalty from the largest diagonal stiffness of its candidate dofs at
+    /// the undeformed state (the "automatic penalty") and clears the multipliers.
+    fn init_contact(&mut self, model: &Model) -> Result<(), AttemptFailure> {
+        if model.contacts.is_empty() {
+            return Ok(());
+        }
+        let zero = vec![0.0; model.state_len()];
+        self.penalties.iter_mut().for_each(|p| *p = 0.0);
+        self.assemble(model, &zero, 0.0, true)?;
+        for (b, c) in model.contacts.iter().enumerate() {
+            let mut kmax = 0.0f64;
+            for s in &self.contact_slots[b] {
+                for pos in [s[0], s[3]] {
+                    if pos != NONE {
+                        kmax = kmax.max(self.values[pos].abs());
+                    }
+                }
+            }
+            self.penalties[b] = c.penalty_factor * kmax.max(1e-12);
+            self.multipliers[b].iter_mut().for_each(|m| *m = 0.0);
+            self.augmentations[b] = 0;
+        }
+        Ok(())
+    }
+
+    /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` for the bodies whose penetration exceeds their limit;
+    /// returns whether any was updated.
+    fn augment(&mut self, model: &Model, u: &[f64]) -> bool {
+        let base = 2 * model.node_count();
+        let mut updated = false;
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            let limit = c.penetration_tolerance * c.element_size;
+            let gaps: Vec<f64> = c
+                .nodes
+                .iter()
+                .map(|&n| c.body.gap([model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]], t).g)
+                .collect();
+            let pen = gaps.iter().fold(0.0f64, |m, g| m.max(-g));
+            if pen > limit {
+                for (m, g) in self.multipliers[b].iter_mut().zip(&gaps) {
+                    *m = (*m - eps * g).max(0.0);
+                }
+                self.augmentations[b] += 1;
+                updated = true;
+            }
+        }
+        updated
     }
 
     /// ‖R‖ on free dofs and the reference force scale.
@@ -537,6 +772,10 @@ impl StaticSolver {
                 energy0 = energy.max(floor);
             }
             let max_du = self.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            // A correction whose energy is at round-off level (1e-15 of the first) cannot
+            // improve the state: the residual has reached the floor of floating-point
+            // arithmetic for this problem (e.g. small forces on stiff penalty contact).
+            let at_round_off = it > 0 && energy <= 1e-15 * energy0;
             if !max_du.is_finite() {
                 return Err(AttemptFailure::Diverged(
                     "non-finite Newton correction".into(),
@@ -544,6 +783,7 @@ impl StaticSolver {
             }
             let mut alpha = 1.0;
             let mut accepted = false;
+            let active_before = self.active_set;
             for _ in 0..8 {
                 let mut trial = std::mem::take(&mut self.u_trial);
                 self.add_free(u, alpha, &mut trial);
@@ -558,7 +798,11 @@ impl StaticSolver {
                     Ok(()) => {}
                 }
                 let (rn, fr) = self.norms();
-                if !opt.line_search || rn < rnorm || !rn.is_finite() {
+                // A full step that changes the contact active set is taken as it is: the
+                // residual jump comes from the new contacts, whose stiffness the next tangent
+                // includes (semi-smooth Newton); damping it would creep in tiny steps.
+                let new_contacts = alpha == 1.0 && self.active_set != active_before;
+                if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts {
                     accepted = rn.is_finite();
                     if accepted {
                         rnorm = rn;
@@ -601,7 +845,7 @@ impl StaticSolver {
             last.max_correction = alpha * max_du;
             let res_ok = rnorm <= opt.residual_tolerance * fref.max(floor);
             let energy_ok = energy * alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
-            let stagnated = rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor);
+            let stagnated = rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor) || at_round_off;
             if (res_ok && energy_ok) || stagnated {
                 return Ok(());
             }
@@ -617,6 +861,39 @@ impl StaticSolver {
         )))
     }
 
+    /// Newton at load factor `lambda`, then augmented-Lagrangian updates of the contact
+    /// multipliers and Newton again until every body's penetration is within its limit
+    /// (at most 20 updates). Records the bodies' travel and force on success.
+    fn newton_augmented(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        lambda: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<(), AttemptFailure> {
+        let saved: Vec<Vec<f64>> = self.multipliers.clone();
+        let result = (|| {
+            self.newton(model, u, lambda, record)?;
+            for _ in 0..20 {
+                if !self.augment(model, u) {
+                    break;
+                }
+                self.newton(model, u, lambda, record)?;
+            }
+            Ok(())
+        })();
+        match result {
+            Ok(()) => {
+                record.bodies = self.body_states(model, u).iter().map(|b| [b.travel, b.force]).collect();
+                Ok(())
+            }
+            Err(e) => {
+                self.multipliers = saved;
+                Err(e)
+            }
+        }
+    }
+
     /// Reaction forces (prescribed dofs) from the last assembly.
     fn reactions(&self) -> Vec<f64> {
         let mut r = vec![0.0; self.residual.len()];
@@ -626,7 +903,8 @@ impl StaticSolver {
         r
     }
 
-    fn solution(&self, u: &[f64], report: SolveReport) -> Solution {
+    fn solution(&self, model: &Model, u: &[f64], report: SolveReport) -> Solution {
+        let n = 2 * model.node_count();
         let reactions = self.reactions();
         let mut report = report;
         report.factorization = self.last_factorization;
@@ -634,12 +912,14 @@ impl StaticSolver {
         report.factorization_time_s = self.timers[1];
         report.triangular_solve_time_s = self.timers[2];
         report.reaction_total = [
-            reactions.iter().step_by(2).sum(),
-            reactions.iter().skip(1).step_by(2).sum(),
+            reactions[..n].iter().step_by(2).sum(),
+            reactions[..n].iter().skip(1).step_by(2).sum(),
         ];
         Solution {
-            u: u.to_vec(),
-            reactions,
+            u: u[..n].to_vec(),
+            state: u.to_vec(),
+            bodies: self.body_states(model, u),
+            reactions: reactions[..n].to_vec(),
             report,
         }
     }
@@ -660,7 +940,7 @@ impl StaticSolver {
     ) -> Result<Solution, SolveError> {
         let t0 = Instant::now();
         self.timers = [0.0; 3];
-        let n_dof = 2 * model.node_count();
+        let n_dof = model.state_len();
         let mut report = SolveReport {
             equations: self.n_eq,
             matrix_nonzeros: self.pattern.nnz(),
@@ -668,9 +948,15 @@ impl StaticSolver {
             ..Default::default()
         };
         let mut u = vec![0.0; n_dof];
+        if let Err(e) = self.init_contact(model) {
+            return Err(SolveError::Setup(LinearSolveError::Other(format!(
+                "the undeformed state cannot be assembled: {e}"
+            ))));
+        }
         if let Some(u0) = initial {
             report.warm_start = true;
-            u.copy_from_slice(u0);
+            let k = u0.len().min(n_dof);
+            u[..k].copy_from_slice(&u0[..k]);
             self.set_prescribed(&mut u, 1.0);
             let mut rec = IncrementRecord {
                 increment: 1,
@@ -679,8 +965,9 @@ impl StaticSolver {
                 converged: false,
                 failure: None,
                 iterations: Vec::new(),
+                bodies: Vec::new(),
             };
-            let outcome = self.newton(model, &mut u, 1.0, &mut rec);
+            let outcome = self.newton_augmented(model, &mut u, 1.0, &mut rec);
             rec.converged = outcome.is_ok();
             rec.failure = outcome.as_ref().err().map(|e| format!("warm start: {e}"));
             report.newton_iterations += rec.iterations.len();
@@ -691,7 +978,7 @@ impl StaticSolver {
                 report.converged_increments = 1;
                 report.lambda = 1.0;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
-                return Ok(self.solution(&u, report));
+                return Ok(self.solution(model, &u, report));
             }
             report.cutbacks += 1;
             u.fill(0.0);
@@ -714,7 +1001,7 @@ impl StaticSolver {
             {
                 report.lambda = lambda;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
-                let partial = Box::new(self.solution(&self.u_conv.clone(), report));
+                let partial = Box::new(self.solution(model, &self.u_conv.clone(), report));
                 return Err(SolveError::TooManyIncrements {
                     max: step.max_increments,
                     lambda,
@@ -740,13 +1027,14 @@ impl StaticSolver {
                 converged: false,
                 failure: None,
                 iterations: Vec::new(),
+                bodies: Vec::new(),
             };
-            let mut outcome = self.newton(model, &mut u, target, &mut rec);
+            let mut outcome = self.newton_augmented(model, &mut u, target, &mut rec);
             if outcome.is_err() && last_dlambda > 0.0 && rec.iterations.is_empty() {
                 // The extrapolated predictor inverted an element: retry from the last state.
                 u.copy_from_slice(&self.u_conv);
                 self.set_prescribed(&mut u, target);
-                outcome = self.newton(model, &mut u, target, &mut rec);
+                outcome = self.newton_augmented(model, &mut u, target, &mut rec);
             }
             report.newton_iterations += rec.iterations.len();
             report.factorizations += rec.iterations.len();
@@ -779,7 +1067,7 @@ impl StaticSolver {
                         let _ = self.assemble(model, &uc, lambda, false);
                         report.lambda = lambda;
                         report.wall_time_s = t0.elapsed().as_secs_f64();
-                        let partial = Box::new(self.solution(&uc, report));
+                        let partial = Box::new(self.solution(model, &uc, report));
                         return Err(SolveError::NotConverged {
                             reason: failure.to_string(),
                             lambda,
@@ -793,7 +1081,7 @@ impl StaticSolver {
         }
         report.lambda = 1.0;
         report.wall_time_s = t0.elapsed().as_secs_f64();
-        Ok(self.solution(&u, report))
+        Ok(self.solution(model, &u, report))
     }
 
     /// Assembles residual and tangent at a given state (λ = 1) and factorizes the tangent, so
@@ -817,7 +1105,8 @@ impl StaticSolver {
         &self.residual
     }
 
-    /// Assembles only the residual at `u` and λ = 1 and returns it (2 per node).
+    /// Assembles only the residual at the state `u` and λ = 1 and returns it (length
+    /// [`Model::state_len`]: 2 per node, then one per rigid body).
     pub fn residual_at(&mut self, model: &Model, u: &[f64]) -> Result<&[f64], String> {
         self.assemble(model, u, 1.0, false)
             .map_err(|e| e.to_string())?;
@@ -829,7 +1118,19 @@ impl StaticSolver {
         &self.values
     }
 
-    /// Assembles residual and tangent at `u`, λ = 1 (for derivative checks).
+    /// Sets the automatic contact penalties as a solve does (for derivative checks of
+    /// [`Self::assemble_at`] with contact).
+    pub fn prepare_contact(&mut self, model: &Model) -> Result<(), String> {
+        self.init_contact(model).map_err(|e| e.to_string())
+    }
+
+    /// The penalty ε of each rigid body (after a solve or [`Self::prepare_contact`]).
+    pub fn penalties(&self) -> &[f64] {
+        &self.penalties
+    }
+
+    /// Assembles residual and tangent at the state `u` (length [`Model::state_len`]), λ = 1
+    /// (for derivative checks).
     pub fn assemble_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
         self.assemble(model, u, 1.0, true)
             .map_err(|e| e.to_string())
