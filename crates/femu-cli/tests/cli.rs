@@ -5,7 +5,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu")).args(args).output().expect("femu runs")
+    Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(args)
+        .output()
+        .expect("femu runs")
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -19,30 +22,61 @@ fn read_csv(path: &Path) -> Vec<Vec<f64>> {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
     assert_eq!(lines.next(), Some("node,x,y,ux,uy"));
-    lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect()
+    lines
+        .map(|l| l.split(',').map(|v| v.parse().unwrap()).collect())
+        .collect()
 }
 
 #[test]
 fn demo_writes_the_output_folder() {
     let out = scratch("demo");
-    let o = femu(&["demo", "--n-theta", "48", "--out", out.to_str().unwrap(), "--quiet"]);
+    let o = femu(&[
+        "demo",
+        "--n-theta",
+        "48",
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    for f in ["model.inp", "displacements.csv", "result.vtu", "summary.json"] {
+    for f in [
+        "model.inp",
+        "displacements.csv",
+        "result.vtu",
+        "summary.json",
+    ] {
         assert!(out.join(f).exists(), "{f} missing");
     }
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["status"], "converged");
     // The skin is pushed inward by about a millimetre (contention, 20 mmHg).
     let umax = s["max_displacement_mm"].as_f64().unwrap();
     assert!(umax > 0.3 && umax < 3.0, "max displacement {umax}");
     // The demo's deck solves again to the same displacements through `femu solve`.
     let out2 = scratch("demo-resolve");
-    let o = femu(&["solve", out.join("model.inp").to_str().unwrap(), "--out", out2.to_str().unwrap(), "--quiet"]);
+    let o = femu(&[
+        "solve",
+        out.join("model.inp").to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (a, b) = (read_csv(&out.join("displacements.csv")), read_csv(&out2.join("displacements.csv")));
+    let (a, b) = (
+        read_csv(&out.join("displacements.csv")),
+        read_csv(&out2.join("displacements.csv")),
+    );
     assert_eq!(a.len(), b.len());
-    let dmax = a.iter().zip(&b).map(|(p, q)| (p[3] - q[3]).abs().max((p[4] - q[4]).abs())).fold(0.0, f64::max);
-    assert!(dmax < 1e-9 * umax, "deck round trip changed the answer by {dmax}");
+    let dmax = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p[3] - q[3]).abs().max((p[4] - q[4]).abs()))
+        .fold(0.0, f64::max);
+    assert!(
+        dmax < 1e-9 * umax,
+        "deck round trip changed the answer by {dmax}"
+    );
 }
 
 const DECK: &str = "*HEADING
@@ -78,33 +112,68 @@ fn solve_a_deck_and_report_bad_decks() {
     let dir = scratch("deck");
     std::fs::write(dir.join("ok.inp"), DECK).unwrap();
     let out = dir.join("out");
-    let o = femu(&["solve", dir.join("ok.inp").to_str().unwrap(), "--out", out.to_str().unwrap(), "--newton-table"]);
+    let o = femu(&[
+        "solve",
+        dir.join("ok.inp").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--newton-table",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("increment") && err.contains("iteration"), "progress and Newton table: {err}");
+    assert!(
+        err.contains("increment") && err.contains("iteration"),
+        "progress and Newton table: {err}"
+    );
     let rows = read_csv(&out.join("displacements.csv"));
     assert_eq!(rows.len(), 6);
     // A negative pressure pulls the right face outward (+x).
     assert!(rows[2][3] > 0.0 && rows[5][3] > 0.0);
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     // The femur-like reaction balances the applied 1e-3 N/mm pull.
     let rx = s["reaction_force_total_n_per_mm"][0].as_f64().unwrap();
     assert!(rx < 0.0, "reaction {rx}");
 
     for (name, broken, expect) in [
         ("type", DECK.replace("TYPE=CPE4,", "TYPE=C3D8,"), ":10:"),
-        ("number", DECK.replace("1.75e-3, 18.0", "1.75e-3, abc"), ":17:"),
-        ("plastic", DECK.replace("*SOLID SECTION", "*PLASTIC\n0.1, 0.0\n*SOLID SECTION"), "*PLASTIC"),
+        (
+            "number",
+            DECK.replace("1.75e-3, 18.0", "1.75e-3, abc"),
+            ":17:",
+        ),
+        (
+            "plastic",
+            DECK.replace("*SOLID SECTION", "*PLASTIC\n0.1, 0.0\n*SOLID SECTION"),
+            "*PLASTIC",
+        ),
         ("set", DECK.replace("LEFT, 1, 2", "FEMUR, 1, 2"), "FEMUR"),
-        ("material", DECK.replace("MATERIAL=M", "MATERIAL=FAT"), "FAT"),
-        ("inverted", DECK.replace("2, 2, 3, 6, 5", "2, 2, 5, 6, 3"), "element 2"),
+        (
+            "material",
+            DECK.replace("MATERIAL=M", "MATERIAL=FAT"),
+            "FAT",
+        ),
+        (
+            "inverted",
+            DECK.replace("2, 2, 3, 6, 5", "2, 2, 5, 6, 3"),
+            "element 2",
+        ),
     ] {
         let path = dir.join(format!("{name}.inp"));
         std::fs::write(&path, broken).unwrap();
-        let o = femu(&["solve", path.to_str().unwrap(), "--out", dir.join("bad").to_str().unwrap(), "--quiet"]);
+        let o = femu(&[
+            "solve",
+            path.to_str().unwrap(),
+            "--out",
+            dir.join("bad").to_str().unwrap(),
+            "--quiet",
+        ]);
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(!o.status.success(), "{name}: should fail");
-        assert!(err.contains(expect), "{name}: message should contain '{expect}': {err}");
+        assert!(
+            err.contains(expect),
+            "{name}: message should contain '{expect}': {err}"
+        );
         assert!(!err.contains("panicked"), "{name}: {err}");
     }
 }
@@ -113,7 +182,8 @@ fn solve_a_deck_and_report_bad_decks() {
 fn solve_a_gmsh_mesh_with_a_study_file() {
     // A mesh written by Gmsh 4.8 (quads and triangles), physical surfaces "Fat" and an unnamed
     // one (tag 7), physical curve "Bottom".
-    let msh = Path::new(env!("CARGO_MANIFEST_DIR")).join("../femu-mesh/tests/data/gmsh_two_surfaces.msh");
+    let msh =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../femu-mesh/tests/data/gmsh_two_surfaces.msh");
     let dir = scratch("msh");
     let study = "element = \"CPE4H\"
 [materials.Fat]
@@ -130,16 +200,39 @@ mmhg = 20
 ";
     std::fs::write(dir.join("study.toml"), study).unwrap();
     let out = dir.join("out");
-    let o = femu(&["solve", msh.to_str().unwrap(), "--study", dir.join("study.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+    let o = femu(&[
+        "solve",
+        msh.to_str().unwrap(),
+        "--study",
+        dir.join("study.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.join("result.vtu").exists());
-    let s: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert!(s["element_types"]["CPE4H"].as_u64().unwrap() > 0);
     assert!(s["pressure_faces"].as_u64().unwrap() > 0);
     // An unknown region and an unknown key are named in the errors.
-    for (bad, expect) in [(study.replace("surface_7", "NOPE"), "NOPE"), (study.replace("d_per_mpa = 18.0", "d = 18.0"), "unknown field `d`")] {
+    for (bad, expect) in [
+        (study.replace("surface_7", "NOPE"), "NOPE"),
+        (
+            study.replace("d_per_mpa = 18.0", "d = 18.0"),
+            "unknown field `d`",
+        ),
+    ] {
         std::fs::write(dir.join("bad.toml"), bad).unwrap();
-        let o = femu(&["solve", msh.to_str().unwrap(), "--study", dir.join("bad.toml").to_str().unwrap(), "--out", out.to_str().unwrap(), "--quiet"]);
+        let o = femu(&[
+            "solve",
+            msh.to_str().unwrap(),
+            "--study",
+            dir.join("bad.toml").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quiet",
+        ]);
         assert!(!o.status.success());
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(expect), "{err}");
