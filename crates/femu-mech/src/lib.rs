@@ -12,6 +12,7 @@ pub mod contact;
 pub mod element;
 pub mod linear;
 pub mod load;
+pub mod loading;
 pub mod material;
 pub mod model;
 pub mod output;

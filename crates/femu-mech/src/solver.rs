@@ -572,10 +572,12 @@ impl StaticSolver {
                 let x = [model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]];
                 let gap = c.body.gap(x, t);
                 let trial = self.multipliers[b][k] - eps * gap.g;
-                if trial < 0.0 {
+                // Touching within round-off counts as active (the first-contact node starts at
+                // g = 0 up to rounding), so that the travel has stiffness from the start.
+                if trial < -eps * 1e-12 * c.element_size {
                     continue;
                 }
-                let lam = trial;
+                let lam = trial.max(0.0);
                 self.active_set.0 += 1;
                 self.active_set.1 = self.active_set.1.wrapping_mul(31).wrapping_add(k as u64 + 1);
                 self.residual[2 * n] -= lam * gap.dg_dx[0];
@@ -737,6 +739,7 @@ impl StaticSolver {
         let (mut rnorm, mut fref) = self.norms();
         let floor = 1e-300;
         let mut energy0 = 0.0;
+        let mut first_residual = f64::INFINITY;
         for it in 0..opt.max_iterations {
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
@@ -798,10 +801,11 @@ impl StaticSolver {
                     Ok(()) => {}
                 }
                 let (rn, fr) = self.norms();
-                // A full step that changes the contact active set is taken as it is: the
-                // residual jump comes from the new contacts, whose stiffness the next tangent
-                // includes (semi-smooth Newton); damping it would creep in tiny steps.
-                let new_contacts = alpha == 1.0 && self.active_set != active_before;
+                // In the first iterations a full step that changes the contact active set is
+                // taken as it is: the residual jump comes from the new contacts, whose stiffness
+                // the next tangent includes (semi-smooth Newton); damping it would creep in tiny
+                // steps. Later, the line search applies again, which breaks active-set cycles.
+                let new_contacts = it < 4 && alpha == 1.0 && self.active_set != active_before;
                 if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts {
                     accepted = rn.is_finite();
                     if accepted {
@@ -848,6 +852,15 @@ impl StaticSolver {
             let stagnated = rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor) || at_round_off;
             if (res_ok && energy_ok) || stagnated {
                 return Ok(());
+            }
+            if it == 0 {
+                first_residual = rnorm;
+            }
+            if it >= 7 && rnorm > first_residual {
+                return Err(AttemptFailure::Diverged(format!(
+                    "no progress after {} iterations (|R| = {rnorm:.3e}, first {first_residual:.3e})",
+                    it + 1
+                )));
             }
             if !rnorm.is_finite() || rnorm > 1e10 * fref.max(1e-12) {
                 return Err(AttemptFailure::Diverged(format!(
