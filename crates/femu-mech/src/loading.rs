@@ -131,11 +131,11 @@ fn skin_extent(model: &Model, skin: &[(usize, usize)], e: [f64; 2]) -> ([f64; 2]
     (c, reach)
 }
 
-/// Contact spreads from a single node at first contact: the first increment is kept at 5 % of
+/// Contact spreads from a single node at first contact: the first increment is kept at 2 % of
 /// the load (increments then grow automatically), instead of trying the whole load at once.
 fn start_contact_gently(model: &mut Model) {
     let period = if model.step.period > 0.0 { model.step.period } else { 1.0 };
-    model.step.initial_increment = model.step.initial_increment.min(0.05 * period);
+    model.step.initial_increment = model.step.initial_increment.min(0.02 * period);
     model.step.max_increments = model.step.max_increments.max(200);
 }
 

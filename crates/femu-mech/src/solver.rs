@@ -32,7 +32,8 @@ pub struct SolverOptions {
     pub max_iterations: usize,
     /// Backtracking line search on the directional residual.
     pub line_search: bool,
-    /// Increment growth factor after an easy increment (≤ 5 iterations).
+    /// Increment growth factor after an easy increment (≤ 5 iterations; the increment doubles
+    /// after ≤ 3).
     pub growth: f64,
     /// Increment reduction factor on a cut-back (Abaqus uses 0.25).
     pub cutback: f64,
@@ -874,9 +875,9 @@ impl StaticSolver {
         )))
     }
 
-    /// Newton at load factor `lambda`, then augmented-Lagrangian updates of the contact
-    /// multipliers and Newton again until every body's penetration is within its limit
-    /// (at most 20 updates). Records the bodies' travel and force on success.
+    /// Newton at load factor `lambda`, then (at the end of the step) augmented-Lagrangian
+    /// updates of the contact multipliers and Newton again until every body's penetration is
+    /// within its limit (at most 20 updates). Records the bodies' travel and force on success.
     fn newton_augmented(
         &mut self,
         model: &Model,
@@ -887,6 +888,12 @@ impl StaticSolver {
         let saved: Vec<Vec<f64>> = self.multipliers.clone();
         let result = (|| {
             self.newton(model, u, lambda, record)?;
+            // The penetration limit is enforced on the final state only: intermediate
+            // increments carry the penalty's own (small) penetration, which saves the Uzawa
+            // re-solves there.
+            if lambda < 1.0 - 1e-12 {
+                return Ok(());
+            }
             for _ in 0..20 {
                 if !self.augment(model, u) {
                     break;
@@ -1062,7 +1069,9 @@ impl StaticSolver {
                     self.u_conv.copy_from_slice(&u);
                     lambda = target;
                     last_dlambda = dl;
-                    if iters <= 5 {
+                    if iters <= 3 {
+                        dlambda = (2.0 * dl).min(max_inc);
+                    } else if iters <= 5 {
                         dlambda = (dl * self.options.growth).min(max_inc);
                     } else {
                         dlambda = dl;
