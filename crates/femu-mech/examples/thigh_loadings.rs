@@ -9,7 +9,10 @@ use femu_mesh::ElementKind;
 use std::time::Instant;
 
 fn main() {
-    let n_theta: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(480);
+    let n_theta: usize = std::env::args()
+        .nth(1)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(480);
     let d = ThighLikeParams::default();
     let s = n_theta as f64 / d.n_theta as f64;
     let p = ThighLikeParams {
@@ -30,9 +33,20 @@ fn main() {
         .fix("INNER")
         .build();
     let base = Model::from_deck(deck).unwrap();
-    let force: f64 = std::env::args().nth(2).and_then(|a| a.parse().ok()).unwrap_or(3.0);
-    let indentation = Loading::Indentation { site: femu_mech::loading::Side::Anterior, radius: 10.0, force };
-    for loading in [Loading::SEED_CONTENTION, Loading::SEED_COMPRESSION, indentation] {
+    let force: f64 = std::env::args()
+        .nth(2)
+        .and_then(|a| a.parse().ok())
+        .unwrap_or(3.0);
+    let indentation = Loading::Indentation {
+        site: femu_mech::loading::Side::Anterior,
+        radius: 10.0,
+        force,
+    };
+    for loading in [
+        Loading::SEED_CONTENTION,
+        Loading::SEED_COMPRESSION,
+        indentation,
+    ] {
         let mut model = base.clone();
         apply_loading(&mut model, &skin, &loading).unwrap();
         let t0 = Instant::now();
@@ -41,14 +55,27 @@ fn main() {
         let dt = t0.elapsed().as_secs_f64();
         match sol {
             Ok(sol) => {
-                let umax = sol.u.chunks(2).map(|c| c[0].hypot(c[1])).fold(0.0, f64::max);
+                let umax = sol
+                    .u
+                    .chunks(2)
+                    .map(|c| c[0].hypot(c[1]))
+                    .fold(0.0, f64::max);
                 println!(
                     "{}: {} elements, {:.3} s, {} increments, {} iterations, {} cut-backs, max|u| {:.3} mm, reaction {:?}",
                     loading.name(), model.mesh.elements.len(), dt, sol.report.converged_increments, sol.report.newton_iterations, sol.report.cutbacks, umax, sol.report.reaction_total
                 );
                 if std::env::var("TRACE").is_ok() {
                     for inc in &sol.report.increments {
-                        println!("  inc {} λ {:.4} conv {} {:?}", inc.increment, inc.lambda, inc.converged, inc.iterations.iter().map(|i| format!("{:.1e}/{:.2}", i.residual_norm, i.step_length)).collect::<Vec<_>>());
+                        println!(
+                            "  inc {} λ {:.4} conv {} {:?}",
+                            inc.increment,
+                            inc.lambda,
+                            inc.converged,
+                            inc.iterations
+                                .iter()
+                                .map(|i| format!("{:.1e}/{:.2}", i.residual_norm, i.step_length))
+                                .collect::<Vec<_>>()
+                        );
                     }
                 }
                 for b in &sol.bodies {

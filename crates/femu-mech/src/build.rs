@@ -179,9 +179,55 @@ pub enum SetupError {
     BadDof(usize),
 }
 
+/// The boundary faces `(element, face)` along the edges `edges` (node pairs) of curve `name`.
+fn faces_of_edges(
+    mesh: &femu_mesh::Mesh,
+    name: &str,
+    edges: &[[usize; 2]],
+) -> Result<Vec<(usize, usize)>, SetupError> {
+    let boundary: std::collections::HashMap<(usize, usize), (usize, usize)> = mesh
+        .boundary_faces()
+        .into_iter()
+        .map(|(e, f)| {
+            let [a, b] = mesh.elements[e].face_nodes(f);
+            ((a.min(b), a.max(b)), (e, f))
+        })
+        .collect();
+    edges
+        .iter()
+        .map(|&[a, b]| {
+            boundary
+                .get(&(a.min(b), a.max(b)))
+                .copied()
+                .ok_or(SetupError::NotABoundaryEdge {
+                    curve: name.to_string(),
+                    a: mesh.node_labels[a],
+                    b: mesh.node_labels[b],
+                })
+        })
+        .collect()
+}
+
+/// The boundary faces `(element, face)` of physical curve `name` of a Gmsh model (e.g. the
+/// skin, for a rigid body's contact surface).
+pub fn curve_faces(
+    msh: &femu_mesh::MshModel,
+    name: &str,
+) -> Result<Vec<(usize, usize)>, SetupError> {
+    let edges = msh
+        .edge_sets
+        .iter()
+        .find(|(k, _)| k.eq_ignore_ascii_case(name))
+        .map(|(_, v)| v)
+        .ok_or_else(|| SetupError::UnknownCurve {
+            name: name.to_string(),
+            available: msh.edge_sets.keys().cloned().collect::<Vec<_>>().join(", "),
+        })?;
+    faces_of_edges(&msh.mesh, name, edges)
+}
+
 /// Turns a Gmsh model and its setup into a deck.
 pub fn deck_from_msh(msh: femu_mesh::MshModel, setup: &MshSetup) -> Result<Deck, SetupError> {
-    use std::collections::HashMap;
     let femu_mesh::MshModel {
         mut mesh,
         edge_sets,
@@ -251,24 +297,8 @@ pub fn deck_from_msh(msh: femu_mesh::MshModel, setup: &MshSetup) -> Result<Deck,
             }
         }
     }
-    let boundary: HashMap<(usize, usize), (usize, usize)> = mesh
-        .boundary_faces()
-        .into_iter()
-        .map(|(e, f)| {
-            let [a, b] = mesh.elements[e].face_nodes(f);
-            ((a.min(b), a.max(b)), (e, f))
-        })
-        .collect();
     for p in &setup.pressures {
-        for &[a, b] in curve(&p.curve)? {
-            let &(element, face) =
-                boundary
-                    .get(&(a.min(b), a.max(b)))
-                    .ok_or(SetupError::NotABoundaryEdge {
-                        curve: p.curve.clone(),
-                        a: mesh.node_labels[a],
-                        b: mesh.node_labels[b],
-                    })?;
+        for (element, face) in faces_of_edges(&mesh, &p.curve, curve(&p.curve)?)? {
             deck.pressures.push(FacePressure {
                 element,
                 face,

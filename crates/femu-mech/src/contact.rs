@@ -65,13 +65,20 @@ impl RigidPlate {
     /// A plate at `point` facing the tissue along `normal`, moving along `normal` (pressing).
     pub fn new(point: [f64; 2], normal: [f64; 2]) -> Result<Self, ContactError> {
         let n = unit(normal).ok_or(ContactError::BadDirection)?;
-        Ok(RigidPlate { point, normal: n, direction: n })
+        Ok(RigidPlate {
+            point,
+            normal: n,
+            direction: n,
+        })
     }
 }
 
 impl RigidSurface for RigidPlate {
     fn gap(&self, x: [f64; 2], t: f64) -> Gap {
-        let p = [self.point[0] + t * self.direction[0], self.point[1] + t * self.direction[1]];
+        let p = [
+            self.point[0] + t * self.direction[0],
+            self.point[1] + t * self.direction[1],
+        ];
         Gap {
             g: dot([x[0] - p[0], x[1] - p[1]], self.normal),
             dg_dx: self.normal,
@@ -97,7 +104,10 @@ impl RigidSurface for RigidPlate {
     }
 
     fn outline(&self, t: f64, half_length: f64) -> Vec<[f64; 2]> {
-        let p = [self.point[0] + t * self.direction[0], self.point[1] + t * self.direction[1]];
+        let p = [
+            self.point[0] + t * self.direction[0],
+            self.point[1] + t * self.direction[1],
+        ];
         let s = [-self.normal[1], self.normal[0]];
         vec![
             [p[0] - half_length * s[0], p[1] - half_length * s[1]],
@@ -122,14 +132,21 @@ impl RigidCylinder {
             return Err(ContactError::BadRadius(radius));
         }
         let d = unit(direction).ok_or(ContactError::BadDirection)?;
-        Ok(RigidCylinder { center, radius, direction: d })
+        Ok(RigidCylinder {
+            center,
+            radius,
+            direction: d,
+        })
     }
 }
 
 impl RigidSurface for RigidCylinder {
     fn gap(&self, x: [f64; 2], t: f64) -> Gap {
         let d = self.direction;
-        let v = [x[0] - self.center[0] - t * d[0], x[1] - self.center[1] - t * d[1]];
+        let v = [
+            x[0] - self.center[0] - t * d[0],
+            x[1] - self.center[1] - t * d[1],
+        ];
         let r = v[0].hypot(v[1]).max(1e-300);
         let m = [v[0] / r, v[1] / r];
         // P = (I - m mᵀ) / r
@@ -137,7 +154,10 @@ impl RigidSurface for RigidCylinder {
             [(1.0 - m[0] * m[0]) / r, -m[0] * m[1] / r],
             [-m[1] * m[0] / r, (1.0 - m[1] * m[1]) / r],
         ];
-        let pd = [p[0][0] * d[0] + p[0][1] * d[1], p[1][0] * d[0] + p[1][1] * d[1]];
+        let pd = [
+            p[0][0] * d[0] + p[0][1] * d[1],
+            p[1][0] * d[0] + p[1][1] * d[1],
+        ];
         Gap {
             g: r - self.radius,
             dg_dx: m,
@@ -168,7 +188,10 @@ impl RigidSurface for RigidCylinder {
     }
 
     fn outline(&self, t: f64, _half_length: f64) -> Vec<[f64; 2]> {
-        let c = [self.center[0] + t * self.direction[0], self.center[1] + t * self.direction[1]];
+        let c = [
+            self.center[0] + t * self.direction[0],
+            self.center[1] + t * self.direction[1],
+        ];
         (0..=72)
             .map(|k| {
                 let a = std::f64::consts::TAU * k as f64 / 72.0;
@@ -195,11 +218,15 @@ pub enum ContactError {
     BadDirection,
     #[error("the indenter radius must be positive, got {0} mm")]
     BadRadius(f64),
-    #[error("the rigid body ({0}) can never touch the contact surface along its direction of travel")]
+    #[error(
+        "the rigid body ({0}) can never touch the contact surface along its direction of travel"
+    )]
     NeverTouches(String),
     #[error("the applied force must push the body towards the tissue (positive), got {0} N/mm")]
     WrongForceSign(f64),
-    #[error("the rigid body ({body}) starts inside the tissue: node {node} is {depth:.3e} mm inside it")]
+    #[error(
+        "the rigid body ({body}) starts inside the tissue: node {node} is {depth:.3e} mm inside it"
+    )]
     StartsInside { body: String, node: i64, depth: f64 },
     #[error("the rigid body ({0}) starts inside the tissue: its centre lies in the mesh")]
     CentreInside(String),
@@ -253,9 +280,15 @@ impl RigidContact {
         let mut trib = std::collections::BTreeMap::<usize, f64>::new();
         let mut total = 0.0;
         for &(e, f) in surface {
-            let el = mesh.elements.get(e).ok_or(ContactError::BadFace { element: e, face: f })?;
+            let el = mesh.elements.get(e).ok_or(ContactError::BadFace {
+                element: e,
+                face: f,
+            })?;
             if f >= el.face_count() {
-                return Err(ContactError::BadFace { element: e, face: f });
+                return Err(ContactError::BadFace {
+                    element: e,
+                    face: f,
+                });
             }
             let [a, b] = el.face_nodes(f);
             let (xa, xb) = (mesh.nodes[a], mesh.nodes[b]);
@@ -266,10 +299,14 @@ impl RigidContact {
         }
         let nodes: Vec<usize> = trib.keys().copied().collect();
         let tributary: Vec<f64> = trib.values().copied().collect();
-        for (&n, _) in &trib {
+        for &n in trib.keys() {
             let g = body.gap(mesh.nodes[n], 0.0).g;
             if g < 0.0 {
-                return Err(ContactError::StartsInside { body: body.describe(), node: mesh.node_labels[n], depth: -g });
+                return Err(ContactError::StartsInside {
+                    body: body.describe(),
+                    node: mesh.node_labels[n],
+                    depth: -g,
+                });
             }
         }
         let first = nodes
@@ -293,7 +330,11 @@ impl RigidContact {
     }
 
     /// Errors if the point `centre` (e.g. an indenter's centre) lies inside an element.
-    pub fn check_centre_outside(&self, mesh: &femu_mesh::Mesh, centre: [f64; 2]) -> Result<(), ContactError> {
+    pub fn check_centre_outside(
+        &self,
+        mesh: &femu_mesh::Mesh,
+        centre: [f64; 2],
+    ) -> Result<(), ContactError> {
         let inside = mesh.elements.iter().any(|el| {
             let n = el.kind.node_count();
             (0..n).all(|k| {

@@ -55,7 +55,9 @@ impl CscPattern {
             }
         }
         let mut col_ptr = Vec::with_capacity(n_total + 1);
-        let mut row_idx = Vec::with_capacity(self.nnz() + 2 * borders.iter().map(|b| b.1.len() + 1).sum::<usize>());
+        let mut row_idx = Vec::with_capacity(
+            self.nnz() + 2 * borders.iter().map(|b| b.1.len() + 1).sum::<usize>(),
+        );
         col_ptr.push(0);
         for c in 0..self.n {
             row_idx.extend_from_slice(&self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]]);
@@ -63,13 +65,21 @@ impl CscPattern {
             col_ptr.push(row_idx.len());
         }
         for (q, rows) in borders {
-            debug_assert_eq!(*q, col_ptr.len() - 1, "borders are numbered after the base equations");
+            debug_assert_eq!(
+                *q,
+                col_ptr.len() - 1,
+                "borders are numbered after the base equations"
+            );
             row_idx.extend_from_slice(rows);
             row_idx.push(*q);
             col_ptr.push(row_idx.len());
         }
         debug_assert_eq!(col_ptr.len(), n_total + 1);
-        CscPattern { n: n_total, col_ptr, row_idx }
+        CscPattern {
+            n: n_total,
+            col_ptr,
+            row_idx,
+        }
     }
 
     /// Number of stored entries.

@@ -87,11 +87,20 @@ pub enum Loading {
 
 impl Loading {
     /// The seed's contention: 20 mmHg.
-    pub const SEED_CONTENTION: Loading = Loading::Contention { pressure: 20.0 * 133.322_387_415e-6 };
+    pub const SEED_CONTENTION: Loading = Loading::Contention {
+        pressure: 20.0 * 133.322_387_415e-6,
+    };
     /// The seed's compression: 0.1 N/mm, plate on the anterior side.
-    pub const SEED_COMPRESSION: Loading = Loading::Compression { side: Side::Anterior, force: 0.1 };
+    pub const SEED_COMPRESSION: Loading = Loading::Compression {
+        side: Side::Anterior,
+        force: 0.1,
+    };
     /// The seed's indentation: 3 N/mm with a 10 mm radius indenter, anterior site.
-    pub const SEED_INDENTATION: Loading = Loading::Indentation { site: Side::Anterior, radius: 10.0, force: 3.0 };
+    pub const SEED_INDENTATION: Loading = Loading::Indentation {
+        site: Side::Anterior,
+        radius: 10.0,
+        force: 3.0,
+    };
 
     /// `contention`, `compression-anterior`, `indentation-medial`, ...
     pub fn name(&self) -> String {
@@ -127,14 +136,21 @@ fn skin_extent(model: &Model, skin: &[(usize, usize)], e: [f64; 2]) -> ([f64; 2]
         c[0] += p[0] / pts.len() as f64;
         c[1] += p[1] / pts.len() as f64;
     }
-    let reach = pts.iter().map(|p| (p[0] - c[0]) * e[0] + (p[1] - c[1]) * e[1]).fold(f64::NEG_INFINITY, f64::max);
+    let reach = pts
+        .iter()
+        .map(|p| (p[0] - c[0]) * e[0] + (p[1] - c[1]) * e[1])
+        .fold(f64::NEG_INFINITY, f64::max);
     (c, reach)
 }
 
 /// Contact spreads from a single node at first contact: the first increment is kept at 2 % of
 /// the load (increments then grow automatically), instead of trying the whole load at once.
 fn start_contact_gently(model: &mut Model) {
-    let period = if model.step.period > 0.0 { model.step.period } else { 1.0 };
+    let period = if model.step.period > 0.0 {
+        model.step.period
+    } else {
+        1.0
+    };
     model.step.initial_increment = model.step.initial_increment.min(0.02 * period);
     model.step.max_increments = model.step.max_increments.max(200);
 }
@@ -142,7 +158,11 @@ fn start_contact_gently(model: &mut Model) {
 /// Applies `loading` to `model` on the skin faces `skin` (`(element, face)`): follower pressure
 /// for contention, a force-controlled rigid body for compression and indentation, placed
 /// 1 mm outside the skin and moved to first contact automatically.
-pub fn apply_loading(model: &mut Model, skin: &[(usize, usize)], loading: &Loading) -> Result<(), LoadingError> {
+pub fn apply_loading(
+    model: &mut Model,
+    skin: &[(usize, usize)],
+    loading: &Loading,
+) -> Result<(), LoadingError> {
     if skin.is_empty() {
         return Err(LoadingError::NoSkin);
     }
@@ -168,16 +188,35 @@ pub fn apply_loading(model: &mut Model, skin: &[(usize, usize)], loading: &Loadi
             let (c, reach) = skin_extent(model, skin, e);
             let point = [c[0] + (reach + 1.0) * e[0], c[1] + (reach + 1.0) * e[1]];
             let plate = RigidPlate::new(point, [-e[0], -e[1]])?;
-            let contact = RigidContact::new(&loading.name(), &model.mesh, skin, Arc::new(plate), TravelControl::Force(force))?;
+            let contact = RigidContact::new(
+                &loading.name(),
+                &model.mesh,
+                skin,
+                Arc::new(plate),
+                TravelControl::Force(force),
+            )?;
             model.contacts.push(contact);
             start_contact_gently(model);
         }
-        Loading::Indentation { site, radius, force } => {
+        Loading::Indentation {
+            site,
+            radius,
+            force,
+        } => {
             let e = site.direction();
             let (c, reach) = skin_extent(model, skin, e);
-            let centre = [c[0] + (reach + radius + 1.0) * e[0], c[1] + (reach + radius + 1.0) * e[1]];
+            let centre = [
+                c[0] + (reach + radius + 1.0) * e[0],
+                c[1] + (reach + radius + 1.0) * e[1],
+            ];
             let cyl = RigidCylinder::new(centre, radius, [-e[0], -e[1]])?;
-            let contact = RigidContact::new(&loading.name(), &model.mesh, skin, Arc::new(cyl), TravelControl::Force(force))?;
+            let contact = RigidContact::new(
+                &loading.name(),
+                &model.mesh,
+                skin,
+                Arc::new(cyl),
+                TravelControl::Force(force),
+            )?;
             contact.check_centre_outside(&model.mesh, centre)?;
             model.contacts.push(contact);
             start_contact_gently(model);

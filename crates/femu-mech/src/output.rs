@@ -129,3 +129,65 @@ pub fn peak_memory_mb() -> Option<f64> {
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
 }
+
+/// Writes, for rigid body `b`, `contact_pressure.csv` — one row per candidate node:
+/// `node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa` (current position, angle about the
+/// candidates' centre, nodal force over the node's tributary length) — and
+/// `force_displacement.csv` — `increment,load_factor,travel_mm,force_n_per_mm` over the
+/// converged increments.
+pub fn write_contact_csv(
+    dir: &Path,
+    model: &Model,
+    solution: &Solution,
+    b: usize,
+) -> io::Result<()> {
+    let c = &model.contacts[b];
+    let body = &solution.bodies[b];
+    let pts: Vec<[f64; 2]> = c
+        .nodes
+        .iter()
+        .map(|&n| {
+            [
+                model.mesh.nodes[n][0] + solution.u[2 * n],
+                model.mesh.nodes[n][1] + solution.u[2 * n + 1],
+            ]
+        })
+        .collect();
+    let centre = pts.iter().fold([0.0, 0.0], |a, p| {
+        [
+            a[0] + p[0] / pts.len() as f64,
+            a[1] + p[1] / pts.len() as f64,
+        ]
+    });
+    let mut w = io::BufWriter::new(std::fs::File::create(dir.join("contact_pressure.csv"))?);
+    writeln!(w, "node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa")?;
+    for (k, &n) in c.nodes.iter().enumerate() {
+        let p = pts[k];
+        let angle = (p[1] - centre[1]).atan2(p[0] - centre[0]).to_degrees();
+        writeln!(
+            w,
+            "{},{:.9e},{:.9e},{:.6},{:.9e},{:.9e},{:.9e}",
+            model.mesh.node_labels[n],
+            p[0],
+            p[1],
+            angle,
+            body.node_gaps[k],
+            body.node_forces[k],
+            body.node_forces[k] / c.tributary[k]
+        )?;
+    }
+    w.flush()?;
+    let mut w = io::BufWriter::new(std::fs::File::create(dir.join("force_displacement.csv"))?);
+    writeln!(w, "increment,load_factor,travel_mm,force_n_per_mm")?;
+    writeln!(w, "0,0,0,0")?;
+    for rec in solution.report.increments.iter().filter(|r| r.converged) {
+        if let Some(s) = rec.bodies.get(b) {
+            writeln!(
+                w,
+                "{},{:.9},{:.9e},{:.9e}",
+                rec.increment, rec.lambda, s[0], s[1]
+            )?;
+        }
+    }
+    w.flush()
+}

@@ -366,7 +366,11 @@ impl StaticSolver {
         let contact_tt: Vec<usize> = (0..model.contacts.len())
             .map(|b| {
                 let qt = eq[n_nodes_dof + b];
-                if qt == NONE { NONE } else { pattern.position(qt, qt).expect("(t, t) in pattern") }
+                if qt == NONE {
+                    NONE
+                } else {
+                    pattern.position(qt, qt).expect("(t, t) in pattern")
+                }
             })
             .collect();
         let mut point_force = vec![0.0; n_dof];
@@ -399,7 +403,11 @@ impl StaticSolver {
             setup_time_s: t0.elapsed().as_secs_f64(),
             last_factorization: None,
             timers: [0.0; 3],
-            multipliers: model.contacts.iter().map(|c| vec![0.0; c.nodes.len()]).collect(),
+            multipliers: model
+                .contacts
+                .iter()
+                .map(|c| vec![0.0; c.nodes.len()])
+                .collect(),
             penalties: vec![0.0; model.contacts.len()],
             augmentations: vec![0; model.contacts.len()],
             active_set: (0, 0),
@@ -570,7 +578,10 @@ impl StaticSolver {
             }
             let eps = self.penalties[b];
             for (k, &n) in c.nodes.iter().enumerate() {
-                let x = [model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]];
+                let x = [
+                    model.mesh.nodes[n][0] + u[2 * n],
+                    model.mesh.nodes[n][1] + u[2 * n + 1],
+                ];
                 let gap = c.body.gap(x, t);
                 let trial = self.multipliers[b][k] - eps * gap.g;
                 // Touching within round-off counts as active (the first-contact node starts at
@@ -580,7 +591,11 @@ impl StaticSolver {
                 }
                 let lam = trial.max(0.0);
                 self.active_set.0 += 1;
-                self.active_set.1 = self.active_set.1.wrapping_mul(31).wrapping_add(k as u64 + 1);
+                self.active_set.1 = self
+                    .active_set
+                    .1
+                    .wrapping_mul(31)
+                    .wrapping_add(k as u64 + 1);
                 self.residual[2 * n] -= lam * gap.dg_dx[0];
                 self.residual[2 * n + 1] -= lam * gap.dg_dx[1];
                 self.residual[tdof] -= lam * gap.dg_dt;
@@ -596,14 +611,17 @@ impl StaticSolver {
                         eps * gap.dg_dx[0] * gap.dg_dt - lam * gap.d2g_dxdt[0],
                         eps * gap.dg_dx[1] * gap.dg_dt - lam * gap.d2g_dxdt[1],
                     ];
-                    let vals = [kxx[0], kxx[1], kxx[2], kxx[3], kxt[0], kxt[1], kxt[0], kxt[1]];
+                    let vals = [
+                        kxx[0], kxx[1], kxx[2], kxx[3], kxt[0], kxt[1], kxt[0], kxt[1],
+                    ];
                     for (pos, v) in s.iter().zip(vals) {
                         if *pos != NONE {
                             self.values[*pos] += v;
                         }
                     }
                     if self.contact_tt[b] != NONE {
-                        self.values[self.contact_tt[b]] += eps * gap.dg_dt * gap.dg_dt - lam * gap.d2g_dtdt;
+                        self.values[self.contact_tt[b]] +=
+                            eps * gap.dg_dt * gap.dg_dt - lam * gap.d2g_dtdt;
                     }
                 }
             }
@@ -629,7 +647,10 @@ impl StaticSolver {
                     ..Default::default()
                 };
                 for (k, &n) in c.nodes.iter().enumerate() {
-                    let x = [model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]];
+                    let x = [
+                        model.mesh.nodes[n][0] + u[2 * n],
+                        model.mesh.nodes[n][1] + u[2 * n + 1],
+                    ];
                     let gap = c.body.gap(x, t);
                     let lam = (self.multipliers[b][k] - eps * gap.g).max(0.0);
                     st.force -= lam * gap.dg_dt;
@@ -682,7 +703,17 @@ impl StaticSolver {
             let gaps: Vec<f64> = c
                 .nodes
                 .iter()
-                .map(|&n| c.body.gap([model.mesh.nodes[n][0] + u[2 * n], model.mesh.nodes[n][1] + u[2 * n + 1]], t).g)
+                .map(|&n| {
+                    c.body
+                        .gap(
+                            [
+                                model.mesh.nodes[n][0] + u[2 * n],
+                                model.mesh.nodes[n][1] + u[2 * n + 1],
+                            ],
+                            t,
+                        )
+                        .g
+                })
                 .collect();
             let pen = gaps.iter().fold(0.0f64, |m, g| m.max(-g));
             if pen > limit {
@@ -807,7 +838,8 @@ impl StaticSolver {
                 // the next tangent includes (semi-smooth Newton); damping it would creep in tiny
                 // steps. Later, the line search applies again, which breaks active-set cycles.
                 let new_contacts = it < 4 && alpha == 1.0 && self.active_set != active_before;
-                if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts {
+                if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts
+                {
                     accepted = rn.is_finite();
                     if accepted {
                         rnorm = rn;
@@ -850,7 +882,8 @@ impl StaticSolver {
             last.max_correction = alpha * max_du;
             let res_ok = rnorm <= opt.residual_tolerance * fref.max(floor);
             let energy_ok = energy * alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
-            let stagnated = rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor) || at_round_off;
+            let stagnated =
+                rnorm <= 1e-3 * opt.residual_tolerance * fref.max(floor) || at_round_off;
             if (res_ok && energy_ok) || stagnated {
                 return Ok(());
             }
@@ -904,7 +937,11 @@ impl StaticSolver {
         })();
         match result {
             Ok(()) => {
-                record.bodies = self.body_states(model, u).iter().map(|b| [b.travel, b.force]).collect();
+                record.bodies = self
+                    .body_states(model, u)
+                    .iter()
+                    .map(|b| [b.travel, b.force])
+                    .collect();
                 Ok(())
             }
             Err(e) => {

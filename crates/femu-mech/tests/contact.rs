@@ -13,18 +13,37 @@ use std::sync::Arc;
 /// Tight Newton tolerances: the assertions are about the discretisation and the contact
 /// enforcement, not about where Newton stopped.
 fn tight() -> SolverOptions {
-    SolverOptions { residual_tolerance: 1e-11, energy_tolerance: 1e-20, ..Default::default() }
+    SolverOptions {
+        residual_tolerance: 1e-11,
+        energy_tolerance: 1e-20,
+        ..Default::default()
+    }
 }
 
 /// A `w x h` block centred on x = 0 (x in [-w/2, w/2], y in [0, h]), bottom fixed, graded
 /// towards the top centre with `sinh` stretching (smallest spacing at x = 0 and y = h).
-fn graded_block(w: f64, h: f64, nx: usize, ny: usize, beta: f64, kind: ElementKind) -> GeneratedMesh {
+fn graded_block(
+    w: f64,
+    h: f64,
+    nx: usize,
+    ny: usize,
+    beta: f64,
+    kind: ElementKind,
+) -> GeneratedMesh {
     let mut g = generate::rectangle(1.0, 1.0, nx, ny, kind);
     for p in g.mesh.nodes.iter_mut() {
         let xi = 2.0 * p[0] - 1.0;
         let eta = 1.0 - p[1];
-        let sx = if beta > 0.0 { (beta * xi).sinh() / beta.sinh() } else { xi };
-        let sy = if beta > 0.0 { (beta * eta).sinh() / beta.sinh() } else { eta };
+        let sx = if beta > 0.0 {
+            (beta * xi).sinh() / beta.sinh()
+        } else {
+            xi
+        };
+        let sy = if beta > 0.0 {
+            (beta * eta).sinh() / beta.sinh()
+        } else {
+            eta
+        };
         *p = [0.5 * w * sx, h * (1.0 - sy)];
     }
     g
@@ -32,7 +51,10 @@ fn graded_block(w: f64, h: f64, nx: usize, ny: usize, beta: f64, kind: ElementKi
 
 fn block_model(g: GeneratedMesh, c10: f64, d: f64) -> (Model, Vec<(usize, usize)>) {
     let top = g.surfaces["TOP"].clone();
-    let deck = DeckBuilder::new(g).material_everywhere(c10, d).fix("BOTTOM").build();
+    let deck = DeckBuilder::new(g)
+        .material_everywhere(c10, d)
+        .fix("BOTTOM")
+        .build();
     (Model::from_deck(deck).unwrap(), top)
 }
 
@@ -44,13 +66,19 @@ fn solve(model: &Model, options: SolverOptions) -> Solution {
 #[test]
 fn contact_tangent_and_force_equation_match_finite_differences() {
     for (label, cylinder) in [("plate", false), ("cylinder", true)] {
-        let (mut model, top) = block_model(graded_block(6.0, 3.0, 6, 3, 0.0, ElementKind::Cpe4), 1.75e-3, 18.0);
+        let (mut model, top) = block_model(
+            graded_block(6.0, 3.0, 6, 3, 0.0, ElementKind::Cpe4),
+            1.75e-3,
+            18.0,
+        );
         let body: Arc<dyn femu_mech::contact::RigidSurface> = if cylinder {
             Arc::new(RigidCylinder::new([0.2, 6.0], 2.5, [0.1, -1.0]).unwrap())
         } else {
             Arc::new(RigidPlate::new([0.0, 4.0], [0.05, -1.0]).unwrap())
         };
-        model.contacts.push(RigidContact::new("body", &model.mesh, &top, body, TravelControl::Force(0.01)).unwrap());
+        model.contacts.push(
+            RigidContact::new("body", &model.mesh, &top, body, TravelControl::Force(0.01)).unwrap(),
+        );
         let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
         solver.prepare_contact(&model).unwrap();
         // A state with several nodes penetrating: random displacements and a travel of 0.3 mm.
@@ -70,7 +98,9 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
         let h = 1e-7;
         let mut max_err = 0.0f64;
         for d in 0..n {
-            let Some(c) = solver.equation_of(d) else { continue };
+            let Some(c) = solver.equation_of(d) else {
+                continue;
+            };
             let mut up = u.clone();
             up[d] += h;
             let rp = solver.residual_at(&model, &up).unwrap().to_vec();
@@ -87,7 +117,10 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
         }
         // Central differences across the kink of ⟨·⟩₊ are avoided by the random state (no gap is
         // within h of zero); truncation and round-off stay below 1e-6 of the largest entry.
-        assert!(max_err < 1e-6 * kmax, "{label}: tangent error {max_err:.3e}, largest entry {kmax:.3e}");
+        assert!(
+            max_err < 1e-6 * kmax,
+            "{label}: tangent error {max_err:.3e}, largest entry {kmax:.3e}"
+        );
         // The travel equation: R_t = contact force along -dg/dt minus the applied force.
         let r = solver.residual_at(&model, &u).unwrap().to_vec();
         let sum_nodes: f64 = (0..model.node_count())
@@ -105,19 +138,54 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
 /// penetration is within 1e-3 of the element size.
 #[test]
 fn plate_force_balance_symmetry_and_penetration() {
-    let (mut model, top) = block_model(graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h), 1.75e-3, 18.0);
+    let (mut model, top) = block_model(
+        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
+        1.75e-3,
+        18.0,
+    );
     let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model.contacts.push(RigidContact::new("plate", &model.mesh, &top, Arc::new(plate), TravelControl::Force(0.1)).unwrap());
+    model.contacts.push(
+        RigidContact::new(
+            "plate",
+            &model.mesh,
+            &top,
+            Arc::new(plate),
+            TravelControl::Force(0.1),
+        )
+        .unwrap(),
+    );
     model.step.initial_increment = 0.25;
     let sol = solve(&model, tight());
     let body = &sol.bodies[0];
     let sum: f64 = body.node_forces.iter().sum();
-    assert!((sum - 0.1).abs() < 1e-8 * 0.1, "contact forces sum to {sum}");
-    assert!((body.force - 0.1).abs() < 1e-8 * 0.1, "force on the plate {}", body.force);
-    assert!((sol.report.reaction_total[1] - 0.1).abs() < 1e-8 * 0.1, "support reaction {:?}", sol.report.reaction_total);
-    assert!(sol.report.reaction_total[0].abs() < 1e-10, "no net horizontal force");
-    assert!(body.max_penetration <= body.penetration_limit, "penetration {} > {}", body.max_penetration, body.penetration_limit);
-    assert!(body.travel > 0.0 && body.active_nodes == model.contacts[0].nodes.len(), "the flat top is all in contact");
+    assert!(
+        (sum - 0.1).abs() < 1e-8 * 0.1,
+        "contact forces sum to {sum}"
+    );
+    assert!(
+        (body.force - 0.1).abs() < 1e-8 * 0.1,
+        "force on the plate {}",
+        body.force
+    );
+    assert!(
+        (sol.report.reaction_total[1] - 0.1).abs() < 1e-8 * 0.1,
+        "support reaction {:?}",
+        sol.report.reaction_total
+    );
+    assert!(
+        sol.report.reaction_total[0].abs() < 1e-10,
+        "no net horizontal force"
+    );
+    assert!(
+        body.max_penetration <= body.penetration_limit,
+        "penetration {} > {}",
+        body.max_penetration,
+        body.penetration_limit
+    );
+    assert!(
+        body.travel > 0.0 && body.active_nodes == model.contacts[0].nodes.len(),
+        "the flat top is all in contact"
+    );
     // Mirror symmetry about x = 0: u_x(-x, y) = -u_x(x, y), u_y(-x, y) = u_y(x, y).
     let umax = sol.u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let index: std::collections::HashMap<(i64, i64), usize> = model
@@ -125,27 +193,62 @@ fn plate_force_balance_symmetry_and_penetration() {
         .nodes
         .iter()
         .enumerate()
-        .map(|(k, p)| (((p[0] * 1e6).round() as i64, (p[1] * 1e6).round() as i64), k))
+        .map(|(k, p)| {
+            (
+                ((p[0] * 1e6).round() as i64, (p[1] * 1e6).round() as i64),
+                k,
+            )
+        })
         .collect();
     let mut asym = 0.0f64;
     for (k, p) in model.mesh.nodes.iter().enumerate() {
         let m = index[&((-p[0] * 1e6).round() as i64, (p[1] * 1e6).round() as i64)];
-        asym = asym.max((sol.u[2 * k] + sol.u[2 * m]).abs()).max((sol.u[2 * k + 1] - sol.u[2 * m + 1]).abs());
+        asym = asym
+            .max((sol.u[2 * k] + sol.u[2 * m]).abs())
+            .max((sol.u[2 * k + 1] - sol.u[2 * m + 1]).abs());
     }
     assert!(asym < 1e-10 * umax, "asymmetry {asym:.3e} of {umax:.3e}");
     // Displacement control to the travel just found gives back the force.
-    let (mut model2, top2) = block_model(graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h), 1.75e-3, 18.0);
+    let (mut model2, top2) = block_model(
+        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
+        1.75e-3,
+        18.0,
+    );
     let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model2.contacts.push(RigidContact::new("plate", &model2.mesh, &top2, Arc::new(plate), TravelControl::Displacement(body.travel)).unwrap());
+    model2.contacts.push(
+        RigidContact::new(
+            "plate",
+            &model2.mesh,
+            &top2,
+            Arc::new(plate),
+            TravelControl::Displacement(body.travel),
+        )
+        .unwrap(),
+    );
     model2.step.initial_increment = 0.25;
     let sol2 = solve(&model2, tight());
     // Same travel, same force — up to the augmented-Lagrangian multipliers, which the two runs
     // update along different load paths; both meet the 1e-3 h penetration limit, which bounds
     // the difference to about 1e-4 of the force here.
-    assert!((sol2.bodies[0].force - 0.1).abs() < 1e-4 * 0.1, "displacement control force {}", sol2.bodies[0].force);
+    assert!(
+        (sol2.bodies[0].force - 0.1).abs() < 1e-4 * 0.1,
+        "displacement control force {}",
+        sol2.bodies[0].force
+    );
     // The force–displacement curve is recorded and increasing.
-    let curve: Vec<[f64; 2]> = sol.report.increments.iter().filter(|r| r.converged).map(|r| r.bodies[0]).collect();
-    assert!(curve.len() >= 2 && curve.windows(2).all(|w| w[1][0] > w[0][0] && w[1][1] > w[0][1]));
+    let curve: Vec<[f64; 2]> = sol
+        .report
+        .increments
+        .iter()
+        .filter(|r| r.converged)
+        .map(|r| r.bodies[0])
+        .collect();
+    assert!(
+        curve.len() >= 2
+            && curve
+                .windows(2)
+                .all(|w| w[1][0] > w[0][0] && w[1][1] > w[0][1])
+    );
 }
 
 /// Hertz line contact: a rigid cylinder (R = 10 mm) pressed into a large Neo-Hookean block with
@@ -162,10 +265,23 @@ fn hertz_line_contact() {
     let (r, a_target) = (10.0, 1.0);
     let force = a_target * a_target * std::f64::consts::PI * e_star / (4.0 * r);
     let a_hertz = (4.0 * force * r / (std::f64::consts::PI * e_star)).sqrt();
-    let (mut model, top) = block_model(graded_block(60.0, 30.0, 160, 80, 4.1, ElementKind::Cpe4h), c10, d);
+    let (mut model, top) = block_model(
+        graded_block(60.0, 30.0, 160, 80, 4.1, ElementKind::Cpe4h),
+        c10,
+        d,
+    );
     let cyl = RigidCylinder::new([0.0, 30.0 + r + 1.0], r, [0.0, -1.0]).unwrap();
-    let contact = RigidContact::new("indenter", &model.mesh, &top, Arc::new(cyl), TravelControl::Force(force)).unwrap();
-    contact.check_centre_outside(&model.mesh, cyl.center).unwrap();
+    let contact = RigidContact::new(
+        "indenter",
+        &model.mesh,
+        &top,
+        Arc::new(cyl),
+        TravelControl::Force(force),
+    )
+    .unwrap();
+    contact
+        .check_centre_outside(&model.mesh, cyl.center)
+        .unwrap();
     model.contacts.push(contact);
     model.step.initial_increment = 0.2;
     let sol = solve(&model, SolverOptions::default());
@@ -181,7 +297,10 @@ fn hertz_line_contact() {
     }
     let a_fe = 2.0 * (m2 / m0).sqrt();
     println!("Hertz: F = {force:.4e} N/mm, a = {a_hertz:.4} mm, FE a = {a_fe:.4} mm ({:+.2} %), penetration {:.2e} mm (limit {:.2e}), {} active nodes", 100.0 * (a_fe / a_hertz - 1.0), body.max_penetration, body.penetration_limit, body.active_nodes);
-    assert!((a_fe / a_hertz - 1.0).abs() < 0.05, "half-width {a_fe} vs Hertz {a_hertz}");
+    assert!(
+        (a_fe / a_hertz - 1.0).abs() < 0.05,
+        "half-width {a_fe} vs Hertz {a_hertz}"
+    );
     let p0 = 2.0 * force / (std::f64::consts::PI * a_hertz);
     let mut worst = 0.0f64;
     for (kk, &node) in c.nodes.iter().enumerate() {
@@ -192,35 +311,105 @@ fn hertz_line_contact() {
             worst = worst.max((p - exact).abs() / p0);
         }
     }
-    println!("Hertz: {} increments, {} Newton iterations, {} cut-backs, {} augmentations, {:.2} s", sol.report.converged_increments, sol.report.newton_iterations, sol.report.cutbacks, body.augmentations, sol.report.wall_time_s);
-    println!("Hertz: largest pressure deviation inside 0.8 a: {:.2} % of p0 = {p0:.4e} MPa", 100.0 * worst);
+    println!(
+        "Hertz: {} increments, {} Newton iterations, {} cut-backs, {} augmentations, {:.2} s",
+        sol.report.converged_increments,
+        sol.report.newton_iterations,
+        sol.report.cutbacks,
+        body.augmentations,
+        sol.report.wall_time_s
+    );
+    println!(
+        "Hertz: largest pressure deviation inside 0.8 a: {:.2} % of p0 = {p0:.4e} MPa",
+        100.0 * worst
+    );
     assert!(worst < 0.10, "pressure deviation {worst}");
     assert!(body.max_penetration <= body.penetration_limit);
 }
 
 #[test]
 fn badly_placed_bodies_are_refused_before_solving() {
-    let (model, top) = block_model(graded_block(10.0, 5.0, 4, 2, 0.0, ElementKind::Cpe4), 1.75e-3, 18.0);
+    let (model, top) = block_model(
+        graded_block(10.0, 5.0, 4, 2, 0.0, ElementKind::Cpe4),
+        1.75e-3,
+        18.0,
+    );
     // A plate sliding sideways above the block, and an indenter passing beside it.
-    let sideways = RigidPlate { point: [0.0, 8.0], normal: [0.0, -1.0], direction: [1.0, 0.0] };
-    let e = RigidContact::new("p", &model.mesh, &top, Arc::new(sideways), TravelControl::Force(0.1)).unwrap_err();
+    let sideways = RigidPlate {
+        point: [0.0, 8.0],
+        normal: [0.0, -1.0],
+        direction: [1.0, 0.0],
+    };
+    let e = RigidContact::new(
+        "p",
+        &model.mesh,
+        &top,
+        Arc::new(sideways),
+        TravelControl::Force(0.1),
+    )
+    .unwrap_err();
     assert!(matches!(e, ContactError::NeverTouches(_)), "{e}");
     let beside = RigidCylinder::new([20.0, 8.0], 2.0, [0.0, -1.0]).unwrap();
-    let e = RigidContact::new("i", &model.mesh, &top, Arc::new(beside), TravelControl::Force(0.1)).unwrap_err();
+    let e = RigidContact::new(
+        "i",
+        &model.mesh,
+        &top,
+        Arc::new(beside),
+        TravelControl::Force(0.1),
+    )
+    .unwrap_err();
     assert!(matches!(e, ContactError::NeverTouches(_)), "{e}");
     // A plate facing away from the block has the tissue behind it: inside.
     let away = RigidPlate::new([0.0, 8.0], [0.0, 1.0]).unwrap();
-    let e = RigidContact::new("p", &model.mesh, &top, Arc::new(away), TravelControl::Force(0.1)).unwrap_err();
+    let e = RigidContact::new(
+        "p",
+        &model.mesh,
+        &top,
+        Arc::new(away),
+        TravelControl::Force(0.1),
+    )
+    .unwrap_err();
     assert!(matches!(e, ContactError::StartsInside { .. }), "{e}");
     let plate = RigidPlate::new([0.0, 8.0], [0.0, -1.0]).unwrap();
-    let e = RigidContact::new("p", &model.mesh, &top, Arc::new(plate), TravelControl::Force(-0.1)).unwrap_err();
+    let e = RigidContact::new(
+        "p",
+        &model.mesh,
+        &top,
+        Arc::new(plate),
+        TravelControl::Force(-0.1),
+    )
+    .unwrap_err();
     assert!(matches!(e, ContactError::WrongForceSign(_)), "{e}");
     let sunk = RigidCylinder::new([0.0, 4.0], 2.0, [0.0, -1.0]).unwrap();
-    let e = RigidContact::new("i", &model.mesh, &top, Arc::new(sunk), TravelControl::Force(0.1)).unwrap_err();
+    let e = RigidContact::new(
+        "i",
+        &model.mesh,
+        &top,
+        Arc::new(sunk),
+        TravelControl::Force(0.1),
+    )
+    .unwrap_err();
     assert!(matches!(e, ContactError::StartsInside { .. }), "{e}");
     let buried = RigidCylinder::new([0.0, 2.0], 0.5, [0.0, -1.0]).unwrap();
-    let c = RigidContact::new("i", &model.mesh, &top, Arc::new(buried), TravelControl::Force(0.1));
-    let e = c.and_then(|c| c.check_centre_outside(&model.mesh, buried.center)).unwrap_err();
-    assert!(matches!(e, ContactError::CentreInside(_) | ContactError::NeverTouches(_)), "{e}");
-    assert!(e.to_string().contains("inside") || e.to_string().contains("never"), "{e}");
+    let c = RigidContact::new(
+        "i",
+        &model.mesh,
+        &top,
+        Arc::new(buried),
+        TravelControl::Force(0.1),
+    );
+    let e = c
+        .and_then(|c| c.check_centre_outside(&model.mesh, buried.center))
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            ContactError::CentreInside(_) | ContactError::NeverTouches(_)
+        ),
+        "{e}"
+    );
+    assert!(
+        e.to_string().contains("inside") || e.to_string().contains("never"),
+        "{e}"
+    );
 }

@@ -16,7 +16,11 @@ const KINDS: [ElementKind; 3] = [ElementKind::Cpe4, ElementKind::Cpe4h, ElementK
 /// that what is tested is the discretisation, not where Newton stopped.
 fn solve(deck: Deck) -> (Model, Solution) {
     let model = Model::from_deck(deck).expect("valid model");
-    let options = SolverOptions { residual_tolerance: 1e-12, energy_tolerance: 1e-20, ..Default::default() };
+    let options = SolverOptions {
+        residual_tolerance: 1e-12,
+        energy_tolerance: 1e-20,
+        ..Default::default()
+    };
     let mut solver = StaticSolver::new(&model, options).unwrap();
     let sol = solver.solve(&model).expect("converges");
     (model, sol)
