@@ -28,6 +28,30 @@ struct BenchSummary {
     /// max |u_femu - u_ccx| / max |u_ccx| over all nodes.
     max_displacement_difference_ratio: Option<f64>,
     threads: usize,
+    /// The compression test (rigid plate, 0.1 N/mm, anterior) on the same mesh, in process:
+    /// model setup + solve (s), increments and Newton iterations of the best run.
+    compression_s: Vec<f64>,
+    compression_best_s: f64,
+    compression_increments: usize,
+    compression_newton_iterations: usize,
+}
+
+/// Solves the compression test in process; returns (setup + solve time, increments, iterations).
+fn run_compression(n_theta: usize) -> Result<(f64, usize, usize)> {
+    let (mut model, skin) = crate::run::thigh_model(n_theta, femu_mesh::ElementKind::Cpe4)?;
+    femu_mech::loading::apply_loading(
+        &mut model,
+        &skin,
+        &femu_mech::loading::Loading::SEED_COMPRESSION,
+    )?;
+    let t = Instant::now();
+    let mut solver = femu_mech::StaticSolver::new(&model, femu_mech::SolverOptions::default())?;
+    let sol = solver.solve(&model)?;
+    Ok((
+        t.elapsed().as_secs_f64(),
+        sol.report.converged_increments,
+        sol.report.newton_iterations,
+    ))
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -49,6 +73,7 @@ fn run_femu(deck: &Path, out: &Path) -> Result<(f64, f64, Option<f64>)> {
         .arg("--out")
         .arg(out)
         .arg("--quiet")
+        .arg("--no-figures")
         .status()
         .context("cannot run femu solve")?;
     let wall = t.elapsed().as_secs_f64();
@@ -142,6 +167,16 @@ pub fn run(out: &Path, n_theta: usize, repeat: usize, with_ccx: bool, quiet: boo
             );
         }
     }
+    let mut compression = Vec::new();
+    let (mut comp_inc, mut comp_it) = (0, 0);
+    for k in 0..repeat {
+        let (t, inc, it) = run_compression(n_theta)?;
+        compression.push(t);
+        (comp_inc, comp_it) = (inc, it);
+        if !quiet {
+            eprintln!("run {}: compression test (femu, in process) {t:.3} s, {inc} increments, {it} Newton iterations", k + 1);
+        }
+    }
     let diff = if use_ccx {
         let ccx_u = femu_mesh::inp::read_ccx_dat_displacements(&ccx_dir.join("model.dat"))?;
         let text = std::fs::read_to_string(femu_out.join("displacements.csv"))?;
@@ -181,6 +216,10 @@ pub fn run(out: &Path, n_theta: usize, repeat: usize, with_ccx: bool, quiet: boo
         femu_peak_memory_mb: peak,
         ccx_wall_s: ccx_wall.clone(),
         threads,
+        compression_best_s: best(&compression),
+        compression_s: compression,
+        compression_increments: comp_inc,
+        compression_newton_iterations: comp_it,
     };
     std::fs::write(
         out.join("summary.json"),
@@ -203,6 +242,10 @@ pub fn run(out: &Path, n_theta: usize, repeat: usize, with_ccx: bool, quiet: boo
                 diff.unwrap_or(f64::NAN)
             );
         }
+        println!(
+            "compression test (rigid plate, 0.1 N/mm): best {:.3} s, {} increments, {} Newton iterations",
+            summary.compression_best_s, summary.compression_increments, summary.compression_newton_iterations
+        );
         println!("details in {}", out.join("summary.json").display());
     }
     Ok(())

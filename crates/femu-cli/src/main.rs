@@ -4,6 +4,8 @@
 //! messages and a non-zero exit code. Nothing numerical lives here.
 
 mod bench;
+mod figures;
+mod mesh_cmd;
 mod run;
 mod study;
 
@@ -45,9 +47,9 @@ impl QuadElement {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// The demo: the contention test (20 mmHg on the skin, femur fixed) on the built-in
-    /// thigh-like cross-section with the seed's Table 1 parameters; writes the deck, the
-    /// displacements, a ParaView file and a summary.
+    /// The demo: the seed's loading tests on the built-in thigh-like cross-section with the
+    /// Table 1 parameters, femur fixed — contention (20 mmHg on the skin) and compression (rigid
+    /// plate, 0.1 N/mm, anterior) by default; one output folder per test.
     Demo {
         /// Output folder.
         #[arg(long, default_value = "out/demo")]
@@ -58,6 +60,10 @@ enum Command {
         /// Angular divisions of the ring mesh (480 gives about 25 000 elements, the seed's size).
         #[arg(long, default_value_t = 240)]
         n_theta: usize,
+        /// Loading tests, comma-separated: contention, compression, indentation (the seed's
+        /// values: 20 mmHg; plate 0.1 N/mm anterior; indenter R = 10 mm, 0.1 N/mm anterior).
+        #[arg(long, value_delimiter = ',', default_value = "contention,compression")]
+        tests: Vec<String>,
     },
     /// Solve an Abaqus/CalculiX deck (.inp), or a Gmsh mesh (.msh) with a study file naming its
     /// materials and loads.
@@ -74,6 +80,9 @@ enum Command {
         /// Print the Newton table (residual and energy norms per iteration).
         #[arg(long)]
         newton_table: bool,
+        /// Skip the pictures (deformed shape with LE11, contact pressure, force–travel).
+        #[arg(long)]
+        no_figures: bool,
     },
     /// Benchmark: the paper-scale thigh-like contention problem (about 25 000 CPE4 quads) solved
     /// by femu and by CalculiX (`ccx`) on the same deck, side by side; reports the time ratio,
@@ -92,6 +101,33 @@ enum Command {
         #[arg(long)]
         no_ccx: bool,
     },
+    /// Build a thigh model: `mesh thigh` (the built-in parametric thigh) or `mesh labels IMAGE`
+    /// (a segmented MRI slice); writes mesh.inp, mesh.vtu, regions.png, quality.csv/json and
+    /// summary.json.
+    Mesh {
+        #[command(subcommand)]
+        what: mesh_cmd::MeshCommand,
+    },
+}
+
+/// The named demo tests.
+fn demo_tests(names: &[String]) -> anyhow::Result<Vec<femu_mech::loading::Loading>> {
+    use femu_mech::loading::{Loading, Side};
+    names
+        .iter()
+        .map(|n| match n.trim() {
+            "contention" => Ok(Loading::SEED_CONTENTION),
+            "compression" => Ok(Loading::SEED_COMPRESSION),
+            "indentation" => Ok(Loading::Indentation {
+                site: Side::Anterior,
+                radius: 10.0,
+                force: 0.1,
+            }),
+            other => anyhow::bail!(
+                "--tests: unknown test '{other}' (contention, compression, indentation)"
+            ),
+        })
+        .collect()
 }
 
 fn main() -> ExitCode {
@@ -101,19 +137,29 @@ fn main() -> ExitCode {
             out,
             element,
             n_theta,
-        } => run::demo(&out, element, n_theta, cli.quiet),
+            tests,
+        } => demo_tests(&tests).and_then(|t| run::demo(&out, element, n_theta, &t, cli.quiet)),
         Command::Solve {
             input,
             study,
             out,
             newton_table,
-        } => run::solve(&input, study.as_deref(), &out, newton_table, cli.quiet),
+            no_figures,
+        } => run::solve(
+            &input,
+            study.as_deref(),
+            &out,
+            newton_table,
+            !no_figures,
+            cli.quiet,
+        ),
         Command::Bench {
             out,
             n_theta,
             repeat,
             no_ccx,
         } => bench::run(&out, n_theta, repeat, !no_ccx, cli.quiet),
+        Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,6 +4,7 @@ use crate::study;
 use crate::QuadElement;
 use anyhow::{bail, Context, Result};
 use femu_mech::build::DeckBuilder;
+use femu_mech::loading::Loading;
 use femu_mech::output::{peak_memory_mb, write_displacements_csv, write_result_vtu};
 use femu_mech::solver::IncrementRecord;
 use femu_mech::{Model, Solution, SolveError, SolveReport, SolverOptions, StaticSolver};
@@ -52,6 +53,20 @@ struct MaterialSummary {
 }
 
 #[derive(Serialize)]
+struct RigidBodySummary {
+    name: String,
+    body: String,
+    control: String,
+    travel_mm: f64,
+    force_n_per_mm: f64,
+    active_nodes: usize,
+    max_penetration_mm: f64,
+    penetration_limit_mm: f64,
+    penalty_n_per_mm: f64,
+    augmentations: usize,
+}
+
+#[derive(Serialize)]
 struct Timings {
     read_s: f64,
     setup_s: f64,
@@ -76,6 +91,7 @@ struct Summary<'a> {
     materials: Vec<MaterialSummary>,
     prescribed_dofs: usize,
     pressure_faces: usize,
+    rigid_bodies: Vec<RigidBodySummary>,
     load_factor: f64,
     max_displacement_mm: f64,
     reaction_force_total_n_per_mm: [f64; 2],
@@ -118,23 +134,26 @@ fn progress(quiet: bool, table: bool) -> impl FnMut(&IncrementRecord) {
     }
 }
 
-/// Solves `deck` and writes `displacements.csv`, `result.vtu`, `summary.json` into `out`.
-/// A solve that stops midway still writes the last converged state, then returns the error.
-pub fn solve_deck(
-    deck: Deck,
+/// Solves `model` and writes `displacements.csv`, `result.vtu`, `summary.json` into `out`,
+/// and for each rigid body `contact_pressure.csv` and `force_displacement.csv` (in a
+/// sub-folder named after the body when there are several). A solve that stops midway still
+/// writes the last converged state, then returns the error.
+#[allow(clippy::too_many_arguments)]
+pub fn solve_model(
+    model: &Model,
     input: &str,
     command: &str,
     out: &Path,
     read_s: f64,
     table: bool,
+    figures: bool,
     quiet: bool,
 ) -> Result<()> {
     let t0 = Instant::now();
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
-    let model = Model::from_deck(deck).with_context(|| format!("invalid model in {input}"))?;
     let options = SolverOptions::default();
-    let mut solver = StaticSolver::new(&model, options)?;
+    let mut solver = StaticSolver::new(model, options)?;
     let setup_s = t0.elapsed().as_secs_f64();
     if !quiet {
         eprintln!(
@@ -146,7 +165,7 @@ pub fn solve_deck(
     }
     let t1 = Instant::now();
     let mut on_increment = progress(quiet, table);
-    let outcome = solver.solve_with(&model, None, &mut on_increment);
+    let outcome = solver.solve_with(model, None, &mut on_increment);
     let solve_s = t1.elapsed().as_secs_f64();
     let (solution, error): (Solution, Option<SolveError>) = match outcome {
         Ok(s) => (s, None),
@@ -158,10 +177,25 @@ pub fn solve_deck(
         Err(e) => return Err(e.into()),
     };
     let t2 = Instant::now();
-    write_displacements_csv(&out.join("displacements.csv"), &model, &solution.u)
+    write_displacements_csv(&out.join("displacements.csv"), model, &solution.u)
         .with_context(|| format!("cannot write {}", out.join("displacements.csv").display()))?;
-    write_result_vtu(&out.join("result.vtu"), &model, &solution)
+    write_result_vtu(&out.join("result.vtu"), model, &solution)
         .with_context(|| format!("cannot write {}", out.join("result.vtu").display()))?;
+    let mut body_dirs = Vec::new();
+    for b in 0..model.contacts.len() {
+        let dir = if model.contacts.len() == 1 {
+            out.to_path_buf()
+        } else {
+            out.join(&model.contacts[b].name)
+        };
+        std::fs::create_dir_all(&dir)?;
+        femu_mech::output::write_contact_csv(&dir, model, &solution, b)
+            .with_context(|| format!("cannot write contact results into {}", dir.display()))?;
+        body_dirs.push(dir);
+    }
+    if figures {
+        crate::figures::write_solve_figures(out, &body_dirs, input, model, &solution)?;
+    }
     let output_s = t2.elapsed().as_secs_f64();
     let mut element_types = std::collections::BTreeMap::new();
     for el in &model.mesh.elements {
@@ -200,6 +234,23 @@ pub fn solve_deck(
         materials,
         prescribed_dofs: model.constraints.len(),
         pressure_faces: model.pressures.len(),
+        rigid_bodies: model
+            .contacts
+            .iter()
+            .zip(&solution.bodies)
+            .map(|(c, b)| RigidBodySummary {
+                name: c.name.clone(),
+                body: c.body.describe(),
+                control: format!("{:?}", c.control),
+                travel_mm: b.travel,
+                force_n_per_mm: b.force,
+                active_nodes: b.active_nodes,
+                max_penetration_mm: b.max_penetration,
+                penetration_limit_mm: b.penetration_limit,
+                penalty_n_per_mm: b.penalty,
+                augmentations: b.augmentations,
+            })
+            .collect(),
         load_factor: r.lambda,
         max_displacement_mm: max_u,
         reaction_force_total_n_per_mm: r.reaction_total,
@@ -235,6 +286,14 @@ pub fn solve_deck(
             out.display()
         );
     }
+    if !quiet {
+        for b in &summary.rigid_bodies {
+            eprintln!(
+                "{}: travel {:.4} mm for {:.4e} N/mm, {} nodes in contact, penetration {:.2e} mm (limit {:.2e})",
+                b.name, b.travel_mm, b.force_n_per_mm, b.active_nodes, b.max_penetration_mm, b.penetration_limit_mm
+            );
+        }
+    }
     match error {
         None => Ok(()),
         Some(e) => Err(anyhow::Error::new(e).context(format!(
@@ -251,6 +310,7 @@ pub fn solve(
     study_file: Option<&Path>,
     out: &Path,
     table: bool,
+    figures: bool,
     quiet: bool,
 ) -> Result<()> {
     let t0 = Instant::now();
@@ -259,68 +319,111 @@ pub fn solve(
         .and_then(|e| e.to_str())
         .unwrap_or("")
         .to_ascii_lowercase();
-    let deck = match ext.as_str() {
+    let name = input.display().to_string();
+    let model = match ext.as_str() {
         "inp" => {
             if study_file.is_some() {
                 bail!("--study is for .msh inputs; a deck carries its own materials and loads");
             }
-            femu_mesh::read_inp(input)?
+            let deck = femu_mesh::read_inp(input)?;
+            Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?
         }
         "msh" => {
             let Some(sf) = study_file else {
-                bail!(
-                    "{}: a Gmsh mesh needs --study STUDY.toml naming materials and loads",
-                    input.display()
-                );
+                bail!("{name}: a Gmsh mesh needs --study STUDY.toml naming materials and loads");
             };
-            let setup = study::read(sf)?;
+            let study = study::read(sf)?;
             let msh = femu_mesh::read_msh(input)?;
-            femu_mech::build::deck_from_msh(msh, &setup)
-                .with_context(|| format!("setting up {} with {}", input.display(), sf.display()))?
+            let context = || format!("setting up {name} with {}", sf.display());
+            let rigid_faces = match &study.rigid {
+                Some((curve, _)) => {
+                    Some(femu_mech::build::curve_faces(&msh, curve).with_context(context)?)
+                }
+                None => None,
+            };
+            let deck = femu_mech::build::deck_from_msh(msh, &study.setup).with_context(context)?;
+            let mut model =
+                Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?;
+            if let (Some((_, loading)), Some(faces)) = (&study.rigid, rigid_faces) {
+                femu_mech::loading::apply_loading(&mut model, &faces, loading)
+                    .with_context(context)?;
+            }
+            model
         }
-        _ => bail!(
-            "{}: unknown input type (expected .inp or .msh)",
-            input.display()
-        ),
+        _ => bail!("{name}: unknown input type (expected .inp or .msh)"),
     };
     let read_s = t0.elapsed().as_secs_f64();
-    solve_deck(
-        deck,
-        &input.display().to_string(),
-        "solve",
-        out,
-        read_s,
-        table,
-        quiet,
-    )
+    solve_model(&model, &name, "solve", out, read_s, table, figures, quiet)
 }
 
-/// `femu demo`: the contention test on the built-in thigh-like section.
-pub fn demo(out: &Path, element: QuadElement, n_theta: usize, quiet: bool) -> Result<()> {
+/// The thigh-like section as a model without loads, and its skin faces.
+pub fn thigh_model(
+    n_theta: usize,
+    kind: femu_mesh::ElementKind,
+) -> Result<(Model, Vec<(usize, usize)>)> {
+    let defaults = ThighLikeParams::default();
+    let scale = n_theta as f64 / defaults.n_theta as f64;
+    let params = ThighLikeParams {
+        n_theta,
+        muscle_rows: ((defaults.muscle_rows as f64 * scale).round() as usize).max(4),
+        fat_rows: ((defaults.fat_rows as f64 * scale).round() as usize).max(2),
+        kind,
+        ..defaults
+    };
+    let g = thigh_like(&params);
+    let skin = g.surfaces["OUTER"].clone();
+    let mut b = DeckBuilder::new(g);
+    for (name, c10_kpa, d) in TABLE1 {
+        b = b.material(name, c10_kpa * 1e-3, d);
+    }
+    Ok((Model::from_deck(b.fix("INNER").build())?, skin))
+}
+
+/// `femu demo`: the seed's loading tests on the built-in thigh-like section, one sub-folder
+/// per test.
+pub fn demo(
+    out: &Path,
+    element: QuadElement,
+    n_theta: usize,
+    tests: &[Loading],
+    quiet: bool,
+) -> Result<()> {
     if n_theta < 16 {
         bail!("--n-theta must be at least 16, got {n_theta}");
     }
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
-    let t0 = Instant::now();
-    let deck = thigh_contention_deck(n_theta, element.kind());
-    let deck_path = out.join("model.inp");
-    femu_mesh::write_inp_file(&deck, &deck_path)
-        .with_context(|| format!("cannot write {}", deck_path.display()))?;
-    if !quiet {
-        eprintln!(
-            "demo: contention test, 20 mmHg follower pressure on the skin, femur fixed, Table 1 materials; deck written to {}",
-            deck_path.display()
-        );
+    for loading in tests {
+        let t0 = Instant::now();
+        let dir = out.join(loading.name());
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create output folder {}", dir.display()))?;
+        if let Loading::Contention { pressure } = loading {
+            // Contention is expressible as a deck: write it, CalculiX runs it unchanged.
+            let mut deck = thigh_contention_deck(n_theta, element.kind());
+            deck.pressures
+                .iter_mut()
+                .for_each(|p| p.magnitude = *pressure);
+            let deck_path = dir.join("model.inp");
+            femu_mesh::write_inp_file(&deck, &deck_path)
+                .with_context(|| format!("cannot write {}", deck_path.display()))?;
+        }
+        let (mut model, skin) = thigh_model(n_theta, element.kind())?;
+        femu_mech::loading::apply_loading(&mut model, &skin, loading)?;
+        if !quiet {
+            eprintln!("demo: {} on the built-in thigh-like section (Table 1 materials, femur fixed) -> {}", loading.name(), dir.display());
+        }
+        let read_s = t0.elapsed().as_secs_f64();
+        solve_model(
+            &model,
+            &format!("built-in thigh-like section, {}", loading.name()),
+            "demo",
+            &dir,
+            read_s,
+            false,
+            true,
+            quiet,
+        )?;
     }
-    let read_s = t0.elapsed().as_secs_f64();
-    solve_deck(
-        deck,
-        "built-in thigh-like section",
-        "demo",
-        out,
-        read_s,
-        false,
-        quiet,
-    )
+    Ok(())
 }

@@ -17,10 +17,22 @@
 //!
 //! [step]                       # optional, as *STATIC
 //! initial_increment = 1.0
+//!
+//! [compression]                # optional: a rigid plate pressed on a physical curve
+//! curve = "skin"
+//! side = "anterior"            # anterior (+y), posterior, lateral (+x), medial, or degrees
+//! force_n_per_mm = 0.1
+//!
+//! [indentation]                # optional: a rigid cylinder (one of the two per run)
+//! curve = "skin"
+//! side = "anterior"
+//! radius_mm = 10.0
+//! force_n_per_mm = 0.1
 //! ```
 
 use anyhow::{bail, Context, Result};
 use femu_mech::build::{CurveDisplacement, CurvePressure, MshSetup, RegionMaterial};
+use femu_mech::loading::{Loading, Side};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -38,6 +50,25 @@ struct StudyFile {
     #[serde(default)]
     pressure: Vec<PressureEntry>,
     step: Option<StepEntry>,
+    compression: Option<RigidEntry>,
+    indentation: Option<RigidEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RigidEntry {
+    curve: String,
+    side: String,
+    force_n_per_mm: f64,
+    radius_mm: Option<f64>,
+}
+
+/// A study: the Gmsh setup and, optionally, a rigid-body loading on a curve.
+#[derive(Debug)]
+pub struct Study {
+    pub setup: MshSetup,
+    /// `(curve, loading)` for a compression or indentation test.
+    pub rigid: Option<(String, Loading)>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -75,13 +106,13 @@ struct StepEntry {
 }
 
 /// Reads and validates a study file.
-pub fn read(path: &Path) -> Result<MshSetup> {
+pub fn read(path: &Path) -> Result<Study> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     parse(&text).with_context(|| format!("in study file {}", path.display()))
 }
 
-fn parse(text: &str) -> Result<MshSetup> {
+fn parse(text: &str) -> Result<Study> {
     let f: StudyFile = toml::from_str(text)?;
     let quad_kind = match f.element.as_deref().map(str::to_ascii_uppercase).as_deref() {
         None | Some("CPE4H") => femu_mesh::ElementKind::Cpe4h,
@@ -158,12 +189,50 @@ fn parse(text: &str) -> Result<MshSetup> {
             );
         }
     }
-    Ok(MshSetup {
-        quad_kind,
-        materials,
-        displacements,
-        pressures,
-        step,
+    let rigid = match (&f.compression, &f.indentation) {
+        (Some(_), Some(_)) => {
+            bail!("give either [compression] or [indentation], one rigid body per run")
+        }
+        (Some(c), None) => {
+            if c.radius_mm.is_some() {
+                bail!("compression.radius_mm: a plate has no radius (did you mean [indentation]?)");
+            }
+            let side =
+                Side::parse(&c.side).map_err(|e| anyhow::anyhow!("compression.side: {e}"))?;
+            Some((
+                c.curve.clone(),
+                Loading::Compression {
+                    side,
+                    force: c.force_n_per_mm,
+                },
+            ))
+        }
+        (None, Some(c)) => {
+            let site =
+                Side::parse(&c.side).map_err(|e| anyhow::anyhow!("indentation.side: {e}"))?;
+            let Some(radius) = c.radius_mm else {
+                bail!("indentation.radius_mm is missing")
+            };
+            Some((
+                c.curve.clone(),
+                Loading::Indentation {
+                    site,
+                    radius,
+                    force: c.force_n_per_mm,
+                },
+            ))
+        }
+        (None, None) => None,
+    };
+    Ok(Study {
+        setup: MshSetup {
+            quad_kind,
+            materials,
+            displacements,
+            pressures,
+            step,
+        },
+        rigid,
     })
 }
 
@@ -177,9 +246,23 @@ mod tests {
             "element = \"CPE4\"\n[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[[fixed]]\ncurve = \"femur\"\n[[pressure]]\ncurve = \"skin\"\nmmhg = 20\n",
         )
         .unwrap();
-        assert_eq!(s.materials[0].c10, 0.8e-3);
-        assert!((s.pressures[0].pressure - 2.666e-3).abs() < 1e-6);
-        assert_eq!(s.displacements[0].dofs, vec![0, 1]);
+        assert_eq!(s.setup.materials[0].c10, 0.8e-3);
+        assert!((s.setup.pressures[0].pressure - 2.666e-3).abs() < 1e-6);
+        assert_eq!(s.setup.displacements[0].dofs, vec![0, 1]);
+        assert!(s.rigid.is_none());
+        let s = parse("[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[compression]\ncurve = \"skin\"\nside = \"medial\"\nforce_n_per_mm = 0.1\n").unwrap();
+        assert!(matches!(
+            s.rigid,
+            Some((
+                _,
+                Loading::Compression {
+                    side: Side::Medial,
+                    ..
+                }
+            ))
+        ));
+        let e = parse("[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[indentation]\ncurve = \"skin\"\nside = \"up\"\nforce_n_per_mm = 0.1\nradius_mm = 5\n").unwrap_err();
+        assert!(format!("{e:#}").contains("indentation.side"), "{e:#}");
         let e = parse("[materials.fat]\nc10_kpa = 0.8\nd = 30.8\n").unwrap_err();
         assert!(format!("{e:#}").contains("unknown field `d`"), "{e:#}");
         let e = parse("[materials.fat]\nc10_kpa = -0.8\nd_per_mpa = 30.8\n").unwrap_err();

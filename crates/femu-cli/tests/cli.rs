@@ -34,21 +34,24 @@ fn demo_writes_the_output_folder() {
         "demo",
         "--n-theta",
         "48",
+        "--tests",
+        "contention,compression",
         "--out",
         out.to_str().unwrap(),
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cont = out.join("contention");
     for f in [
         "model.inp",
         "displacements.csv",
         "result.vtu",
         "summary.json",
     ] {
-        assert!(out.join(f).exists(), "{f} missing");
+        assert!(cont.join(f).exists(), "contention/{f} missing");
     }
     let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(cont.join("summary.json")).unwrap()).unwrap();
     assert_eq!(s["status"], "converged");
     // The skin is pushed inward by about a millimetre (contention, 20 mmHg).
     let umax = s["max_displacement_mm"].as_f64().unwrap();
@@ -57,14 +60,14 @@ fn demo_writes_the_output_folder() {
     let out2 = scratch("demo-resolve");
     let o = femu(&[
         "solve",
-        out.join("model.inp").to_str().unwrap(),
+        cont.join("model.inp").to_str().unwrap(),
         "--out",
         out2.to_str().unwrap(),
         "--quiet",
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (a, b) = (
-        read_csv(&out.join("displacements.csv")),
+        read_csv(&cont.join("displacements.csv")),
         read_csv(&out2.join("displacements.csv")),
     );
     assert_eq!(a.len(), b.len());
@@ -76,6 +79,30 @@ fn demo_writes_the_output_folder() {
     assert!(
         dmax < 1e-9 * umax,
         "deck round trip changed the answer by {dmax}"
+    );
+    // Compression: the plate carries the seed's 0.1 N/mm, within the penetration limit.
+    let comp = out.join("compression-anterior");
+    for f in [
+        "displacements.csv",
+        "result.vtu",
+        "summary.json",
+        "contact_pressure.csv",
+        "force_displacement.csv",
+    ] {
+        assert!(comp.join(f).exists(), "compression-anterior/{f} missing");
+    }
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(comp.join("summary.json")).unwrap()).unwrap();
+    let body = &s["rigid_bodies"][0];
+    assert!((body["force_n_per_mm"].as_f64().unwrap() - 0.1).abs() < 1e-8);
+    assert!(
+        body["max_penetration_mm"].as_f64().unwrap()
+            <= body["penetration_limit_mm"].as_f64().unwrap()
+    );
+    let curve = std::fs::read_to_string(comp.join("force_displacement.csv")).unwrap();
+    assert!(
+        curve.lines().count() >= 3,
+        "force-displacement curve: {curve}"
     );
 }
 
@@ -237,4 +264,72 @@ mmhg = 20
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(expect), "{err}");
     }
+}
+
+/// A rigid plate pressed on the skin of an unstructured Gmsh thigh (fat, anterior and
+/// posterior muscle regions), set up entirely from the study file.
+#[test]
+fn compression_on_a_gmsh_thigh_from_a_study_file() {
+    let msh = Path::new(env!("CARGO_MANIFEST_DIR")).join("../femu-mech/tests/data/thigh_ccx.msh");
+    let dir = scratch("msh-compression");
+    let study = "element = \"CPE4H\"
+[materials.FAT]
+c10_kpa = 0.8
+d_per_mpa = 30.8
+[materials.ANTERIOR]
+c10_kpa = 1.75
+d_per_mpa = 18.0
+[materials.POSTERIOR]
+c10_kpa = 3.0
+d_per_mpa = 18.0
+[[fixed]]
+curve = \"FEMUR\"
+[compression]
+curve = \"SKIN\"
+side = \"anterior\"
+force_n_per_mm = 0.05
+";
+    std::fs::write(dir.join("study.toml"), study).unwrap();
+    let out = dir.join("out");
+    let o = femu(&[
+        "solve",
+        msh.to_str().unwrap(),
+        "--study",
+        dir.join("study.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let body = &s["rigid_bodies"][0];
+    assert!((body["force_n_per_mm"].as_f64().unwrap() - 0.05).abs() < 1e-9);
+    // The femur reaction balances the plate (the plate pushes towards -y).
+    let ry = s["reaction_force_total_n_per_mm"][1].as_f64().unwrap();
+    assert!((ry - 0.05).abs() < 1e-7, "femur reaction {ry}");
+    assert!(
+        out.join("contact_pressure.csv").exists() && out.join("force_displacement.csv").exists()
+    );
+    // A force of the wrong sign is refused before any solve, naming the problem.
+    std::fs::write(
+        dir.join("bad.toml"),
+        study.replace("force_n_per_mm = 0.05", "force_n_per_mm = -0.05"),
+    )
+    .unwrap();
+    let o = femu(&[
+        "solve",
+        msh.to_str().unwrap(),
+        "--study",
+        dir.join("bad.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("force"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

@@ -1,0 +1,228 @@
+//! `femu mesh thigh` and `femu mesh labels` as a user runs them: the output folder, its
+//! summary, and clear errors on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn femu(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(args)
+        .output()
+        .expect("femu runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("femu-mesh-test-{}-{name}", std::process::id()));
+    std::fs::remove_dir_all(&dir).ok();
+    dir
+}
+
+fn summary(dir: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()
+}
+
+fn assert_outputs(dir: &Path) {
+    for f in [
+        "mesh.inp",
+        "mesh.vtu",
+        "regions.png",
+        "quality.csv",
+        "quality.json",
+        "summary.json",
+    ] {
+        assert!(dir.join(f).exists(), "{f} missing in {}", dir.display());
+    }
+}
+
+#[test]
+fn mesh_thigh_writes_the_output_folder_and_its_deck_solves() {
+    let out = scratch("thigh");
+    let o = femu(&[
+        "mesh",
+        "thigh",
+        "--size",
+        "4",
+        "--element",
+        "cpe4",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_outputs(&out);
+    let s = summary(&out);
+    assert_eq!(s["command"], "mesh thigh");
+    assert_eq!(s["element"], "CPE4");
+    let n = s["elements"].as_u64().unwrap();
+    assert!(n > 300 && n < 2000, "{n}");
+    assert_eq!(s["regions"].as_object().unwrap().len(), 5);
+    assert!(
+        s["quality"]["total"]["min_scaled_jacobian"]
+            .as_f64()
+            .unwrap()
+            > 0.3
+    );
+    let csv = std::fs::read_to_string(out.join("quality.csv")).unwrap();
+    assert!(csv.starts_with("region,elements,area_mm2,min_scaled_jacobian"));
+    assert_eq!(csv.lines().count(), 7);
+    // The deck runs through `femu solve` as is.
+    let solved = out.join("solve");
+    let o = femu(&[
+        "solve",
+        out.join("mesh.inp").to_str().unwrap(),
+        "--out",
+        solved.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(solved.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(s["status"], "converged");
+    // Dimensions from a study-style file; bad ones are refused with the key named.
+    let params = out.join("thigh.toml");
+    std::fs::write(
+        &params,
+        "[thigh]\nfat_thickness_mm = 12.0\nelement_size_mm = 4.0\n",
+    )
+    .unwrap();
+    let o = femu(&[
+        "mesh",
+        "thigh",
+        "--params",
+        params.to_str().unwrap(),
+        "--out",
+        out.join("p").to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        summary(&out.join("p"))["input"]["params"]["fat_thickness_mm"],
+        12.0
+    );
+    std::fs::write(&params, "[thigh]\nfemur_diameter_mm = 80.0\n").unwrap();
+    let o = femu(&[
+        "mesh",
+        "thigh",
+        "--params",
+        params.to_str().unwrap(),
+        "--out",
+        out.join("q").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("femur_diameter_mm"));
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
+fn mesh_labels_on_the_mri_slice_and_bad_inputs() {
+    let out = scratch("labels");
+    let image = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/mri/thigh_001_slice06_labels.png");
+    let map = "1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=ischio";
+    if image.exists() {
+        let o = femu(&[
+            "mesh",
+            "labels",
+            image.to_str().unwrap(),
+            "--pixel-size",
+            "0.7422",
+            "--map",
+            map,
+            "--bone",
+            "7",
+            "--size",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        assert_outputs(&out);
+        let s = summary(&out);
+        for (r, v) in s["regions"].as_object().unwrap() {
+            let e = v["area_error_percent"].as_f64().unwrap();
+            assert!(e.abs() < 2.0, "{r}: {e} %");
+        }
+        assert!(s["femur_area_error_percent"].as_f64().unwrap().abs() < 3.0);
+        assert!(!s["warnings"].as_array().unwrap().is_empty());
+        // A label without a mapping (6 left out) is named.
+        let o = femu(&[
+            "mesh",
+            "labels",
+            image.to_str().unwrap(),
+            "--pixel-size",
+            "0.7422",
+            "--map",
+            "1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius",
+            "--bone",
+            "7",
+            "--out",
+            out.join("x").to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        assert!(String::from_utf8_lossy(&o.stderr).contains("label 6"));
+        // A region without a Table 1 material.
+        let o = femu(&[
+            "mesh",
+            "labels",
+            image.to_str().unwrap(),
+            "--pixel-size",
+            "0.7422",
+            "--map",
+            "1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=adductor",
+            "--bone",
+            "7",
+            "--out",
+            out.join("y").to_str().unwrap(),
+        ]);
+        assert!(!o.status.success());
+        assert!(String::from_utf8_lossy(&o.stderr).contains("ADDUCTOR"));
+    } else {
+        eprintln!("SKIPPED the MRI part: {} is absent", image.display());
+    }
+    // Unreadable image; missing pixel size; bad map.
+    std::fs::create_dir_all(&out).unwrap();
+    let junk = out.join("junk.png");
+    std::fs::write(&junk, "not a picture").unwrap();
+    let o = femu(&[
+        "mesh",
+        "labels",
+        junk.to_str().unwrap(),
+        "--pixel-size",
+        "1",
+        "--map",
+        "1=fat",
+        "--bone",
+        "7",
+        "--out",
+        out.join("z").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("junk.png"));
+    let o = femu(&[
+        "mesh",
+        "labels",
+        junk.to_str().unwrap(),
+        "--map",
+        "1=fat",
+        "--bone",
+        "7",
+        "--pixel-size",
+        "0",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--pixel-size"));
+    let o = femu(&[
+        "mesh",
+        "labels",
+        junk.to_str().unwrap(),
+        "--pixel-size",
+        "1",
+        "--map",
+        "1-fat",
+        "--bone",
+        "7",
+    ]);
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("LABEL=REGION"));
+    std::fs::remove_dir_all(&out).ok();
+}

@@ -1,0 +1,188 @@
+//! Exports of a meshed thigh: the contention deck (Abaqus/CalculiX `.inp`, runnable by `ccx`
+//! as is), the ParaView file of the regions, and the default materials (the seed's Table 1).
+
+use crate::mesher::ThighModel;
+use crate::quality::scaled_jacobian;
+use crate::GeometryError;
+use femu_mesh::generate::GeneratedMesh;
+use femu_mesh::{
+    BoundaryCondition, Deck, FacePressure, MaterialDef, StepDef, VtuField, VtuIntField,
+};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The seed's Table 1: `(region, C10 in kPa, D in MPa^-1)`.
+pub const TABLE1: [(&str, f64, f64); 5] = [
+    ("FAT", 0.8, 30.8),
+    ("ISCHIO", 3.0, 18.0),
+    ("QUADRICEPS", 1.75, 18.0),
+    ("GRACILIS", 2.2, 18.0),
+    ("SARTORIUS", 3.75, 18.0),
+];
+
+/// A compressible Neo-Hookean material of a region (Abaqus form
+/// `W = C10 (I1bar - 3) + (1/D)(J - 1)^2`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Material {
+    pub region: String,
+    /// C10 (MPa).
+    pub c10_mpa: f64,
+    /// D (MPa^-1).
+    pub d_per_mpa: f64,
+}
+
+impl Material {
+    /// The seed's Table 1 materials.
+    pub fn table1() -> Vec<Material> {
+        TABLE1
+            .iter()
+            .map(|&(r, c10_kpa, d)| Material {
+                region: r.to_string(),
+                c10_mpa: c10_kpa * 1e-3,
+                d_per_mpa: d,
+            })
+            .collect()
+    }
+}
+
+/// The contention test of the seed on a meshed thigh: one material per region (found by name,
+/// case-insensitively, in `materials`), every node of the node set `FEMUR` fixed, a follower
+/// pressure `pressure_mpa` on every face of the surface `SKIN` (the seed: 20 mmHg,
+/// [`crate::CONTENTION_MPA`]), one static step with NLGEOM.
+pub fn contention_deck(
+    model: &ThighModel,
+    materials: &[Material],
+    pressure_mpa: f64,
+) -> Result<Deck, GeometryError> {
+    if !pressure_mpa.is_finite() {
+        return Err(GeometryError::param(
+            "pressure",
+            pressure_mpa,
+            "must be finite",
+        ));
+    }
+    let g: &GeneratedMesh = &model.mesh;
+    let n = g.mesh.elements.len();
+    let mut deck = Deck {
+        mesh: g.mesh.clone(),
+        element_material: vec![usize::MAX; n],
+        element_region: vec![usize::MAX; n],
+        step: StepDef::default(),
+        ..Default::default()
+    };
+    for (r, name) in model.regions.iter().enumerate() {
+        let m = materials
+            .iter()
+            .find(|m| m.region.eq_ignore_ascii_case(name))
+            .ok_or_else(|| GeometryError::NoMaterial(name.clone()))?;
+        if !(m.c10_mpa > 0.0) || !(m.d_per_mpa > 0.0) {
+            return Err(GeometryError::param(
+                &format!("material of {name}"),
+                format!("C10 {} MPa, D {} 1/MPa", m.c10_mpa, m.d_per_mpa),
+                "C10 and D must be positive",
+            ));
+        }
+        deck.materials.push(MaterialDef {
+            name: name.clone(),
+            c10: m.c10_mpa,
+            d1: m.d_per_mpa,
+        });
+        deck.region_names.push(name.clone());
+        for &e in g.mesh.element_set(name).unwrap_or(&[]) {
+            deck.element_material[e] = r;
+            deck.element_region[e] = r;
+        }
+    }
+    if let Some(e) = deck.element_region.iter().position(|&r| r == usize::MAX) {
+        return Err(GeometryError::Meshing(format!(
+            "element {} belongs to no region",
+            g.mesh.element_labels[e]
+        )));
+    }
+    for &node in g.mesh.node_set("FEMUR").unwrap_or(&[]) {
+        for dof in 0..2 {
+            deck.boundaries.push(BoundaryCondition {
+                node,
+                dof,
+                value: 0.0,
+            });
+        }
+    }
+    for &(element, face) in g.surfaces.get("SKIN").map_or(&[][..], Vec::as_slice) {
+        deck.pressures.push(FacePressure {
+            element,
+            face,
+            magnitude: pressure_mpa,
+        });
+    }
+    Ok(deck)
+}
+
+/// Writes `deck` with [`femu_mesh::write_inp`] and adds the named surfaces as
+/// `*SURFACE, NAME=..., TYPE=ELEMENT` blocks (`element, Sn`, n = face + 1) before the step, so
+/// that a user can load the skin or the femur edge in Abaqus/CalculiX by name.
+pub fn write_inp_with_surfaces(
+    deck: &Deck,
+    surfaces: &BTreeMap<String, Vec<(usize, usize)>>,
+    path: &Path,
+) -> Result<(), GeometryError> {
+    let io = |source: std::io::Error| GeometryError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut buf = Vec::new();
+    femu_mesh::write_inp(deck, &mut buf).map_err(io)?;
+    let text = String::from_utf8(buf).expect("the deck writer writes UTF-8");
+    let mut block = String::new();
+    for (name, faces) in surfaces {
+        if faces.is_empty() {
+            continue;
+        }
+        block.push_str(&format!("*SURFACE, NAME={name}, TYPE=ELEMENT\n"));
+        for &(e, f) in faces {
+            if e >= deck.mesh.elements.len() {
+                return Err(GeometryError::Meshing(format!(
+                    "surface {name} names element index {e}, which does not exist"
+                )));
+            }
+            block.push_str(&format!("{}, S{}\n", deck.mesh.element_labels[e], f + 1));
+        }
+    }
+    let at = text.find("\n*STEP").map(|k| k + 1).unwrap_or(text.len());
+    let out = format!("{}{}{}", &text[..at], block, &text[at..]);
+    std::fs::write(path, out).map_err(io)
+}
+
+/// Writes the mesh as a ParaView file with the cell fields `region` (index into
+/// `model.regions`) and `scaled_jacobian`.
+pub fn write_regions_vtu(model: &ThighModel, path: &Path) -> Result<(), GeometryError> {
+    let m = &model.mesh.mesh;
+    let mut region = vec![-1i32; m.elements.len()];
+    for (r, name) in model.regions.iter().enumerate() {
+        for &e in m.element_set(name).unwrap_or(&[]) {
+            region[e] = r as i32;
+        }
+    }
+    let sj: Vec<f64> = (0..m.elements.len())
+        .map(|e| scaled_jacobian(&m.element_coords(e).0))
+        .collect();
+    femu_mesh::write_vtu_with_int_cells(
+        path,
+        m,
+        None,
+        &[],
+        &[VtuField {
+            name: "scaled_jacobian",
+            components: 1,
+            data: &sj,
+        }],
+        &[VtuIntField {
+            name: "region",
+            data: &region,
+        }],
+    )
+    .map_err(|source| GeometryError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}

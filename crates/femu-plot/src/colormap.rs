@@ -1,0 +1,113 @@
+//! Perceptual colour maps: viridis for one-sided data, a blue–white–red diverging map for
+//! signed data, grey for missing values.
+
+use plotters::style::RGBColor;
+
+/// The colour of a missing (NaN) value.
+pub const MISSING: RGBColor = RGBColor(190, 190, 190);
+
+/// Viridis (matplotlib's default; perceptually uniform, readable in grey and by colour-blind
+/// readers), sampled at 9 equally spaced points (R `viridisLite::viridis(9)`).
+const VIRIDIS: [[u8; 3]; 9] = [
+    [0x44, 0x01, 0x54],
+    [0x47, 0x2D, 0x7B],
+    [0x3B, 0x52, 0x8B],
+    [0x2C, 0x72, 0x8E],
+    [0x21, 0x90, 0x8C],
+    [0x27, 0xAD, 0x81],
+    [0x5D, 0xC8, 0x63],
+    [0xAA, 0xDC, 0x32],
+    [0xFD, 0xE7, 0x25],
+];
+
+/// ColorBrewer RdBu (11 classes) reversed: dark blue for the most negative value, near-white in
+/// the middle, dark red for the most positive.
+const BLUE_WHITE_RED: [[u8; 3]; 11] = [
+    [0x05, 0x30, 0x61],
+    [0x21, 0x66, 0xAC],
+    [0x43, 0x93, 0xC3],
+    [0x92, 0xC5, 0xDE],
+    [0xD1, 0xE5, 0xF0],
+    [0xF7, 0xF7, 0xF7],
+    [0xFD, 0xDB, 0xC7],
+    [0xF4, 0xA5, 0x82],
+    [0xD6, 0x60, 0x4D],
+    [0xB2, 0x18, 0x2B],
+    [0x67, 0x00, 0x1F],
+];
+
+/// A colour map over a value range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ColorMap {
+    /// Viridis over `lo..hi`.
+    Viridis { lo: f64, hi: f64 },
+    /// Blue–white–red over `-a..a` (white at zero).
+    Diverging { a: f64 },
+}
+
+impl ColorMap {
+    /// The range the map spans.
+    pub fn range(&self) -> (f64, f64) {
+        match *self {
+            ColorMap::Viridis { lo, hi } => (lo, hi),
+            ColorMap::Diverging { a } => (-a, a),
+        }
+    }
+
+    /// The colour of `v`; values outside the range take the end colours, NaN is [`MISSING`].
+    pub fn color(&self, v: f64) -> RGBColor {
+        if v.is_nan() {
+            return MISSING;
+        }
+        let (lo, hi) = self.range();
+        let t = ((v - lo) / (hi - lo)).clamp(0.0, 1.0);
+        match self {
+            ColorMap::Viridis { .. } => sample(&VIRIDIS, t),
+            ColorMap::Diverging { .. } => sample(&BLUE_WHITE_RED, t),
+        }
+    }
+}
+
+/// Linear interpolation in a table of equally spaced colours, `t` in `[0, 1]`.
+fn sample(table: &[[u8; 3]], t: f64) -> RGBColor {
+    let x = t * (table.len() - 1) as f64;
+    let i = (x.floor() as usize).min(table.len() - 2);
+    let f = x - i as f64;
+    let c = |k: usize| {
+        let a = table[i][k] as f64;
+        let b = table[i + 1][k] as f64;
+        (a + f * (b - a)).round() as u8
+    };
+    RGBColor(c(0), c(1), c(2))
+}
+
+/// Colour-blind-safe qualitative colours (Okabe & Ito) for series and bar groups.
+pub const SERIES: [RGBColor; 8] = [
+    RGBColor(0, 114, 178),
+    RGBColor(213, 94, 0),
+    RGBColor(0, 158, 115),
+    RGBColor(204, 121, 167),
+    RGBColor(230, 159, 0),
+    RGBColor(86, 180, 233),
+    RGBColor(0, 0, 0),
+    RGBColor(240, 228, 66),
+];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ends_middle_and_missing() {
+        let v = ColorMap::Viridis { lo: 0.0, hi: 2.0 };
+        assert_eq!(v.color(0.0), RGBColor(0x44, 0x01, 0x54));
+        assert_eq!(v.color(2.0), RGBColor(0xFD, 0xE7, 0x25));
+        assert_eq!(v.color(5.0), RGBColor(0xFD, 0xE7, 0x25));
+        assert_eq!(v.color(1.0), RGBColor(0x21, 0x90, 0x8C));
+        assert_eq!(v.color(f64::NAN), MISSING);
+        let d = ColorMap::Diverging { a: 3.0 };
+        assert_eq!(d.color(0.0), RGBColor(0xF7, 0xF7, 0xF7));
+        assert_eq!(d.color(-3.0), RGBColor(0x05, 0x30, 0x61));
+        assert_eq!(d.color(3.0), RGBColor(0x67, 0x00, 0x1F));
+    }
+}
