@@ -47,7 +47,7 @@ impl QuadElement {
 
 #[derive(Subcommand, Debug)]
 enum Command {
-    /// The demo: the seed's loading tests on the built-in thigh-like cross-section with the
+    /// The demo: the seed's loading tests on the built-in parametric thigh with the
     /// Table 1 parameters, femur fixed — contention (20 mmHg on the skin) and compression (rigid
     /// plate, 0.1 N/mm, anterior) by default; one output folder per test.
     Demo {
@@ -57,9 +57,9 @@ enum Command {
         /// Element formulation.
         #[arg(long, value_enum, default_value = "cpe4h")]
         element: QuadElement,
-        /// Angular divisions of the ring mesh (480 gives about 25 000 elements, the seed's size).
-        #[arg(long, default_value_t = 240)]
-        n_theta: usize,
+        /// Target number of elements of the built-in thigh (the seed's paper scale is 25 000).
+        #[arg(long, default_value_t = 6000)]
+        elements: usize,
         /// Loading tests, comma-separated: contention, compression, indentation (the seed's
         /// values: 20 mmHg; plate 0.1 N/mm anterior; indenter R = 10 mm, 0.1 N/mm anterior).
         #[arg(long, value_delimiter = ',', default_value = "contention,compression")]
@@ -84,16 +84,16 @@ enum Command {
         #[arg(long)]
         no_figures: bool,
     },
-    /// Benchmark: the paper-scale thigh-like contention problem (about 25 000 CPE4 quads) solved
+    /// Benchmark: the paper-scale contention problem on the built-in thigh (about 25 000 CPE4 quads) solved
     /// by femu and by CalculiX (`ccx`) on the same deck, side by side; reports the time ratio,
     /// the displacement agreement and femu's peak memory.
     Bench {
         /// Output folder.
         #[arg(long, default_value = "out/bench")]
         out: PathBuf,
-        /// Angular divisions of the ring mesh (480: 24 960 elements).
-        #[arg(long, default_value_t = 480)]
-        n_theta: usize,
+        /// Target number of elements of the built-in thigh (25 000: the seed's scale).
+        #[arg(long, default_value_t = 25_000)]
+        elements: usize,
         /// Repetitions of each solver (the best and the median are reported).
         #[arg(long, default_value_t = 3)]
         repeat: usize,
@@ -136,9 +136,9 @@ fn main() -> ExitCode {
         Command::Demo {
             out,
             element,
-            n_theta,
+            elements,
             tests,
-        } => demo_tests(&tests).and_then(|t| run::demo(&out, element, n_theta, &t, cli.quiet)),
+        } => demo_tests(&tests).and_then(|t| run::demo(&out, element, elements, &t, cli.quiet)),
         Command::Solve {
             input,
             study,
@@ -155,10 +155,10 @@ fn main() -> ExitCode {
         ),
         Command::Bench {
             out,
-            n_theta,
+            elements,
             repeat,
             no_ccx,
-        } => bench::run(&out, n_theta, repeat, !no_ccx, cli.quiet),
+        } => bench::run(&out, elements, repeat, !no_ccx, cli.quiet),
         Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
     };
     match result {

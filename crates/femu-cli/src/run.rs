@@ -3,45 +3,46 @@
 use crate::study;
 use crate::QuadElement;
 use anyhow::{bail, Context, Result};
-use femu_mech::build::DeckBuilder;
 use femu_mech::loading::Loading;
 use femu_mech::output::{peak_memory_mb, write_displacements_csv, write_result_vtu};
 use femu_mech::solver::IncrementRecord;
 use femu_mech::{Model, Solution, SolveError, SolveReport, SolverOptions, StaticSolver};
-use femu_mesh::generate::{thigh_like, ThighLikeParams};
 use femu_mesh::Deck;
 use serde::Serialize;
 use std::path::Path;
 use std::time::Instant;
 
-/// Seed Table 1: (region, C10 in kPa, D in MPa^-1).
-pub const TABLE1: [(&str, f64, f64); 5] = [
-    ("FAT", 0.8, 30.8),
-    ("ISCHIO", 3.0, 18.0),
-    ("QUADRICEPS", 1.75, 18.0),
-    ("GRACILIS", 2.2, 18.0),
-    ("SARTORIUS", 3.75, 18.0),
-];
-
-/// The contention pressure of the seed: 20 mmHg in MPa.
-pub const CONTENTION_MPA: f64 = 20.0 * study::MMHG_IN_MPA;
-
-/// The thigh-like contention deck used by the demo and the benchmark.
-pub fn thigh_contention_deck(n_theta: usize, kind: femu_mesh::ElementKind) -> Deck {
-    let defaults = ThighLikeParams::default();
-    let scale = n_theta as f64 / defaults.n_theta as f64;
-    let params = ThighLikeParams {
-        n_theta,
-        muscle_rows: ((defaults.muscle_rows as f64 * scale).round() as usize).max(4),
-        fat_rows: ((defaults.fat_rows as f64 * scale).round() as usize).max(2),
-        kind,
-        ..defaults
-    };
-    let mut b = DeckBuilder::new(thigh_like(&params));
-    for (name, c10_kpa, d) in TABLE1 {
-        b = b.material(name, c10_kpa * 1e-3, d);
+/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a
+/// contention deck: Table 1 materials, femur fixed, 20 mmHg on the skin; and its skin faces.
+pub fn thigh_deck(
+    elements: usize,
+    kind: femu_mesh::ElementKind,
+) -> Result<(Deck, Vec<(usize, usize)>)> {
+    if !(100..=500_000).contains(&elements) {
+        bail!("the number of elements must be in [100, 500000], got {elements}");
     }
-    b.fix("INNER").pressure("OUTER", CONTENTION_MPA).build()
+    let params = femu_geometry::ThighParams {
+        target_elements: Some(elements),
+        ..Default::default()
+    };
+    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
+    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
+    let deck = femu_geometry::contention_deck(
+        &thigh,
+        &femu_geometry::Material::table1(),
+        femu_geometry::CONTENTION_MPA,
+    )?;
+    Ok((deck, skin))
+}
+
+/// The built-in thigh as a model without loads (femur fixed), and its skin faces.
+pub fn thigh_model(
+    elements: usize,
+    kind: femu_mesh::ElementKind,
+) -> Result<(Model, Vec<(usize, usize)>)> {
+    let (mut deck, skin) = thigh_deck(elements, kind)?;
+    deck.pressures.clear();
+    Ok((Model::from_deck(deck)?, skin))
 }
 
 #[derive(Serialize)]
@@ -356,67 +357,53 @@ pub fn solve(
     solve_model(&model, &name, "solve", out, read_s, table, figures, quiet)
 }
 
-/// The thigh-like section as a model without loads, and its skin faces.
-pub fn thigh_model(
-    n_theta: usize,
-    kind: femu_mesh::ElementKind,
-) -> Result<(Model, Vec<(usize, usize)>)> {
-    let defaults = ThighLikeParams::default();
-    let scale = n_theta as f64 / defaults.n_theta as f64;
-    let params = ThighLikeParams {
-        n_theta,
-        muscle_rows: ((defaults.muscle_rows as f64 * scale).round() as usize).max(4),
-        fat_rows: ((defaults.fat_rows as f64 * scale).round() as usize).max(2),
-        kind,
-        ..defaults
-    };
-    let g = thigh_like(&params);
-    let skin = g.surfaces["OUTER"].clone();
-    let mut b = DeckBuilder::new(g);
-    for (name, c10_kpa, d) in TABLE1 {
-        b = b.material(name, c10_kpa * 1e-3, d);
-    }
-    Ok((Model::from_deck(b.fix("INNER").build())?, skin))
-}
-
-/// `femu demo`: the seed's loading tests on the built-in thigh-like section, one sub-folder
+/// `femu demo`: the seed's loading tests on the built-in parametric thigh, one sub-folder
 /// per test.
 pub fn demo(
     out: &Path,
     element: QuadElement,
-    n_theta: usize,
+    elements: usize,
     tests: &[Loading],
     quiet: bool,
 ) -> Result<()> {
-    if n_theta < 16 {
-        bail!("--n-theta must be at least 16, got {n_theta}");
-    }
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let t0 = Instant::now();
+    let (base_deck, skin) = thigh_deck(elements, element.kind())?;
+    let mesh_s = t0.elapsed().as_secs_f64();
     for loading in tests {
-        let t0 = Instant::now();
+        let t1 = Instant::now();
         let dir = out.join(loading.name());
         std::fs::create_dir_all(&dir)
             .with_context(|| format!("cannot create output folder {}", dir.display()))?;
+        let mut deck = base_deck.clone();
+        deck.pressures.clear();
         if let Loading::Contention { pressure } = loading {
-            // Contention is expressible as a deck: write it, CalculiX runs it unchanged.
-            let mut deck = thigh_contention_deck(n_theta, element.kind());
-            deck.pressures
+            // Contention is expressible as a deck: write it; it runs unchanged in Abaqus, and in
+            // CalculiX with CPE4 elements (`--element cpe4`; ccx has no hybrid element).
+            let mut with_pressure = base_deck.clone();
+            with_pressure
+                .pressures
                 .iter_mut()
                 .for_each(|p| p.magnitude = *pressure);
             let deck_path = dir.join("model.inp");
-            femu_mesh::write_inp_file(&deck, &deck_path)
+            femu_mesh::write_inp_file(&with_pressure, &deck_path)
                 .with_context(|| format!("cannot write {}", deck_path.display()))?;
         }
-        let (mut model, skin) = thigh_model(n_theta, element.kind())?;
+        let mut model = Model::from_deck(deck)?;
         femu_mech::loading::apply_loading(&mut model, &skin, loading)?;
         if !quiet {
-            eprintln!("demo: {} on the built-in thigh-like section (Table 1 materials, femur fixed) -> {}", loading.name(), dir.display());
+            eprintln!(
+                "demo: {} on the built-in thigh ({} elements, Table 1 materials, femur fixed) -> {}",
+                loading.name(),
+                model.mesh.elements.len(),
+                dir.display()
+            );
         }
-        let read_s = t0.elapsed().as_secs_f64();
+        let read_s = mesh_s + t1.elapsed().as_secs_f64();
         solve_model(
             &model,
-            &format!("built-in thigh-like section, {}", loading.name()),
+            &format!("built-in thigh, {}", loading.name()),
             "demo",
             &dir,
             read_s,

@@ -32,8 +32,8 @@ fn demo_writes_the_output_folder() {
     let out = scratch("demo");
     let o = femu(&[
         "demo",
-        "--n-theta",
-        "48",
+        "--elements",
+        "1500",
         "--tests",
         "contention,compression",
         "--out",
