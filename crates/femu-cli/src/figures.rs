@@ -53,32 +53,9 @@ pub fn write_solve_figures(
     .with_context(|| format!("cannot draw {}", path.display()))?;
     for (b, dir) in body_dirs.iter().enumerate() {
         let c = &model.contacts[b];
-        let body = &solution.bodies[b];
-        let pts: Vec<[f64; 2]> = c
-            .nodes
+        let mut profile: Vec<(f64, f64)> = femu_mech::output::contact_profile(model, solution, b)
             .iter()
-            .map(|&n| {
-                [
-                    model.mesh.nodes[n][0] + solution.u[2 * n],
-                    model.mesh.nodes[n][1] + solution.u[2 * n + 1],
-                ]
-            })
-            .collect();
-        let centre = pts.iter().fold([0.0, 0.0], |a, p| {
-            [
-                a[0] + p[0] / pts.len() as f64,
-                a[1] + p[1] / pts.len() as f64,
-            ]
-        });
-        let mut profile: Vec<(f64, f64)> = pts
-            .iter()
-            .enumerate()
-            .map(|(k, p)| {
-                (
-                    (p[1] - centre[1]).atan2(p[0] - centre[0]).to_degrees(),
-                    1e3 * body.node_forces[k] / c.tributary[k],
-                )
-            })
+            .map(|p| (p.angle_deg, 1e3 * p.pressure))
             .collect();
         profile.sort_by(|a, b| a.0.total_cmp(&b.0));
         // Zoom on the contact zone (with a margin of a few nodes on each side).

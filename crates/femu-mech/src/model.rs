@@ -163,6 +163,15 @@ impl Model {
         ue
     }
 
+    /// Current position of node `n` for the state `u`.
+    #[inline]
+    pub fn current_position(&self, n: usize, u: &[f64]) -> [f64; 2] {
+        [
+            self.mesh.nodes[n][0] + u[2 * n],
+            self.mesh.nodes[n][1] + u[2 * n + 1],
+        ]
+    }
+
     /// Sets the C10 and D of material `m` (used by identification and sensitivity studies).
     pub fn set_material(&mut self, m: usize, law: NeoHookean) {
         self.materials[m].law = law;

@@ -130,9 +130,53 @@ pub fn peak_memory_mb() -> Option<f64> {
     Some(kb / 1024.0)
 }
 
+/// The contact state of one skin node of a rigid body's surface.
+#[derive(Debug, Clone, Copy)]
+pub struct ContactPoint {
+    pub node: usize,
+    /// Current position (mm).
+    pub position: [f64; 2],
+    /// Angle of the position about the centre of the contact surface's nodes (degrees).
+    pub angle_deg: f64,
+    pub gap: f64,
+    /// Nodal contact force (N per mm of thickness).
+    pub force: f64,
+    /// Force over the node's tributary length (MPa).
+    pub pressure: f64,
+}
+
+/// Contact state of every candidate node of rigid body `b`, in candidate order.
+pub fn contact_profile(model: &Model, solution: &Solution, b: usize) -> Vec<ContactPoint> {
+    let c = &model.contacts[b];
+    let body = &solution.bodies[b];
+    let pts: Vec<[f64; 2]> = c
+        .nodes
+        .iter()
+        .map(|&n| model.current_position(n, &solution.u))
+        .collect();
+    let inv = 1.0 / pts.len().max(1) as f64;
+    let centre = pts
+        .iter()
+        .fold([0.0, 0.0], |a, p| [a[0] + p[0] * inv, a[1] + p[1] * inv]);
+    c.nodes
+        .iter()
+        .enumerate()
+        .map(|(k, &node)| {
+            let p = pts[k];
+            ContactPoint {
+                node,
+                position: p,
+                angle_deg: (p[1] - centre[1]).atan2(p[0] - centre[0]).to_degrees(),
+                gap: body.node_gaps[k],
+                force: body.node_forces[k],
+                pressure: body.node_forces[k] / c.tributary[k],
+            }
+        })
+        .collect()
+}
+
 /// Writes, for rigid body `b`, `contact_pressure.csv` — one row per candidate node:
-/// `node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa` (current position, angle about the
-/// candidates' centre, nodal force over the node's tributary length) — and
+/// `node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa` (see [`ContactPoint`]) — and
 /// `force_displacement.csv` — `increment,load_factor,travel_mm,force_n_per_mm` over the
 /// converged increments.
 pub fn write_contact_csv(
@@ -141,39 +185,19 @@ pub fn write_contact_csv(
     solution: &Solution,
     b: usize,
 ) -> io::Result<()> {
-    let c = &model.contacts[b];
-    let body = &solution.bodies[b];
-    let pts: Vec<[f64; 2]> = c
-        .nodes
-        .iter()
-        .map(|&n| {
-            [
-                model.mesh.nodes[n][0] + solution.u[2 * n],
-                model.mesh.nodes[n][1] + solution.u[2 * n + 1],
-            ]
-        })
-        .collect();
-    let centre = pts.iter().fold([0.0, 0.0], |a, p| {
-        [
-            a[0] + p[0] / pts.len() as f64,
-            a[1] + p[1] / pts.len() as f64,
-        ]
-    });
     let mut w = io::BufWriter::new(std::fs::File::create(dir.join("contact_pressure.csv"))?);
     writeln!(w, "node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa")?;
-    for (k, &n) in c.nodes.iter().enumerate() {
-        let p = pts[k];
-        let angle = (p[1] - centre[1]).atan2(p[0] - centre[0]).to_degrees();
+    for p in contact_profile(model, solution, b) {
         writeln!(
             w,
             "{},{:.9e},{:.9e},{:.6},{:.9e},{:.9e},{:.9e}",
-            model.mesh.node_labels[n],
-            p[0],
-            p[1],
-            angle,
-            body.node_gaps[k],
-            body.node_forces[k],
-            body.node_forces[k] / c.tributary[k]
+            model.mesh.node_labels[p.node],
+            p.position[0],
+            p.position[1],
+            p.angle_deg,
+            p.gap,
+            p.force,
+            p.pressure
         )?;
     }
     w.flush()?;

@@ -479,15 +479,11 @@ impl StaticSolver {
                     let face = &model.pressures[k];
                     let [la, lb] = face.local;
                     let [na, nb] = face.nodes;
-                    let xa = [
-                        model.mesh.nodes[na][0] + u[2 * na],
-                        model.mesh.nodes[na][1] + u[2 * na + 1],
-                    ];
-                    let xb = [
-                        model.mesh.nodes[nb][0] + u[2 * nb],
-                        model.mesh.nodes[nb][1] + u[2 * nb + 1],
-                    ];
-                    let f = face.external_force(xa, xb, lambda);
+                    let f = face.external_force(
+                        model.current_position(na, u),
+                        model.current_position(nb, u),
+                        lambda,
+                    );
                     let ld = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
                     for i in 0..4 {
                         out.force[ld[i]] -= f[i];
@@ -515,15 +511,11 @@ impl StaticSolver {
         self.fext.fill(0.0);
         for face in &model.pressures {
             let [na, nb] = face.nodes;
-            let xa = [
-                model.mesh.nodes[na][0] + u[2 * na],
-                model.mesh.nodes[na][1] + u[2 * na + 1],
-            ];
-            let xb = [
-                model.mesh.nodes[nb][0] + u[2 * nb],
-                model.mesh.nodes[nb][1] + u[2 * nb + 1],
-            ];
-            let f = face.external_force(xa, xb, lambda);
+            let f = face.external_force(
+                model.current_position(na, u),
+                model.current_position(nb, u),
+                lambda,
+            );
             self.fext[2 * na] += f[0];
             self.fext[2 * na + 1] += f[1];
             self.fext[2 * nb] += f[2];
