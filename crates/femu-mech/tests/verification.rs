@@ -327,3 +327,52 @@ fn thick_cylinder_converges_to_radial_reference() {
         );
     }
 }
+
+/// Warm start (used by identification: many solves with nearby parameters): after changing C10
+/// of one layer by 1 %, the solve started from the previous displacement takes the whole load in
+/// one increment with at most 3 Newton iterations and lands on the cold-start answer.
+#[test]
+fn warm_start_from_a_nearby_solution() {
+    let g = generate::annulus(14.0, 40.0, 60.0, 64, 6, 4, ElementKind::Cpe4h);
+    let deck = DeckBuilder::new(g)
+        .material("INNER_LAYER", 1.75e-3, 18.0)
+        .material("OUTER_LAYER", 0.8e-3, 30.8)
+        .fix("INNER")
+        .pressure("OUTER", 2.666e-3)
+        .build();
+    let mut model = Model::from_deck(deck).unwrap();
+    let options = SolverOptions {
+        residual_tolerance: 1e-12,
+        energy_tolerance: 1e-20,
+        ..Default::default()
+    };
+    let mut solver = StaticSolver::new(&model, options).unwrap();
+    let first = solver.solve(&model).unwrap();
+    model.materials[0].law.c10 *= 1.01;
+    let warm = solver
+        .solve_with(&model, Some(&first.u), &mut |_| {})
+        .unwrap();
+    assert!(warm.report.warm_start && warm.report.converged_increments == 1);
+    assert!(
+        warm.report.newton_iterations <= 3,
+        "{} iterations",
+        warm.report.newton_iterations
+    );
+    let cold = solver.solve(&model).unwrap();
+    let umax = cold.u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let diff = warm
+        .u
+        .iter()
+        .zip(&cold.u)
+        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        diff < 1e-9 * umax,
+        "warm and cold answers differ by {diff:.3e}"
+    );
+    assert!(
+        (warm.u[2 * model.mesh.node_sets["OUTER"][0]]
+            - first.u[2 * model.mesh.node_sets["OUTER"][0]])
+            .abs()
+            > 0.0
+    );
+}
