@@ -333,3 +333,36 @@ force_n_per_mm = 0.05
         String::from_utf8_lossy(&o.stderr)
     );
 }
+
+/// A solve that cannot reach the end of its step (a pressure that crushes the elements, with a
+/// minimum increment that forbids cutting back far) exits non-zero, says where it stopped, and
+/// still writes the last converged state.
+#[test]
+fn a_failed_solve_keeps_what_it_finished() {
+    let dir = scratch("fail");
+    let deck = DECK.replace(
+        "0.5, 1.0\n*DLOAD\n2, P2, -1.0e-3",
+        "0.25, 1.0, 0.2, 1.0\n*DLOAD\n2, P2, 50.0",
+    );
+    assert_ne!(deck, DECK);
+    std::fs::write(dir.join("crush.inp"), deck).unwrap();
+    let out = dir.join("out");
+    let o = femu(&[
+        "solve",
+        dir.join("crush.inp").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "should fail: {err}");
+    assert!(
+        err.contains("load factor") && !err.contains("panicked"),
+        "{err}"
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s["status"], "not converged");
+    assert!(s["error"].as_str().unwrap().contains("converge"));
+    assert_eq!(read_csv(&out.join("displacements.csv")).len(), 6);
+}
