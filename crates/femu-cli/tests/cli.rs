@@ -18,6 +18,24 @@ fn scratch(name: &str) -> PathBuf {
     dir
 }
 
+/// The `summary.json` of an output folder.
+fn summary(out: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap()
+}
+
+/// `femu solve MESH --study STUDY --out OUT --quiet`.
+fn solve_msh(msh: &Path, study: &Path, out: &Path) -> Output {
+    femu(&[
+        "solve",
+        msh.to_str().unwrap(),
+        "--study",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ])
+}
+
 fn read_csv(path: &Path) -> Vec<Vec<f64>> {
     let text = std::fs::read_to_string(path).unwrap();
     let mut lines = text.lines();
@@ -50,8 +68,7 @@ fn demo_writes_the_output_folder() {
     ] {
         assert!(cont.join(f).exists(), "contention/{f} missing");
     }
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(cont.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&cont);
     assert_eq!(s["status"], "converged");
     // The skin is pushed inward by about a millimetre (contention, 20 mmHg).
     let umax = s["max_displacement_mm"].as_f64().unwrap();
@@ -91,8 +108,7 @@ fn demo_writes_the_output_folder() {
     ] {
         assert!(comp.join(f).exists(), "compression-anterior/{f} missing");
     }
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(comp.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&comp);
     let body = &s["rigid_bodies"][0];
     assert!((body["force_n_per_mm"].as_f64().unwrap() - 0.1).abs() < 1e-8);
     assert!(
@@ -156,8 +172,7 @@ fn solve_a_deck_and_report_bad_decks() {
     assert_eq!(rows.len(), 6);
     // A negative pressure pulls the right face outward (+x).
     assert!(rows[2][3] > 0.0 && rows[5][3] > 0.0);
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&out);
     // The femur-like reaction balances the applied 1e-3 N/mm pull.
     let rx = s["reaction_force_total_n_per_mm"][0].as_f64().unwrap();
     assert!(rx < 0.0, "reaction {rx}");
@@ -227,19 +242,10 @@ mmhg = 20
 ";
     std::fs::write(dir.join("study.toml"), study).unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "solve",
-        msh.to_str().unwrap(),
-        "--study",
-        dir.join("study.toml").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = solve_msh(&msh, &dir.join("study.toml"), &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.join("result.vtu").exists());
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&out);
     assert!(s["element_types"]["CPE4H"].as_u64().unwrap() > 0);
     assert!(s["pressure_faces"].as_u64().unwrap() > 0);
     // An unknown region and an unknown key are named in the errors.
@@ -251,15 +257,7 @@ mmhg = 20
         ),
     ] {
         std::fs::write(dir.join("bad.toml"), bad).unwrap();
-        let o = femu(&[
-            "solve",
-            msh.to_str().unwrap(),
-            "--study",
-            dir.join("bad.toml").to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quiet",
-        ]);
+        let o = solve_msh(&msh, &dir.join("bad.toml"), &out);
         assert!(!o.status.success());
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(expect), "{err}");
@@ -291,18 +289,9 @@ force_n_per_mm = 0.05
 ";
     std::fs::write(dir.join("study.toml"), study).unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "solve",
-        msh.to_str().unwrap(),
-        "--study",
-        dir.join("study.toml").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = solve_msh(&msh, &dir.join("study.toml"), &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&out);
     let body = &s["rigid_bodies"][0];
     assert!((body["force_n_per_mm"].as_f64().unwrap() - 0.05).abs() < 1e-9);
     // The femur reaction balances the plate (the plate pushes towards -y).
@@ -317,15 +306,7 @@ force_n_per_mm = 0.05
         study.replace("force_n_per_mm = 0.05", "force_n_per_mm = -0.05"),
     )
     .unwrap();
-    let o = femu(&[
-        "solve",
-        msh.to_str().unwrap(),
-        "--study",
-        dir.join("bad.toml").to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = solve_msh(&msh, &dir.join("bad.toml"), &out);
     assert!(!o.status.success());
     assert!(
         String::from_utf8_lossy(&o.stderr).contains("force"),
@@ -360,8 +341,7 @@ fn a_failed_solve_keeps_what_it_finished() {
         err.contains("load factor") && !err.contains("panicked"),
         "{err}"
     );
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let s: serde_json::Value = summary(&out);
     assert_eq!(s["status"], "not converged");
     assert!(s["error"].as_str().unwrap().contains("converge"));
     assert_eq!(read_csv(&out.join("displacements.csv")).len(), 6);
