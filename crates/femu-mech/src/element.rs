@@ -129,6 +129,23 @@ impl ElementGeometry {
         Ok(geo)
     }
 
+    /// Area-weighted average over the Gauss points of a quantity of the deformation gradient.
+    pub fn gauss_average<E>(
+        &self,
+        u: &[[f64; 2]],
+        quantity: impl Fn(&Tensor2) -> Result<[f64; 4], E>,
+    ) -> Result<[f64; 4], E> {
+        let mut s = [0.0; 4];
+        for g in 0..self.n_gauss {
+            let q = quantity(&self.deformation_gradient(g, u))?;
+            let w = self.gauss[g].weight / self.area;
+            for k in 0..4 {
+                s[k] += w * q[k];
+            }
+        }
+        Ok(s)
+    }
+
     /// Deformation gradient `[F11, F12, F21, F22]` at Gauss point g for local displacements u.
     #[inline]
     pub fn deformation_gradient(&self, g: usize, u: &[[f64; 2]]) -> Tensor2 {
@@ -273,17 +290,10 @@ impl SolidElement for DisplacementElement {
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
     ) -> Result<[f64; 4], NonPositiveJacobian> {
-        let mut s = [0.0; 4];
-        for g in 0..geo.n_gauss {
-            let f = geo.deformation_gradient(g, u);
-            let r = mat.response(&f, false)?;
-            let c = crate::material::cauchy_from_pk1(&f, &r.pk1, r.tau33);
-            let w = geo.gauss[g].weight / geo.area;
-            for k in 0..4 {
-                s[k] += w * c[k];
-            }
-        }
-        Ok(s)
+        geo.gauss_average(u, |f| {
+            let r = mat.response(f, false)?;
+            Ok(crate::material::cauchy_from_pk1(f, &r.pk1, r.tau33))
+        })
     }
 }
 
@@ -375,34 +385,25 @@ impl SolidElement for MeanDilatationElement {
     ) -> Result<[f64; 4], NonPositiveJacobian> {
         let theta = Self::mean_dilatation(geo, u)?;
         let p = mat.volumetric(theta)[1];
-        let mut s = [0.0; 4];
-        for g in 0..geo.n_gauss {
-            let f = geo.deformation_gradient(g, u);
-            let r = mat.response_isochoric(&f, false)?;
-            let c = crate::material::cauchy_from_pk1(&f, &r.pk1, r.tau33);
-            let w = geo.gauss[g].weight / geo.area;
-            for k in 0..4 {
-                s[k] += w * c[k];
-            }
+        let mut s = geo.gauss_average(u, |f| {
+            let r = mat.response_isochoric(f, false)?;
+            Ok(crate::material::cauchy_from_pk1(f, &r.pk1, r.tau33))
+        })?;
+        for k in 0..3 {
+            s[k] += p;
         }
-        s[0] += p;
-        s[1] += p;
-        s[2] += p;
         Ok(s)
     }
 }
 
 /// Element-average logarithmic strain `[LExx, LEyy, LEzz, LExy]`.
 pub fn element_log_strain(geo: &ElementGeometry, u: &[[f64; 2]]) -> [f64; 4] {
-    let mut s = [0.0; 4];
-    for g in 0..geo.n_gauss {
-        let le = crate::material::log_strain(&geo.deformation_gradient(g, u));
-        let w = geo.gauss[g].weight / geo.area;
-        for k in 0..4 {
-            s[k] += w * le[k];
-        }
+    match geo.gauss_average(u, |f| {
+        Ok::<_, std::convert::Infallible>(crate::material::log_strain(f))
+    }) {
+        Ok(s) => s,
+        Err(never) => match never {},
     }
-    s
 }
 
 #[cfg(test)]
