@@ -33,12 +33,10 @@
 use anyhow::{bail, Context, Result};
 use femu_mech::build::{CurveDisplacement, CurvePressure, MshSetup, RegionMaterial};
 use femu_mech::loading::{Loading, Side};
+use femu_mesh::MMHG_IN_MPA;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::Path;
-
-/// 1 mmHg in MPa.
-pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -49,7 +49,7 @@ pub use picture::write_regions_png;
 pub use quality::{quality_report, QualityReport, RegionQuality};
 
 /// The contention pressure of the seed: 20 mmHg in MPa (2.666e-3).
-pub const CONTENTION_MPA: f64 = 20.0 * 133.322_387_415e-6;
+pub const CONTENTION_MPA: f64 = 20.0 * femu_mesh::MMHG_IN_MPA;
 
 /// Names of the seed's five regions, as element-set names.
 pub const SEED_REGIONS: [&str; 5] = ["FAT", "QUADRICEPS", "ISCHIO", "GRACILIS", "SARTORIUS"];

@@ -24,7 +24,9 @@ pub struct CscPattern {
 }
 
 impl CscPattern {
-    /// Builds the pattern from (row, col) pairs (duplicates allowed).
+    /// Builds the pattern from (row, col) pairs (duplicates allowed); for small hand-made
+    /// matrices in tests (meshes use [`NodeGraph::dof_pattern`]).
+    #[cfg(test)]
     pub fn from_pairs(n: usize, pairs: &mut Vec<(usize, usize)>) -> Self {
         pairs.sort_unstable_by_key(|&(r, c)| (c, r));
         pairs.dedup();

@@ -88,7 +88,7 @@ pub enum Loading {
 impl Loading {
     /// The seed's contention: 20 mmHg.
     pub const SEED_CONTENTION: Loading = Loading::Contention {
-        pressure: 20.0 * 133.322_387_415e-6,
+        pressure: 20.0 * femu_mesh::MMHG_IN_MPA,
     };
     /// The seed's compression: 0.1 N/mm, plate on the anterior side.
     pub const SEED_COMPRESSION: Loading = Loading::Compression {

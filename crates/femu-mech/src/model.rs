@@ -171,9 +171,4 @@ impl Model {
             self.mesh.nodes[n][1] + u[2 * n + 1],
         ]
     }
-
-    /// Sets the C10 and D of material `m` (used by identification and sensitivity studies).
-    pub fn set_material(&mut self, m: usize, law: NeoHookean) {
-        self.materials[m].law = law;
-    }
 }

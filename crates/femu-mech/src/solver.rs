@@ -187,9 +187,6 @@ pub struct StaticSolver {
     pattern: CscPattern,
     /// For element e, `slots[e*64 + r*nd + c]` is the position of local entry (r, c) in `values`.
     slots: Vec<usize>,
-    /// Pressure faces of each element (CSR: `face_ptr[e]..face_ptr[e+1]` into `face_idx`).
-    face_ptr: Vec<usize>,
-    face_idx: Vec<usize>,
     /// Prescribed dofs and their end-of-step values.
     prescribed: Vec<(usize, f64)>,
     /// Dead nodal forces at λ = 1 (2 per node).
@@ -319,19 +316,6 @@ impl StaticSolver {
                 }
             }
         });
-        let mut face_ptr = vec![0usize; n_el + 1];
-        for f in &model.pressures {
-            face_ptr[f.element + 1] += 1;
-        }
-        for e in 0..n_el {
-            face_ptr[e + 1] += face_ptr[e];
-        }
-        let mut fill = face_ptr.clone();
-        let mut face_idx = vec![0usize; model.pressures.len()];
-        for (k, f) in model.pressures.iter().enumerate() {
-            face_idx[fill[f.element]] = k;
-            fill[f.element] += 1;
-        }
         let contact_slots: Vec<Vec<[usize; 8]>> = model
             .contacts
             .iter()
@@ -385,8 +369,6 @@ impl StaticSolver {
             n_eq,
             pattern,
             slots,
-            face_ptr,
-            face_idx,
             prescribed,
             point_force,
             ke: vec![0.0; n_el * KE],
@@ -453,8 +435,6 @@ impl StaticSolver {
         lambda: f64,
         with_tangent: bool,
     ) -> Result<(), AttemptFailure> {
-        let face_ptr = &self.face_ptr;
-        let face_idx = &self.face_idx;
         let failed = self
             .fe
             .par_chunks_mut(MAX_DOFS)
@@ -474,29 +454,6 @@ impl StaticSolver {
                 {
                     return Some((e, j.0));
                 }
-                let nd = 2 * geo.n_nodes;
-                for &k in &face_idx[face_ptr[e]..face_ptr[e + 1]] {
-                    let face = &model.pressures[k];
-                    let [la, lb] = face.local;
-                    let [na, nb] = face.nodes;
-                    let f = face.external_force(
-                        model.current_position(na, u),
-                        model.current_position(nb, u),
-                        lambda,
-                    );
-                    let ld = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
-                    for i in 0..4 {
-                        out.force[ld[i]] -= f[i];
-                    }
-                    if let Some(k) = out.stiffness.as_deref_mut() {
-                        let kl = face.load_stiffness(lambda);
-                        for i in 0..4 {
-                            for j in 0..4 {
-                                k[ld[i] * nd + ld[j]] += kl[i][j];
-                            }
-                        }
-                    }
-                }
                 None
             })
             .find_any(|r| r.is_some())
@@ -507,20 +464,7 @@ impl StaticSolver {
                 det,
             });
         }
-        // External force (for the reference force scale): pressure part recomputed cheaply.
         self.fext.fill(0.0);
-        for face in &model.pressures {
-            let [na, nb] = face.nodes;
-            let f = face.external_force(
-                model.current_position(na, u),
-                model.current_position(nb, u),
-                lambda,
-            );
-            self.fext[2 * na] += f[0];
-            self.fext[2 * na + 1] += f[1];
-            self.fext[2 * nb] += f[2];
-            self.fext[2 * nb + 1] += f[3];
-        }
         for (fx, p) in self.fext.iter_mut().zip(&self.point_force) {
             *fx += lambda * p;
         }
@@ -547,6 +491,7 @@ impl StaticSolver {
                 }
             }
         }
+        self.add_pressure(model, u, lambda, with_tangent);
         self.add_contact(model, u, lambda, with_tangent);
         for (d, &q) in self.eq.iter().enumerate() {
             if q != NONE {
@@ -554,6 +499,39 @@ impl StaticSolver {
             }
         }
         Ok(())
+    }
+
+    /// Adds the follower-pressure loads: `-f_ext` to the residual, `f_ext` to the reference
+    /// force, and the load stiffness through the slots of the face's element.
+    fn add_pressure(&mut self, model: &Model, u: &[f64], lambda: f64, with_tangent: bool) {
+        for face in &model.pressures {
+            let [na, nb] = face.nodes;
+            let f = face.external_force(
+                model.current_position(na, u),
+                model.current_position(nb, u),
+                lambda,
+            );
+            let dofs = [2 * na, 2 * na + 1, 2 * nb, 2 * nb + 1];
+            for (&d, fi) in dofs.iter().zip(f) {
+                self.residual[d] -= fi;
+                self.fext[d] += fi;
+            }
+            if with_tangent {
+                let [la, lb] = face.local;
+                let local = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
+                let nd = 2 * model.mesh.elements[face.element].kind.node_count();
+                let slots = &self.slots[face.element * KE..];
+                let kl = face.load_stiffness(lambda);
+                for i in 0..4 {
+                    for j in 0..4 {
+                        let pos = slots[local[i] * nd + local[j]];
+                        if pos != NONE {
+                            self.values[pos] += kl[i][j];
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Adds the rigid-body contact terms (see [`crate::contact`]) and, under force control,
