@@ -5,6 +5,7 @@
 //! - [`load`]: follower pressure with load stiffness.
 //! - [`model`]: a checked model built from a resolved deck.
 //! - [`solver`]: incremental Newton–Raphson with line search and cut-back, sparse LU reused.
+//! - [`sensitivity`]: exact parameter sensitivities by direct differentiation (seed §2.3).
 //! - [`output`]: displacements CSV, VTU with LE and Cauchy stress, summary JSON.
 
 pub mod build;
@@ -17,6 +18,7 @@ pub mod material;
 pub mod model;
 pub mod output;
 pub mod reference;
+pub mod sensitivity;
 pub mod solver;
 
 pub use material::{Hyperelastic, NeoHookean};

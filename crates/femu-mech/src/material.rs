@@ -174,24 +174,57 @@ impl NeoHookean {
     }
 }
 
+/// `c10 (J^(-2/3) I1 - 3)` and its invariant derivatives.
+fn neo_hookean_isochoric(c10: f64, i1: f64, j: f64) -> InvariantDerivatives {
+    let jm23 = j.powf(-2.0 / 3.0);
+    let jm53 = jm23 / j;
+    let jm83 = jm53 / j;
+    InvariantDerivatives {
+        w: c10 * (jm23 * i1 - 3.0),
+        w_i: c10 * jm23,
+        w_j: -2.0 / 3.0 * c10 * i1 * jm53,
+        w_ii: 0.0,
+        w_ij: -2.0 / 3.0 * c10 * jm53,
+        w_jj: 10.0 / 9.0 * c10 * i1 * jm83,
+    }
+}
+
+/// `inv_d (J - 1)^2` and its first two derivatives.
+fn neo_hookean_volumetric(inv_d: f64, j: f64) -> [f64; 3] {
+    let jm1 = j - 1.0;
+    [jm1 * jm1 * inv_d, 2.0 * jm1 * inv_d, 2.0 * inv_d]
+}
+
 impl Hyperelastic for NeoHookean {
     fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
-        let jm23 = j.powf(-2.0 / 3.0);
-        let jm53 = jm23 / j;
-        let jm83 = jm53 / j;
-        InvariantDerivatives {
-            w: self.c10 * (jm23 * i1 - 3.0),
-            w_i: self.c10 * jm23,
-            w_j: -2.0 / 3.0 * self.c10 * i1 * jm53,
-            w_ii: 0.0,
-            w_ij: -2.0 / 3.0 * self.c10 * jm53,
-            w_jj: 10.0 / 9.0 * self.c10 * i1 * jm83,
-        }
+        neo_hookean_isochoric(self.c10, i1, j)
     }
 
     fn volumetric(&self, j: f64) -> [f64; 3] {
-        let jm1 = j - 1.0;
-        [jm1 * jm1 / self.d, 2.0 * jm1 / self.d, 2.0 / self.d]
+        neo_hookean_volumetric(1.0 / self.d, j)
+    }
+}
+
+/// The energy `a (I1bar - 3) + b (J - 1)^2` with any real coefficients (no positivity check):
+/// the derivative of the Neo-Hookean energy with respect to one of its parameters. `W` is linear
+/// in C10 and in 1/D, so `∂W/∂C10` is this form with `(a, b) = (1, 0)` and `∂W/∂D` with
+/// `(0, -1/D²)`; evaluated by an element, it gives the exact `∂f_int/∂θ` (parameter
+/// sensitivities, seed §2.3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeoHookeanRate {
+    /// `a`, the rate of C10.
+    pub c10: f64,
+    /// `b`, the rate of 1/D.
+    pub inv_d: f64,
+}
+
+impl Hyperelastic for NeoHookeanRate {
+    fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
+        neo_hookean_isochoric(self.c10, i1, j)
+    }
+
+    fn volumetric(&self, j: f64) -> [f64; 3] {
+        neo_hookean_volumetric(self.inv_d, j)
     }
 }
 

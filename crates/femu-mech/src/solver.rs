@@ -127,6 +127,18 @@ pub struct Solution {
     pub report: SolveReport,
 }
 
+/// A node in contact with a rigid body at a converged state (see
+/// [`StaticSolver::active_constraints`]): its contact force and the gap gradient.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActiveConstraint {
+    pub body: usize,
+    pub node: usize,
+    /// Contact force λ (N per mm, > 0).
+    pub force: f64,
+    pub dg_dx: [f64; 2],
+    pub dg_dt: f64,
+}
+
 /// Why a solve did not reach the end of the step.
 #[derive(thiserror::Error)]
 pub enum SolveError {
@@ -661,8 +673,9 @@ impl StaticSolver {
         Ok(())
     }
 
-    /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` for the bodies whose penetration exceeds their limit;
-    /// returns whether any was updated.
+    /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` for the bodies whose complementarity error (a
+    /// penetration, or an open gap under a contact force) exceeds their limit; returns whether
+    /// any was updated.
     fn augment(&mut self, model: &Model, u: &[f64]) -> bool {
         let base = 2 * model.node_count();
         let mut updated = false;
@@ -685,8 +698,21 @@ impl StaticSolver {
                         .g
                 })
                 .collect();
-            let pen = gaps.iter().fold(0.0f64, |m, g| m.max(-g));
-            if pen > limit {
+            // Complementarity error: a penetration, or a gap at a node that still carries a
+            // contact force (the multiplier overshot).
+            let violation = gaps
+                .iter()
+                .zip(&self.multipliers[b])
+                .fold(0.0f64, |m, (&g, &lam)| {
+                    if g < 0.0 {
+                        m.max(-g)
+                    } else if lam - eps * g > 0.0 {
+                        m.max(g)
+                    } else {
+                        m
+                    }
+                });
+            if violation > limit {
                 for (m, g) in self.multipliers[b].iter_mut().zip(&gaps) {
                     *m = (*m - eps * g).max(0.0);
                 }
@@ -975,10 +1001,15 @@ impl StaticSolver {
             ..Default::default()
         };
         let mut u = vec![0.0; n_dof];
-        if let Err(e) = self.init_contact(model) {
-            return Err(SolveError::Setup(LinearSolveError::Other(format!(
-                "the undeformed state cannot be assembled: {e}"
-            ))));
+        // A warm start keeps the contact penalties and multipliers of the previous solve (the
+        // contact forces of a nearby state), so that few augmentations remain.
+        let keep_contact = initial.is_some() && self.penalties.iter().all(|&p| p > 0.0);
+        if !keep_contact {
+            if let Err(e) = self.init_contact(model) {
+                return Err(SolveError::Setup(LinearSolveError::Other(format!(
+                    "the undeformed state cannot be assembled: {e}"
+                ))));
+            }
         }
         if let Some(u0) = initial {
             report.warm_start = true;
@@ -1009,6 +1040,11 @@ impl StaticSolver {
             }
             report.cutbacks += 1;
             u.fill(0.0);
+            if let Err(e) = self.init_contact(model) {
+                return Err(SolveError::Setup(LinearSolveError::Other(format!(
+                    "the undeformed state cannot be assembled: {e}"
+                ))));
+            }
         }
         let step = model.step;
         let period = if step.period > 0.0 { step.period } else { 1.0 };
@@ -1156,6 +1192,53 @@ impl StaticSolver {
     /// The penalty ε of each rigid body (after a solve or [`Self::prepare_contact`]).
     pub fn penalties(&self) -> &[f64] {
         &self.penalties
+    }
+
+    /// Factorizes the tangent assembled last (e.g. by [`Self::assemble_at`]) without
+    /// re-assembling it.
+    pub fn refactorize(&mut self) -> Result<(), String> {
+        let kind = self
+            .lu
+            .factorize(&self.pattern, &self.values)
+            .map_err(|e| e.to_string())?;
+        self.last_factorization = Some(kind);
+        Ok(())
+    }
+
+    /// Whether a tangent has been factorized (by a solve or [`Self::factorize_at`]), so that
+    /// [`Self::solve_tangent`] can be called.
+    pub fn has_factorization(&self) -> bool {
+        self.lu.last().is_some()
+    }
+
+    /// `y = K_T x` on the free dofs, with the tangent assembled last.
+    pub fn tangent_mul(&self, x: &[f64], y: &mut [f64]) {
+        self.pattern.mul_vec(&self.values, x, y);
+    }
+
+    /// The contact constraints active at the state `u` with the multipliers of the last solve:
+    /// every candidate node whose contact force `⟨λ̂ - ε g⟩₊` is positive.
+    pub fn active_constraints(&self, model: &Model, u: &[f64]) -> Vec<ActiveConstraint> {
+        let base = 2 * model.node_count();
+        let mut out = Vec::new();
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let force = self.multipliers[b][k] - eps * gap.g;
+                if force > 0.0 {
+                    out.push(ActiveConstraint {
+                        body: b,
+                        node: n,
+                        force,
+                        dg_dx: gap.dg_dx,
+                        dg_dt: gap.dg_dt,
+                    });
+                }
+            }
+        }
+        out
     }
 
     /// Assembles residual and tangent at the state `u` (length [`Model::state_len`]), λ = 1

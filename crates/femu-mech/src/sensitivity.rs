@@ -1,0 +1,462 @@
+//! Parameter sensitivities by direct differentiation of the discrete equilibrium (the exact
+//! version of the seed's §2.3, Eq. 3, which used finite differences).
+//!
+//! At a converged state `R(u(θ), θ) = 0`, so `K_T ∂u/∂θ_k = -∂R/∂θ_k`. Only the internal force
+//! depends on the material parameters, and the Neo-Hookean energy
+//! `W = C10 (I1bar - 3) + (1/D)(J - 1)²` is linear in C10 and in 1/D: `∂f_int/∂θ_k` is the
+//! internal force of the rate energy [`NeoHookeanRate`] over the elements of the parameter's
+//! material, exact for every element formulation (the CPE4H mean-dilatation force is linear in
+//! the energy too). One back-substitution per parameter with the tangent of the solve.
+//!
+//! **Contact.** The sensitivity is that of the exactly constrained problem (the limit the
+//! augmented-Lagrangian iterations converge to): the nodes in contact at the converged state keep
+//! their gap, `Gᵀ ∂u/∂θ = 0`, and their contact forces change freely (μ):
+//!
+//! ```text
+//! K_T x - G μ = -∂R/∂θ,   Gᵀ x = 0
+//! ⇒  x = x₀ + Z μ,  x₀ = K_T⁻¹ (-∂R/∂θ),  Z = K_T⁻¹ G,  (Gᵀ Z) μ = -Gᵀ x₀
+//! ```
+//!
+//! with `G` the gap gradients of the active nodes (including the rigid body's travel under
+//! force control). The penalty terms of `K_T` vanish on `Gᵀ x = 0`, so the result does not
+//! depend on the penalty. `Z` costs one back-substitution per active node, shared by all
+//! parameters.
+//!
+//! **Reusing the factorization.** The solver's last factorization is that of the last Newton
+//! iterate, one (tiny) correction away from the converged state. The exact tangent at the
+//! converged state is assembled (no factorization) and the systems are solved by iterative
+//! refinement preconditioned with the stale factors, which converges in one or two steps; if it
+//! does not, the exact tangent is factorized.
+
+use crate::element::{formulation, ElementResult, MAX_DOFS};
+use crate::material::NeoHookeanRate;
+use crate::model::Model;
+use crate::solver::StaticSolver;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::time::Instant;
+
+/// Which Neo-Hookean parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub enum ParameterKind {
+    /// C10 (MPa).
+    C10,
+    /// D (MPa⁻¹).
+    D,
+}
+
+/// One material parameter of a model: C10 or D of material `material`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+pub struct Parameter {
+    pub material: usize,
+    pub kind: ParameterKind,
+}
+
+impl Parameter {
+    /// The parameter's value in `model` (MPa or MPa⁻¹).
+    pub fn value(&self, model: &Model) -> f64 {
+        let law = &model.materials[self.material].law;
+        match self.kind {
+            ParameterKind::C10 => law.c10,
+            ParameterKind::D => law.d,
+        }
+    }
+
+    /// Sets the parameter's value in `model` (the caller keeps it positive and finite).
+    pub fn set(&self, model: &mut Model, value: f64) {
+        let law = &mut model.materials[self.material].law;
+        match self.kind {
+            ParameterKind::C10 => law.c10 = value,
+            ParameterKind::D => law.d = value,
+        }
+    }
+
+    /// `C10_QUADRICEPS`, `D_FAT`, ... (material names as in the model).
+    pub fn name(&self, model: &Model) -> String {
+        let kind = match self.kind {
+            ParameterKind::C10 => "C10",
+            ParameterKind::D => "D",
+        };
+        format!("{kind}_{}", model.materials[self.material].name)
+    }
+
+    /// The rate energy `∂W/∂θ` (see [`NeoHookeanRate`]).
+    fn rate(&self, model: &Model) -> NeoHookeanRate {
+        match self.kind {
+            ParameterKind::C10 => NeoHookeanRate {
+                c10: 1.0,
+                inv_d: 0.0,
+            },
+            ParameterKind::D => {
+                let d = model.materials[self.material].law.d;
+                NeoHookeanRate {
+                    c10: 0.0,
+                    inv_d: -1.0 / (d * d),
+                }
+            }
+        }
+    }
+}
+
+/// C10 and D of every material of `model`, in material order: `[C10_0, D_0, C10_1, D_1, ...]`.
+pub fn all_parameters(model: &Model) -> Vec<Parameter> {
+    (0..model.materials.len())
+        .flat_map(|m| {
+            [ParameterKind::C10, ParameterKind::D].map(|kind| Parameter { material: m, kind })
+        })
+        .collect()
+}
+
+/// Why sensitivities could not be computed.
+#[derive(Debug, thiserror::Error)]
+pub enum SensitivityError {
+    #[error("the state cannot be assembled for sensitivities: {0}")]
+    Assembly(String),
+    #[error("the tangent cannot be factorized for sensitivities: {0}")]
+    Factorization(String),
+    #[error("the contact constraints are singular (pivot {pivot:.3e} of {size} active nodes)")]
+    SingularContact { pivot: f64, size: usize },
+    #[error("parameter {index} refers to material {material}, the model has {count}")]
+    BadParameter {
+        index: usize,
+        material: usize,
+        count: usize,
+    },
+}
+
+/// How the sensitivities were obtained.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct SensitivityReport {
+    pub parameters: usize,
+    /// Active contact nodes held on their rigid body.
+    pub active_constraints: usize,
+    /// Back-substitutions with the factorized tangent.
+    pub back_substitutions: usize,
+    /// Whether the exact tangent had to be factorized (refinement with the solve's factors did
+    /// not converge, or there were none).
+    pub refactorized: bool,
+    /// Largest relative residual `‖K_T x - b‖ / ‖b‖` of the solves.
+    pub max_relative_residual: f64,
+    pub wall_time_s: f64,
+}
+
+/// Direct-differentiation sensitivities with buffers kept between calls (the identification
+/// calls it once per iteration).
+#[derive(Debug, Default)]
+pub struct DirectSensitivity {
+    /// Element rate forces of C10 (`a = 1`) and of 1/D (`b = 1`), `MAX_DOFS` per element.
+    f_c10: Vec<f64>,
+    f_invd: Vec<f64>,
+    rhs: Vec<f64>,
+    residual: Vec<f64>,
+    correction: Vec<f64>,
+    product: Vec<f64>,
+}
+
+/// Relative residual at which the refinement stops (near round-off for these systems).
+const REFINEMENT_TOLERANCE: f64 = 1e-13;
+
+impl DirectSensitivity {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// `∂state/∂θ_k` for each parameter at the converged `state` (length [`Model::state_len`])
+    /// of `solver`'s last solve of `model` (its contact multipliers define the active set).
+    /// `out[k]` has the state's layout; prescribed dofs have zero sensitivity.
+    pub fn compute(
+        &mut self,
+        solver: &mut StaticSolver,
+        model: &Model,
+        state: &[f64],
+        parameters: &[Parameter],
+        out: &mut Vec<Vec<f64>>,
+    ) -> Result<SensitivityReport, SensitivityError> {
+        let t0 = Instant::now();
+        for (index, p) in parameters.iter().enumerate() {
+            if p.material >= model.materials.len() {
+                return Err(SensitivityError::BadParameter {
+                    index,
+                    material: p.material,
+                    count: model.materials.len(),
+                });
+            }
+        }
+        let mut report = SensitivityReport {
+            parameters: parameters.len(),
+            ..Default::default()
+        };
+        solver
+            .assemble_at(model, state)
+            .map_err(SensitivityError::Assembly)?;
+        if !solver.has_factorization() {
+            solver
+                .refactorize()
+                .map_err(SensitivityError::Factorization)?;
+            report.refactorized = true;
+        }
+        self.element_rate_forces(model, state)?;
+
+        let n_eq = solver.equations();
+        let n_state = model.state_len();
+        let eqs: Vec<Option<usize>> = (0..n_state).map(|d| solver.equation_of(d)).collect();
+        for buf in [
+            &mut self.rhs,
+            &mut self.residual,
+            &mut self.correction,
+            &mut self.product,
+        ] {
+            buf.resize(n_eq, 0.0);
+        }
+
+        // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
+        let active = solver.active_constraints(model, state);
+        report.active_constraints = active.len();
+        let base = 2 * model.node_count();
+        let g_entries: Vec<Vec<(usize, f64)>> = active
+            .iter()
+            .map(|c| {
+                let dofs = [
+                    (2 * c.node, c.dg_dx[0]),
+                    (2 * c.node + 1, c.dg_dx[1]),
+                    (base + c.body, c.dg_dt),
+                ];
+                dofs.iter()
+                    .filter_map(|&(d, v)| eqs[d].map(|q| (q, v)))
+                    .collect()
+            })
+            .collect();
+        let m = active.len();
+        let mut z: Vec<Vec<f64>> = Vec::with_capacity(m);
+        for entries in &g_entries {
+            self.rhs.fill(0.0);
+            for &(q, v) in entries {
+                self.rhs[q] = v;
+            }
+            let mut x = vec![0.0; n_eq];
+            self.solve(solver, &mut x, &mut report)?;
+            z.push(x);
+        }
+        let schur = if m > 0 {
+            let s = faer::Mat::<f64>::from_fn(m, m, |i, j| {
+                g_entries[i].iter().map(|&(q, v)| v * z[j][q]).sum::<f64>()
+            });
+            let pivot = (0..m)
+                .map(|i| s[(i, i)].abs())
+                .fold(f64::INFINITY, f64::min);
+            Some((s.partial_piv_lu(), pivot))
+        } else {
+            None
+        };
+
+        out.resize_with(parameters.len(), Vec::new);
+        for (p, du) in parameters.iter().zip(out.iter_mut()) {
+            // b = -∂R/∂θ on the free dofs.
+            self.rhs.fill(0.0);
+            let rate_force = match p.kind {
+                ParameterKind::C10 => &self.f_c10,
+                ParameterKind::D => &self.f_invd,
+            };
+            let scale = match p.kind {
+                ParameterKind::C10 => p.rate(model).c10,
+                ParameterKind::D => p.rate(model).inv_d,
+            };
+            for (e, el) in model.mesh.elements.iter().enumerate() {
+                if model.element_material[e] != p.material {
+                    continue;
+                }
+                let fe = &rate_force[e * MAX_DOFS..];
+                for (a, &n) in el.nodes().iter().enumerate() {
+                    for i in 0..2 {
+                        if let Some(q) = eqs[2 * n + i] {
+                            self.rhs[q] -= scale * fe[2 * a + i];
+                        }
+                    }
+                }
+            }
+            let mut x = std::mem::take(du);
+            x.clear();
+            x.resize(n_eq, 0.0);
+            self.solve(solver, &mut x, &mut report)?;
+            if let Some((lu, pivot)) = &schur {
+                use faer::linalg::solvers::Solve;
+                let y = faer::Mat::<f64>::from_fn(m, 1, |i, _| {
+                    -g_entries[i].iter().map(|&(q, v)| v * x[q]).sum::<f64>()
+                });
+                let mu = lu.solve(&y);
+                if (0..m).any(|i| !mu[(i, 0)].is_finite()) {
+                    return Err(SensitivityError::SingularContact {
+                        pivot: *pivot,
+                        size: m,
+                    });
+                }
+                for (i, zi) in z.iter().enumerate() {
+                    let mi = mu[(i, 0)];
+                    for (xq, zq) in x.iter_mut().zip(zi) {
+                        *xq += mi * zq;
+                    }
+                }
+            }
+            // Scatter to the state layout.
+            du.clear();
+            du.resize(n_state, 0.0);
+            for (d, q) in eqs.iter().enumerate() {
+                if let Some(q) = q {
+                    du[d] = x[*q];
+                }
+            }
+        }
+        report.wall_time_s = t0.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// Internal forces of the unit rate energies of C10 and of 1/D, element by element.
+    fn element_rate_forces(
+        &mut self,
+        model: &Model,
+        state: &[f64],
+    ) -> Result<(), SensitivityError> {
+        let n_el = model.mesh.elements.len();
+        self.f_c10.resize(n_el * MAX_DOFS, 0.0);
+        self.f_invd.resize(n_el * MAX_DOFS, 0.0);
+        let failed = self
+            .f_c10
+            .par_chunks_mut(MAX_DOFS)
+            .zip(self.f_invd.par_chunks_mut(MAX_DOFS))
+            .enumerate()
+            .map(|(e, (fc, fd))| {
+                let geo = &model.geometry[e];
+                let ue = model.gather(e, state);
+                let element = formulation(geo.kind);
+                for (rate, f) in [
+                    (
+                        NeoHookeanRate {
+                            c10: 1.0,
+                            inv_d: 0.0,
+                        },
+                        fc,
+                    ),
+                    (
+                        NeoHookeanRate {
+                            c10: 0.0,
+                            inv_d: 1.0,
+                        },
+                        fd,
+                    ),
+                ] {
+                    let mut out = ElementResult {
+                        energy: 0.0,
+                        force: f,
+                        stiffness: None,
+                    };
+                    if element
+                        .evaluate(geo, &rate, &ue[..geo.n_nodes], &mut out)
+                        .is_err()
+                    {
+                        return Some(e);
+                    }
+                }
+                None
+            })
+            .find_any(|r| r.is_some())
+            .flatten();
+        match failed {
+            Some(e) => Err(SensitivityError::Assembly(format!(
+                "element {} is inverted",
+                model.mesh.element_labels[e]
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// Solves `K_T x = self.rhs` (the tangent assembled last) by iterative refinement with the
+    /// solver's current factors; factorizes `K_T` itself if that does not converge.
+    fn solve(
+        &mut self,
+        solver: &mut StaticSolver,
+        x: &mut [f64],
+        report: &mut SensitivityReport,
+    ) -> Result<(), SensitivityError> {
+        let bnorm = norm(&self.rhs);
+        if bnorm == 0.0 {
+            x.fill(0.0);
+            return Ok(());
+        }
+        x.copy_from_slice(&self.rhs);
+        solver.solve_tangent(x);
+        report.back_substitutions += 1;
+        let mut last = f64::INFINITY;
+        for _ in 0..12 {
+            solver.tangent_mul(x, &mut self.product);
+            for ((r, b), kx) in self.residual.iter_mut().zip(&self.rhs).zip(&self.product) {
+                *r = b - kx;
+            }
+            let rel = norm(&self.residual) / bnorm;
+            if rel <= REFINEMENT_TOLERANCE || (report.refactorized && rel >= 0.5 * last) {
+                report.max_relative_residual = report.max_relative_residual.max(rel);
+                return Ok(());
+            }
+            if !report.refactorized && (rel >= 0.5 * last || !rel.is_finite()) {
+                // The stale factors are too far from K_T: factorize K_T and start again.
+                solver
+                    .refactorize()
+                    .map_err(SensitivityError::Factorization)?;
+                report.refactorized = true;
+                x.copy_from_slice(&self.rhs);
+                solver.solve_tangent(x);
+                report.back_substitutions += 1;
+                last = f64::INFINITY;
+                continue;
+            }
+            last = rel;
+            self.correction.copy_from_slice(&self.residual);
+            solver.solve_tangent(&mut self.correction);
+            report.back_substitutions += 1;
+            for (xi, ci) in x.iter_mut().zip(&self.correction) {
+                *xi += ci;
+            }
+        }
+        solver.tangent_mul(x, &mut self.product);
+        let rel = self
+            .rhs
+            .iter()
+            .zip(&self.product)
+            .map(|(b, kx)| (b - kx) * (b - kx))
+            .sum::<f64>()
+            .sqrt()
+            / bnorm;
+        report.max_relative_residual = report.max_relative_residual.max(rel);
+        Ok(())
+    }
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+}
+
+/// The seed's Eq. 3 for one parameter: `S_k = ‖θ_k ∂U/∂θ_k‖ / ‖U‖` over the nodal displacements
+/// (2 per node), and the map behind it, per node:
+/// `s_k(n) = θ_k |∂u_n/∂θ_k| / rms_n |u_n|` — normalized by the root-mean-square nodal
+/// displacement so that `S_k = rms_n s_k(n)` and nodes with no displacement (the femur) do not
+/// divide by zero.
+pub fn sensitivity_map(u: &[f64], du_dtheta: &[f64], theta: f64) -> (f64, Vec<f64>) {
+    let n = u.len() / 2;
+    let unorm = norm(&u[..2 * n]);
+    let rms = unorm / (n.max(1) as f64).sqrt();
+    let map: Vec<f64> = (0..n)
+        .map(|i| {
+            let s = theta * du_dtheta[2 * i].hypot(du_dtheta[2 * i + 1]);
+            if rms > 0.0 {
+                s / rms
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let global = if unorm > 0.0 {
+        theta.abs() * norm(&du_dtheta[..2 * n]) / unorm
+    } else {
+        0.0
+    };
+    (global, map)
+}
