@@ -25,10 +25,12 @@ pub mod colormap;
 mod field;
 mod line;
 mod text;
+mod tile;
 
 pub use chart::{bar_chart_png, histogram_png, BarChart, Histogram};
 pub use field::{mesh_field_png, node_field_png, FieldPlot, Overlay};
 pub use line::{line_plot_png, LegendPosition, LinePlot, LineStyle, Series};
+pub use tile::tile_png;
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
