@@ -280,7 +280,7 @@ mod tests {
         let id = identifiability(&f, &names(3));
         let fm = faer::Mat::<f64>::from_fn(3, 3, |i, j| f[i][j] * sigma * sigma);
         let draws = 4000;
-        let mut est = vec![Vec::with_capacity(draws); 3];
+        let mut est: Vec<Vec<f64>> = (0..3).map(|_| Vec::with_capacity(draws)).collect();
         for _ in 0..draws {
             let noise: Vec<f64> = (0..rows)
                 .map(|_| {
