@@ -6,7 +6,9 @@
 mod bench;
 mod figures;
 mod mesh_cmd;
+mod plan;
 mod run;
+mod sensitivity_cmd;
 mod study;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -101,6 +103,30 @@ enum Command {
         #[arg(long)]
         no_ccx: bool,
     },
+    /// Exact sensitivities of the displacement field to C10 and D of every tissue for each
+    /// loading test (seed Eq. 3, Fig. 8), and the identifiability of the parameters from the
+    /// measurement grid (Fisher information, predicted standard deviations, test ranking).
+    Sensitivity {
+        /// Study file (TOML; see README). Without it: the built-in thigh, Table 1, the seed's
+        /// three tests, a 64 x 64 grid over the thigh, sigma = 1.76e-2 mm.
+        study: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, default_value = "out/sensitivity")]
+        out: PathBuf,
+        /// Target number of elements of the built-in thigh (overrides the study).
+        #[arg(long)]
+        elements: Option<usize>,
+        /// Also compute central finite differences (two extra solves per parameter) and report
+        /// their difference from the direct differentiation.
+        #[arg(long)]
+        fd_check: bool,
+        /// Relative parameter step of the finite differences (the seed's 5e-2 %).
+        #[arg(long, default_value_t = 5e-4)]
+        fd_step: f64,
+        /// Skip the pictures.
+        #[arg(long)]
+        no_figures: bool,
+    },
     /// Build a thigh model: `mesh thigh` (the built-in parametric thigh) or `mesh labels IMAGE`
     /// (a segmented MRI slice); writes mesh.inp, mesh.vtu, regions.png, quality.csv/json and
     /// summary.json.
@@ -160,6 +186,24 @@ fn main() -> ExitCode {
             no_ccx,
         } => bench::run(&out, elements, repeat, !no_ccx, cli.quiet),
         Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
+        Command::Sensitivity {
+            study,
+            out,
+            elements,
+            fd_check,
+            fd_step,
+            no_figures,
+        } => sensitivity_cmd::run(
+            &sensitivity_cmd::SensitivityArgs {
+                study,
+                out,
+                elements,
+                fd_check,
+                fd_step,
+                no_figures,
+            },
+            cli.quiet,
+        ),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -15,6 +15,9 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::Side;
 use faer::{Conj, MatMut, Par};
 
+/// Largest number of right-hand sides solved at once (the workspace is sized for it once).
+pub const MAX_RHS: usize = 16;
+
 /// A compressed-sparse-column pattern (square), built once per mesh.
 #[derive(Debug, Clone)]
 pub struct CscPattern {
@@ -248,7 +251,7 @@ impl SparseLu {
         let par = Par::rayon(0);
         let req = StackReq::any_of(&[
             symbolic.factorize_numeric_lu_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, par),
+            symbolic.solve_in_place_scratch::<f64>(MAX_RHS, par),
         ]);
         Ok(SparseLu {
             symbolic,
@@ -282,13 +285,20 @@ impl SparseLu {
 
     /// Solves `A x = rhs` in place with the last factorization.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        self.solve_many_in_place(rhs, 1);
+    }
+
+    /// Solves `A X = B` in place for `columns` right-hand sides stored one after the other
+    /// (column-major, at most [`MAX_RHS`]).
+    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
         assert!(self.factorized, "solve before factorize");
-        let n = rhs.len();
+        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
+        let n = rhs.len() / columns;
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
         let stack = MemStack::new(&mut self.mem);
         lu.solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            MatMut::from_column_major_slice_mut(rhs, n, columns),
             self.par,
             stack,
         );
@@ -346,7 +356,7 @@ impl SparseLdlt {
         let par = Par::rayon(0);
         let req = StackReq::any_of(&[
             symbolic.factorize_numeric_ldlt_scratch::<f64>(par, Default::default()),
-            symbolic.solve_in_place_scratch::<f64>(1, par),
+            symbolic.solve_in_place_scratch::<f64>(MAX_RHS, par),
         ]);
         Ok(SparseLdlt {
             l_values: vec![0.0; symbolic.len_val()],
@@ -388,13 +398,20 @@ impl SparseLdlt {
 
     /// Solves `A x = rhs` in place.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        self.solve_many_in_place(rhs, 1);
+    }
+
+    /// Solves `A X = B` in place for `columns` right-hand sides stored one after the other
+    /// (column-major, at most [`MAX_RHS`]).
+    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
         assert!(self.factorized, "solve before factorize");
-        let n = rhs.len();
+        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
+        let n = rhs.len() / columns;
         let ldlt = LdltRef::new(&self.symbolic, &self.l_values);
         let stack = MemStack::new(&mut self.mem);
         ldlt.solve_in_place_with_conj(
             Conj::No,
-            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            MatMut::from_column_major_slice_mut(rhs, n, columns),
             self.par,
             stack,
         );
@@ -491,9 +508,19 @@ impl TangentSolver {
 
     /// Solves `A x = rhs` in place with the last factorization.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
+        self.solve_many_in_place(rhs, 1);
+    }
+
+    /// Solves `A X = B` in place for `columns` (≤ [`MAX_RHS`]) right-hand sides stored one
+    /// after the other: one pass over the factors for all of them.
+    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
         match self.last {
-            Some(Factorization::Ldlt) => self.ldlt.solve_in_place(rhs),
-            Some(Factorization::Lu) => self.lu.as_mut().expect("factorized").solve_in_place(rhs),
+            Some(Factorization::Ldlt) => self.ldlt.solve_many_in_place(rhs, columns),
+            Some(Factorization::Lu) => self
+                .lu
+                .as_mut()
+                .expect("factorized")
+                .solve_many_in_place(rhs, columns),
             None => panic!("solve before factorize"),
         }
     }

@@ -231,6 +231,8 @@ pub struct StaticSolver {
     augmentations: Vec<usize>,
     /// Count and fingerprint of the active contact nodes at the last assembly.
     active_set: (usize, u64),
+    /// The state of the last assembly, if it was at λ = 1 with the tangent (empty otherwise).
+    tangent_state: Vec<f64>,
 }
 
 impl std::fmt::Debug for StaticSolver {
@@ -405,6 +407,7 @@ impl StaticSolver {
             penalties: vec![0.0; model.contacts.len()],
             augmentations: vec![0; model.contacts.len()],
             active_set: (0, 0),
+            tangent_state: Vec::with_capacity(n_dof),
             contact_slots,
             contact_tt,
         })
@@ -437,6 +440,10 @@ impl StaticSolver {
         let t0 = Instant::now();
         let result = self.assemble_untimed(model, u, lambda, with_tangent);
         self.timers[0] += t0.elapsed().as_secs_f64();
+        self.tangent_state.clear();
+        if result.is_ok() && with_tangent && lambda == 1.0 {
+            self.tangent_state.extend_from_slice(u);
+        }
         result
     }
 
@@ -1165,6 +1172,12 @@ impl StaticSolver {
         self.lu.solve_in_place(rhs);
     }
 
+    /// Solves `K_T X = B` for `columns` (≤ [`crate::linear::MAX_RHS`]) right-hand sides stored
+    /// one after the other, in one pass over the factors.
+    pub fn solve_tangent_many(&mut self, rhs: &mut [f64], columns: usize) {
+        self.lu.solve_many_in_place(rhs, columns);
+    }
+
     /// The full residual `f_int - λ f_ext` (2 per node) at the last assembled state.
     pub fn residual(&self) -> &[f64] {
         &self.residual
@@ -1203,6 +1216,12 @@ impl StaticSolver {
             .map_err(|e| e.to_string())?;
         self.last_factorization = Some(kind);
         Ok(())
+    }
+
+    /// Whether the last assembly was of the tangent at `u` and λ = 1 (as at the end of a
+    /// successful solve), so that [`Self::tangent_values`] are those at `u`.
+    pub fn tangent_is_at(&self, u: &[f64]) -> bool {
+        self.tangent_state.as_slice() == u
     }
 
     /// Whether a tangent has been factorized (by a solve or [`Self::factorize_at`]), so that

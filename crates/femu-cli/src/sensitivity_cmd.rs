@@ -1,0 +1,604 @@
+//! `femu sensitivity [STUDY] --out DIR`: exact sensitivities of the displacement field to the
+//! ten Neo-Hookean parameters for each loading test (seed §2.3, Eq. 3, Fig. 8), and the
+//! identifiability of the parameters from the measurement grid (Fisher information).
+
+use crate::plan::{self, Plan};
+use anyhow::{bail, Context, Result};
+use femu_identify::fisher::{self, Identifiability, Tied};
+use femu_mech::loading::apply_loading;
+use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
+use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
+use femu_mesh::locate::PointLocator;
+use femu_plot::{bar_chart_png, node_field_png, tile_png, BarChart, FieldPlot};
+use serde::Serialize;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Options of the command.
+#[derive(Debug, Clone)]
+pub struct SensitivityArgs {
+    pub study: Option<PathBuf>,
+    pub out: PathBuf,
+    pub elements: Option<usize>,
+    pub fd_check: bool,
+    pub fd_step: f64,
+    pub no_figures: bool,
+}
+
+/// The built-in thigh of the study with its materials (Table 1 with the study's overrides),
+/// femur fixed, no load; and its skin faces.
+pub fn thigh_model(plan: &Plan) -> Result<(Model, Vec<(usize, usize)>)> {
+    let params = femu_geometry::ThighParams {
+        target_elements: if plan.size_mm.is_some() {
+            None
+        } else {
+            Some(plan.elements.unwrap_or(6000))
+        },
+        element_size_mm: plan.size_mm,
+        ..Default::default()
+    };
+    let thigh = femu_geometry::parametric_thigh(&params, plan.element.kind())?;
+    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
+    let mut materials = femu_geometry::Material::table1();
+    for (region, c10, d) in &plan.materials {
+        let m = materials
+            .iter_mut()
+            .find(|m| m.region.eq_ignore_ascii_case(region))
+            .with_context(|| {
+                format!(
+                    "[materials.{region}]: no such region (FAT, QUADRICEPS, ISCHIO, GRACILIS, SARTORIUS)"
+                )
+            })?;
+        if let Some(c) = c10 {
+            m.c10_mpa = *c;
+        }
+        if let Some(d) = d {
+            m.d_per_mpa = *d;
+        }
+    }
+    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0)?;
+    deck.pressures.clear();
+    Ok((Model::from_deck(deck)?, skin))
+}
+
+/// Sensitivities of one test.
+struct TestResult {
+    name: String,
+    model: Model,
+    solution: Solution,
+    /// `∂u/∂θ_k` (2 per node).
+    du: Vec<Vec<f64>>,
+    /// Eq. 3 per parameter and its nodal map.
+    global: Vec<f64>,
+    maps: Vec<Vec<f64>>,
+    solve_s: f64,
+    sensitivity_s: f64,
+    report: femu_mech::sensitivity::SensitivityReport,
+    fd_max_rel_diff: Option<Vec<f64>>,
+}
+
+#[derive(Serialize)]
+struct TestSummary {
+    test: String,
+    solve_time_s: f64,
+    sensitivity_time_s: f64,
+    sensitivity_over_solve: f64,
+    newton_iterations: usize,
+    max_displacement_mm: f64,
+    sensitivity_index: Vec<(String, f64)>,
+    direct_differentiation: femu_mech::sensitivity::SensitivityReport,
+    finite_difference_max_relative_difference: Option<Vec<(String, f64)>>,
+}
+
+#[derive(Serialize)]
+struct Ranking {
+    measurement: String,
+    grouping: String,
+    worst_c10_relative_sd: f64,
+    worst_d_relative_sd: f64,
+    condition: f64,
+    identifiability: Identifiability,
+}
+
+#[derive(Serialize)]
+struct Summary {
+    command: &'static str,
+    version: &'static str,
+    elements: usize,
+    nodes: usize,
+    element: String,
+    parameters: Vec<(String, f64)>,
+    tests: Vec<TestSummary>,
+    grid_points: usize,
+    grid_points_in_tissue: usize,
+    grid_spacing_mm: f64,
+    noise_sigma_mm: f64,
+    ranking: Vec<Ranking>,
+    finding: Vec<String>,
+    wall_time_s: f64,
+}
+
+/// Runs the command.
+pub fn run(args: &SensitivityArgs, quiet: bool) -> Result<()> {
+    let t0 = Instant::now();
+    if !(args.fd_step > 0.0 && args.fd_step < 0.1) {
+        bail!("--fd-step must be in (0, 0.1), got {}", args.fd_step);
+    }
+    let mut plan = match &args.study {
+        Some(p) => plan::read(p)?,
+        None => Plan::default(),
+    };
+    if let Some(n) = args.elements {
+        plan.elements = Some(n);
+        plan.size_mm = None;
+    }
+    if plan.groups.is_empty() {
+        plan.groups = vec![vec![
+            "D_ISCHIO".into(),
+            "D_SARTORIUS".into(),
+            "D_GRACILIS".into(),
+        ]];
+    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let (base, skin) = thigh_model(&plan)?;
+    let params = all_parameters(&base);
+    let names: Vec<String> = params.iter().map(|p| p.name(&base)).collect();
+    if !quiet {
+        eprintln!(
+            "built-in thigh: {} elements, {} nodes; {} tests, {} parameters",
+            base.mesh.elements.len(),
+            base.node_count(),
+            plan.tests.len(),
+            params.len()
+        );
+    }
+    // Checked before any solve: the groups and the grid.
+    let groupings = [
+        ("ungrouped".to_string(), Tied::none(&names)),
+        (
+            "grouped".to_string(),
+            Tied::new(&names, &plan.groups).context("[parameters] groups")?,
+        ),
+    ];
+    let (lo, hi) = base.mesh.bounding_box();
+    let points = plan.grid.points(lo, hi);
+    let spacing = if points.len() > 1 {
+        points[1][0] - points[0][0]
+    } else {
+        0.0
+    };
+    let locator = PointLocator::new(&base.mesh);
+    let located: Vec<_> = points.iter().filter_map(|p| locator.locate(*p)).collect();
+    if located.is_empty() {
+        bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
+    }
+    let mut results = Vec::new();
+    for loading in &plan.tests {
+        let r = run_test(&base, &skin, loading, &params, args, quiet)?;
+        write_test_outputs(&args.out.join(&r.name), &r, &names)?;
+        results.push(r);
+    }
+
+    let thetas: Vec<f64> = params.iter().map(|p| p.value(&base)).collect();
+    let columns_of = |r: &TestResult| -> Vec<Vec<f64>> {
+        r.du.iter()
+            .zip(&thetas)
+            .map(|(du, th)| {
+                located
+                    .iter()
+                    .flat_map(|loc| {
+                        [
+                            th * loc.interpolate(du, 2, 0),
+                            th * loc.interpolate(du, 2, 1),
+                        ]
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let mut ranking = Vec::new();
+    for (gname, tied) in &groupings {
+        let mut total: Option<Vec<Vec<f64>>> = None;
+        for r in &results {
+            let f = fisher::information(&columns_of(r), plan.sigma_mm, tied)?;
+            ranking.push(rank(&r.name, gname, &f, tied));
+            match &mut total {
+                None => total = Some(f),
+                Some(t) => fisher::add_information(t, &f),
+            }
+        }
+        if results.len() > 1 {
+            let label = results
+                .iter()
+                .map(|r| r.name.as_str())
+                .collect::<Vec<_>>()
+                .join(" + ");
+            ranking.push(rank(&label, gname, total.as_ref().expect("tests"), tied));
+        }
+    }
+    ranking.sort_by(|a, b| {
+        (
+            a.grouping.as_str(),
+            a.worst_c10_relative_sd.max(a.worst_d_relative_sd),
+        )
+            .partial_cmp(&(
+                b.grouping.as_str(),
+                b.worst_c10_relative_sd.max(b.worst_d_relative_sd),
+            ))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
+
+    let finding = findings(&results, &names);
+    if !args.no_figures {
+        write_figures(&args.out, &results, &names, quiet)?;
+    }
+    let summary = Summary {
+        command: "sensitivity",
+        version: env!("CARGO_PKG_VERSION"),
+        elements: base.mesh.elements.len(),
+        nodes: base.node_count(),
+        element: format!("{:?}", plan.element).to_uppercase(),
+        parameters: names.iter().cloned().zip(thetas.iter().cloned()).collect(),
+        tests: results
+            .iter()
+            .map(|r| TestSummary {
+                test: r.name.clone(),
+                solve_time_s: r.solve_s,
+                sensitivity_time_s: r.sensitivity_s,
+                sensitivity_over_solve: r.sensitivity_s / r.solve_s,
+                newton_iterations: r.solution.report.newton_iterations,
+                max_displacement_mm: max_norm(&r.solution.u),
+                sensitivity_index: names
+                    .iter()
+                    .cloned()
+                    .zip(r.global.iter().cloned())
+                    .collect(),
+                direct_differentiation: r.report.clone(),
+                finite_difference_max_relative_difference: r
+                    .fd_max_rel_diff
+                    .as_ref()
+                    .map(|d| names.iter().cloned().zip(d.iter().cloned()).collect()),
+            })
+            .collect(),
+        grid_points: points.len(),
+        grid_points_in_tissue: located.len(),
+        grid_spacing_mm: spacing,
+        noise_sigma_mm: plan.sigma_mm,
+        ranking,
+        finding: finding.clone(),
+        wall_time_s: t0.elapsed().as_secs_f64(),
+    };
+    let path = args.out.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !quiet {
+        for line in &finding {
+            eprintln!("{line}");
+        }
+        eprintln!("best measurements (predicted relative sd, worst C10 / worst D):");
+        for r in summary.ranking.iter().take(6) {
+            eprintln!(
+                "  {:<40} {:<9} {:>9.2e} / {:>9.2e}",
+                r.measurement, r.grouping, r.worst_c10_relative_sd, r.worst_d_relative_sd
+            );
+        }
+        eprintln!("wrote {}", args.out.display());
+    }
+    Ok(())
+}
+
+fn max_norm(u: &[f64]) -> f64 {
+    u.chunks_exact(2)
+        .map(|c| c[0].hypot(c[1]))
+        .fold(0.0, f64::max)
+}
+
+fn rank(measurement: &str, grouping: &str, f: &[Vec<f64>], tied: &Tied) -> Ranking {
+    let id = fisher::identifiability(f, &tied.names);
+    let worst = |prefix: &str| {
+        id.names
+            .iter()
+            .zip(&id.relative_sd)
+            .filter(|(n, _)| n.starts_with(prefix))
+            .map(|(_, s)| *s)
+            .fold(0.0f64, f64::max)
+    };
+    Ranking {
+        measurement: measurement.to_string(),
+        grouping: grouping.to_string(),
+        worst_c10_relative_sd: worst("C10_"),
+        worst_d_relative_sd: worst("D_"),
+        condition: id.condition,
+        identifiability: id,
+    }
+}
+
+fn run_test(
+    base: &Model,
+    skin: &[(usize, usize)],
+    loading: &femu_mech::loading::Loading,
+    params: &[Parameter],
+    args: &SensitivityArgs,
+    quiet: bool,
+) -> Result<TestResult> {
+    let name = loading.name();
+    let mut model = base.clone();
+    apply_loading(&mut model, skin, loading).with_context(|| format!("test {name}"))?;
+    // With --fd-check the states are converged far beyond the default so that finite
+    // differences of re-solves are meaningful at the 1e-5 level.
+    let options = if args.fd_check {
+        for c in &mut model.contacts {
+            c.penetration_tolerance = 1e-13;
+        }
+        SolverOptions {
+            residual_tolerance: 1e-12,
+            energy_tolerance: 1e-24,
+            ..Default::default()
+        }
+    } else {
+        SolverOptions::default()
+    };
+    let mut solver = StaticSolver::new(&model, options)?;
+    let t = Instant::now();
+    let solution = solver
+        .solve(&model)
+        .map_err(|e| anyhow::anyhow!("test {name}: {e}"))?;
+    let solve_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let mut dd = DirectSensitivity::new();
+    let mut dstate = Vec::new();
+    let report = dd
+        .compute(&mut solver, &model, &solution.state, params, &mut dstate)
+        .with_context(|| format!("test {name}"))?;
+    let sensitivity_s = t.elapsed().as_secs_f64();
+    let n2 = 2 * model.node_count();
+    let du: Vec<Vec<f64>> = dstate.iter().map(|d| d[..n2].to_vec()).collect();
+    let mut global = Vec::new();
+    let mut maps = Vec::new();
+    for (p, d) in params.iter().zip(&du) {
+        let (s, map) = sensitivity_map(&solution.u, d, p.value(&model));
+        global.push(s);
+        maps.push(map);
+    }
+    if !quiet {
+        eprintln!(
+            "{name}: solved in {solve_s:.2} s ({} Newton iterations), 10 sensitivities in {sensitivity_s:.3} s ({:.0} % of the solve)",
+            solution.report.newton_iterations,
+            100.0 * sensitivity_s / solve_s
+        );
+    }
+    let fd_max_rel_diff = if args.fd_check {
+        let mut diffs = Vec::new();
+        for (k, p) in params.iter().enumerate() {
+            let theta = p.value(&model);
+            let h = args.fd_step;
+            p.set(&mut model, theta * (1.0 + h));
+            let plus = solver
+                .solve_with(&model, Some(&solution.state), &mut |_| {})
+                .map_err(|e| anyhow::anyhow!("test {name}, finite difference: {e}"))?;
+            p.set(&mut model, theta * (1.0 - h));
+            let minus = solver
+                .solve_with(&model, Some(&solution.state), &mut |_| {})
+                .map_err(|e| anyhow::anyhow!("test {name}, finite difference: {e}"))?;
+            p.set(&mut model, theta);
+            let mut dmax = 0.0f64;
+            let mut smax = 0.0f64;
+            for i in 0..n2 {
+                let fd = (plus.u[i] - minus.u[i]) / (2.0 * h * theta);
+                dmax = dmax.max((fd - du[k][i]).abs());
+                smax = smax.max(fd.abs());
+            }
+            diffs.push(if smax > 0.0 { dmax / smax } else { dmax });
+        }
+        if !quiet {
+            eprintln!(
+                "{name}: direct differentiation vs central finite differences (step {:.0e}): worst relative difference {:.2e}",
+                args.fd_step,
+                diffs.iter().cloned().fold(0.0, f64::max)
+            );
+        }
+        Some(diffs)
+    } else {
+        None
+    };
+    Ok(TestResult {
+        name,
+        model,
+        solution,
+        du,
+        global,
+        maps,
+        solve_s,
+        sensitivity_s,
+        report,
+        fd_max_rel_diff,
+    })
+}
+
+/// `sensitivity.csv` (node, x, y, ux, uy, one map column per parameter) and `sensitivity.vtu`
+/// (the maps and the raw derivatives as point fields).
+fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let path = dir.join("sensitivity.csv");
+    let mut w = std::io::BufWriter::new(
+        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    write!(w, "node,x,y,ux,uy")?;
+    for n in names {
+        write!(w, ",S_{n}")?;
+    }
+    writeln!(w)?;
+    for (i, x) in r.model.mesh.nodes.iter().enumerate() {
+        write!(
+            w,
+            "{},{:.9e},{:.9e},{:.9e},{:.9e}",
+            r.model.mesh.node_labels[i],
+            x[0],
+            x[1],
+            r.solution.u[2 * i],
+            r.solution.u[2 * i + 1]
+        )?;
+        for m in &r.maps {
+            write!(w, ",{:.6e}", m[i])?;
+        }
+        writeln!(w)?;
+    }
+    w.flush()?;
+    let disp: Vec<[f64; 2]> = r.solution.u.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
+    let field_names: Vec<(String, String)> = names
+        .iter()
+        .map(|n| (format!("S_{n}"), format!("dU_d{n}")))
+        .collect();
+    let du3: Vec<Vec<f64>> =
+        r.du.iter()
+            .map(|d| d.chunks_exact(2).flat_map(|c| [c[0], c[1], 0.0]).collect())
+            .collect();
+    let mut fields = Vec::new();
+    for (k, (s_name, d_name)) in field_names.iter().enumerate() {
+        fields.push(femu_mesh::vtu::VtuField {
+            name: s_name,
+            components: 1,
+            data: &r.maps[k],
+        });
+        fields.push(femu_mesh::vtu::VtuField {
+            name: d_name,
+            components: 3,
+            data: &du3[k],
+        });
+    }
+    let path = dir.join("sensitivity.vtu");
+    femu_mesh::vtu::write_vtu(&path, &r.model.mesh, Some(&disp), &fields, &[])
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(())
+}
+
+fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
+    let mut w = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    writeln!(
+        w,
+        "measurement,grouping,worst_c10_relative_sd,worst_d_relative_sd,condition,parameter_relative_sd"
+    )?;
+    for r in ranking {
+        let per: Vec<String> = r
+            .identifiability
+            .names
+            .iter()
+            .zip(&r.identifiability.relative_sd)
+            .map(|(n, s)| format!("{n}={s:.3e}"))
+            .collect();
+        writeln!(
+            w,
+            "{},{},{:.4e},{:.4e},{:.4e},{}",
+            r.measurement,
+            r.grouping,
+            r.worst_c10_relative_sd,
+            r.worst_d_relative_sd,
+            r.condition,
+            per.join(" ")
+        )?;
+    }
+    Ok(())
+}
+
+/// The seed's qualitative finding, restated from the numbers: per test, whether the C10 or the
+/// D family is the more sensitive (mean of Eq. 3 over the five tissues).
+fn findings(results: &[TestResult], names: &[String]) -> Vec<String> {
+    results
+        .iter()
+        .map(|r| {
+            let mean = |prefix: &str| {
+                let v: Vec<f64> = names
+                    .iter()
+                    .zip(&r.global)
+                    .filter(|(n, _)| n.starts_with(prefix))
+                    .map(|(_, s)| *s)
+                    .collect();
+                v.iter().sum::<f64>() / v.len().max(1) as f64
+            };
+            let (c, d) = (mean("C10_"), mean("D_"));
+            let (best, ratio) = if c >= d { ("C10", c / d) } else { ("D", d / c) };
+            format!(
+                "{}: the {best} family is the more sensitive (mean Eq. 3 index C10 {c:.3e}, D {d:.3e}; ratio {ratio:.1})",
+                r.name
+            )
+        })
+        .collect()
+}
+
+/// `sensitivity_maps.png` (one panel per parameter and test, rows sharing a colour scale, the
+/// seed's Fig. 8 for every tissue), `sensitivity_quadriceps.png` (the seed's Fig. 8 itself) and
+/// `sensitivity_index.png` (Eq. 3 per parameter and test).
+fn write_figures(out: &Path, results: &[TestResult], names: &[String], quiet: bool) -> Result<()> {
+    let panel_dir = out.join("panels");
+    std::fs::create_dir_all(&panel_dir)?;
+    let mut panels: Vec<Vec<PathBuf>> = Vec::new();
+    for (k, name) in names.iter().enumerate() {
+        let hi = results
+            .iter()
+            .flat_map(|r| r.maps[k].iter().cloned())
+            .filter(|v| v.is_finite())
+            .fold(0.0f64, f64::max);
+        let range = (0.0, if hi > 0.0 { hi } else { 1.0 });
+        let mut row = Vec::new();
+        for r in results {
+            let path = panel_dir.join(format!("{}_{name}.png", r.name));
+            node_field_png(
+                &path,
+                &r.model.mesh,
+                None,
+                &r.maps[k],
+                &FieldPlot {
+                    title: format!("{}: S({name}) (Eq. 3, per node)", r.name),
+                    value_label: format!("θ|∂u/∂θ| / rms|u|, θ = {name}"),
+                    range: Some(range),
+                    region_of_element: Some(&r.model.element_region),
+                    width: 700,
+                    height: 540,
+                    ..Default::default()
+                },
+            )
+            .with_context(|| format!("cannot draw {}", path.display()))?;
+            row.push(path);
+        }
+        panels.push(row);
+    }
+    let cols = results.len();
+    let all: Vec<&Path> = panels.iter().flatten().map(|p| p.as_path()).collect();
+    tile_png(&out.join("sensitivity_maps.png"), &all, cols)?;
+    let quad: Vec<&Path> = names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.ends_with("_QUADRICEPS"))
+        .flat_map(|(k, _)| panels[k].iter().map(|p| p.as_path()))
+        .collect();
+    if !quad.is_empty() {
+        tile_png(&out.join("sensitivity_quadriceps.png"), &quad, cols)?;
+    }
+    let groups: Vec<(String, Vec<f64>)> = results
+        .iter()
+        .map(|r| (r.name.clone(), r.global.clone()))
+        .collect();
+    bar_chart_png(
+        &out.join("sensitivity_index.png"),
+        names,
+        &groups,
+        None,
+        &BarChart {
+            title: "Sensitivity index S = ‖θ ∂U/∂θ‖ / ‖U‖ (seed Eq. 3)".into(),
+            x_label: "parameter".into(),
+            y_label: "S (-)".into(),
+            ..Default::default()
+        },
+    )?;
+    if !quiet {
+        eprintln!(
+            "figures: sensitivity_maps.png, sensitivity_quadriceps.png, sensitivity_index.png"
+        );
+    }
+    Ok(())
+}
