@@ -152,7 +152,6 @@ pub struct DirectSensitivity {
     block: Vec<f64>,
     rhs: Vec<f64>,
     residual: Vec<f64>,
-    product: Vec<f64>,
 }
 
 /// Relative residual at which the refinement stops.
@@ -393,24 +392,31 @@ impl DirectSensitivity {
             self.rhs.clear();
             self.rhs.extend_from_slice(chunk);
             self.residual.resize(chunk.len(), 0.0);
-            self.product.resize(n, 0.0);
             let bnorms: Vec<f64> = self.rhs.chunks(n).map(norm).collect();
             solver.solve_tangent_many(chunk, cols);
             report.back_substitutions += cols;
             let mut last = f64::INFINITY;
             loop {
                 // R = B - K X, and the worst relative residual of the columns.
-                let mut rel = 0.0f64;
-                for c in 0..cols {
-                    solver.tangent_mul(&chunk[c * n..(c + 1) * n], &mut self.product);
-                    let r = &mut self.residual[c * n..(c + 1) * n];
-                    for ((ri, bi), kx) in r.iter_mut().zip(&self.rhs[c * n..]).zip(&self.product) {
-                        *ri = bi - kx;
-                    }
-                    if bnorms[c] > 0.0 {
-                        rel = rel.max(norm(r) / bnorms[c]);
-                    }
-                }
+                let tangent: &StaticSolver = solver;
+                let x_cols: &[f64] = chunk;
+                let rhs = &self.rhs;
+                let rel = self
+                    .residual
+                    .par_chunks_mut(n)
+                    .enumerate()
+                    .map(|(c, r)| {
+                        tangent.tangent_mul(&x_cols[c * n..(c + 1) * n], r);
+                        for (ri, bi) in r.iter_mut().zip(&rhs[c * n..(c + 1) * n]) {
+                            *ri = bi - *ri;
+                        }
+                        if bnorms[c] > 0.0 {
+                            norm(r) / bnorms[c]
+                        } else {
+                            0.0
+                        }
+                    })
+                    .reduce(|| 0.0, f64::max);
                 let converged = rel <= REFINEMENT_TOLERANCE;
                 let stalled = !(rel < 0.5 * last);
                 if converged || (stalled && rel <= ACCEPTABLE_RESIDUAL) {
