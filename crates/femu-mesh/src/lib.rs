@@ -23,12 +23,14 @@ pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 pub mod deck;
 pub mod generate;
 pub mod inp;
+pub mod locate;
 pub mod mesh;
 pub mod msh;
 pub mod vtu;
 
 pub use deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
 pub use inp::{read_inp, write_inp, write_inp_file, InpError};
+pub use locate::{PointInterpolation, PointLocation, PointLocator};
 pub use mesh::{Element, ElementKind, Mesh, MeshError};
 pub use msh::{read_msh, MshError, MshModel};
 pub use vtu::{write_vtu, write_vtu_with_int_cells, VtuField, VtuIntField};
