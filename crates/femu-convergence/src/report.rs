@@ -119,7 +119,10 @@ pub fn write_outputs(
             .runs
             .iter()
             .filter(|r| {
-                r.element == s.element && r.d_scale == 1.0 && r.mesh + 1 < study.meshes.len()
+                r.test == result.loading
+                    && r.element == s.element
+                    && r.d_scale == 1.0
+                    && r.mesh + 1 < study.meshes.len()
             })
             .filter_map(|r| r.max_diff_mm.filter(|d| *d > 0.0).map(|d| (r.h_mm, d)))
             .collect();
@@ -144,7 +147,10 @@ pub fn write_outputs(
             .runs
             .iter()
             .filter(|r| {
-                r.element == s.element && r.d_scale == 1.0 && r.mesh + 1 < study.meshes.len()
+                r.test == result.loading
+                    && r.element == s.element
+                    && r.d_scale == 1.0
+                    && r.mesh + 1 < study.meshes.len()
             })
             .filter_map(|r| r.rms_diff_mm.filter(|d| *d > 0.0).map(|d| (r.h_mm, d)))
             .collect();
@@ -231,9 +237,11 @@ pub fn write_outputs(
                     ),
                     x_label: "node spacing h (mm)".into(),
                     y_label: "RMS |u| / reference RMS |u| (1 = converged, < 1 = too stiff)".into(),
-                    log_x: true,
+                    log_x: false,
                     log_y: false,
-                    legend: LegendPosition::LowerLeft,
+                    // Room above the converged line (1) for the legend.
+                    y_range: Some((0.0, 1.45)),
+                    legend: LegendPosition::UpperRight,
                     ..LinePlot::default()
                 },
             )
