@@ -4,6 +4,7 @@
 //! messages and a non-zero exit code. Nothing numerical lives here.
 
 mod bench;
+mod convergence_cmd;
 mod figures;
 mod mesh_cmd;
 mod plan;
@@ -134,6 +135,17 @@ enum Command {
         #[command(subcommand)]
         what: mesh_cmd::MeshCommand,
     },
+    /// Mesh and element validation (seed §2.1.2.1): the study's loading test on a sequence of
+    /// meshes of the built-in thigh per element type, compared with the finest at the DIC grid
+    /// points; table, log-log plot with rates, the recommended mesh, the locking check.
+    Convergence {
+        /// Study file (TOML; see the femu-convergence docs). Without it: contention, Table 1,
+        /// CPE4H/CPE4/CPE3, 1 500 to 50 000 elements, tolerance 1e-4 mm, D / 1000 for locking.
+        study: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, default_value = "out/convergence")]
+        out: PathBuf,
+    },
 }
 
 /// The named demo tests.
@@ -204,6 +216,9 @@ fn main() -> ExitCode {
             },
             cli.quiet,
         ),
+        Command::Convergence { study, out } => {
+            convergence_cmd::run(study.as_deref(), &out, cli.quiet)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

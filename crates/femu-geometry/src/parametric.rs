@@ -413,13 +413,36 @@ pub fn parametric_thigh(
     params: &ThighParams,
     kind: ElementKind,
 ) -> Result<ThighModel, GeometryError> {
+    parametric_thigh_on_raster(params, kind, None)
+}
+
+/// As [`parametric_thigh`], with the shapes sampled on a raster of `raster_mm` (in [0.05, 0.5]
+/// mm) instead of a quarter of the element size (clamped to [0.1, 0.25] mm). The traced and
+/// smoothed curves depend on the raster only, so meshes of different sizes on one raster
+/// discretize one geometry: a mesh convergence study needs that (seed §2.1.2.1), otherwise
+/// the curves move by up to 0.1 mm between meshes and the displacement differences stop
+/// decreasing.
+pub fn parametric_thigh_on_raster(
+    params: &ThighParams,
+    kind: ElementKind,
+    raster_mm: Option<f64>,
+) -> Result<ThighModel, GeometryError> {
     params.validate()?;
+    if let Some(px) = raster_mm {
+        if !(0.05..=0.5).contains(&px) {
+            return Err(GeometryError::param(
+                "raster_mm",
+                px,
+                "must be in [0.05, 0.5]",
+            ));
+        }
+    }
     let names: Vec<String> = SEED_REGIONS.iter().map(|s| s.to_string()).collect();
     let [a, b] = params.skin_semi_axes_mm;
     let rf = 0.5 * params.femur_diameter_mm;
     let tissue_area = std::f64::consts::PI * (a * b - rf * rf);
     let run = |h: f64| -> Result<ThighModel, GeometryError> {
-        let px = (h / 4.0).clamp(0.1, 0.25);
+        let px = raster_mm.unwrap_or((h / 4.0).clamp(0.1, 0.25));
         let options = MeshOptions {
             element_size_mm: h,
             kind,

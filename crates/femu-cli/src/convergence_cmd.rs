@@ -1,0 +1,93 @@
+//! `femu convergence [STUDY.toml] --out DIR`: the mesh and element validation study of the seed
+//! (§2.1.2.1) on the built-in thigh. Parses, calls `femu_convergence`, prints the table and
+//! the recommendation; the numbers are computed in the library.
+
+use anyhow::{Context, Result};
+use femu_convergence::{report, run_study, ConvergenceStudy};
+use std::path::Path;
+
+/// Runs the study in `study_file` (the defaults without one) and writes `out`.
+pub fn run(study_file: Option<&Path>, out: &Path, quiet: bool) -> Result<()> {
+    let study = match study_file {
+        Some(p) => ConvergenceStudy::read(p)?,
+        None => ConvergenceStudy::default(),
+    };
+    if !quiet {
+        eprintln!(
+            "convergence: {} on the built-in thigh, {} meshes x {} element types{}, tolerance {:.0e} mm, {} x {} grid points",
+            study.loading.name(),
+            study.meshes.len(),
+            study.elements.len(),
+            if study.locking {
+                format!(" (and D x {} for locking)", study.d_scale)
+            } else {
+                String::new()
+            },
+            study.tolerance_mm,
+            study.grid.counts[0],
+            study.grid.counts[1]
+        );
+    }
+    let mut progress = |line: &str| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    };
+    let result = run_study(&study, &mut progress)?;
+    report::write_outputs(out, &study, &result)
+        .with_context(|| format!("writing the results into {}", out.display()))?;
+    if !quiet {
+        println!(
+            "{:<22} {:<6} {:>8} {:>6} {:>7} {:>7} {:>12} {:>12} {:>8} {:>8}",
+            "test",
+            "element",
+            "D scale",
+            "mesh",
+            "elems",
+            "nodes",
+            "max diff mm",
+            "RMS diff mm",
+            "solve s",
+            "mem MB"
+        );
+        for r in &result.runs {
+            println!(
+                "{:<22} {:<6} {:>8} {:>6} {:>7} {:>7} {:>12} {:>12} {:>8.2} {:>8}",
+                r.test,
+                r.element,
+                r.d_scale,
+                r.mesh + 1,
+                r.elements,
+                r.nodes,
+                r.max_diff_mm.map_or("-".into(), |v| format!("{v:.3e}")),
+                r.rms_diff_mm.map_or("-".into(), |v| format!("{v:.3e}")),
+                r.solve_s,
+                r.peak_memory_mb.map_or("-".into(), |v| format!("{v:.0}"))
+            );
+        }
+        for s in &result.elements {
+            if let Some(f) = s.rate_max {
+                println!(
+                    "{} {} (D x {}): rate {:.2} (max), {} (RMS)",
+                    s.test,
+                    s.element,
+                    s.d_scale,
+                    f.rate,
+                    s.rate_rms.map_or("-".into(), |f| format!("{:.2}", f.rate))
+                );
+            }
+        }
+        println!("{}", result.recommendation);
+        if let Some(l) = &result.locking {
+            println!("{}", l.sentence);
+        }
+        println!(
+            "{} of {} grid points compared; {:.1} s; results in {}",
+            result.common_points,
+            result.grid_points,
+            result.total_s,
+            out.display()
+        );
+    }
+    Ok(())
+}

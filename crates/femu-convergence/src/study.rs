@@ -1,0 +1,495 @@
+//! The convergence study file (TOML), parsed and validated in one place. Every key is optional;
+//! units are in the key names; an unknown key is an error that names it.
+//!
+//! ```toml
+//! elements = ["CPE4H", "CPE4", "CPE3"]      # element types compared (CPE3: each quad split in two)
+//! target_elements = [1500, 3000, 6000, 12000, 25000, 50000]   # the mesh sequence, or
+//! # element_size_mm = [4.0, 2.0, 1.0]       # ... element sizes (one of the two)
+//! tolerance_mm = 1e-4                       # the seed's criterion (§2.1.2.1)
+//! locking = true                            # the nearly incompressible study (D x d_scale)
+//! d_scale = 1e-3                            # ... on the locking_meshes coarsest meshes, with
+//! locking_meshes = 2                        # the compression test if the study's is contention
+//! # raster_mm = 0.13                        # shape raster, one for all meshes (default h_min/4)
+//!
+//! [thigh]                                   # the built-in thigh (femu_geometry::ThighParams)
+//! fat_thickness_mm = 8.0                    # ... without its mesh-size keys
+//!
+//! [materials.quadriceps]                    # overrides of Table 1, per region
+//! c10_kpa = 1.75
+//! d_per_mpa = 18.0
+//!
+//! [contention]                              # the loading test: one of
+//! mmhg = 20.0                               # [contention] (default, 20 mmHg),
+//! # [compression] side = "anterior", force_n_per_mm = 0.1
+//! # [indentation] side = "anterior", radius_mm = 10.0, force_n_per_mm = 3.0
+//!
+//! [grid]                                    # the common comparison points (DIC grid)
+//! origin_mm = [-50.4, -40.8]                # lower-left point
+//! spacing_mm = 1.6
+//! counts = [64, 64]
+//! ```
+
+use crate::ConvergenceError;
+use femu_geometry::{Material, ThighParams};
+use femu_mech::loading::{Loading, Side};
+use femu_mesh::{ElementKind, MMHG_IN_MPA};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The mesh sequence: target element counts or element sizes, coarse to fine.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MeshSequence {
+    /// About this many quads per mesh.
+    TargetElements(Vec<usize>),
+    /// Element sizes (mm).
+    ElementSizes(Vec<f64>),
+}
+
+impl MeshSequence {
+    /// The raster (mm) shared by every mesh of the sequence: a quarter of the finest element
+    /// size (estimated from the tissue area for counts), clamped to [0.1, 0.25] mm like the
+    /// default of [`femu_geometry::parametric_thigh`].
+    pub fn raster_mm(&self, tissue_area_mm2: f64) -> f64 {
+        let h_min = match self {
+            MeshSequence::TargetElements(v) => {
+                (tissue_area_mm2 / *v.iter().max().unwrap_or(&1) as f64).sqrt()
+            }
+            MeshSequence::ElementSizes(v) => v.iter().copied().fold(f64::INFINITY, f64::min),
+        };
+        (h_min / 4.0).clamp(0.1, 0.25)
+    }
+
+    /// Number of meshes.
+    pub fn len(&self) -> usize {
+        match self {
+            MeshSequence::TargetElements(v) => v.len(),
+            MeshSequence::ElementSizes(v) => v.len(),
+        }
+    }
+
+    /// True if there is no mesh.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// The common comparison points: a regular grid, as the DIC measures (seed §2.4.1: 64 x 64
+/// points, 16 px apart).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DicGrid {
+    /// Lower-left point of the grid (model frame, mm).
+    pub origin_mm: [f64; 2],
+    /// Distance between neighbouring points (mm).
+    pub spacing_mm: f64,
+    /// Number of points `[along x, along y]`.
+    pub counts: [usize; 2],
+}
+
+impl DicGrid {
+    /// The seed's grid: 64 x 64 points 16 px apart. The seed does not give one consistent pixel
+    /// size (its noise of 1.5 px = 1.76e-2 mm would mean 0.012 mm/px, its abstract's 0.2 mm
+    /// noise about 0.13 mm/px); at 0.1 mm/px, typical of a linear-probe B-mode image, the points
+    /// are 1.6 mm apart and the window is 100.8 mm wide. It is centred medio-laterally on the
+    /// default thigh with its top row on the anterior skin (y = 60 mm), under the probe, so it
+    /// covers the quadriceps, the sartorius, the femur (masked) and the front of the ischio.
+    pub fn seed_default() -> DicGrid {
+        let spacing = 16.0 * 0.1;
+        let span = 63.0 * spacing;
+        DicGrid {
+            origin_mm: [-0.5 * span, 60.0 - span],
+            spacing_mm: spacing,
+            counts: [64, 64],
+        }
+    }
+
+    /// The points, row by row from the lower left (x fastest).
+    pub fn points(&self) -> Vec<[f64; 2]> {
+        let mut p = Vec::with_capacity(self.counts[0] * self.counts[1]);
+        for j in 0..self.counts[1] {
+            for i in 0..self.counts[0] {
+                p.push([
+                    self.origin_mm[0] + i as f64 * self.spacing_mm,
+                    self.origin_mm[1] + j as f64 * self.spacing_mm,
+                ]);
+            }
+        }
+        p
+    }
+}
+
+/// A validated convergence study.
+#[derive(Debug, Clone)]
+pub struct ConvergenceStudy {
+    /// The built-in thigh's dimensions (its mesh-size keys unset: the sequence sets them).
+    pub thigh: ThighParams,
+    /// Materials per region (Table 1 unless overridden).
+    pub materials: Vec<Material>,
+    /// The loading test.
+    pub loading: Loading,
+    /// Element types compared, in the order given.
+    pub elements: Vec<ElementKind>,
+    /// The meshes, coarse to fine; the finest is the reference.
+    pub meshes: MeshSequence,
+    /// A mesh is accepted when its largest displacement difference from the finest at the
+    /// common points is below this (mm).
+    pub tolerance_mm: f64,
+    /// Whether to run the nearly incompressible (locking) study.
+    pub locking: bool,
+    /// Factor on every D of the locking study (0 < d_scale < 1).
+    pub d_scale: f64,
+    /// The locking study runs on this many of the coarsest meshes.
+    pub locking_meshes: usize,
+    /// Raster of the parametric shapes (mm), the same for every mesh so that all discretize
+    /// one geometry; by default a quarter of the finest element size, in [0.1, 0.25].
+    pub raster_mm: Option<f64>,
+    /// The common comparison points.
+    pub grid: DicGrid,
+}
+
+impl Default for ConvergenceStudy {
+    /// The seed's setup: the built-in thigh with Table 1, the contention test (20 mmHg), CPE4H,
+    /// CPE4 and CPE3, six meshes from 1 500 to 50 000 quads (the seed tested 6 000 to 26 000
+    /// nodes and kept 25 392 elements), tolerance 1e-4 mm, locking with D / 1000, the seed's
+    /// 64 x 64 grid.
+    fn default() -> Self {
+        ConvergenceStudy {
+            thigh: ThighParams::default(),
+            materials: Material::table1(),
+            loading: Loading::SEED_CONTENTION,
+            elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
+            meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),
+            tolerance_mm: 1e-4,
+            locking: true,
+            d_scale: 1e-3,
+            locking_meshes: 2,
+            raster_mm: None,
+            grid: DicGrid::seed_default(),
+        }
+    }
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct StudyFile {
+    elements: Option<Vec<String>>,
+    target_elements: Option<Vec<usize>>,
+    element_size_mm: Option<Vec<f64>>,
+    tolerance_mm: Option<f64>,
+    locking: Option<bool>,
+    d_scale: Option<f64>,
+    locking_meshes: Option<usize>,
+    raster_mm: Option<f64>,
+    thigh: Option<ThighParams>,
+    #[serde(default)]
+    materials: BTreeMap<String, MaterialEntry>,
+    contention: Option<ContentionEntry>,
+    compression: Option<RigidEntry>,
+    indentation: Option<RigidEntry>,
+    grid: Option<DicGrid>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MaterialEntry {
+    c10_kpa: Option<f64>,
+    d_per_mpa: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ContentionEntry {
+    mmhg: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RigidEntry {
+    side: Option<String>,
+    force_n_per_mm: f64,
+    radius_mm: Option<f64>,
+}
+
+impl ConvergenceStudy {
+    /// Reads and validates a study file; errors name the file and the key.
+    pub fn read(path: &Path) -> Result<ConvergenceStudy, ConvergenceError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConvergenceError::Io {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses and validates the text of a study file named `file` (for the messages).
+    pub fn parse(text: &str, file: &str) -> Result<ConvergenceStudy, ConvergenceError> {
+        let bad = |key: &str, message: String| ConvergenceError::Study {
+            file: file.to_string(),
+            key: key.to_string(),
+            message,
+        };
+        let raw: StudyFile = toml::from_str(text).map_err(|e| {
+            // toml names the unknown or mistyped key in its message ("unknown field `x`").
+            let msg = e.message().to_string();
+            let key = msg
+                .split('`')
+                .nth(1)
+                .filter(|_| msg.starts_with("unknown field"))
+                .unwrap_or("(syntax)")
+                .to_string();
+            let at = e
+                .span()
+                .map(|s| {
+                    let line = text[..s.start.min(text.len())].lines().count().max(1);
+                    format!(" (line {line})")
+                })
+                .unwrap_or_default();
+            bad(&key, format!("{msg}{at}"))
+        })?;
+        let mut study = ConvergenceStudy::default();
+        if let Some(names) = raw.elements {
+            if names.is_empty() {
+                return Err(bad("elements", "give at least one element type".into()));
+            }
+            let mut kinds = Vec::new();
+            for n in &names {
+                let k = ElementKind::from_deck_name(n).ok_or_else(|| {
+                    bad(
+                        "elements",
+                        format!("'{n}' is not an element type (CPE4, CPE4H, CPE3)"),
+                    )
+                })?;
+                if kinds.contains(&k) {
+                    return Err(bad("elements", format!("'{n}' is listed twice")));
+                }
+                kinds.push(k);
+            }
+            study.elements = kinds;
+        }
+        match (raw.target_elements, raw.element_size_mm) {
+            (Some(_), Some(_)) => {
+                return Err(bad(
+                    "element_size_mm",
+                    "give either target_elements or element_size_mm, not both".into(),
+                ))
+            }
+            (Some(v), None) => study.meshes = MeshSequence::TargetElements(v),
+            (None, Some(v)) => study.meshes = MeshSequence::ElementSizes(v),
+            (None, None) => {}
+        }
+        if let Some(t) = raw.tolerance_mm {
+            study.tolerance_mm = t;
+        }
+        if let Some(l) = raw.locking {
+            study.locking = l;
+        }
+        if let Some(d) = raw.d_scale {
+            study.d_scale = d;
+        }
+        if let Some(n) = raw.locking_meshes {
+            study.locking_meshes = n;
+        }
+        study.raster_mm = raw.raster_mm;
+        if let Some(t) = raw.thigh {
+            if t.target_elements.is_some() || t.element_size_mm.is_some() {
+                return Err(bad(
+                    "thigh.target_elements",
+                    "the mesh sizes come from the top-level target_elements or element_size_mm"
+                        .into(),
+                ));
+            }
+            study.thigh = t;
+        }
+        for (name, m) in &raw.materials {
+            let entry = study
+                .materials
+                .iter_mut()
+                .find(|x| x.region.eq_ignore_ascii_case(name))
+                .ok_or_else(|| {
+                    bad(
+                        &format!("materials.{name}"),
+                        "not a region of the built-in thigh (fat, quadriceps, ischio, gracilis, sartorius)".into(),
+                    )
+                })?;
+            if let Some(c) = m.c10_kpa {
+                if !(c > 0.0 && c.is_finite()) {
+                    return Err(bad(
+                        &format!("materials.{name}.c10_kpa"),
+                        format!("must be positive, got {c}"),
+                    ));
+                }
+                entry.c10_mpa = c * 1e-3;
+            }
+            if let Some(d) = m.d_per_mpa {
+                if !(d > 0.0 && d.is_finite()) {
+                    return Err(bad(
+                        &format!("materials.{name}.d_per_mpa"),
+                        format!("must be positive, got {d}"),
+                    ));
+                }
+                entry.d_per_mpa = d;
+            }
+        }
+        let tests = [
+            raw.contention.is_some(),
+            raw.compression.is_some(),
+            raw.indentation.is_some(),
+        ];
+        if tests.iter().filter(|&&t| t).count() > 1 {
+            return Err(bad(
+                "contention",
+                "give one loading test: [contention], [compression] or [indentation]".into(),
+            ));
+        }
+        if let Some(c) = raw.contention {
+            if !(c.mmhg.is_finite() && c.mmhg != 0.0) {
+                return Err(bad(
+                    "contention.mmhg",
+                    format!("must be finite and non-zero, got {}", c.mmhg),
+                ));
+            }
+            study.loading = Loading::Contention {
+                pressure: c.mmhg * MMHG_IN_MPA,
+            };
+        }
+        for (table, entry) in [
+            ("compression", &raw.compression),
+            ("indentation", &raw.indentation),
+        ] {
+            let Some(r) = entry else { continue };
+            let side = match &r.side {
+                Some(s) => Side::parse(s).map_err(|m| bad(&format!("{table}.side"), m))?,
+                None => Side::Anterior,
+            };
+            if !(r.force_n_per_mm > 0.0 && r.force_n_per_mm.is_finite()) {
+                return Err(bad(
+                    &format!("{table}.force_n_per_mm"),
+                    format!(
+                        "must be positive (pushing on the skin), got {}",
+                        r.force_n_per_mm
+                    ),
+                ));
+            }
+            study.loading = if table == "compression" {
+                if r.radius_mm.is_some() {
+                    return Err(bad(
+                        "compression.radius_mm",
+                        "a compression plate is flat; radius_mm is for [indentation]".into(),
+                    ));
+                }
+                Loading::Compression {
+                    side,
+                    force: r.force_n_per_mm,
+                }
+            } else {
+                let radius = r.radius_mm.unwrap_or(10.0);
+                if !(radius > 0.0 && radius.is_finite()) {
+                    return Err(bad(
+                        "indentation.radius_mm",
+                        format!("must be positive, got {radius}"),
+                    ));
+                }
+                Loading::Indentation {
+                    site: side,
+                    radius,
+                    force: r.force_n_per_mm,
+                }
+            };
+        }
+        if let Some(g) = raw.grid {
+            study.grid = g;
+        }
+        study
+            .validate()
+            .map_err(|(key, message)| bad(&key, message))?;
+        Ok(study)
+    }
+
+    /// Checks the ranges; on failure returns the key and the reason.
+    pub fn validate(&self) -> Result<(), (String, String)> {
+        let key = |k: &str, m: String| Err((k.to_string(), m));
+        if self.elements.is_empty() {
+            return key("elements", "give at least one element type".into());
+        }
+        match &self.meshes {
+            MeshSequence::TargetElements(v) => {
+                if v.len() < 3 {
+                    return key(
+                        "target_elements",
+                        format!("give at least 3 meshes (a rate needs two differences from the finest), got {}", v.len()),
+                    );
+                }
+                if let Some(n) = v.iter().find(|n| !(100..=500_000).contains(*n)) {
+                    return key("target_elements", format!("{n} is outside [100, 500000]"));
+                }
+                if v.windows(2).any(|w| w[1] <= w[0]) {
+                    return key("target_elements", "must increase (coarse to fine)".into());
+                }
+            }
+            MeshSequence::ElementSizes(v) => {
+                if v.len() < 3 {
+                    return key(
+                        "element_size_mm",
+                        format!("give at least 3 meshes, got {}", v.len()),
+                    );
+                }
+                if let Some(h) = v.iter().find(|h| !(**h >= 0.2 && **h <= 20.0)) {
+                    return key("element_size_mm", format!("{h} is outside [0.2, 20] mm"));
+                }
+                if v.windows(2).any(|w| w[1] >= w[0]) {
+                    return key("element_size_mm", "must decrease (coarse to fine)".into());
+                }
+            }
+        }
+        if !(self.tolerance_mm > 0.0 && self.tolerance_mm.is_finite()) {
+            return key(
+                "tolerance_mm",
+                format!("must be positive, got {}", self.tolerance_mm),
+            );
+        }
+        if !(self.d_scale > 0.0 && self.d_scale < 1.0) {
+            return key(
+                "d_scale",
+                format!(
+                    "must be in (0, 1) (D smaller: nearly incompressible), got {}",
+                    self.d_scale
+                ),
+            );
+        }
+        if self.locking && !(1..=self.meshes.len()).contains(&self.locking_meshes) {
+            return key(
+                "locking_meshes",
+                format!(
+                    "must be in [1, {}] (the number of meshes)",
+                    self.meshes.len()
+                ),
+            );
+        }
+        if let Some(px) = self.raster_mm {
+            if !(0.05..=0.5).contains(&px) {
+                return key("raster_mm", format!("must be in [0.05, 0.5] mm, got {px}"));
+            }
+        }
+        let g = &self.grid;
+        if !(g.spacing_mm > 0.0 && g.spacing_mm.is_finite()) {
+            return key(
+                "grid.spacing_mm",
+                format!("must be positive, got {}", g.spacing_mm),
+            );
+        }
+        if !(g.origin_mm[0].is_finite() && g.origin_mm[1].is_finite()) {
+            return key("grid.origin_mm", "must be finite".into());
+        }
+        if g.counts[0] == 0 || g.counts[1] == 0 || g.counts[0] * g.counts[1] > 1_000_000 {
+            return key(
+                "grid.counts",
+                format!("{:?}: between 1 and 1e6 points", g.counts),
+            );
+        }
+        let mut t = self.thigh.clone();
+        t.target_elements = Some(1000);
+        t.validate()
+            .map_err(|e| ("thigh".to_string(), e.to_string()))?;
+        Ok(())
+    }
+}
