@@ -4,5 +4,10 @@
 //! - [`fisher`]: identifiability of (log-)parameters from the sensitivity Jacobian of the
 //!   measured displacements and the measurement noise (Fisher information, Cramér–Rao bounds,
 //!   correlations, singular values), with tied parameters.
+//! - [`measured`]: the measured-field CSV of conventions.md.
+//! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
+//!   log-parameters with bounds, Latin-hypercube starts.
 
 pub mod fisher;
+pub mod fit;
+pub mod measured;

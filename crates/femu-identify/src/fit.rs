@@ -1,0 +1,506 @@
+//! Finite element model updating (seed §2.1.3, Eq. 2): the parameters θ that minimize
+//! `J(θ) = ½ Σ_i w_i (u_model,i(θ) - u_measured,i)²` over the measured points.
+//!
+//! The free parameters are optimized in log scale, `φ = ln θ`, within bounds; a free parameter
+//! may move several model parameters together (tied, the seed's grouping of D). The model's
+//! field at the measured points is the nodal solution interpolated by the shape functions of the
+//! element that contains each point in the reference configuration (`femu_mesh::locate`); points
+//! outside the tissue are masked and counted. The Jacobian is exact: the projection of the
+//! direct-differentiation sensitivities (`femu_mech::sensitivity`), one back-substitution per
+//! parameter with the tangent of the solve. Each forward solve starts from the last converged
+//! field (warm start).
+//!
+//! [`levenberg_marquardt`] minimizes with Marquardt's diagonal scaling and bound projection;
+//! failed forward solves (Newton diverging at extreme parameters) are rejected steps, not
+//! failures. [`latin_hypercube`] draws the starts of the seed's multi-start.
+
+use crate::measured::MeasuredField;
+use femu_mech::sensitivity::{DirectSensitivity, Parameter};
+use femu_mech::{Model, SolverOptions, StaticSolver};
+use femu_mesh::locate::{PointLocation, PointLocator};
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+use std::time::Instant;
+
+/// A free parameter: the model parameters it moves together, and its bounds (model units).
+#[derive(Debug, Clone, Serialize)]
+pub struct FreeParameter {
+    pub name: String,
+    pub members: Vec<Parameter>,
+    pub lower: f64,
+    pub upper: f64,
+}
+
+/// Why an identification cannot run or stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    #[error("no measured point lies in the tissue of the model ({masked} points masked)")]
+    NoData { masked: usize },
+    #[error("{data} measured components for {free} free parameters: not enough data")]
+    TooFewData { data: usize, free: usize },
+    #[error(
+        "free parameter {name}: bounds [{lower}, {upper}] must be positive with lower < upper"
+    )]
+    BadBounds {
+        name: String,
+        lower: f64,
+        upper: f64,
+    },
+    #[error("free parameter {name}: the start {start} is outside its bounds [{lower}, {upper}]")]
+    StartOutside {
+        name: String,
+        start: f64,
+        lower: f64,
+        upper: f64,
+    },
+    #[error("the forward solve failed: {0}")]
+    Solve(String),
+    #[error("sensitivities: {0}")]
+    Sensitivity(String),
+    #[error("the Jacobian is singular: parameter {name} does not change the measured field (column norm {norm:.3e}); fix it or tie it")]
+    Unidentifiable { name: String, norm: f64 },
+}
+
+/// The model, its solver and the measurement, ready for repeated evaluations.
+pub struct Problem {
+    model: Model,
+    solver: StaticSolver,
+    sensitivity: DirectSensitivity,
+    free: Vec<FreeParameter>,
+    /// Located measured points, their measured components and `√w`.
+    locations: Vec<PointLocation>,
+    measured: Vec<f64>,
+    sqrt_w: Vec<f64>,
+    masked: usize,
+    warm: Option<Vec<f64>>,
+    dstate: Vec<Vec<f64>>,
+    /// Forward solves and sensitivity evaluations so far.
+    pub forward_solves: usize,
+    pub jacobians: usize,
+}
+
+impl Problem {
+    /// Sets up the problem: locates the measured points in the reference mesh and checks the
+    /// free parameters. Contact is converged to 1e-8 of the element size (instead of 1e-3) so
+    /// that the model field is a smooth function of the parameters.
+    pub fn new(
+        mut model: Model,
+        options: SolverOptions,
+        field: &MeasuredField,
+        free: Vec<FreeParameter>,
+    ) -> Result<Problem, FitError> {
+        for f in &free {
+            if !(f.lower > 0.0 && f.upper > f.lower && f.upper.is_finite()) {
+                return Err(FitError::BadBounds {
+                    name: f.name.clone(),
+                    lower: f.lower,
+                    upper: f.upper,
+                });
+            }
+        }
+        for c in &mut model.contacts {
+            c.penetration_tolerance = c.penetration_tolerance.min(1e-8);
+        }
+        let locator = PointLocator::new(&model.mesh);
+        let mut locations = Vec::new();
+        let mut measured = Vec::new();
+        let mut sqrt_w = Vec::new();
+        let mut masked = 0;
+        for p in &field.points {
+            match locator.locate(p.x) {
+                Some(loc) => {
+                    locations.push(loc);
+                    measured.extend_from_slice(&p.u);
+                    sqrt_w.extend(p.weight.iter().map(|w| w.sqrt()));
+                }
+                None => masked += 1,
+            }
+        }
+        if locations.is_empty() {
+            return Err(FitError::NoData { masked });
+        }
+        let data = sqrt_w.iter().filter(|w| **w > 0.0).count();
+        if data < free.len() {
+            return Err(FitError::TooFewData {
+                data,
+                free: free.len(),
+            });
+        }
+        let solver =
+            StaticSolver::new(&model, options).map_err(|e| FitError::Solve(e.to_string()))?;
+        Ok(Problem {
+            model,
+            solver,
+            sensitivity: DirectSensitivity::new(),
+            free,
+            locations,
+            measured,
+            sqrt_w,
+            masked,
+            warm: None,
+            dstate: Vec::new(),
+            forward_solves: 0,
+            jacobians: 0,
+        })
+    }
+
+    /// Measured points inside the tissue, and masked ones.
+    pub fn points(&self) -> (usize, usize) {
+        (self.locations.len(), self.masked)
+    }
+
+    pub fn free(&self) -> &[FreeParameter] {
+        &self.free
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// Sets the model parameters from the log-parameters `phi`.
+    fn set(&mut self, phi: &[f64]) {
+        for (f, &p) in self.free.iter().zip(phi) {
+            for m in &f.members {
+                m.set(&mut self.model, p.exp());
+            }
+        }
+    }
+
+    /// The model field at the measured points for the last solve.
+    fn project(&self, u: &[f64], out: &mut Vec<f64>) {
+        out.clear();
+        for loc in &self.locations {
+            out.push(loc.interpolate(u, 2, 0));
+            out.push(loc.interpolate(u, 2, 1));
+        }
+    }
+
+    /// Weighted residuals `√w (u_model - u_measured)` at `phi` and, if asked, the Jacobian
+    /// columns `∂r/∂φ_k`.
+    pub fn evaluate(
+        &mut self,
+        phi: &[f64],
+        jacobian: bool,
+    ) -> Result<(Vec<f64>, Option<Vec<Vec<f64>>>), FitError> {
+        self.set(phi);
+        self.forward_solves += 1;
+        let sol = self
+            .solver
+            .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
+            .map_err(|e| FitError::Solve(e.to_string()))?;
+        let mut r = Vec::with_capacity(self.measured.len());
+        self.project(&sol.u, &mut r);
+        for ((ri, m), w) in r.iter_mut().zip(&self.measured).zip(&self.sqrt_w) {
+            *ri = w * (*ri - m);
+        }
+        let jac = if jacobian {
+            self.jacobians += 1;
+            let members: Vec<Parameter> = self
+                .free
+                .iter()
+                .flat_map(|f| f.members.iter().copied())
+                .collect();
+            self.sensitivity
+                .compute(
+                    &mut self.solver,
+                    &self.model,
+                    &sol.state,
+                    &members,
+                    &mut self.dstate,
+                )
+                .map_err(|e| FitError::Sensitivity(e.to_string()))?;
+            let mut cols = Vec::with_capacity(self.free.len());
+            let mut k = 0;
+            let mut col = Vec::new();
+            for f in &self.free {
+                let mut sum = vec![0.0; r.len()];
+                for m in &f.members {
+                    let theta = m.value(&self.model);
+                    self.project(&self.dstate[k], &mut col);
+                    for ((s, c), w) in sum.iter_mut().zip(&col).zip(&self.sqrt_w) {
+                        *s += w * theta * c;
+                    }
+                    k += 1;
+                }
+                cols.push(sum);
+            }
+            Some(cols)
+        } else {
+            None
+        };
+        self.warm = Some(sol.state);
+        Ok((r, jac))
+    }
+
+    /// The model field `[ux, uy, ...]` at the located measured points for `theta` (model
+    /// units, one per free parameter), and the masked count: a virtual measurement.
+    pub fn field_at(&mut self, theta: &[f64]) -> Result<Vec<f64>, FitError> {
+        let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
+        self.set(&phi);
+        let sol = self
+            .solver
+            .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
+            .map_err(|e| FitError::Solve(e.to_string()))?;
+        let mut out = Vec::new();
+        self.project(&sol.u, &mut out);
+        self.warm = Some(sol.state);
+        Ok(out)
+    }
+}
+
+/// Options of [`levenberg_marquardt`].
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct LmOptions {
+    pub max_iterations: usize,
+    /// Stop when the largest log-parameter step is below this (relative parameter change).
+    pub step_tolerance: f64,
+    /// Stop when the cost decreases by less than this fraction in an accepted step.
+    pub cost_tolerance: f64,
+    /// Initial damping, relative to the diagonal of JᵀJ.
+    pub initial_damping: f64,
+}
+
+impl Default for LmOptions {
+    fn default() -> Self {
+        LmOptions {
+            max_iterations: 60,
+            step_tolerance: 1e-8,
+            cost_tolerance: 1e-14,
+            initial_damping: 1e-3,
+        }
+    }
+}
+
+/// One accepted or rejected step.
+#[derive(Debug, Clone, Serialize)]
+pub struct LmStep {
+    pub iteration: usize,
+    pub cost: f64,
+    pub damping: f64,
+    pub accepted: bool,
+    pub max_step: f64,
+    /// Why a step was rejected when its forward solve failed.
+    pub failure: Option<String>,
+}
+
+/// The result of one minimization.
+#[derive(Debug, Clone, Serialize)]
+pub struct FitResult {
+    /// Identified free parameters (model units).
+    pub theta: Vec<f64>,
+    pub start: Vec<f64>,
+    /// `½ Σ r²` at the optimum.
+    pub cost: f64,
+    pub iterations: usize,
+    pub forward_solves: usize,
+    pub jacobians: usize,
+    pub converged: bool,
+    pub reason: String,
+    pub history: Vec<LmStep>,
+    pub wall_time_s: f64,
+    /// Jacobian columns at the optimum (for confidence intervals).
+    #[serde(skip)]
+    pub jacobian: Vec<Vec<f64>>,
+    /// Number of residual components.
+    pub data: usize,
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// Minimizes the cost of `problem` from `start` (model units, one per free parameter).
+pub fn levenberg_marquardt(
+    problem: &mut Problem,
+    start: &[f64],
+    opts: &LmOptions,
+) -> Result<FitResult, FitError> {
+    let t0 = Instant::now();
+    let n = problem.free.len();
+    for (f, &s) in problem.free.iter().zip(start) {
+        if !(s >= f.lower && s <= f.upper) {
+            return Err(FitError::StartOutside {
+                name: f.name.clone(),
+                start: s,
+                lower: f.lower,
+                upper: f.upper,
+            });
+        }
+    }
+    let lo: Vec<f64> = problem.free.iter().map(|f| f.lower.ln()).collect();
+    let hi: Vec<f64> = problem.free.iter().map(|f| f.upper.ln()).collect();
+    let solves0 = problem.forward_solves;
+    let jac0 = problem.jacobians;
+    let mut phi: Vec<f64> = start.iter().map(|s| s.ln()).collect();
+    let (mut r, j) = problem.evaluate(&phi, true)?;
+    let mut j = j.expect("asked");
+    let mut cost = 0.5 * dot(&r, &r);
+    let mut lambda = opts.initial_damping;
+    let mut history = Vec::new();
+    let mut converged = false;
+    let mut reason = format!("{} iterations", opts.max_iterations);
+    let mut iterations = 0;
+    for it in 1..=opts.max_iterations {
+        iterations = it;
+        // Normal equations A = JᵀJ, g = Jᵀr.
+        let a: Vec<Vec<f64>> = (0..n)
+            .map(|p| (0..n).map(|q| dot(&j[p], &j[q])).collect())
+            .collect();
+        let g: Vec<f64> = (0..n).map(|p| dot(&j[p], &r)).collect();
+        if let Some(p) = (0..n).find(|&p| !(a[p][p] > 0.0)) {
+            return Err(FitError::Unidentifiable {
+                name: problem.free[p].name.clone(),
+                norm: a[p][p].max(0.0).sqrt(),
+            });
+        }
+        let m = faer::Mat::<f64>::from_fn(n, n, |p, q| {
+            a[p][q] + if p == q { lambda * a[p][p] } else { 0.0 }
+        });
+        let rhs = faer::Mat::<f64>::from_fn(n, 1, |p, _| -g[p]);
+        let delta = {
+            use faer::linalg::solvers::Solve;
+            m.partial_piv_lu().solve(&rhs)
+        };
+        let mut trial = phi.clone();
+        for p in 0..n {
+            trial[p] = (phi[p] + delta[(p, 0)]).clamp(lo[p], hi[p]);
+        }
+        let max_step = (0..n)
+            .map(|p| (trial[p] - phi[p]).abs())
+            .fold(0.0f64, f64::max);
+        if !max_step.is_finite() {
+            return Err(FitError::Unidentifiable {
+                name: problem.free[0].name.clone(),
+                norm: f64::NAN,
+            });
+        }
+        if max_step < opts.step_tolerance {
+            converged = true;
+            reason = format!("step below {:.0e}", opts.step_tolerance);
+            history.push(LmStep {
+                iteration: it,
+                cost,
+                damping: lambda,
+                accepted: false,
+                max_step,
+                failure: None,
+            });
+            break;
+        }
+        match problem.evaluate(&trial, true) {
+            Ok((rt, jt)) => {
+                let ct = 0.5 * dot(&rt, &rt);
+                let accepted = ct < cost;
+                history.push(LmStep {
+                    iteration: it,
+                    cost: ct,
+                    damping: lambda,
+                    accepted,
+                    max_step,
+                    failure: None,
+                });
+                if accepted {
+                    let decrease = (cost - ct) / cost.max(f64::MIN_POSITIVE);
+                    phi = trial;
+                    r = rt;
+                    j = jt.expect("asked");
+                    cost = ct;
+                    lambda = (lambda / 3.0).max(1e-12);
+                    if decrease < opts.cost_tolerance || cost == 0.0 {
+                        converged = true;
+                        reason = "cost stationary".into();
+                        break;
+                    }
+                } else {
+                    lambda *= 4.0;
+                }
+            }
+            Err(FitError::Solve(why)) => {
+                history.push(LmStep {
+                    iteration: it,
+                    cost: f64::NAN,
+                    damping: lambda,
+                    accepted: false,
+                    max_step,
+                    failure: Some(why),
+                });
+                lambda *= 10.0;
+            }
+            Err(e) => return Err(e),
+        }
+        if lambda > 1e12 {
+            reason = "damping too large (no descent)".into();
+            break;
+        }
+    }
+    // The problem's state is that of the last evaluation, which may be a rejected trial:
+    // the Jacobian returned is the one at `phi`.
+    Ok(FitResult {
+        theta: phi.iter().map(|p| p.exp()).collect(),
+        start: start.to_vec(),
+        cost,
+        iterations,
+        forward_solves: problem.forward_solves - solves0,
+        jacobians: problem.jacobians - jac0,
+        converged,
+        reason,
+        history,
+        wall_time_s: t0.elapsed().as_secs_f64(),
+        data: r.len(),
+        jacobian: j,
+    })
+}
+
+/// `n` Latin-hypercube starts in the log-bounds of `free` (each parameter's range cut into `n`
+/// strata, one start per stratum, strata shuffled independently per parameter), seeded.
+pub fn latin_hypercube(free: &[FreeParameter], n: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut starts = vec![vec![0.0; free.len()]; n];
+    for (k, f) in free.iter().enumerate() {
+        let (lo, hi) = (f.lower.ln(), f.upper.ln());
+        let mut strata: Vec<usize> = (0..n).collect();
+        for i in (1..n).rev() {
+            let j = rng.gen_range(0..=i);
+            strata.swap(i, j);
+        }
+        for (s, start) in strata.iter().zip(starts.iter_mut()) {
+            let u = (*s as f64 + rng.gen_range(0.0..1.0)) / n as f64;
+            start[k] = (lo + u * (hi - lo)).exp();
+        }
+    }
+    starts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use femu_mech::sensitivity::ParameterKind;
+
+    #[test]
+    fn latin_hypercube_fills_every_stratum() {
+        let free: Vec<FreeParameter> = (0..3)
+            .map(|k| FreeParameter {
+                name: format!("P{k}"),
+                members: vec![Parameter {
+                    material: k,
+                    kind: ParameterKind::C10,
+                }],
+                lower: 1e-4,
+                upper: 1e-2,
+            })
+            .collect();
+        let s = latin_hypercube(&free, 5, 3);
+        assert_eq!(s.len(), 5);
+        for k in 0..3 {
+            let mut strata: Vec<usize> = s
+                .iter()
+                .map(|x| {
+                    ((x[k].ln() - 1e-4f64.ln()) / (1e-2f64.ln() - 1e-4f64.ln()) * 5.0) as usize
+                })
+                .collect();
+            strata.sort_unstable();
+            assert_eq!(strata, vec![0, 1, 2, 3, 4]);
+        }
+        assert_eq!(s, latin_hypercube(&free, 5, 3));
+    }
+}

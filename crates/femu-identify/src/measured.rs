@@ -1,0 +1,228 @@
+//! The measured displacement field (conventions.md): what DIC writes and the identification
+//! reads.
+//!
+//! ```text
+//! # optional comment lines: source, units, pixel size, frame
+//! x,y,ux,uy[,sx,sy][,w]
+//! ```
+//!
+//! `x,y` reference coordinates in the model frame (mm), `ux,uy` the measured displacement (mm),
+//! optional standard deviations `sx,sy` (mm) or a weight `w`. A non-finite or non-numeric cell is
+//! an error naming its line.
+
+use std::io::Write;
+use std::path::Path;
+
+/// One measured point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeasuredPoint {
+    pub x: [f64; 2],
+    pub u: [f64; 2],
+    /// Weight of each component in the least squares: `1/sx², 1/sy²`, or `w, w`, or `1, 1`.
+    pub weight: [f64; 2],
+}
+
+/// A measured field.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct MeasuredField {
+    pub points: Vec<MeasuredPoint>,
+    /// Comment lines (without `#`).
+    pub comments: Vec<String>,
+}
+
+/// Why a measured-field file cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum MeasuredError {
+    #[error("{path}: cannot read: {message}")]
+    Io { path: String, message: String },
+    #[error("{path}:{line}: {message}")]
+    Bad {
+        path: String,
+        line: usize,
+        message: String,
+    },
+    #[error("{path}: no data row")]
+    Empty { path: String },
+}
+
+impl MeasuredField {
+    /// Reads a measured-field CSV.
+    pub fn read(path: &Path) -> Result<MeasuredField, MeasuredError> {
+        let text = std::fs::read_to_string(path).map_err(|e| MeasuredError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Self::parse(&text, &path.display().to_string())
+    }
+
+    /// Parses the text of a measured-field CSV (`name` is used in messages).
+    pub fn parse(text: &str, name: &str) -> Result<MeasuredField, MeasuredError> {
+        let bad = |line: usize, message: String| MeasuredError::Bad {
+            path: name.to_string(),
+            line,
+            message,
+        };
+        let mut field = MeasuredField::default();
+        let mut columns: Option<Vec<String>> = None;
+        let mut idx = [usize::MAX; 7];
+        for (k, raw) in text.lines().enumerate() {
+            let line = k + 1;
+            let t = raw.trim();
+            if t.is_empty() {
+                continue;
+            }
+            if let Some(c) = t.strip_prefix('#') {
+                field.comments.push(c.trim().to_string());
+                continue;
+            }
+            let cells: Vec<&str> = t.split(',').map(str::trim).collect();
+            let Some(cols) = &columns else {
+                let names: Vec<String> = cells.iter().map(|c| c.to_ascii_lowercase()).collect();
+                for (slot, want) in ["x", "y", "ux", "uy", "sx", "sy", "w"].iter().enumerate() {
+                    if let Some(p) = names.iter().position(|n| n == want) {
+                        idx[slot] = p;
+                    }
+                }
+                if idx[..4].contains(&usize::MAX) {
+                    return Err(bad(
+                        line,
+                        format!("the header must name x,y,ux,uy (got '{t}')"),
+                    ));
+                }
+                if (idx[4] == usize::MAX) != (idx[5] == usize::MAX) {
+                    return Err(bad(line, "sx and sy go together".into()));
+                }
+                if idx[4] != usize::MAX && idx[6] != usize::MAX {
+                    return Err(bad(line, "give sx,sy or w, not both".into()));
+                }
+                if let Some(u) = names
+                    .iter()
+                    .find(|n| !["x", "y", "ux", "uy", "sx", "sy", "w"].contains(&n.as_str()))
+                {
+                    return Err(bad(line, format!("unknown column '{u}'")));
+                }
+                columns = Some(names);
+                continue;
+            };
+            if cells.len() != cols.len() {
+                return Err(bad(
+                    line,
+                    format!("{} cells, the header has {}", cells.len(), cols.len()),
+                ));
+            }
+            let get = |slot: usize| -> Result<f64, MeasuredError> {
+                let cell = cells[idx[slot]];
+                let v: f64 = cell.parse().map_err(|_| {
+                    bad(
+                        line,
+                        format!("column {}: '{cell}' is not a number", cols[idx[slot]]),
+                    )
+                })?;
+                if !v.is_finite() {
+                    return Err(bad(
+                        line,
+                        format!("column {}: {cell} is not finite", cols[idx[slot]]),
+                    ));
+                }
+                Ok(v)
+            };
+            let weight = if idx[4] != usize::MAX {
+                let (sx, sy) = (get(4)?, get(5)?);
+                if !(sx > 0.0 && sy > 0.0) {
+                    return Err(bad(
+                        line,
+                        format!("sx, sy must be positive, got {sx}, {sy}"),
+                    ));
+                }
+                [1.0 / (sx * sx), 1.0 / (sy * sy)]
+            } else if idx[6] != usize::MAX {
+                let w = get(6)?;
+                if !(w >= 0.0) {
+                    return Err(bad(line, format!("w must be non-negative, got {w}")));
+                }
+                [w, w]
+            } else {
+                [1.0, 1.0]
+            };
+            field.points.push(MeasuredPoint {
+                x: [get(0)?, get(1)?],
+                u: [get(2)?, get(3)?],
+                weight,
+            });
+        }
+        if field.points.is_empty() {
+            return Err(MeasuredError::Empty {
+                path: name.to_string(),
+            });
+        }
+        Ok(field)
+    }
+
+    /// Writes the field as `x,y,ux,uy` (and `sx,sy` when every weight is `1/s²` of a common
+    /// `sigma`, given here), full precision, with the comment lines.
+    pub fn write(&self, path: &Path, sigma: Option<f64>) -> std::io::Result<()> {
+        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        for c in &self.comments {
+            writeln!(w, "# {c}")?;
+        }
+        match sigma {
+            Some(_) => writeln!(w, "x,y,ux,uy,sx,sy")?,
+            None => writeln!(w, "x,y,ux,uy")?,
+        }
+        for p in &self.points {
+            write!(
+                w,
+                "{:.12e},{:.12e},{:.12e},{:.12e}",
+                p.x[0], p.x[1], p.u[0], p.u[1]
+            )?;
+            if let Some(s) = sigma {
+                write!(w, ",{s:.6e},{s:.6e}")?;
+            }
+            writeln!(w)?;
+        }
+        w.flush()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_weights_and_names_bad_lines() {
+        let f = MeasuredField::parse("# DIC\nx,y,ux,uy,sx,sy\n1,2,0.1,0.2,0.5,0.25\n", "m.csv")
+            .unwrap();
+        assert_eq!(f.points[0].weight, [4.0, 16.0]);
+        assert_eq!(f.comments, vec!["DIC".to_string()]);
+        let f = MeasuredField::parse("x,y,ux,uy,w\n1,2,0.1,0.2,3\n", "m.csv").unwrap();
+        assert_eq!(f.points[0].weight, [3.0, 3.0]);
+        let err = |t: &str| MeasuredField::parse(t, "m.csv").unwrap_err().to_string();
+        assert!(err("x,y,ux,uy\n1,2,3,4\n1,2,NaN,4\n").contains("m.csv:3"));
+        assert!(err("x,y,ux,uy\n1,2,3,abc\n").contains("'abc' is not a number"));
+        assert!(err("x,y,ux\n").contains("x,y,ux,uy"));
+        assert!(err("x,y,ux,uy\n1,2,3\n").contains("m.csv:2"));
+        assert!(err("x,y,ux,uy\n").contains("no data"));
+        assert!(err("x,y,ux,uy,q\n").contains("unknown column 'q'"));
+    }
+
+    #[test]
+    fn round_trip() {
+        let dir = std::env::temp_dir().join(format!("femu-measured-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let f = MeasuredField {
+            points: vec![MeasuredPoint {
+                x: [1.5, -2.0],
+                u: [1e-3, -0.25],
+                weight: [1.0, 1.0],
+            }],
+            comments: vec!["synthetic".into()],
+        };
+        let p = dir.join("m.csv");
+        f.write(&p, Some(0.5)).unwrap();
+        let g = MeasuredField::read(&p).unwrap();
+        assert_eq!(g.points[0].x, f.points[0].x);
+        assert_eq!(g.points[0].u, f.points[0].u);
+        assert_eq!(g.points[0].weight, [4.0, 4.0]);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
