@@ -22,6 +22,9 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 use std::time::Instant;
 
+/// Jacobian columns, one per free parameter.
+pub type Columns = Vec<Vec<f64>>;
+
 /// A free parameter: the model parameters it moves together, and its bounds (model units).
 #[derive(Debug, Clone, Serialize)]
 pub struct FreeParameter {
@@ -181,7 +184,7 @@ impl Problem {
         &mut self,
         phi: &[f64],
         jacobian: bool,
-    ) -> Result<(Vec<f64>, Option<Vec<Vec<f64>>>), FitError> {
+    ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
         self.set(phi);
         self.forward_solves += 1;
         let sol = self
