@@ -6,6 +6,7 @@
 mod bench;
 mod convergence_cmd;
 mod figures;
+mod identify_cmd;
 mod mesh_cmd;
 mod plan;
 mod run;
@@ -128,6 +129,39 @@ enum Command {
         #[arg(long)]
         no_figures: bool,
     },
+    /// The virtual experiment (seed §2.4.1): solve the study's identification test with the
+    /// reference parameters, project the field on the grid, add seeded Gaussian noise; writes
+    /// measured.csv.
+    Synth {
+        /// Study file (TOML; see README). Without it: built-in thigh, Table 1, compression.
+        study: Option<PathBuf>,
+        #[arg(long, default_value = "out/synth")]
+        out: PathBuf,
+        /// Target number of elements of the built-in thigh (overrides the study).
+        #[arg(long)]
+        elements: Option<usize>,
+    },
+    /// Identify C10 and D of the tissues from a measured field (FEMU): Levenberg–Marquardt with
+    /// the exact Jacobian from Latin-hypercube starts; a virtual experiment when no --measured
+    /// field is given (with --repeat noise realizations: the seed's Fig. 9 with error bars).
+    Identify {
+        /// Study file (TOML; see README).
+        study: Option<PathBuf>,
+        #[arg(long, default_value = "out/identify")]
+        out: PathBuf,
+        /// Measured field (CSV x,y,ux,uy[,sx,sy][,w] in the model frame, mm).
+        #[arg(long)]
+        measured: Option<PathBuf>,
+        /// Target number of elements of the built-in thigh (overrides the study).
+        #[arg(long)]
+        elements: Option<usize>,
+        /// Noise realizations of the virtual experiment (overrides the study).
+        #[arg(long)]
+        repeat: Option<usize>,
+        /// Latin-hypercube starts (overrides the study).
+        #[arg(long)]
+        starts: Option<usize>,
+    },
     /// Build a thigh model: `mesh thigh` (the built-in parametric thigh) or `mesh labels IMAGE`
     /// (a segmented MRI slice); writes mesh.inp, mesh.vtu, regions.png, quality.csv/json and
     /// summary.json.
@@ -198,6 +232,39 @@ fn main() -> ExitCode {
             no_ccx,
         } => bench::run(&out, elements, repeat, !no_ccx, cli.quiet),
         Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
+        Command::Synth {
+            study,
+            out,
+            elements,
+        } => identify_cmd::synth(
+            &identify_cmd::IdentifyArgs {
+                study,
+                out,
+                measured: None,
+                elements,
+                repeat: None,
+                starts: None,
+            },
+            cli.quiet,
+        ),
+        Command::Identify {
+            study,
+            out,
+            measured,
+            elements,
+            repeat,
+            starts,
+        } => identify_cmd::identify(
+            &identify_cmd::IdentifyArgs {
+                study,
+                out,
+                measured,
+                elements,
+                repeat,
+                starts,
+            },
+            cli.quiet,
+        ),
         Command::Sensitivity {
             study,
             out,

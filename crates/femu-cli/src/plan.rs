@@ -35,6 +35,15 @@
 //!
 //! [parameters]
 //! groups = [["D_ISCHIO", "D_SARTORIUS", "D_GRACILIS"]]   # tied parameters (seed §2.4.2)
+//!
+//! [identification]
+//! test = "compression"         # the test whose field is measured (default: compression)
+//! fixed = []                   # parameters held at their reference value
+//! grouped = true               # tie [parameters] groups
+//! bounds_factor = 4.0          # bounds: reference / 4 .. reference x 4
+//! starts = 5                   # Latin-hypercube starts
+//! seed = 1                     # noise and starts
+//! repeat = 1                   # noise realizations (Monte Carlo)
 //! ```
 
 use anyhow::{bail, Context, Result};
@@ -55,6 +64,37 @@ struct PlanFile {
     grid: Option<GridEntry>,
     noise: Option<NoiseEntry>,
     parameters: Option<ParametersEntry>,
+    identification: Option<IdentificationEntry>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IdentificationEntry {
+    test: Option<String>,
+    #[serde(default)]
+    fixed: Vec<String>,
+    bounds_factor: Option<f64>,
+    starts: Option<usize>,
+    seed: Option<u64>,
+    repeat: Option<usize>,
+    grouped: Option<bool>,
+}
+
+/// The identification settings (`[identification]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IdentificationPlan {
+    /// Index into [`Plan::tests`] of the test whose field is measured.
+    pub test: usize,
+    /// Parameters held at their reference value (`C10_FAT`, ...).
+    pub fixed: Vec<String>,
+    /// Bounds: reference / factor .. reference x factor.
+    pub bounds_factor: f64,
+    pub starts: usize,
+    pub seed: u64,
+    /// Noise realizations (Monte Carlo).
+    pub repeat: usize,
+    /// Whether `[parameters] groups` are tied.
+    pub grouped: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -152,6 +192,7 @@ pub struct Plan {
     pub grid: GridSpec,
     pub sigma_mm: f64,
     pub groups: Vec<Vec<String>>,
+    pub identification: IdentificationPlan,
 }
 
 impl Default for Plan {
@@ -310,7 +351,65 @@ pub fn parse(text: &str) -> Result<Plan> {
         None => SEED_SIGMA_MM,
         Some(n) => positive("[noise] sigma_mm", n.sigma_mm)?,
     };
+    let identification = {
+        let e = file.identification.unwrap_or(IdentificationEntry {
+            test: None,
+            fixed: Vec::new(),
+            bounds_factor: None,
+            starts: None,
+            seed: None,
+            repeat: None,
+            grouped: None,
+        });
+        let test = match &e.test {
+            None => tests
+                .iter()
+                .position(|t| matches!(t, Loading::Compression { .. }))
+                .unwrap_or(0),
+            Some(name) => tests
+                .iter()
+                .position(|t| {
+                    t.name().eq_ignore_ascii_case(name)
+                        || t.name()
+                            .split('-')
+                            .next()
+                            .is_some_and(|k| k.eq_ignore_ascii_case(name))
+                })
+                .with_context(|| {
+                    format!(
+                        "[identification] test: no test '{name}' (tests: {})",
+                        tests
+                            .iter()
+                            .map(|t| t.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )
+                })?,
+        };
+        let bounds_factor = e.bounds_factor.unwrap_or(4.0);
+        if !(bounds_factor > 1.0 && bounds_factor.is_finite()) {
+            bail!("[identification] bounds_factor must be above 1, got {bounds_factor}");
+        }
+        let starts = e.starts.unwrap_or(5);
+        if !(1..=64).contains(&starts) {
+            bail!("[identification] starts must be in [1, 64], got {starts}");
+        }
+        let repeat = e.repeat.unwrap_or(1);
+        if !(1..=1000).contains(&repeat) {
+            bail!("[identification] repeat must be in [1, 1000], got {repeat}");
+        }
+        IdentificationPlan {
+            test,
+            fixed: e.fixed,
+            bounds_factor,
+            starts,
+            seed: e.seed.unwrap_or(1),
+            repeat,
+            grouped: e.grouped.unwrap_or(true),
+        }
+    };
     Ok(Plan {
+        identification,
         elements: model.elements,
         size_mm: model.size_mm,
         element,
