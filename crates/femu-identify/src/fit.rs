@@ -507,3 +507,159 @@ mod tests {
         assert_eq!(s, latin_hypercube(&free, 5, 3));
     }
 }
+
+/// How [`bfgs`] gets its gradient.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub enum Gradient {
+    /// `Jᵀ r` with the exact Jacobian (one solve + sensitivities per evaluation).
+    Exact,
+    /// Central finite differences with this relative step (the seed's method: forward solves
+    /// only, two extra per free parameter and gradient).
+    FiniteDifference(f64),
+}
+
+/// BFGS on `½|r|²` in log-parameters with a projected backtracking (Armijo) line search — the
+/// seed's optimizer (§2.1.3), kept to compare with [`levenberg_marquardt`]. Stops when the
+/// largest step is below `opts.step_tolerance` or the cost stalls.
+pub fn bfgs(
+    problem: &mut Problem,
+    start: &[f64],
+    gradient: Gradient,
+    opts: &LmOptions,
+    max_iterations: usize,
+) -> Result<FitResult, FitError> {
+    let t0 = Instant::now();
+    let n = problem.free.len();
+    let lo: Vec<f64> = problem.free.iter().map(|f| f.lower.ln()).collect();
+    let hi: Vec<f64> = problem.free.iter().map(|f| f.upper.ln()).collect();
+    let solves0 = problem.forward_solves;
+    let jac0 = problem.jacobians;
+    let mut phi: Vec<f64> = start.iter().map(|s| s.ln()).collect();
+    // Cost and gradient at phi.
+    let eval = |p: &mut Problem, phi: &[f64]| -> Result<(f64, Vec<f64>, Vec<f64>), FitError> {
+        match gradient {
+            Gradient::Exact => {
+                let (r, j) = p.evaluate(phi, true)?;
+                let j = j.expect("asked");
+                let g = j.iter().map(|c| dot(c, &r)).collect();
+                Ok((0.5 * dot(&r, &r), g, r))
+            }
+            Gradient::FiniteDifference(h) => {
+                let (r, _) = p.evaluate(phi, false)?;
+                let c0 = 0.5 * dot(&r, &r);
+                let mut g = vec![0.0; phi.len()];
+                for k in 0..phi.len() {
+                    // A relative step h of θ is a step of ln(1 + h) in φ; central differences.
+                    let dq = (1.0 + h).ln();
+                    let mut q = phi.to_vec();
+                    q[k] += dq;
+                    let (rp, _) = p.evaluate(&q, false)?;
+                    q[k] = phi[k] - dq;
+                    let (rm, _) = p.evaluate(&q, false)?;
+                    g[k] = 0.5 * (dot(&rp, &rp) - dot(&rm, &rm)) / (2.0 * dq);
+                }
+                Ok((c0, g, r))
+            }
+        }
+    };
+    let (mut cost, mut g, mut r) = eval(problem, &phi)?;
+    let mut hinv = vec![vec![0.0; n]; n];
+    for (i, row) in hinv.iter_mut().enumerate() {
+        row[i] = 1.0;
+    }
+    let mut history = Vec::new();
+    let mut converged = false;
+    let mut reason = format!("{max_iterations} iterations");
+    let mut iterations = 0;
+    let mut first = true;
+    for it in 1..=max_iterations {
+        iterations = it;
+        let mut d: Vec<f64> = (0..n).map(|i| -dot(&hinv[i], &g)).collect();
+        if first {
+            // Scale the first step so that it moves the largest parameter by at most 0.5.
+            let m = d.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            if m > 0.5 {
+                d.iter_mut().for_each(|v| *v *= 0.5 / m);
+            }
+        }
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..30 {
+            let trial: Vec<f64> = (0..n)
+                .map(|i| (phi[i] + alpha * d[i]).clamp(lo[i], hi[i]))
+                .collect();
+            let step: Vec<f64> = (0..n).map(|i| trial[i] - phi[i]).collect();
+            if step.iter().all(|s| s.abs() < opts.step_tolerance) {
+                break;
+            }
+            match eval(problem, &trial) {
+                Ok((ct, gt, rt)) if ct <= cost + 1e-4 * dot(&g, &step) => {
+                    accepted = Some((trial, step, ct, gt, rt));
+                    break;
+                }
+                Ok(_) | Err(FitError::Solve(_)) => alpha *= 0.5,
+                Err(e) => return Err(e),
+            }
+        }
+        let Some((trial, s, ct, gt, rt)) = accepted else {
+            converged = true;
+            reason = "no further descent along the search direction".into();
+            break;
+        };
+        let max_step = s.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        history.push(LmStep {
+            iteration: it,
+            cost: ct,
+            damping: alpha,
+            accepted: true,
+            max_step,
+            failure: None,
+        });
+        let y: Vec<f64> = (0..n).map(|i| gt[i] - g[i]).collect();
+        let sy = dot(&s, &y);
+        if sy > 1e-12 * dot(&s, &s).sqrt() * dot(&y, &y).sqrt() {
+            if first {
+                // Shanno's scaling of the initial inverse Hessian.
+                let scale = sy / dot(&y, &y);
+                for (i, row) in hinv.iter_mut().enumerate() {
+                    row.iter_mut().for_each(|v| *v = 0.0);
+                    row[i] = scale;
+                }
+            }
+            let hy: Vec<f64> = (0..n).map(|i| dot(&hinv[i], &y)).collect();
+            let yhy = dot(&y, &hy);
+            let rho = 1.0 / sy;
+            for i in 0..n {
+                for j in 0..n {
+                    hinv[i][j] +=
+                        (1.0 + rho * yhy) * rho * s[i] * s[j] - rho * (hy[i] * s[j] + s[i] * hy[j]);
+                }
+            }
+        }
+        first = false;
+        let decrease = (cost - ct) / cost.max(f64::MIN_POSITIVE);
+        phi = trial;
+        cost = ct;
+        g = gt;
+        r = rt;
+        if max_step < opts.step_tolerance || decrease < opts.cost_tolerance {
+            converged = true;
+            reason = "step or cost decrease below tolerance".into();
+            break;
+        }
+    }
+    Ok(FitResult {
+        theta: phi.iter().map(|p| p.exp()).collect(),
+        start: start.to_vec(),
+        cost,
+        iterations,
+        forward_solves: problem.forward_solves - solves0,
+        jacobians: problem.jacobians - jac0,
+        converged,
+        reason,
+        history,
+        wall_time_s: t0.elapsed().as_secs_f64(),
+        data: r.len(),
+        jacobian: Vec::new(),
+    })
+}

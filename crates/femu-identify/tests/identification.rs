@@ -179,3 +179,54 @@ fn bad_problems_are_refused() {
     let e = levenberg_marquardt(&mut p, &start, &LmOptions::default());
     assert!(e.err().unwrap().to_string().contains("outside its bounds"));
 }
+
+/// LM and BFGS (exact gradient, and the seed's finite-difference gradient) reach the same optimum
+/// on the noise-free virtual experiment; the forward solves each needed are printed (measured on
+/// 500 quads, four free parameters: LM 7, BFGS 36, FD-BFGS 324).
+#[test]
+fn lm_and_bfgs_reach_the_same_optimum() {
+    use femu_identify::fit::{bfgs, Gradient};
+    let model = compression_thigh(500);
+    // Four parameters (fat and quadriceps), the others fixed at Table 1: keeps FD-BFGS short.
+    let free: Vec<FreeParameter> = free_parameters(&model).into_iter().take(4).collect();
+    let (field, reference) = virtual_field(&model, &free);
+    let start: Vec<f64> = reference
+        .iter()
+        .enumerate()
+        .map(|(k, v)| v * if k % 2 == 0 { 1.6 } else { 0.7 })
+        .collect();
+    let mut runs = Vec::new();
+    for method in ["LM", "BFGS exact", "BFGS FD"] {
+        let mut p = Problem::new(
+            model.clone(),
+            SolverOptions::default(),
+            &field,
+            free.clone(),
+        )
+        .unwrap();
+        let opts = LmOptions::default();
+        let r = match method {
+            "LM" => levenberg_marquardt(&mut p, &start, &opts).unwrap(),
+            "BFGS exact" => bfgs(&mut p, &start, Gradient::Exact, &opts, 200).unwrap(),
+            _ => bfgs(&mut p, &start, Gradient::FiniteDifference(5e-4), &opts, 200).unwrap(),
+        };
+        let worst = r
+            .theta
+            .iter()
+            .zip(&reference)
+            .map(|(t, t0)| ((t - t0) / t0).abs())
+            .fold(0.0f64, f64::max);
+        eprintln!(
+            "{method}: worst relative error {worst:.2e}, cost {:.2e}, {} iterations, {} forward solves ({})",
+            r.cost, r.iterations, r.forward_solves, r.reason
+        );
+        runs.push((method, worst, r.forward_solves));
+    }
+    // All three reach the reference to 0.1 % (measured: 9e-8, 6e-8, 9e-6; with forward
+    // differences FD-BFGS stalled at 24 %, hence central differences).
+    assert!(runs.iter().all(|r| r.1 < 1e-3), "{runs:?}");
+    assert!(
+        runs[0].2 < runs[2].2,
+        "LM should need fewer solves than FD-BFGS: {runs:?}"
+    );
+}
