@@ -4,6 +4,7 @@
 //! messages and a non-zero exit code. Nothing numerical lives here.
 
 mod bench;
+mod dic_cmd;
 mod figures;
 mod mesh_cmd;
 mod run;
@@ -108,6 +109,12 @@ enum Command {
         #[command(subcommand)]
         what: mesh_cmd::MeshCommand,
     },
+    /// Global finite-element DIC (Q4) between a reference and a deformed image (PNG, TIFF,
+    /// DICOM): field.csv (mm, model frame), nodes/elements CSV, VTU, PNG maps, summary.json.
+    Dic(dic_cmd::DicArgs),
+    /// DIC random error: correlates successive images of unloaded tissue and reports the
+    /// standard deviation of ux and uy per pair (CSV, box plot).
+    DicNoise(dic_cmd::DicNoiseArgs),
 }
 
 /// The named demo tests.
@@ -160,6 +167,8 @@ fn main() -> ExitCode {
             no_ccx,
         } => bench::run(&out, elements, repeat, !no_ccx, cli.quiet),
         Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
+        Command::Dic(args) => dic_cmd::run(&args, cli.quiet),
+        Command::DicNoise(args) => dic_cmd::run_noise(&args, cli.quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

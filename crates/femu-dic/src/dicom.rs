@@ -415,69 +415,70 @@ pub fn read_dicom(path: &Path, frame: usize) -> Result<GreyImage, DicError> {
         ));
     }
     let scale = 255.0 / ((1u64 << stored.clamp(1, 16)) - 1) as f64;
-    let data: Vec<f64> =
-        match (photometric.as_str(), spp) {
-            ("MONOCHROME2", 1) => samples.iter().take(n).map(|v| v * scale).collect(),
-            ("MONOCHROME1", 1) => samples.iter().take(n).map(|v| 255.0 - v * scale).collect(),
-            ("PALETTE COLOR", 1) => {
-                let r = palette(
-                    path,
-                    &obj,
-                    tags::RED_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
-                    tags::RED_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    tags::SEGMENTED_RED_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    "red",
-                )?;
-                let g = palette(
-                    path,
-                    &obj,
-                    tags::GREEN_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
-                    tags::GREEN_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    tags::SEGMENTED_GREEN_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    "green",
-                )?;
-                let b = palette(
-                    path,
-                    &obj,
-                    tags::BLUE_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
-                    tags::BLUE_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    tags::SEGMENTED_BLUE_PALETTE_COLOR_LOOKUP_TABLE_DATA,
-                    "blue",
-                )?;
-                let look = |t: &(usize, i64, Vec<f64>), v: f64| {
-                    let k = (v as i64 - t.1).clamp(0, t.0 as i64 - 1) as usize;
-                    t.2[k]
+    let data: Vec<f64> = match (photometric.as_str(), spp) {
+        ("MONOCHROME2", 1) => samples.iter().take(n).map(|v| v * scale).collect(),
+        ("MONOCHROME1", 1) => samples.iter().take(n).map(|v| 255.0 - v * scale).collect(),
+        ("PALETTE COLOR", 1) => {
+            let r = palette(
+                path,
+                &obj,
+                tags::RED_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
+                tags::RED_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                tags::SEGMENTED_RED_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                "red",
+            )?;
+            let g = palette(
+                path,
+                &obj,
+                tags::GREEN_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
+                tags::GREEN_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                tags::SEGMENTED_GREEN_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                "green",
+            )?;
+            let b = palette(
+                path,
+                &obj,
+                tags::BLUE_PALETTE_COLOR_LOOKUP_TABLE_DESCRIPTOR,
+                tags::BLUE_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                tags::SEGMENTED_BLUE_PALETTE_COLOR_LOOKUP_TABLE_DATA,
+                "blue",
+            )?;
+            let look = |t: &(usize, i64, Vec<f64>), v: f64| {
+                let k = (v as i64 - t.1).clamp(0, t.0 as i64 - 1) as usize;
+                t.2[k]
+            };
+            samples
+                .iter()
+                .take(n)
+                .map(|&v| luma(look(&r, v), look(&g, v), look(&b, v)))
+                .collect()
+        }
+        ("RGB", 3) => (0..n)
+            .map(|k| {
+                let (r, g, b) = if planar {
+                    (samples[k], samples[n + k], samples[2 * n + k])
+                } else {
+                    (samples[3 * k], samples[3 * k + 1], samples[3 * k + 2])
                 };
-                samples
-                    .iter()
-                    .take(n)
-                    .map(|&v| luma(look(&r, v), look(&g, v), look(&b, v)))
-                    .collect()
-            }
-            ("RGB", 3) => (0..n)
-                .map(|k| {
-                    let (r, g, b) = if planar {
-                        (samples[k], samples[n + k], samples[2 * n + k])
-                    } else {
-                        (samples[3 * k], samples[3 * k + 1], samples[3 * k + 2])
-                    };
-                    luma(r, g, b) * scale
-                })
-                .collect(),
-            ("YBR_FULL", 3) => (0..n)
-                .map(|k| if planar { samples[k] } else { samples[3 * k] } * scale)
-                .collect(),
-            // Native 4:2:2: Y1 Y2 Cb Cr for each pair of pixels.
-            ("YBR_FULL_422", 3) => (0..n)
-                .map(|k| samples[4 * (k / 2) + (k % 2)] * scale)
-                .collect(),
-            (pi, s) => return Err(err(
+                luma(r, g, b) * scale
+            })
+            .collect(),
+        ("YBR_FULL", 3) => (0..n)
+            .map(|k| if planar { samples[k] } else { samples[3 * k] } * scale)
+            .collect(),
+        // Native 4:2:2: Y1 Y2 Cb Cr for each pair of pixels.
+        ("YBR_FULL_422", 3) => (0..n)
+            .map(|k| samples[4 * (k / 2) + (k % 2)] * scale)
+            .collect(),
+        (pi, s) => {
+            return Err(err(
                 path,
                 format!(
                     "photometric interpretation {pi} with {s} sample(s) per pixel is not supported"
                 ),
-            )),
-        };
+            ))
+        }
+    };
     let mut img = GreyImage::new(w, h, data).map_err(|e| err(path, e.to_string()))?;
     img.pixel_size = info.pixel_size;
     Ok(img)

@@ -51,7 +51,8 @@ use std::time::Instant;
 pub enum Brightness {
     /// None: grey levels are conserved.
     None,
-    /// One offset and one scale over the whole ROI.
+    /// One offset and one scale over the whole ROI (the default: harmless when the lighting
+    /// does not change, necessary when it does, as in DIC Challenge Sample 5).
     Global,
     /// One offset and one scale per element (ultrasound gain and attenuation vary with depth).
     PerElement,
@@ -84,7 +85,7 @@ impl Default for DicOptions {
             element_size: 16,
             tolerance: 1e-3,
             max_iterations: 100,
-            brightness: Brightness::None,
+            brightness: Brightness::Global,
             regularization_length: None,
             pyramid_levels: None,
             fft_init: true,
@@ -191,6 +192,9 @@ struct Level {
     /// Equations of each element: `2 node + component`, nodes in element order.
     dofs: Vec<[usize; 8]>,
     pattern: CscPattern,
+    /// `M` on the pattern (kept for the diagnostics and the tests).
+    #[cfg_attr(not(test), allow(dead_code))]
+    m_values: Vec<f64>,
     /// The regularization `K` on the pattern, with its weight `λ`.
     reg: Option<(Vec<f64>, f64)>,
     chol: Cholesky,
@@ -376,7 +380,7 @@ impl Level {
             }
         };
         let a_values: Vec<f64> = match &reg {
-            None => m_values,
+            None => m_values.clone(),
             Some((kv, lambda)) => m_values
                 .iter()
                 .zip(kv)
@@ -402,6 +406,7 @@ impl Level {
             fy,
             dofs,
             pattern,
+            m_values,
             reg,
             chol,
             f_stats,
@@ -847,4 +852,191 @@ pub fn correlate(
         image_size: (width, height),
         mesh: level.mesh,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lab::{self, Speckle};
+    use crate::mesh::Rect;
+
+    /// A small speckle level: 64 x 64 image, ROI 16..48, 8 px elements (16 nodes x 2).
+    fn small() -> (GreyImage, Level) {
+        let s = Speckle::new(64, 64, 1.5, 5);
+        let f = s.reference();
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 32,
+            h: 32,
+        });
+        let level = Level::new(&f, &roi, 8, None).unwrap();
+        (f, level)
+    }
+
+    /// Residual vector `f − g(x + u)` (no brightness correction) at nodal values `a`.
+    fn residuals(level: &mut Level, g: &BSpline, a: &[f64]) -> Vec<f64> {
+        level.warp(g, a);
+        level.f.iter().zip(&level.gw).map(|(f, g)| f - g).collect()
+    }
+
+    /// `M` (eq. 2) equals `JᵀJ` with `J = ∂r/∂a` by central finite differences at `u = 0`
+    /// when the deformed image is the reference (there `∇g = ∇f` exactly). Step 1e-4 px:
+    /// truncation O(ε²) ~ 1e-8 relative, well below the 1e-5 tolerance.
+    #[test]
+    fn hessian_matches_finite_difference_jacobian() {
+        let (f, mut level) = small();
+        let g = BSpline::new(&f.data, f.width, f.height);
+        let n = 2 * level.mesh.n_nodes();
+        let eps = 1e-4;
+        let jac: Vec<Vec<f64>> = (0..n)
+            .map(|q| {
+                let mut a = vec![0.0; n];
+                a[q] = eps;
+                let rp = residuals(&mut level, &g, &a);
+                a[q] = -eps;
+                let rm = residuals(&mut level, &g, &a);
+                rp.iter()
+                    .zip(&rm)
+                    .map(|(p, m)| (p - m) / (2.0 * eps))
+                    .collect()
+            })
+            .collect();
+        let scale = level.m_values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for p in 0..n {
+            for q in 0..n {
+                let jtj: f64 = jac[p].iter().zip(&jac[q]).map(|(a, b)| a * b).sum();
+                let m = level
+                    .pattern
+                    .position(p, q)
+                    .map_or(0.0, |k| level.m_values[k]);
+                assert!(
+                    (m - jtj).abs() < 1e-5 * scale,
+                    "M[{p},{q}] = {m}, JᵀJ = {jtj}"
+                );
+            }
+        }
+    }
+
+    /// The gradient of the cost (1), `∂Φ/∂a_i = −2 Σ r N_i ∇g(x + u)`, against central finite
+    /// differences of Φ at a non-trivial field on a translated pair; and the modified
+    /// Gauss–Newton right-hand side `b` (eq. 2) equals `−½ ∂Φ/∂a` up to the replacement of
+    /// `∇g(x + u)` by `∇f(x)`, i.e. exactly at the solution of a pure translation.
+    #[test]
+    fn cost_gradient_matches_finite_differences() {
+        let s = Speckle::new(64, 64, 1.5, 5);
+        let f = s.reference();
+        let gi = s.deformed(&lab::translation(0.3, -0.2));
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 32,
+            h: 32,
+        });
+        let mut level = Level::new(&f, &roi, 8, None).unwrap();
+        let g = BSpline::new(&gi.data, gi.width, gi.height);
+        let n = 2 * level.mesh.n_nodes();
+        let a0: Vec<f64> = (0..n)
+            .map(|q| 0.1 * ((q * 7 % 5) as f64 - 2.0) + if q % 2 == 0 { 0.3 } else { -0.2 })
+            .collect();
+        let cost = |level: &mut Level, a: &[f64]| {
+            residuals(level, &g, a).iter().map(|r| r * r).sum::<f64>()
+        };
+        // Analytic gradient.
+        let r = residuals(&mut level, &g, &a0);
+        let h = level.mesh.h;
+        let npx = h * h;
+        let mut grad = vec![0.0; n];
+        for e in 0..level.mesh.n_elements() {
+            let (px, py) = level.mesh.element_origin(e);
+            let c = level.mesh.conn[e];
+            for k in 0..npx {
+                let nn = level.ntab[k];
+                let (mut ux, mut uy) = (0.0, 0.0);
+                for i in 0..4 {
+                    ux += nn[i] * a0[2 * c[i]];
+                    uy += nn[i] * a0[2 * c[i] + 1];
+                }
+                let (_, gx, gy) = g.eval_grad((px + k % h) as f64 + ux, (py + k / h) as f64 + uy);
+                for i in 0..4 {
+                    grad[2 * c[i]] += -2.0 * r[e * npx + k] * nn[i] * gx;
+                    grad[2 * c[i] + 1] += -2.0 * r[e * npx + k] * nn[i] * gy;
+                }
+            }
+        }
+        let eps = 1e-5;
+        for q in 0..n {
+            let mut a = a0.clone();
+            a[q] += eps;
+            let cp = cost(&mut level, &a);
+            a[q] -= 2.0 * eps;
+            let cm = cost(&mut level, &a);
+            let fd = (cp - cm) / (2.0 * eps);
+            assert!(
+                (fd - grad[q]).abs() < 1e-5 * (1.0 + grad[q].abs()) + 1e-3,
+                "dof {q}: {fd} vs {}",
+                grad[q]
+            );
+        }
+        // At the exact translation, b (eq. 2) and the cost gradient both vanish to the
+        // interpolation error: both are small against their scale at a0.
+        let exact: Vec<f64> = (0..n)
+            .map(|q| if q % 2 == 0 { 0.3 } else { -0.2 })
+            .collect();
+        level.warp(&g, &exact);
+        level.residual(Brightness::None);
+        let b_max = level
+            .elem_b
+            .iter()
+            .flat_map(|b| b.iter())
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        let g_max = grad.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(
+            b_max < 0.01 * g_max,
+            "b at the solution {b_max} vs gradient scale {g_max}"
+        );
+    }
+
+    #[test]
+    fn uniform_images_and_bad_options_are_refused() {
+        let flat = GreyImage::new(64, 64, vec![100.0; 64 * 64]).unwrap();
+        let s = Speckle::new(64, 64, 1.5, 1).reference();
+        let roi = Roi::Rect(Rect {
+            x: 0,
+            y: 0,
+            w: 64,
+            h: 64,
+        });
+        let o = DicOptions::default();
+        let e = correlate(&flat, &s, &roi, &o).unwrap_err();
+        assert!(matches!(e, DicError::NoTexture(_)), "{e}");
+        let e = correlate(&s, &flat, &roi, &o).unwrap_err();
+        assert!(matches!(e, DicError::NoTexture(_)), "{e}");
+        let small = GreyImage::new(32, 64, vec![1.0; 32 * 64]).unwrap();
+        assert!(matches!(
+            correlate(&s, &small, &roi, &o),
+            Err(DicError::SizeMismatch { .. })
+        ));
+        let bad = DicOptions {
+            tolerance: -1.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            correlate(&s, &s, &roi, &bad),
+            Err(DicError::Option { .. })
+        ));
+        // A textureless patch inside a textured image: refused, naming the element.
+        // (32 x 32 px flat corner: element 0 is 16 px from any texture, where the B-spline
+        // gradient has decayed as 0.27^16 ~ 1e-9.)
+        let mut patched = s.clone();
+        for y in 0..32 {
+            for x in 0..32 {
+                patched.data[y * 64 + x] = 50.0;
+            }
+        }
+        match correlate(&patched, &patched, &roi, &o) {
+            Err(e) => assert!(e.to_string().contains("element 0"), "{e}"),
+            Ok(_) => panic!("a textureless element was accepted"),
+        }
+    }
 }
