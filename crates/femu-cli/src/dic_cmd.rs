@@ -454,10 +454,17 @@ fn write_maps(
         ),
     ];
     for (name, values, title, label, diverging) in maps {
+        // Colour range from the 1st to the 99th percentile, so that a few wild values (a
+        // flagged element) do not wash out the map.
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        let range = (v.len() > 1).then(|| (v[v.len() / 100], v[v.len() - 1 - v.len() / 100]));
+        let range = range.filter(|r| r.1 > r.0);
         let opts = femu_plot::ImageField {
             title,
             value_label: label,
             diverging,
+            range,
             crop: Some((x0, y0, x1 - x0, y1 - y0)),
             ..Default::default()
         };
