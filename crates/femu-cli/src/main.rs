@@ -5,6 +5,7 @@
 
 mod bench;
 mod convergence_cmd;
+mod dic_cmd;
 mod figures;
 mod identify_cmd;
 mod mesh_cmd;
@@ -180,6 +181,12 @@ enum Command {
         #[arg(long, default_value = "out/convergence")]
         out: PathBuf,
     },
+    /// Global finite-element DIC (Q4) between a reference and a deformed image (PNG, TIFF,
+    /// DICOM): field.csv (mm, model frame), nodes/elements CSV, VTU, PNG maps, summary.json.
+    Dic(dic_cmd::DicArgs),
+    /// DIC random error: correlates successive images of unloaded tissue and reports the
+    /// standard deviation of ux and uy per pair (CSV, box plot).
+    DicNoise(dic_cmd::DicNoiseArgs),
 }
 
 /// The named demo tests.
@@ -286,6 +293,8 @@ fn main() -> ExitCode {
         Command::Convergence { study, out } => {
             convergence_cmd::run(study.as_deref(), &out, cli.quiet)
         }
+        Command::Dic(args) => dic_cmd::run(&args, cli.quiet),
+        Command::DicNoise(args) => dic_cmd::run_noise(&args, cli.quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -9,7 +9,9 @@
 //!   split along its 1–3 diagonal);
 //! - [`line_plot_png`]: curves with optional log-log axes (convergence plots);
 //! - [`bar_chart_png`]: grouped bars with optional error bars (identified parameters per tissue);
-//! - [`histogram_png`]: grey levels, errors.
+//! - [`histogram_png`]: grey levels, errors;
+//! - [`image_field_png`]: a per-pixel field over a grey image (DIC maps);
+//! - [`box_plot_png`]: distributions per group (DIC random error per pair).
 //!
 //! Drawing uses `plotters`' bitmap backend; text uses the DejaVu Sans font embedded by the
 //! `dejavu` crate (no system font library needed), registered once per process; the PNG is
@@ -20,15 +22,19 @@
 //! is a [`PlotError`], never a panic. NaN values are skipped (cells drawn grey, points left out).
 
 mod axis;
+mod boxplot;
 mod chart;
 pub mod colormap;
 mod field;
+mod image_field;
 mod line;
 mod text;
 mod tile;
 
+pub use boxplot::{box_plot_png, BoxPlot};
 pub use chart::{bar_chart_png, histogram_png, BarChart, Histogram};
 pub use field::{mesh_field_png, node_field_png, FieldPlot, Overlay};
+pub use image_field::{image_field_png, ImageField};
 pub use line::{line_plot_png, LegendPosition, LinePlot, LineStyle, Series};
 pub use tile::tile_png;
 

@@ -1,0 +1,153 @@
+//! `femu dic` and `femu dic-noise` as a user runs them: the output folder on a synthetic
+//! speckle pair (virtual lab, 8-bit PNG), and clear errors for bad input.
+
+use femu_dic::lab::{self, Speckle};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn femu(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(args)
+        .output()
+        .expect("femu runs")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("femu-dic-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A reference and a translated speckle image (0.4, -0.25) px, 8-bit PNG.
+fn pair(dir: &Path) -> (PathBuf, PathBuf) {
+    let s = Speckle::new(192, 160, 1.5, 3);
+    let (f, g) = (s.reference(), s.deformed(&lab::translation(0.4, -0.25)));
+    let (pf, pg) = (dir.join("ref.png"), dir.join("def.png"));
+    lab::quantize_8bit(&f).save_png(&pf).unwrap();
+    lab::quantize_8bit(&g).save_png(&pg).unwrap();
+    (pf, pg)
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn dic_writes_the_output_folder() {
+    let dir = scratch("ok");
+    let (f, g) = pair(&dir);
+    let out = dir.join("out");
+    let o = femu(&[
+        "dic",
+        s(&f),
+        s(&g),
+        "--roi",
+        "16,16,160,128",
+        "--element",
+        "16",
+        "--pixel-size",
+        "0.1",
+        "--y-up",
+        "--out",
+        s(&out),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for name in [
+        "field.csv",
+        "nodes.csv",
+        "elements.csv",
+        "result.vtu",
+        "summary.json",
+        "ux.png",
+        "uy.png",
+        "exx.png",
+        "eyy.png",
+        "exy.png",
+        "residual.png",
+    ] {
+        assert!(out.join(name).is_file(), "{name} missing");
+    }
+    let csv = std::fs::read_to_string(out.join("field.csv")).unwrap();
+    let mut rows = csv.lines().filter(|l| !l.starts_with('#'));
+    assert_eq!(rows.next(), Some("x,y,ux,uy,w"));
+    // ux = 0.4 px x 0.1 mm, uy = -0.25 px x 0.1 mm x (-1: y up) = +0.025 mm.
+    let mut n = 0;
+    for r in rows {
+        let v: Vec<f64> = r.split(',').map(|t| t.parse().unwrap()).collect();
+        assert!(
+            (v[2] - 0.04).abs() < 0.002 && (v[3] - 0.025).abs() < 0.002,
+            "{r}"
+        );
+        n += 1;
+    }
+    assert_eq!(n, 80, "grid points: 10 x 8 elements at the default step");
+    let sum: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(sum["result"]["converged"], true);
+    assert_eq!(sum["pixel_size"]["source"], "option --pixel-size");
+}
+
+#[test]
+fn dic_noise_writes_csv_and_box_plot() {
+    let dir = scratch("noise");
+    let s3 = Speckle::new(128, 128, 1.5, 9);
+    let base = s3.reference();
+    let mut paths = Vec::new();
+    for k in 0..3 {
+        let p = dir.join(format!("f{k}.png"));
+        lab::quantize_8bit(&lab::add_noise(&base, 2.0, k))
+            .save_png(&p)
+            .unwrap();
+        paths.push(p);
+    }
+    let out = dir.join("out");
+    let mut args = vec!["dic-noise"];
+    args.extend(paths.iter().map(|p| s(p)));
+    args.extend(["--roi", "16,16,96,96", "--out", s(&out), "--quiet"]);
+    let o = femu(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("noise.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 3, "header + 2 pairs");
+    assert!(out.join("noise_box.png").is_file() && out.join("summary.json").is_file());
+}
+
+#[test]
+fn bad_input_gets_a_clear_error() {
+    let dir = scratch("bad");
+    let (f, g) = pair(&dir);
+    let small = dir.join("small.png");
+    femu_dic::GreyImage::new(64, 64, vec![10.0; 64 * 64])
+        .unwrap()
+        .save_png(&small)
+        .unwrap();
+    let flat = dir.join("flat.png");
+    femu_dic::GreyImage::new(192, 160, vec![90.0; 192 * 160])
+        .unwrap()
+        .save_png(&flat)
+        .unwrap();
+    let out = dir.join("out");
+    let missing = dir.join("missing.png");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec![s(&f), s(&small)], "differ in size"),
+        (vec![s(&f), s(&g), "--roi", "150,10,100,50"], "outside"),
+        (
+            vec![s(&f), s(&g), "--roi", "0,0,40,40", "--element", "64"],
+            "larger than the region of interest",
+        ),
+        (vec![s(&flat), s(&g)], "no texture"),
+        (vec![s(&f), s(&g), "--roi", "1,2,3"], "x,y,w,h"),
+        (vec![s(&f), s(&missing)], "missing.png"),
+    ];
+    for (args, expect) in cases {
+        let mut a = vec!["dic"];
+        a.extend(args);
+        a.extend(["--out", s(&out), "--quiet"]);
+        let o = femu(&a);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{a:?} succeeded");
+        assert!(err.contains(expect), "{a:?}: '{err}' lacks '{expect}'");
+        assert!(!err.contains("panicked"), "{err}");
+    }
+}

@@ -1,0 +1,217 @@
+//! Grey-level images: reading PNG/TIFF (8 or 16 bit, grey or colour) and DICOM, luminance,
+//! the pixel size, and the 2x2 pyramid.
+//!
+//! Grey levels are kept as `f64` on a 0–255 scale whatever the bit depth (16-bit values are
+//! divided by 257, so no precision is lost). Colour is converted to luminance with the ITU-R
+//! BT.601 weights `Y = 0.299 R + 0.587 G + 0.114 B` (the weights of ultrasound scanners' video
+//! outputs and of DICOM's YBR conversion).
+
+use crate::error::DicError;
+use std::path::Path;
+
+/// BT.601 luma weights.
+pub const LUMA: [f64; 3] = [0.299, 0.587, 0.114];
+
+/// The physical size of a pixel, when the file tells it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PixelSize {
+    /// Size along x (columns), mm.
+    pub dx_mm: f64,
+    /// Size along y (rows), mm.
+    pub dy_mm: f64,
+    /// Where it comes from (`"SequenceOfUltrasoundRegions"`, `"PixelSpacing"`, `"option"`).
+    pub source: &'static str,
+}
+
+/// A grey-level image, row-major, pixel centres at integer coordinates `(x, y)`, `y` down.
+#[derive(Debug, Clone)]
+pub struct GreyImage {
+    pub width: usize,
+    pub height: usize,
+    /// `data[y * width + x]`, grey levels on a 0–255 scale.
+    pub data: Vec<f64>,
+    /// Pixel size read from the file (DICOM), if any.
+    pub pixel_size: Option<PixelSize>,
+}
+
+impl GreyImage {
+    /// An image from row-major values; errors if the length does not match or a value is not
+    /// finite.
+    pub fn new(width: usize, height: usize, data: Vec<f64>) -> Result<Self, DicError> {
+        if width == 0 || height == 0 || data.len() != width * height {
+            return Err(DicError::option(
+                "image",
+                format!("{} values for a {width} x {height} image", data.len()),
+            ));
+        }
+        if let Some(k) = data.iter().position(|v| !v.is_finite()) {
+            return Err(DicError::option(
+                "image",
+                format!("pixel ({}, {}) is not finite", k % width, k / width),
+            ));
+        }
+        Ok(GreyImage {
+            width,
+            height,
+            data,
+            pixel_size: None,
+        })
+    }
+
+    /// The grey level of pixel `(x, y)`.
+    #[inline]
+    pub fn at(&self, x: usize, y: usize) -> f64 {
+        self.data[y * self.width + x]
+    }
+
+    /// Reads a PNG or TIFF file (by its content), or a DICOM file (by the `.dcm` extension or
+    /// the `DICM` magic at byte 128), taking `frame` of a multi-frame DICOM file.
+    pub fn open(path: &Path, frame: usize) -> Result<Self, DicError> {
+        if crate::dicom::is_dicom(path) {
+            return crate::dicom::read_dicom(path, frame);
+        }
+        let err = |message: String| DicError::ImageRead {
+            path: path.to_path_buf(),
+            message,
+        };
+        if frame != 0 {
+            return Err(err(format!(
+                "frame {frame} requested, but PNG/TIFF files are read as a single frame"
+            )));
+        }
+        let img = image::ImageReader::open(path)
+            .map_err(|e| err(e.to_string()))?
+            .with_guessed_format()
+            .map_err(|e| err(e.to_string()))?
+            .decode()
+            .map_err(|e| err(e.to_string()))?;
+        Ok(from_dynamic(&img))
+    }
+
+    /// The 2x2 block average (one pyramid level down): pixel `(i, j)` of the result covers the
+    /// pixels `2i..2i+2 x 2j..2j+2`, so its centre is at `(2i + 0.5, 2j + 0.5)` here.
+    pub fn half(&self) -> GreyImage {
+        let (w, h) = (self.width / 2, self.height / 2);
+        let mut data = vec![0.0; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let a = self.at(2 * i, 2 * j) + self.at(2 * i + 1, 2 * j);
+                let b = self.at(2 * i, 2 * j + 1) + self.at(2 * i + 1, 2 * j + 1);
+                data[j * w + i] = 0.25 * (a + b);
+            }
+        }
+        GreyImage {
+            width: w,
+            height: h,
+            data,
+            pixel_size: self.pixel_size,
+        }
+    }
+
+    /// Writes the image as an 8-bit grey PNG (values clamped to 0–255).
+    pub fn save_png(&self, path: &Path) -> Result<(), DicError> {
+        let buf: Vec<u8> = self
+            .data
+            .iter()
+            .map(|v| v.round().clamp(0.0, 255.0) as u8)
+            .collect();
+        image::GrayImage::from_raw(self.width as u32, self.height as u32, buf)
+            .ok_or_else(|| DicError::Write {
+                path: path.to_path_buf(),
+                message: "buffer size".into(),
+            })?
+            .save_with_format(path, image::ImageFormat::Png)
+            .map_err(|e| DicError::Write {
+                path: path.to_path_buf(),
+                message: e.to_string(),
+            })
+    }
+}
+
+/// Luminance of a decoded PNG/TIFF image on a 0–255 scale.
+fn from_dynamic(img: &image::DynamicImage) -> GreyImage {
+    use image::DynamicImage as D;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let data: Vec<f64> = match img {
+        D::ImageLuma8(b) => b.as_raw().iter().map(|&v| v as f64).collect(),
+        D::ImageLumaA8(b) => b.pixels().map(|p| p.0[0] as f64).collect(),
+        D::ImageLuma16(b) => b.as_raw().iter().map(|&v| v as f64 / 257.0).collect(),
+        D::ImageLumaA16(b) => b.pixels().map(|p| p.0[0] as f64 / 257.0).collect(),
+        D::ImageRgb8(b) => b
+            .pixels()
+            .map(|p| luma(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64))
+            .collect(),
+        D::ImageRgba8(b) => b
+            .pixels()
+            .map(|p| luma(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64))
+            .collect(),
+        D::ImageRgb16(b) => b
+            .pixels()
+            .map(|p| luma(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64) / 257.0)
+            .collect(),
+        D::ImageRgba16(b) => b
+            .pixels()
+            .map(|p| luma(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64) / 257.0)
+            .collect(),
+        other => other
+            .to_rgb32f()
+            .pixels()
+            .map(|p| 255.0 * luma(p.0[0] as f64, p.0[1] as f64, p.0[2] as f64))
+            .collect(),
+    };
+    GreyImage {
+        width: w,
+        height: h,
+        data,
+        pixel_size: None,
+    }
+}
+
+/// BT.601 luminance.
+#[inline]
+pub fn luma(r: f64, g: f64, b: f64) -> f64 {
+    LUMA[0] * r + LUMA[1] * g + LUMA[2] * b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 8-bit grey, 16-bit grey and RGB PNG files read back with the same grey levels.
+    #[test]
+    fn reads_grey_16bit_and_rgb() {
+        let dir = std::env::temp_dir().join(format!("femu-dic-img-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let g8 = image::GrayImage::from_fn(5, 3, |x, y| image::Luma([(10 * x + 50 * y) as u8]));
+        g8.save(dir.join("g8.png")).unwrap();
+        let g16 = image::ImageBuffer::<image::Luma<u16>, _>::from_fn(5, 3, |x, y| {
+            image::Luma([257 * (10 * x + 50 * y) as u16])
+        });
+        g16.save(dir.join("g16.tif")).unwrap();
+        let rgb = image::RgbImage::from_fn(5, 3, |x, y| {
+            let v = (10 * x + 50 * y) as u8;
+            image::Rgb([v, v, v])
+        });
+        rgb.save(dir.join("rgb.png")).unwrap();
+        for name in ["g8.png", "g16.tif", "rgb.png"] {
+            let img = GreyImage::open(&dir.join(name), 0).unwrap();
+            assert_eq!((img.width, img.height), (5, 3));
+            assert!(
+                (img.at(3, 2) - 130.0).abs() < 1e-9,
+                "{name}: {}",
+                img.at(3, 2)
+            );
+        }
+        let e = GreyImage::open(&dir.join("missing.png"), 0).unwrap_err();
+        assert!(e.to_string().contains("missing.png"));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn half_averages_blocks() {
+        let img = GreyImage::new(4, 2, vec![0., 2., 4., 6., 2., 4., 6., 8.]).unwrap();
+        let h = img.half();
+        assert_eq!((h.width, h.height), (2, 1));
+        assert_eq!(h.data, vec![2.0, 6.0]);
+    }
+}

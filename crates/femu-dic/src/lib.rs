@@ -1,0 +1,32 @@
+//! Global finite-element digital image correlation (DIC) for `femu`: the displacement field
+//! between a reference and a deformed image as a 4-node quadrilateral (Q4) finite-element
+//! field over a region of interest, as Correli-Q4 does in the seed study (§2.1.1), independent
+//! of the FE solver.
+//!
+//! - [`image`]: PNG/TIFF/DICOM input as grey levels ([`GreyImage`]), pixel size.
+//! - [`dicom`]: DICOM ultrasound (uncompressed, JPEG baseline, RLE; multi-frame; palette
+//!   colour; Sequence of Ultrasound Regions / Pixel Spacing).
+//! - [`mesh`]: ROI (rectangle or mask) and the structured Q4 mesh ([`DicMesh`]).
+//! - [`bspline`]: cubic B-spline interpolation of the deformed image.
+//! - [`solver`]: modified Gauss–Newton with the sparse Hessian factorized once
+//!   ([`correlate`]), pyramid and FFT initialization, Tikhonov regularization.
+//! - [`output`]: model frame (mm), the measured-field CSV of `conventions.md`, nodal CSV, VTU.
+//! - [`lab`]: the virtual lab (speckle images warped by known displacement fields).
+//! - [`noise`]: random error from pairs of images of an unloaded specimen.
+
+pub mod bspline;
+pub mod dicom;
+pub mod error;
+pub mod fft;
+pub mod image;
+pub mod lab;
+pub mod mesh;
+pub mod noise;
+pub mod output;
+pub mod solver;
+pub mod sparse;
+
+pub use error::DicError;
+pub use image::{GreyImage, PixelSize};
+pub use mesh::{DicMesh, Rect, Roi};
+pub use solver::{correlate, Brightness, DicOptions, DicResult};

@@ -1,0 +1,358 @@
+//! Outputs of a correlation: the model frame (pixels → mm), the measured-field CSV of
+//! `conventions.md` on a regular grid, nodal and element tables, the VTU file and the summary.
+
+use crate::error::DicError;
+use crate::solver::{DicResult, LevelReport, Timings};
+use std::io::Write;
+use std::path::Path;
+
+/// The model frame of the measured field: `X = sx (x − ox) dx`, `Y = sy (y − oy) dy` (mm)
+/// for a pixel position `(x, y)`, with `dx, dy` the pixel size (mm/px) and `sx, sy = ±1` the
+/// axis directions (image rows go down; `y_up` makes the model y axis point up).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ModelFrame {
+    /// Pixel position of the model origin.
+    pub origin_px: [f64; 2],
+    /// Pixel size (mm/px) along x and y.
+    pub pixel_size_mm: [f64; 2],
+    pub x_left: bool,
+    pub y_up: bool,
+}
+
+impl Default for ModelFrame {
+    fn default() -> Self {
+        ModelFrame {
+            origin_px: [0.0, 0.0],
+            pixel_size_mm: [1.0, 1.0],
+            x_left: false,
+            y_up: false,
+        }
+    }
+}
+
+impl ModelFrame {
+    fn signs(&self) -> [f64; 2] {
+        [
+            if self.x_left { -1.0 } else { 1.0 },
+            if self.y_up { -1.0 } else { 1.0 },
+        ]
+    }
+
+    /// Model coordinates (mm) of a pixel position.
+    pub fn point(&self, p: [f64; 2]) -> [f64; 2] {
+        let s = self.signs();
+        [
+            s[0] * (p[0] - self.origin_px[0]) * self.pixel_size_mm[0],
+            s[1] * (p[1] - self.origin_px[1]) * self.pixel_size_mm[1],
+        ]
+    }
+
+    /// Model displacement (mm) of a displacement in pixels.
+    pub fn displacement(&self, u: [f64; 2]) -> [f64; 2] {
+        let s = self.signs();
+        [
+            s[0] * u[0] * self.pixel_size_mm[0],
+            s[1] * u[1] * self.pixel_size_mm[1],
+        ]
+    }
+
+    /// Small strain `(εXX, εYY, εXY)` in the model frame from the pixel displacement gradient
+    /// `G_ij = ∂u_i/∂x_j`: `∂U_i/∂X_j = s_i d_i G_ij / (s_j d_j)`.
+    pub fn strain(&self, g: [[f64; 2]; 2]) -> [f64; 3] {
+        let s = self.signs();
+        let d = self.pixel_size_mm;
+        let m = |i: usize, j: usize| s[i] * d[i] * g[i][j] / (s[j] * d[j]);
+        [m(0, 0), m(1, 1), 0.5 * (m(0, 1) + m(1, 0))]
+    }
+}
+
+fn werr(path: &Path) -> impl Fn(std::io::Error) -> DicError + '_ {
+    move |e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    }
+}
+
+/// One point of the measured field on the regular grid.
+#[derive(Debug, Clone, Copy)]
+pub struct GridPoint {
+    /// Pixel position and displacement (pixels).
+    pub x_px: [f64; 2],
+    pub u_px: [f64; 2],
+    /// In the model frame (mm).
+    pub x_mm: [f64; 2],
+    pub u_mm: [f64; 2],
+    /// Weight: 1, or 0 in an element flagged for a high residual.
+    pub w: f64,
+}
+
+/// The field sampled every `step` pixels over the active elements (cell centres of a grid
+/// tiling the mesh).
+pub fn grid(res: &DicResult, frame: &ModelFrame, step: f64) -> Result<Vec<GridPoint>, DicError> {
+    if !(step > 0.0 && step.is_finite()) {
+        return Err(DicError::option(
+            "grid step",
+            format!("{step} px must be positive"),
+        ));
+    }
+    let m = &res.mesh;
+    let (x0, y0) = (m.x0 as f64 - 0.5, m.y0 as f64 - 0.5);
+    let (wx, wy) = ((m.nx * m.h) as f64, (m.ny * m.h) as f64);
+    let (nx, ny) = ((wx / step).floor() as usize, (wy / step).floor() as usize);
+    let mut out = Vec::with_capacity(nx * ny);
+    for j in 0..ny {
+        for i in 0..nx {
+            let p = [x0 + (i as f64 + 0.5) * step, y0 + (j as f64 + 0.5) * step];
+            if let Some((e, _, _)) = m.locate(p[0], p[1]) {
+                let u = m
+                    .interpolate(&res.displacement, p[0], p[1])
+                    .expect("located");
+                out.push(GridPoint {
+                    x_px: p,
+                    u_px: u,
+                    x_mm: frame.point(p),
+                    u_mm: frame.displacement(u),
+                    w: if res.flagged[e] { 0.0 } else { 1.0 },
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Writes the measured-field CSV (`x,y,ux,uy,w`, mm) with `comments` as `#` lines.
+pub fn write_field_csv(
+    path: &Path,
+    points: &[GridPoint],
+    comments: &[String],
+) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    for c in comments {
+        writeln!(f, "# {c}").map_err(&e)?;
+    }
+    writeln!(f, "x,y,ux,uy,w").map_err(&e)?;
+    for p in points {
+        writeln!(
+            f,
+            "{:.12e},{:.12e},{:.12e},{:.12e},{}",
+            p.x_mm[0], p.x_mm[1], p.u_mm[0], p.u_mm[1], p.w
+        )
+        .map_err(&e)?;
+    }
+    f.flush().map_err(&e)
+}
+
+/// Writes `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm`.
+pub fn write_nodes_csv(path: &Path, res: &DicResult, frame: &ModelFrame) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    writeln!(f, "node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm").map_err(&e)?;
+    for (n, (p, u)) in res.mesh.nodes.iter().zip(&res.displacement).enumerate() {
+        let (xm, um) = (frame.point(*p), frame.displacement(*u));
+        writeln!(
+            f,
+            "{},{},{},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e}",
+            n + 1,
+            p[0],
+            p[1],
+            u[0],
+            u[1],
+            xm[0],
+            xm[1],
+            um[0],
+            um[1]
+        )
+        .map_err(&e)?;
+    }
+    f.flush().map_err(&e)
+}
+
+/// Element table: `element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged` (strain in the model
+/// frame, residual RMS in grey levels).
+pub fn write_elements_csv(
+    path: &Path,
+    res: &DicResult,
+    frame: &ModelFrame,
+) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    writeln!(f, "element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged").map_err(&e)?;
+    for (k, c) in res.mesh.conn.iter().enumerate() {
+        let s = frame.strain(res.mesh.gradient_at_centre(&res.displacement, k));
+        writeln!(
+            f,
+            "{},{},{},{},{},{:.9e},{:.9e},{:.9e},{:.6e},{}",
+            k + 1,
+            c[0] + 1,
+            c[1] + 1,
+            c[2] + 1,
+            c[3] + 1,
+            s[0],
+            s[1],
+            s[2],
+            res.element_residual[k],
+            res.flagged[k] as u8
+        )
+        .map_err(&e)?;
+    }
+    f.flush().map_err(&e)
+}
+
+/// Element strains in the model frame.
+pub fn element_strains(res: &DicResult, frame: &ModelFrame) -> Vec<[f64; 3]> {
+    (0..res.mesh.n_elements())
+        .map(|k| frame.strain(res.mesh.gradient_at_centre(&res.displacement, k)))
+        .collect()
+}
+
+/// The mesh in the model frame (mm) with displacement (mm), pixel displacement, strain,
+/// residual and flags, for ParaView.
+pub fn write_vtu(path: &Path, res: &DicResult, frame: &ModelFrame) -> Result<(), DicError> {
+    let mut mesh = res.mesh.to_mesh();
+    for p in &mut mesh.nodes {
+        *p = frame.point(*p);
+    }
+    let u_mm: Vec<[f64; 2]> = res
+        .displacement
+        .iter()
+        .map(|u| frame.displacement(*u))
+        .collect();
+    let u_px: Vec<f64> = res
+        .displacement
+        .iter()
+        .flat_map(|u| [u[0], u[1], 0.0])
+        .collect();
+    let strain: Vec<f64> = element_strains(res, frame)
+        .iter()
+        .flat_map(|s| [s[0], s[1], 0.0, s[2]])
+        .collect();
+    let flagged: Vec<f64> = res.flagged.iter().map(|&b| b as u8 as f64).collect();
+    use femu_mesh::vtu::VtuField;
+    femu_mesh::vtu::write_vtu(
+        path,
+        &mesh,
+        Some(&u_mm),
+        &[VtuField {
+            name: "displacement_px",
+            components: 3,
+            data: &u_px,
+        }],
+        &[
+            VtuField {
+                name: "strain",
+                components: 4,
+                data: &strain,
+            },
+            VtuField {
+                name: "residual",
+                components: 1,
+                data: &res.element_residual,
+            },
+            VtuField {
+                name: "flagged",
+                components: 1,
+                data: &flagged,
+            },
+        ],
+    )
+    .map_err(|e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// The numbers a user quotes, for `summary.json`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DicSummary {
+    pub elements: usize,
+    pub nodes: usize,
+    pub element_size_px: usize,
+    pub iterations: usize,
+    pub converged: bool,
+    pub last_increment_px: f64,
+    pub residual_rms: f64,
+    pub residual_percent_of_dynamic: f64,
+    pub flagged_elements: usize,
+    pub initial_shift_px: (i64, i64),
+    /// Mean and standard deviation of the nodal displacements (pixels).
+    pub mean_u_px: [f64; 2],
+    pub std_u_px: [f64; 2],
+    pub levels: Vec<LevelReport>,
+    pub timings: Timings,
+}
+
+impl DicSummary {
+    pub fn of(res: &DicResult) -> Self {
+        let (mean, std) = mean_std(&res.displacement);
+        DicSummary {
+            elements: res.mesh.n_elements(),
+            nodes: res.mesh.n_nodes(),
+            element_size_px: res.mesh.h,
+            iterations: res.iterations,
+            converged: res.converged,
+            last_increment_px: res.last_increment_px,
+            residual_rms: res.residual_rms,
+            residual_percent_of_dynamic: res.residual_percent,
+            flagged_elements: res.flagged.iter().filter(|&&b| b).count(),
+            initial_shift_px: res.initial_shift,
+            mean_u_px: mean,
+            std_u_px: std,
+            levels: res.levels.clone(),
+            timings: res.timings.clone(),
+        }
+    }
+}
+
+/// Mean and (population) standard deviation of each component.
+pub fn mean_std(u: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
+    let n = u.len().max(1) as f64;
+    let mut m = [0.0; 2];
+    for v in u {
+        m[0] += v[0] / n;
+        m[1] += v[1] / n;
+    }
+    let mut s = [0.0; 2];
+    for v in u {
+        s[0] += (v[0] - m[0]).powi(2) / n;
+        s[1] += (v[1] - m[1]).powi(2) / n;
+    }
+    (m, [s[0].sqrt(), s[1].sqrt()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_frame_maps_points_displacements_and_strains() {
+        let f = ModelFrame {
+            origin_px: [10.0, 20.0],
+            pixel_size_mm: [0.1, 0.2],
+            x_left: false,
+            y_up: true,
+        };
+        assert_eq!(f.point([12.0, 25.0]), [0.2, -1.0]);
+        let u = f.displacement([1.0, 1.0]);
+        assert!((u[0] - 0.1).abs() < 1e-15 && (u[1] + 0.2).abs() < 1e-15);
+        // u_px = G x: model gradient by finite differences of the mapped field.
+        let g = [[0.01, 0.02], [0.03, -0.005]];
+        let s = f.strain(g);
+        let map = |x: [f64; 2]| {
+            let up = [
+                g[0][0] * x[0] + g[0][1] * x[1],
+                g[1][0] * x[0] + g[1][1] * x[1],
+            ];
+            (f.point(x), f.displacement(up))
+        };
+        let (p0, u0) = map([0.0, 0.0]);
+        let (p1, u1) = map([1.0, 0.0]);
+        let (p2, u2) = map([0.0, 1.0]);
+        let duxdx = (u1[0] - u0[0]) / (p1[0] - p0[0]);
+        let duydy = (u2[1] - u0[1]) / (p2[1] - p0[1]);
+        let duxdy = (u2[0] - u0[0]) / (p2[1] - p0[1]);
+        let duydx = (u1[1] - u0[1]) / (p1[0] - p0[0]);
+        assert!((s[0] - duxdx).abs() < 1e-12 && (s[1] - duydy).abs() < 1e-12);
+        assert!((s[2] - 0.5 * (duxdy + duydx)).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,1058 @@
+//! Global finite-element DIC with Q4 elements (Besnard, Hild & Roux 2006, "Finite-element
+//! displacement fields analysis from digital images: application to Portevin–Le Châtelier
+//! bands"; the Correli-Q4 formulation used by the seed, §2.1.1).
+//!
+//! The displacement is the Q4 field `u(x) = Σ_n N_n(x) a_n` over the mesh of the ROI, and the
+//! nodal values `a` minimize the sum of squared grey-level differences over the ROI pixels
+//!
+//! ```text
+//! Φ(a) = Σ_x [ f(x) − g̃(x + u(x)) ]²                                                 (1)
+//! ```
+//!
+//! with `f` the reference image, `g` the deformed one interpolated by cubic B-splines and
+//! `g̃ = s g + o` optionally corrected for brightness `o` and contrast `s` (mean and standard
+//! deviation of `g` matched to those of `f`, over the ROI or per element). Linearizing
+//! `g(x + u + δu) ≈ g(x + u) + ∇f(x)·δu` (the *modified* Gauss–Newton scheme: the deformed
+//! gradient is replaced by the reference one, valid at convergence where `g(x + u) ≈ f(x)`)
+//! gives at each iteration
+//!
+//! ```text
+//! M δa = b,   M_ij = Σ_x (N_i ∇f)·(N_j ∇f),   b_i = Σ_x (N_i ∇f) [f(x) − g̃(x + u(x))]    (2)
+//! ```
+//!
+//! where `M` does not depend on `a`: it is assembled and factorized (sparse Cholesky) once per
+//! pyramid level, and each iteration costs one pass over the pixels plus one sparse solve.
+//!
+//! **Regularization** (optional, Tikhonov): the penalty `λ aᵀ K a`, `K = Lᵀ L` with `L` the
+//! 5-point Laplacian of each component at the nodes whose four neighbours exist (so rigid and
+//! affine fields are not penalized), is added to (1), giving `(M + λK) δa = b − λ K a`. The
+//! weight follows Tomičević, Hild & Roux (2013): `λ = vᵀMv / vᵀKv` for a plane wave `v` of the
+//! regularization length `ℓ`, so that waves shorter than `ℓ` are damped (as `(ℓ/λ_w)⁴`) and
+//! longer ones are left to the images.
+//!
+//! **Initialization**: an integer shift from FFT phase correlation on the coarsest level of a
+//! 2x2 image pyramid, then Gauss–Newton on each level from coarse to fine, each level
+//! starting from the field of the one above (doubled and interpolated).
+//!
+//! **Convergence**: the root mean square over the nodes of the nodal increment `|δa_n|` below
+//! the tolerance (default 1e-3 px), or the iteration limit (the result says which). The RMS,
+//! not the maximum, so that one weakly constrained corner node in a textureless spot does not
+//! hold the whole field hostage; such a node's element keeps a high residual and is flagged.
+
+use crate::bspline::BSpline;
+use crate::error::DicError;
+use crate::image::GreyImage;
+use crate::mesh::{DicMesh, Roi};
+use crate::sparse::{Cholesky, CscPattern};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Brightness and contrast correction of the deformed image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Brightness {
+    /// None: grey levels are conserved.
+    None,
+    /// One offset and one scale over the whole ROI (the default: harmless when the lighting
+    /// does not change, necessary when it does, as in DIC Challenge Sample 5).
+    Global,
+    /// One offset and one scale per element (ultrasound gain and attenuation vary with depth).
+    PerElement,
+}
+
+/// Options of the correlation.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DicOptions {
+    /// Element size (pixels).
+    pub element_size: usize,
+    /// Convergence: RMS over the nodes of the nodal displacement increment (pixels).
+    pub tolerance: f64,
+    /// Maximum number of Gauss–Newton iterations on the finest level.
+    pub max_iterations: usize,
+    pub brightness: Brightness,
+    /// Tikhonov regularization length (pixels); `None`: no regularization.
+    pub regularization_length: Option<f64>,
+    /// Pyramid levels above the full-resolution image; `None`: automatic (up to 2 while the
+    /// coarsest ROI still holds 2 x 2 elements).
+    pub pyramid_levels: Option<usize>,
+    /// Integer-shift initial guess by FFT cross-correlation.
+    pub fft_init: bool,
+    /// An element is flagged when its residual RMS exceeds this factor times the median.
+    pub flag_factor: f64,
+}
+
+impl Default for DicOptions {
+    fn default() -> Self {
+        DicOptions {
+            element_size: 16,
+            tolerance: 1e-3,
+            max_iterations: 100,
+            brightness: Brightness::Global,
+            regularization_length: None,
+            pyramid_levels: None,
+            fft_init: true,
+            flag_factor: 3.0,
+        }
+    }
+}
+
+impl DicOptions {
+    fn validate(&self) -> Result<(), DicError> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return Err(DicError::option(
+                "tolerance",
+                format!("{} must be positive", self.tolerance),
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(DicError::option("max iterations", "must be at least 1"));
+        }
+        if let Some(l) = self.regularization_length {
+            if !(l > 0.0 && l.is_finite()) {
+                return Err(DicError::option(
+                    "regularization length",
+                    format!("{l} px must be positive"),
+                ));
+            }
+        }
+        if !(self.flag_factor > 1.0) {
+            return Err(DicError::option(
+                "flag factor",
+                format!("{} must be above 1", self.flag_factor),
+            ));
+        }
+        if matches!(self.pyramid_levels, Some(l) if l > 6) {
+            return Err(DicError::option("pyramid levels", "at most 6"));
+        }
+        Ok(())
+    }
+}
+
+/// What happened on one pyramid level.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LevelReport {
+    /// 0: full resolution; `l`: images reduced `2^l` times.
+    pub level: usize,
+    pub elements: usize,
+    pub nodes: usize,
+    pub iterations: usize,
+    pub converged: bool,
+    pub last_increment_px: f64,
+    pub residual_rms: f64,
+    /// Why a coarse level was skipped (too small, no texture), if it was.
+    pub skipped: Option<String>,
+}
+
+/// Wall-clock times (seconds).
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Timings {
+    /// Pyramid, B-spline coefficients, FFT initial guess.
+    pub preparation_s: f64,
+    /// Assembly and factorization of `M` (all levels).
+    pub setup_s: f64,
+    /// Gauss–Newton iterations (all levels).
+    pub iterations_s: f64,
+    pub total_s: f64,
+}
+
+/// The measured field and its diagnostics.
+#[derive(Debug, Clone)]
+pub struct DicResult {
+    pub mesh: DicMesh,
+    /// Nodal displacements `[ux, uy]` (pixels).
+    pub displacement: Vec<[f64; 2]>,
+    /// Gauss–Newton iterations on the finest level.
+    pub iterations: usize,
+    pub converged: bool,
+    pub last_increment_px: f64,
+    /// RMS of the grey-level residual `f − g̃(x + u)` over the ROI (grey levels, 0–255 scale).
+    pub residual_rms: f64,
+    /// The same as a percentage of the reference dynamic range over the ROI.
+    pub residual_percent: f64,
+    /// Residual RMS per element (grey levels).
+    pub element_residual: Vec<f64>,
+    /// Elements whose residual exceeds `flag_factor` times the median.
+    pub flagged: Vec<bool>,
+    /// Residual per image pixel (NaN outside the mesh), `width x height`.
+    pub residual_image: Vec<f32>,
+    /// Integer initial shift from the FFT (full-resolution pixels).
+    pub initial_shift: (i64, i64),
+    pub levels: Vec<LevelReport>,
+    pub timings: Timings,
+    pub image_size: (usize, usize),
+}
+
+/// One pyramid level: pixels of the ROI ordered element by element, reference values and
+/// gradients, the matrix `M (+ λK)` factorized once, and every buffer of the iterations.
+struct Level {
+    mesh: DicMesh,
+    /// Shape function values at the `h²` pixels of an element (same for every element).
+    ntab: Vec<[f64; 4]>,
+    f: Vec<f64>,
+    fx: Vec<f64>,
+    fy: Vec<f64>,
+    /// Equations of each element: `2 node + component`, nodes in element order.
+    dofs: Vec<[usize; 8]>,
+    pattern: CscPattern,
+    /// `M` on the pattern (kept for the diagnostics and the tests).
+    #[cfg_attr(not(test), allow(dead_code))]
+    m_values: Vec<f64>,
+    /// The regularization `K` on the pattern, with its weight `λ`.
+    reg: Option<(Vec<f64>, f64)>,
+    chol: Cholesky,
+    /// Reference mean and standard deviation per element and over the ROI.
+    f_stats: Vec<[f64; 2]>,
+    f_global: [f64; 2],
+    // Iteration buffers (allocated once).
+    gw: Vec<f64>,
+    elem_b: Vec<[f64; 8]>,
+    elem_g: Vec<[f64; 3]>,
+    corr: Vec<(f64, f64)>,
+    rhs: Vec<f64>,
+    work: Vec<f64>,
+}
+
+impl Level {
+    /// Pixels, reference gradient, `M` (eq. 2) and its factorization.
+    fn new(
+        reference: &GreyImage,
+        roi: &Roi,
+        h: usize,
+        reg_length: Option<f64>,
+    ) -> Result<Self, DicError> {
+        let mesh = DicMesh::new(roi, reference.width, reference.height, h)?;
+        let spline = BSpline::new(&reference.data, reference.width, reference.height);
+        let npx = h * h;
+        let ntab: Vec<[f64; 4]> = (0..npx)
+            .map(|k| {
+                DicMesh::shape(
+                    ((k % h) as f64 + 0.5) / h as f64,
+                    ((k / h) as f64 + 0.5) / h as f64,
+                )
+            })
+            .collect();
+        let ne = mesh.n_elements();
+        let mut f = vec![0.0; ne * npx];
+        let mut fx = vec![0.0; ne * npx];
+        let mut fy = vec![0.0; ne * npx];
+        let mut elem_m = vec![[0.0f64; 64]; ne];
+        let mut f_stats = vec![[0.0f64; 2]; ne];
+        f.par_chunks_mut(npx)
+            .zip(fx.par_chunks_mut(npx))
+            .zip(fy.par_chunks_mut(npx))
+            .zip(elem_m.par_iter_mut())
+            .zip(f_stats.par_iter_mut())
+            .enumerate()
+            .for_each(|(e, ((((fe, fxe), fye), me), st))| {
+                let (px, py) = mesh.element_origin(e);
+                for k in 0..npx {
+                    let (v, gx, gy) = spline.grad_at_pixel(px + k % h, py + k / h);
+                    fe[k] = v;
+                    fxe[k] = gx;
+                    fye[k] = gy;
+                    let n = &ntab[k];
+                    // Row vector (N0 fx, N0 fy, N1 fx, ...) and its outer product.
+                    let mut row = [0.0; 8];
+                    for a in 0..4 {
+                        row[2 * a] = n[a] * gx;
+                        row[2 * a + 1] = n[a] * gy;
+                    }
+                    for i in 0..8 {
+                        for j in 0..=i {
+                            me[i * 8 + j] += row[i] * row[j];
+                        }
+                    }
+                }
+                for i in 0..8 {
+                    for j in 0..i {
+                        me[j * 8 + i] = me[i * 8 + j];
+                    }
+                }
+                let mean = fe.iter().sum::<f64>() / npx as f64;
+                let var = fe.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / npx as f64;
+                *st = [mean, var.sqrt()];
+            });
+        let n_all = (ne * npx) as f64;
+        let mean = f.iter().sum::<f64>() / n_all;
+        let std = (f.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n_all).sqrt();
+        let grad_ms = fx.iter().zip(&fy).map(|(a, b)| a * a + b * b).sum::<f64>() / n_all;
+        if !(std > 1e-6 && grad_ms > 1e-10) {
+            return Err(DicError::NoTexture(format!(
+                "the reference image is uniform over the region of interest (grey-level std {std:.3e}, gradient RMS {:.3e}): there is nothing to correlate",
+                grad_ms.sqrt()
+            )));
+        }
+        // Elements without texture make M singular (their corner nodes are unmeasurable).
+        if reg_length.is_none() {
+            for e in 0..ne {
+                let g2: f64 = (0..npx)
+                    .map(|k| fx[e * npx + k].powi(2) + fy[e * npx + k].powi(2))
+                    .sum::<f64>()
+                    / npx as f64;
+                if g2 < 1e-6 * grad_ms {
+                    let (px, py) = mesh.element_origin(e);
+                    return Err(DicError::NoTexture(format!(
+                        "element {e} (pixels x {px}..{}, y {py}..{}) has no grey-level texture (gradient RMS {:.2e} against {:.2e} over the ROI); exclude it with a mask or set a regularization length",
+                        px + h,
+                        py + h,
+                        g2.sqrt(),
+                        grad_ms.sqrt()
+                    )));
+                }
+            }
+        }
+        let dofs: Vec<[usize; 8]> = mesh
+            .conn
+            .iter()
+            .map(|c| {
+                let mut d = [0usize; 8];
+                for a in 0..4 {
+                    d[2 * a] = 2 * c[a];
+                    d[2 * a + 1] = 2 * c[a] + 1;
+                }
+                d
+            })
+            .collect();
+        let n_eq = 2 * mesh.n_nodes();
+        let mut pairs: Vec<(usize, usize)> = Vec::with_capacity(64 * ne);
+        for d in &dofs {
+            for &r in d {
+                for &c in d {
+                    pairs.push((r, c));
+                }
+            }
+        }
+        let laplacian = if reg_length.is_some() {
+            laplacian_rows(&mesh)
+        } else {
+            Vec::new()
+        };
+        for row in &laplacian {
+            for &(p, _) in row {
+                for &(q, _) in row {
+                    for c in 0..2 {
+                        pairs.push((2 * p + c, 2 * q + c));
+                    }
+                }
+            }
+        }
+        let pattern = CscPattern::from_pairs(n_eq, pairs);
+        let mut m_values = vec![0.0; pattern.nnz()];
+        for (d, me) in dofs.iter().zip(&elem_m) {
+            for i in 0..8 {
+                for j in 0..8 {
+                    let pos = pattern
+                        .position(d[i], d[j])
+                        .expect("element entry in the pattern");
+                    m_values[pos] += me[i * 8 + j];
+                }
+            }
+        }
+        let reg = match reg_length {
+            None => None,
+            Some(ell) => {
+                let mut k_values = vec![0.0; pattern.nnz()];
+                for row in &laplacian {
+                    for &(p, wp) in row {
+                        for &(q, wq) in row {
+                            for c in 0..2 {
+                                let pos = pattern
+                                    .position(2 * p + c, 2 * q + c)
+                                    .expect("Laplacian entry in the pattern");
+                                k_values[pos] += wp * wq;
+                            }
+                        }
+                    }
+                }
+                // λ from a plane wave of wavelength ℓ (ux varying along x, uy along y).
+                let k = std::f64::consts::TAU / ell;
+                let v: Vec<f64> = (0..n_eq)
+                    .map(|q| {
+                        let p = mesh.nodes[q / 2];
+                        (k * p[q % 2]).sin()
+                    })
+                    .collect();
+                let vkv = pattern.quadratic_form(&k_values, &v);
+                let vmv = pattern.quadratic_form(&m_values, &v);
+                if laplacian.is_empty() || !(vkv > 0.0) {
+                    None
+                } else {
+                    Some((k_values, vmv / vkv))
+                }
+            }
+        };
+        let a_values: Vec<f64> = match &reg {
+            None => m_values.clone(),
+            Some((kv, lambda)) => m_values
+                .iter()
+                .zip(kv)
+                .map(|(m, k)| m + lambda * k)
+                .collect(),
+        };
+        let chol = Cholesky::factorize(&pattern, &a_values).map_err(|e| match e {
+            DicError::Linear(msg) => DicError::NoTexture(format!(
+                "{msg}: some nodes are not measurable (too little texture around them); use a mask, larger elements or a regularization length"
+            )),
+            other => other,
+        })?;
+        Ok(Level {
+            ntab,
+            gw: vec![0.0; ne * npx],
+            elem_b: vec![[0.0; 8]; ne],
+            elem_g: vec![[0.0; 3]; ne],
+            corr: vec![(1.0, 0.0); ne],
+            rhs: vec![0.0; n_eq],
+            work: vec![0.0; n_eq],
+            f,
+            fx,
+            fy,
+            dofs,
+            pattern,
+            m_values,
+            reg,
+            chol,
+            f_stats,
+            f_global: [mean, std],
+            mesh,
+        })
+    }
+
+    /// Evaluates `g(x + u(x))` at every ROI pixel into `gw`, with the sums `Σg`, `Σg²` per
+    /// element.
+    fn warp(&mut self, g: &BSpline, a: &[f64]) {
+        let h = self.mesh.h;
+        let npx = h * h;
+        let mesh = &self.mesh;
+        let ntab = &self.ntab;
+        self.gw
+            .par_chunks_mut(npx)
+            .zip(self.elem_g.par_iter_mut())
+            .enumerate()
+            .for_each(|(e, (gwe, st))| {
+                let c = &mesh.conn[e];
+                let ax = [a[2 * c[0]], a[2 * c[1]], a[2 * c[2]], a[2 * c[3]]];
+                let ay = [
+                    a[2 * c[0] + 1],
+                    a[2 * c[1] + 1],
+                    a[2 * c[2] + 1],
+                    a[2 * c[3] + 1],
+                ];
+                let (px, py) = mesh.element_origin(e);
+                let (mut s1, mut s2) = (0.0, 0.0);
+                for j in 0..h {
+                    for i in 0..h {
+                        let k = j * h + i;
+                        let n = &ntab[k];
+                        let ux = n[0] * ax[0] + n[1] * ax[1] + n[2] * ax[2] + n[3] * ax[3];
+                        let uy = n[0] * ay[0] + n[1] * ay[1] + n[2] * ay[2] + n[3] * ay[3];
+                        let v = g.eval((px + i) as f64 + ux, (py + j) as f64 + uy);
+                        gwe[k] = v;
+                        s1 += v;
+                        s2 += v * v;
+                    }
+                }
+                *st = [s1, s2, 0.0];
+            });
+    }
+
+    /// Brightness/contrast `(s, o)` of element `e` such that `s g + o` has the mean and the
+    /// standard deviation of `f`.
+    fn correction(&self, mode: Brightness, e: usize, global: [f64; 2]) -> (f64, f64) {
+        let npx = (self.mesh.h * self.mesh.h) as f64;
+        let (fm, fs, gm, gs) = match mode {
+            Brightness::None => return (1.0, 0.0),
+            Brightness::Global => (self.f_global[0], self.f_global[1], global[0], global[1]),
+            Brightness::PerElement => {
+                let [s1, s2, _] = self.elem_g[e];
+                let gm = s1 / npx;
+                let gs = (s2 / npx - gm * gm).max(0.0).sqrt();
+                (self.f_stats[e][0], self.f_stats[e][1], gm, gs)
+            }
+        };
+        if gs > 1e-9 * (1.0 + gm.abs()) {
+            (fs / gs, fm - fs / gs * gm)
+        } else {
+            (1.0, fm - gm)
+        }
+    }
+
+    /// Global mean and std of the warped image (for [`Brightness::Global`]).
+    fn global_g(&self) -> [f64; 2] {
+        let n = self.gw.len() as f64;
+        let (s1, s2) = self
+            .elem_g
+            .iter()
+            .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
+        let m = s1 / n;
+        [m, (s2 / n - m * m).max(0.0).sqrt()]
+    }
+
+    /// Residual `r = f − (s g + o)` and the element vectors `b_e = Σ (N ∇f) r` (eq. 2), with
+    /// `Σ r²` per element in `elem_g[e][2]`.
+    fn residual(&mut self, mode: Brightness) {
+        let global = self.global_g();
+        for e in 0..self.corr.len() {
+            self.corr[e] = self.correction(mode, e, global);
+        }
+        let Level {
+            ntab,
+            f,
+            fx,
+            fy,
+            gw,
+            elem_b,
+            elem_g,
+            corr,
+            mesh,
+            ..
+        } = self;
+        let npx = mesh.h * mesh.h;
+        elem_b
+            .par_iter_mut()
+            .zip(elem_g.par_iter_mut())
+            .zip(f.par_chunks(npx))
+            .zip(fx.par_chunks(npx))
+            .zip(fy.par_chunks(npx))
+            .zip(gw.par_chunks(npx))
+            .zip(corr.par_iter())
+            .for_each(|((((((b, st), fe), fxe), fye), gwe), &(s, o))| {
+                let mut bb = [0.0; 8];
+                let mut r2 = 0.0;
+                for k in 0..npx {
+                    let r = fe[k] - (s * gwe[k] + o);
+                    r2 += r * r;
+                    let n = &ntab[k];
+                    let (rx, ry) = (r * fxe[k], r * fye[k]);
+                    for a in 0..4 {
+                        bb[2 * a] += n[a] * rx;
+                        bb[2 * a + 1] += n[a] * ry;
+                    }
+                }
+                *b = bb;
+                st[2] = r2;
+            });
+    }
+
+    /// Gauss–Newton iterations (eq. 2) from the nodal values `a`, updated in place. Returns
+    /// the iterations made, whether the increment fell below `tol`, and the last increment.
+    /// Nothing is allocated here.
+    fn iterate(
+        &mut self,
+        g: &BSpline,
+        a: &mut [f64],
+        mode: Brightness,
+        tol: f64,
+        max_iter: usize,
+        limit: f64,
+    ) -> Result<(usize, bool, f64), DicError> {
+        let mut inc = f64::INFINITY;
+        for it in 1..=max_iter {
+            self.warp(g, a);
+            self.residual(mode);
+            self.rhs.fill(0.0);
+            for (d, b) in self.dofs.iter().zip(&self.elem_b) {
+                for i in 0..8 {
+                    self.rhs[d[i]] += b[i];
+                }
+            }
+            if let Some((kv, lambda)) = &self.reg {
+                self.pattern.mul_vec(kv, a, &mut self.work);
+                for (r, w) in self.rhs.iter_mut().zip(&self.work) {
+                    *r -= lambda * w;
+                }
+            }
+            self.chol.solve_in_place(&mut self.rhs);
+            let mut sq = 0.0;
+            let mut amax = 0.0f64;
+            for (ai, d) in a.iter_mut().zip(&self.rhs) {
+                *ai += d;
+                sq += d * d;
+                amax = amax.max(ai.abs());
+            }
+            // RMS over the nodes of the nodal increment |δa_n| (pixels).
+            inc = (2.0 * sq / a.len() as f64).sqrt();
+            if !inc.is_finite() {
+                return Err(DicError::Diverged(format!(
+                    "non-finite displacement increment at iteration {it}"
+                )));
+            }
+            if amax > limit {
+                return Err(DicError::Diverged(format!(
+                    "at iteration {it} a nodal displacement reached {amax:.1} px, beyond the image size; the images may not show the same scene (try a mask, brightness correction or a regularization length)"
+                )));
+            }
+            if inc < tol {
+                return Ok((it, true, inc));
+            }
+        }
+        Ok((max_iter, false, inc))
+    }
+
+    /// Residual RMS over the ROI (after [`Self::residual`]).
+    fn residual_rms(&self) -> f64 {
+        let s: f64 = self.elem_g.iter().map(|v| v[2]).sum();
+        (s / self.gw.len() as f64).sqrt()
+    }
+}
+
+/// Rows of the regularization operator `L`: the 5-point Laplacian (weights `−4, 1, 1, 1, 1`)
+/// at the nodes whose four neighbours are nodes, and at the other nodes the 1D second
+/// difference (`1, −2, 1`) along each grid direction in which both neighbours exist (so edge
+/// and corner nodes are regularized too). Affine fields are in the kernel of every row.
+fn laplacian_rows(mesh: &DicMesh) -> Vec<Vec<(usize, f64)>> {
+    let w = mesh.nx + 1;
+    let at = |i: isize, j: isize| {
+        if i < 0 || j < 0 || i > mesh.nx as isize || j > mesh.ny as isize {
+            usize::MAX
+        } else {
+            mesh.grid_node[j as usize * w + i as usize]
+        }
+    };
+    let mut rows = Vec::new();
+    for (n, &(i, j)) in mesh.node_grid.iter().enumerate() {
+        let (i, j) = (i as isize, j as isize);
+        let (l, r, d, u) = (at(i - 1, j), at(i + 1, j), at(i, j - 1), at(i, j + 1));
+        let ok = |q: usize| q != usize::MAX;
+        if ok(l) && ok(r) && ok(d) && ok(u) {
+            rows.push(vec![(n, -4.0), (l, 1.0), (r, 1.0), (d, 1.0), (u, 1.0)]);
+            continue;
+        }
+        if ok(l) && ok(r) {
+            rows.push(vec![(n, -2.0), (l, 1.0), (r, 1.0)]);
+        }
+        if ok(d) && ok(u) {
+            rows.push(vec![(n, -2.0), (d, 1.0), (u, 1.0)]);
+        }
+    }
+    rows
+}
+
+/// Number of automatic pyramid levels: up to 2 while the reduced ROI holds 2 x 2 elements.
+fn auto_levels(bb_w: usize, bb_h: usize, h: usize) -> usize {
+    let mut l = 0;
+    while l < 2 && bb_w >> (l + 1) >= 2 * h && bb_h >> (l + 1) >= 2 * h {
+        l += 1;
+    }
+    l
+}
+
+/// Grey-level standard deviation over the pixels of a rectangle.
+fn std_over(img: &GreyImage, x: usize, y: usize, w: usize, h: usize) -> f64 {
+    let n = (w * h) as f64;
+    let mut s1 = 0.0;
+    let mut s2 = 0.0;
+    for j in y..y + h {
+        for v in &img.data[j * img.width + x..j * img.width + x + w] {
+            s1 += v;
+            s2 += v * v;
+        }
+    }
+    let m = s1 / n;
+    (s2 / n - m * m).max(0.0).sqrt()
+}
+
+/// Nodal values on `fine` from the field `u` on `coarse`, `k` pyramid levels above: a coarse
+/// pixel centre `x_c` sits at `x = 2^k x_c + (2^k − 1)/2` in fine pixels, so
+/// `u_fine(x) = 2^k u_coarse((x − (2^k − 1)/2) / 2^k)`; nodes outside the coarse mesh take the
+/// value of the nearest coarse node.
+fn prolong(coarse: &DicMesh, u: &[f64], fine: &DicMesh, k: usize) -> Vec<f64> {
+    let f = (1usize << k) as f64;
+    let off = 0.5 * (f - 1.0);
+    let uc: Vec<[f64; 2]> = u.chunks(2).map(|c| [c[0], c[1]]).collect();
+    let mut out = Vec::with_capacity(2 * fine.n_nodes());
+    for p in &fine.nodes {
+        let (xc, yc) = ((p[0] - off) / f, (p[1] - off) / f);
+        let v = coarse.interpolate(&uc, xc, yc).unwrap_or_else(|| {
+            let mut best = (f64::INFINITY, [0.0; 2]);
+            for (q, val) in coarse.nodes.iter().zip(&uc) {
+                let d = (q[0] - xc).powi(2) + (q[1] - yc).powi(2);
+                if d < best.0 {
+                    best = (d, *val);
+                }
+            }
+            best.1
+        });
+        out.push(f * v[0]);
+        out.push(f * v[1]);
+    }
+    out
+}
+
+/// Measures the displacement from `reference` to `deformed` over `roi` (global Q4 DIC, see the
+/// module documentation). Input errors (sizes, ROI, element size, no texture) are reported
+/// before any computation; a run that does not reach the tolerance returns its last field with
+/// `converged = false`.
+pub fn correlate(
+    reference: &GreyImage,
+    deformed: &GreyImage,
+    roi: &Roi,
+    opts: &DicOptions,
+) -> Result<DicResult, DicError> {
+    let t0 = Instant::now();
+    opts.validate()?;
+    if (reference.width, reference.height) != (deformed.width, deformed.height) {
+        return Err(DicError::SizeMismatch {
+            reference: (reference.width, reference.height),
+            deformed: (deformed.width, deformed.height),
+        });
+    }
+    let (width, height) = (reference.width, reference.height);
+    let h = opts.element_size;
+    // Mesh first: ROI and element-size errors before any work.
+    let fine_mesh = DicMesh::new(roi, width, height, h)?;
+    let bb = roi.bounding_box(width, height)?;
+    let (mx, my) = (fine_mesh.nx * h, fine_mesh.ny * h);
+    if std_over(deformed, bb.x, bb.y, mx, my) < 1e-6 {
+        return Err(DicError::NoTexture(
+            "the deformed image is uniform over the region of interest: there is nothing to correlate".into(),
+        ));
+    }
+    let n_levels = opts
+        .pyramid_levels
+        .unwrap_or_else(|| auto_levels(mx, my, h));
+    // Pyramid of images and ROIs.
+    let mut refs = vec![reference.clone()];
+    let mut defs = vec![deformed.clone()];
+    let mut rois = vec![roi.clone()];
+    for l in 0..n_levels {
+        refs.push(refs[l].half());
+        defs.push(defs[l].half());
+        rois.push(rois[l].half());
+    }
+    let mut timings = Timings::default();
+    let splines: Vec<BSpline> = defs
+        .par_iter()
+        .map(|d| BSpline::new(&d.data, d.width, d.height))
+        .collect();
+    // FFT integer shift on the coarsest level that has a valid ROI.
+    let mut shift_px = (0i64, 0i64);
+    if opts.fft_init {
+        for l in (0..=n_levels).rev() {
+            if let Ok(b) = rois[l].bounding_box(refs[l].width, refs[l].height) {
+                if b.w >= 8 && b.h >= 8 {
+                    let crop = |img: &GreyImage| -> Vec<f64> {
+                        (b.y..b.y + b.h)
+                            .flat_map(|j| {
+                                img.data[j * img.width + b.x..j * img.width + b.x + b.w]
+                                    .iter()
+                                    .copied()
+                            })
+                            .collect()
+                    };
+                    let s = crate::fft::integer_shift(&crop(&refs[l]), &crop(&defs[l]), b.w, b.h);
+                    shift_px = (s.0 << l, s.1 << l);
+                    break;
+                }
+            }
+        }
+    }
+    timings.preparation_s = t0.elapsed().as_secs_f64();
+    let limit = (width.max(height)) as f64;
+    let mut levels = Vec::new();
+    // The field carried from level to level: (mesh, nodal values) in that level's pixels.
+    let mut carried: Option<(DicMesh, Vec<f64>, usize)> = None;
+    let mut finest: Option<(Level, Vec<f64>, usize, bool, f64)> = None;
+    for l in (0..=n_levels).rev() {
+        let ts = Instant::now();
+        let level = Level::new(
+            &refs[l],
+            &rois[l],
+            h,
+            opts.regularization_length.map(|v| v / (1 << l) as f64),
+        );
+        let mut level = match level {
+            Ok(lv) => lv,
+            Err(e) if l > 0 => {
+                levels.push(LevelReport {
+                    level: l,
+                    elements: 0,
+                    nodes: 0,
+                    iterations: 0,
+                    converged: false,
+                    last_increment_px: f64::NAN,
+                    residual_rms: f64::NAN,
+                    skipped: Some(e.to_string()),
+                });
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
+        timings.setup_s += ts.elapsed().as_secs_f64();
+        let ti = Instant::now();
+        let mut a = match &carried {
+            Some((mesh, u, from)) => prolong(mesh, u, &level.mesh, from - l),
+            None => {
+                let s = ((shift_px.0 >> l) as f64, (shift_px.1 >> l) as f64);
+                (0..level.mesh.n_nodes()).flat_map(|_| [s.0, s.1]).collect()
+            }
+        };
+        let (tol, max_iter) = if l == 0 {
+            (opts.tolerance, opts.max_iterations)
+        } else {
+            (opts.tolerance.max(1e-2), opts.max_iterations.min(30))
+        };
+        let (its, conv, inc) = level.iterate(
+            &splines[l],
+            &mut a,
+            opts.brightness,
+            tol,
+            max_iter,
+            limit / (1 << l) as f64,
+        )?;
+        timings.iterations_s += ti.elapsed().as_secs_f64();
+        level.warp(&splines[l], &a);
+        level.residual(opts.brightness);
+        levels.push(LevelReport {
+            level: l,
+            elements: level.mesh.n_elements(),
+            nodes: level.mesh.n_nodes(),
+            iterations: its,
+            converged: conv,
+            last_increment_px: inc,
+            residual_rms: level.residual_rms(),
+            skipped: None,
+        });
+        if l == 0 {
+            finest = Some((level, a, its, conv, inc));
+        } else {
+            carried = Some((level.mesh.clone(), a, l));
+        }
+    }
+    let (level, a, iterations, converged, last_increment_px) =
+        finest.expect("level 0 is always built or returns an error");
+    // Diagnostics on the finest level.
+    let npx = h * h;
+    let ne = level.mesh.n_elements();
+    let element_residual: Vec<f64> = level
+        .elem_g
+        .iter()
+        .map(|v| (v[2] / npx as f64).sqrt())
+        .collect();
+    let mut sorted = element_residual.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let median = sorted[ne / 2];
+    let flagged: Vec<bool> = element_residual
+        .iter()
+        .map(|&r| r > opts.flag_factor * median)
+        .collect();
+    let mut residual_image = vec![f32::NAN; width * height];
+    for e in 0..ne {
+        let (px, py) = level.mesh.element_origin(e);
+        let (s, o) = level.corr[e];
+        for k in 0..npx {
+            let r = level.f[e * npx + k] - (s * level.gw[e * npx + k] + o);
+            residual_image[(py + k / h) * width + px + k % h] = r as f32;
+        }
+    }
+    let (fmin, fmax) = level
+        .f
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    let residual_rms = level.residual_rms();
+    timings.total_s = t0.elapsed().as_secs_f64();
+    Ok(DicResult {
+        displacement: a.chunks(2).map(|c| [c[0], c[1]]).collect(),
+        iterations,
+        converged,
+        last_increment_px,
+        residual_rms,
+        residual_percent: 100.0 * residual_rms / (fmax - fmin).max(1e-12),
+        element_residual,
+        flagged,
+        residual_image,
+        initial_shift: shift_px,
+        levels,
+        timings,
+        image_size: (width, height),
+        mesh: level.mesh,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lab::{self, Speckle};
+    use crate::mesh::Rect;
+
+    /// A small speckle level: 64 x 64 image, ROI 16..48, 8 px elements (16 nodes x 2).
+    fn small() -> (GreyImage, Level) {
+        let s = Speckle::new(64, 64, 1.5, 5);
+        let f = s.reference();
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 32,
+            h: 32,
+        });
+        let level = Level::new(&f, &roi, 8, None).unwrap();
+        (f, level)
+    }
+
+    /// Residual vector `f − g(x + u)` (no brightness correction) at nodal values `a`.
+    fn residuals(level: &mut Level, g: &BSpline, a: &[f64]) -> Vec<f64> {
+        level.warp(g, a);
+        level.f.iter().zip(&level.gw).map(|(f, g)| f - g).collect()
+    }
+
+    /// `M` (eq. 2) equals `JᵀJ` with `J = ∂r/∂a` by central finite differences at `u = 0`
+    /// when the deformed image is the reference (there `∇g = ∇f` exactly). Step 1e-4 px:
+    /// truncation O(ε²) ~ 1e-8 relative, well below the 1e-5 tolerance.
+    #[test]
+    fn hessian_matches_finite_difference_jacobian() {
+        let (f, mut level) = small();
+        let g = BSpline::new(&f.data, f.width, f.height);
+        let n = 2 * level.mesh.n_nodes();
+        let eps = 1e-4;
+        let jac: Vec<Vec<f64>> = (0..n)
+            .map(|q| {
+                let mut a = vec![0.0; n];
+                a[q] = eps;
+                let rp = residuals(&mut level, &g, &a);
+                a[q] = -eps;
+                let rm = residuals(&mut level, &g, &a);
+                rp.iter()
+                    .zip(&rm)
+                    .map(|(p, m)| (p - m) / (2.0 * eps))
+                    .collect()
+            })
+            .collect();
+        let scale = level.m_values.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        for p in 0..n {
+            for q in 0..n {
+                let jtj: f64 = jac[p].iter().zip(&jac[q]).map(|(a, b)| a * b).sum();
+                let m = level
+                    .pattern
+                    .position(p, q)
+                    .map_or(0.0, |k| level.m_values[k]);
+                assert!(
+                    (m - jtj).abs() < 1e-5 * scale,
+                    "M[{p},{q}] = {m}, JᵀJ = {jtj}"
+                );
+            }
+        }
+    }
+
+    /// The gradient of the cost (1), `∂Φ/∂a_i = −2 Σ r N_i ∇g(x + u)`, against central finite
+    /// differences of Φ at a non-trivial field on a translated pair; and the modified
+    /// Gauss–Newton right-hand side `b` (eq. 2) equals `−½ ∂Φ/∂a` up to the replacement of
+    /// `∇g(x + u)` by `∇f(x)`, i.e. exactly at the solution of a pure translation.
+    #[test]
+    fn cost_gradient_matches_finite_differences() {
+        let s = Speckle::new(64, 64, 1.5, 5);
+        let f = s.reference();
+        let gi = s.deformed(&lab::translation(0.3, -0.2));
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 32,
+            h: 32,
+        });
+        let mut level = Level::new(&f, &roi, 8, None).unwrap();
+        let g = BSpline::new(&gi.data, gi.width, gi.height);
+        let n = 2 * level.mesh.n_nodes();
+        let a0: Vec<f64> = (0..n)
+            .map(|q| 0.1 * ((q * 7 % 5) as f64 - 2.0) + if q % 2 == 0 { 0.3 } else { -0.2 })
+            .collect();
+        let cost = |level: &mut Level, a: &[f64]| {
+            residuals(level, &g, a).iter().map(|r| r * r).sum::<f64>()
+        };
+        // Analytic gradient.
+        let r = residuals(&mut level, &g, &a0);
+        let h = level.mesh.h;
+        let npx = h * h;
+        let mut grad = vec![0.0; n];
+        for e in 0..level.mesh.n_elements() {
+            let (px, py) = level.mesh.element_origin(e);
+            let c = level.mesh.conn[e];
+            for k in 0..npx {
+                let nn = level.ntab[k];
+                let (mut ux, mut uy) = (0.0, 0.0);
+                for i in 0..4 {
+                    ux += nn[i] * a0[2 * c[i]];
+                    uy += nn[i] * a0[2 * c[i] + 1];
+                }
+                let (_, gx, gy) = g.eval_grad((px + k % h) as f64 + ux, (py + k / h) as f64 + uy);
+                for i in 0..4 {
+                    grad[2 * c[i]] += -2.0 * r[e * npx + k] * nn[i] * gx;
+                    grad[2 * c[i] + 1] += -2.0 * r[e * npx + k] * nn[i] * gy;
+                }
+            }
+        }
+        let eps = 1e-5;
+        for q in 0..n {
+            let mut a = a0.clone();
+            a[q] += eps;
+            let cp = cost(&mut level, &a);
+            a[q] -= 2.0 * eps;
+            let cm = cost(&mut level, &a);
+            let fd = (cp - cm) / (2.0 * eps);
+            assert!(
+                (fd - grad[q]).abs() < 1e-5 * (1.0 + grad[q].abs()) + 1e-3,
+                "dof {q}: {fd} vs {}",
+                grad[q]
+            );
+        }
+        // At the exact translation, b (eq. 2) and the cost gradient both vanish to the
+        // interpolation error: both are small against their scale at a0.
+        let exact: Vec<f64> = (0..n)
+            .map(|q| if q % 2 == 0 { 0.3 } else { -0.2 })
+            .collect();
+        level.warp(&g, &exact);
+        level.residual(Brightness::None);
+        let b_max = level
+            .elem_b
+            .iter()
+            .flat_map(|b| b.iter())
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        let g_max = grad.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        assert!(
+            b_max < 0.01 * g_max,
+            "b at the solution {b_max} vs gradient scale {g_max}"
+        );
+    }
+
+    #[test]
+    fn uniform_images_and_bad_options_are_refused() {
+        let flat = GreyImage::new(64, 64, vec![100.0; 64 * 64]).unwrap();
+        let s = Speckle::new(64, 64, 1.5, 1).reference();
+        let roi = Roi::Rect(Rect {
+            x: 0,
+            y: 0,
+            w: 64,
+            h: 64,
+        });
+        let o = DicOptions::default();
+        let e = correlate(&flat, &s, &roi, &o).unwrap_err();
+        assert!(matches!(e, DicError::NoTexture(_)), "{e}");
+        let e = correlate(&s, &flat, &roi, &o).unwrap_err();
+        assert!(matches!(e, DicError::NoTexture(_)), "{e}");
+        let small = GreyImage::new(32, 64, vec![1.0; 32 * 64]).unwrap();
+        assert!(matches!(
+            correlate(&s, &small, &roi, &o),
+            Err(DicError::SizeMismatch { .. })
+        ));
+        let bad = DicOptions {
+            tolerance: -1.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            correlate(&s, &s, &roi, &bad),
+            Err(DicError::Option { .. })
+        ));
+        // A textureless patch inside a textured image: refused, naming the element.
+        // (32 x 32 px flat corner: element 0 is 16 px from any texture, where the B-spline
+        // gradient has decayed as 0.27^16 ~ 1e-9.)
+        let mut patched = s.clone();
+        for y in 0..32 {
+            for x in 0..32 {
+                patched.data[y * 64 + x] = 50.0;
+            }
+        }
+        match correlate(&patched, &patched, &roi, &o) {
+            Err(e) => assert!(e.to_string().contains("element 0"), "{e}"),
+            Ok(_) => panic!("a textureless element was accepted"),
+        }
+    }
+}

@@ -1,0 +1,233 @@
+//! A field over an image: a grey-level picture (an ultrasound frame, a speckle image) with a
+//! per-pixel value drawn over it in colour where it is defined, and a colour bar. Axes are in
+//! image pixels, y pointing down as in the image.
+
+use crate::colormap::ColorMap;
+use crate::text::{draw_title, font, tick_label, Sizes};
+use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
+use plotters::prelude::*;
+use std::path::Path;
+
+/// Options of [`image_field_png`].
+#[derive(Debug, Clone)]
+pub struct ImageField {
+    pub title: String,
+    /// Name and unit of the values, along the colour bar.
+    pub value_label: String,
+    /// Blue–white–red symmetric about zero instead of viridis.
+    pub diverging: bool,
+    /// Colour range; by default the finite values' range (symmetric for `diverging`).
+    pub range: Option<(f64, f64)>,
+    /// Opacity of the colours over the grey image (0–1).
+    pub alpha: f64,
+    /// Part of the image shown, `(x, y, w, h)` pixels; by default the whole image.
+    pub crop: Option<(usize, usize, usize, usize)>,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Default for ImageField {
+    fn default() -> Self {
+        ImageField {
+            title: String::new(),
+            value_label: String::new(),
+            diverging: false,
+            range: None,
+            alpha: 0.75,
+            crop: None,
+            width: crate::DEFAULT_WIDTH,
+            height: crate::DEFAULT_HEIGHT,
+        }
+    }
+}
+
+/// Writes a PNG of `values` (one per pixel of an `img_w x img_h` image, NaN where there is no
+/// value) blended over the grey image `grey` (0–255), with a colour bar.
+pub fn image_field_png(
+    path: &Path,
+    grey: &[f64],
+    img_w: usize,
+    img_h: usize,
+    values: &[f64],
+    opts: &ImageField,
+) -> Result<(), PlotError> {
+    check_size(opts.width, opts.height)?;
+    check_range("value range", opts.range)?;
+    if img_w == 0 || img_h == 0 {
+        return Err(PlotError::Empty("the image has no pixel".into()));
+    }
+    for (what, v) in [("grey levels", grey), ("values", values)] {
+        if v.len() != img_w * img_h {
+            return Err(PlotError::LengthMismatch {
+                what: format!("{what} (one per pixel of {img_w} x {img_h})"),
+                expected: img_w * img_h,
+                found: v.len(),
+            });
+        }
+    }
+    if !(0.0..=1.0).contains(&opts.alpha) {
+        return Err(PlotError::InvalidOption(format!(
+            "alpha {} is outside 0..1",
+            opts.alpha
+        )));
+    }
+    let (cx, cy, cw, ch) = opts.crop.unwrap_or((0, 0, img_w, img_h));
+    if cw == 0 || ch == 0 || cx + cw > img_w || cy + ch > img_h {
+        return Err(PlotError::InvalidOption(format!(
+            "crop ({cx}, {cy}, {cw}, {ch}) is not inside the {img_w} x {img_h} image"
+        )));
+    }
+    let (lo, hi) = match opts.range {
+        Some(r) => r,
+        None => {
+            let r = finite_min_max(values.iter().copied()).ok_or_else(|| {
+                PlotError::InvalidData("every value is NaN: nothing to colour".into())
+            })?;
+            widen(r.0, r.1)
+        }
+    };
+    let cmap = if opts.diverging {
+        let a = lo.abs().max(hi.abs());
+        ColorMap::Diverging {
+            a: if a > 0.0 { a } else { 1.0 },
+        }
+    } else {
+        ColorMap::Viridis { lo, hi }
+    };
+    let s = Sizes::new(opts.width, opts.height);
+    // Layout: image on the left keeping its aspect ratio, colour bar on the right.
+    let (yla, xla) = (s.px(90.0), s.px(70.0));
+    let (cb_gap, cb_w, cb_la) = (s.px(30.0), s.px(30.0), s.px(130.0));
+    let top = s.title_band() + s.px(10.0);
+    let aw = opts
+        .width
+        .saturating_sub(yla + s.px(16.0) + cb_gap + cb_w + cb_la + s.px(12.0))
+        .max(20);
+    let ah = opts.height.saturating_sub(top + xla + s.px(10.0)).max(20);
+    let scale = (aw as f64 / cw as f64).min(ah as f64 / ch as f64);
+    let pw = ((scale * cw as f64).floor() as u32).max(10);
+    let ph = ((scale * ch as f64).floor() as u32).max(10);
+    let left = yla + s.px(16.0);
+    let canvas = Canvas::new(opts.width, opts.height);
+    canvas.draw_and_save(path, |root| {
+        draw_title(root, &opts.title, s)?;
+        // Image pixels: nearest neighbour, grey blended with the colour where defined.
+        for py in 0..ph {
+            let iy = cy + ((py as f64 + 0.5) / scale).floor().min(ch as f64 - 1.0) as usize;
+            for px in 0..pw {
+                let ix = cx + ((px as f64 + 0.5) / scale).floor().min(cw as f64 - 1.0) as usize;
+                let k = iy * img_w + ix;
+                let gv = grey[k].clamp(0.0, 255.0);
+                let v = values[k];
+                let c = if v.is_nan() {
+                    RGBColor(gv as u8, gv as u8, gv as u8)
+                } else {
+                    let RGBColor(r, g, b) = cmap.color(v);
+                    let mix =
+                        |c: u8| (opts.alpha * c as f64 + (1.0 - opts.alpha) * gv).round() as u8;
+                    RGBColor(mix(r), mix(g), mix(b))
+                };
+                root.draw_pixel(((left + px) as i32, (top + py) as i32), &c)
+                    .map_err(de)?;
+            }
+        }
+        // Axes in image pixels (y down): the chart's y runs over −y so that it grows downwards.
+        let area = root.clone().shrink((left - yla, top), (yla + pw, ph + xla));
+        let mut chart = ChartBuilder::on(&area)
+            .margin(0)
+            .y_label_area_size(yla)
+            .x_label_area_size(xla)
+            .build_cartesian_2d(
+                cx as f64..(cx + cw) as f64,
+                -((cy + ch) as f64)..-(cy as f64),
+            )
+            .map_err(de)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .x_desc("x (px)")
+            .y_desc("y (px)")
+            .label_style(font(s.tick()))
+            .axis_desc_style(font(s.desc()))
+            .x_labels(6)
+            .y_labels(6)
+            .y_label_formatter(&|v| format!("{}", (-v).round()))
+            .x_label_formatter(&|v| format!("{}", v.round()))
+            .draw()
+            .map_err(de)?;
+        // Colour bar.
+        let (blo, bhi) = cmap.range();
+        let cb_left = left + pw + cb_gap;
+        let bar_area = root.clone().shrink((cb_left, top), (cb_w + cb_la, ph));
+        let mut bar = ChartBuilder::on(&bar_area)
+            .margin(0)
+            .right_y_label_area_size(cb_la)
+            .build_cartesian_2d(0.0..1.0, blo..bhi)
+            .map_err(de)?;
+        let steps = ph.max(2) as usize;
+        bar.draw_series((0..steps).map(|i| {
+            let a = blo + (bhi - blo) * i as f64 / steps as f64;
+            let b = blo + (bhi - blo) * (i + 1) as f64 / steps as f64;
+            Rectangle::new([(0.0, a), (1.0, b)], cmap.color(0.5 * (a + b)).filled())
+        }))
+        .map_err(de)?;
+        bar.draw_series(std::iter::once(Rectangle::new(
+            [(0.0, blo), (1.0, bhi)],
+            BLACK.stroke_width(1),
+        )))
+        .map_err(de)?;
+        bar.configure_mesh()
+            .set_all_tick_mark_size(s.px(7.0))
+            .disable_mesh()
+            .disable_x_axis()
+            .y_desc(opts.value_label.as_str())
+            .label_style(font(s.tick()))
+            .axis_desc_style(font(s.desc()))
+            .y_labels(((ph / s.px(60.0)) as usize).clamp(3, 11))
+            .y_label_formatter(&|v| tick_label(*v, blo, bhi))
+            .draw()
+            .map_err(de)?;
+        Ok(())
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_a_png_and_rejects_bad_input() {
+        let (w, h) = (60, 40);
+        let grey: Vec<f64> = (0..w * h).map(|k| ((k * 37) % 255) as f64).collect();
+        let vals: Vec<f64> = (0..w * h)
+            .map(|k| {
+                if (k % w) > 10 && (k / w) > 5 {
+                    (k % w) as f64 * 0.01 - 0.3
+                } else {
+                    f64::NAN
+                }
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("femu-plot-img-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("f.png");
+        let opts = ImageField {
+            title: "ux".into(),
+            value_label: "ux (px)".into(),
+            diverging: true,
+            width: 600,
+            height: 400,
+            ..Default::default()
+        };
+        image_field_png(&p, &grey, w, h, &vals, &opts).unwrap();
+        let img = image::open(&p).unwrap();
+        assert_eq!((img.width(), img.height()), (600, 400));
+        assert!(image_field_png(&p, &grey[1..], w, h, &vals, &opts).is_err());
+        let bad = ImageField {
+            crop: Some((50, 0, 20, 10)),
+            ..opts.clone()
+        };
+        assert!(image_field_png(&p, &grey, w, h, &vals, &bad).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
