@@ -42,7 +42,7 @@ pub struct CorrelationArgs {
     /// Element size (pixels).
     #[arg(long, default_value_t = 16)]
     pub element: usize,
-    /// Convergence: largest nodal displacement increment (pixels).
+    /// Convergence: RMS of the nodal displacement increments (pixels).
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
     /// Maximum Gauss–Newton iterations.
