@@ -282,6 +282,7 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
     let mut best_per_repeat: Vec<FitResult> = Vec::new();
     let mut masked = 0;
     let mut inside = 0;
+    let mut first_field: Option<MeasuredField> = None;
     for rep in 0..repeats {
         let field = match &args.measured {
             Some(p) => MeasuredField::read(p)?,
@@ -317,6 +318,9 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
             free.clone(),
         )?;
         (inside, masked) = probe.points();
+        if first_field.is_none() {
+            first_field = Some(field.clone());
+        }
         let mut best: Option<FitResult> = None;
         for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
             match o {
@@ -405,6 +409,9 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
         .collect();
     write_parameters_csv(&args.out.join("parameters.csv"), &parameters)?;
     write_figures(&args.out, &parameters, best, virtual_experiment, repeats)?;
+    if let Some(field) = &first_field {
+        write_field_figures(&args.out, &model, &free, field, &best.theta)?;
+    }
     let summary = Summary {
         command: "identify",
         version: env!("CARGO_PKG_VERSION"),
@@ -596,5 +603,113 @@ fn write_figures(
             },
         )?;
     }
+    Ok(())
+}
+
+/// `fields.png`: measured and model ux, uy at the measured points and their difference (one
+/// panel each), when the points lie on a regular grid (as written by `synth` and `dic`).
+fn write_field_figures(
+    out: &Path,
+    model: &Model,
+    free: &[FreeParameter],
+    field: &MeasuredField,
+    theta: &[f64],
+) -> Result<()> {
+    let locator = PointLocator::new(&model.mesh);
+    let inside: Vec<&MeasuredPoint> = field
+        .points
+        .iter()
+        .filter(|p| locator.locate(p.x).is_some())
+        .collect();
+    let mut p = Problem::new(
+        model.clone(),
+        SolverOptions::default(),
+        field,
+        free.to_vec(),
+    )?;
+    let u = p.field_at(theta)?;
+    // The grid: distinct x and y values.
+    let distinct = |k: usize| {
+        let mut v: Vec<f64> = inside.iter().map(|p| p.x[k]).collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup_by(|a, b| (*a - *b).abs() < 1e-9 * (1.0 + b.abs()));
+        v
+    };
+    let (xs, ys) = (distinct(0), distinct(1));
+    let (nx, ny) = (xs.len(), ys.len());
+    if nx < 2 || ny < 2 || nx * ny > 1_000_000 || nx * ny < inside.len() {
+        return Ok(()); // not a grid: no picture
+    }
+    let index = |v: f64, axis: &[f64]| {
+        axis.binary_search_by(|a| a.total_cmp(&v))
+            .or_else(|i| {
+                let near =
+                    |j: usize| j < axis.len() && (axis[j] - v).abs() < 1e-9 * (1.0 + v.abs());
+                if near(i) {
+                    Ok(i)
+                } else if i > 0 && near(i - 1) {
+                    Ok(i - 1)
+                } else {
+                    Err(())
+                }
+            })
+            .ok()
+    };
+    let mut images = vec![vec![f64::NAN; nx * ny]; 6];
+    for (k, pt) in inside.iter().enumerate() {
+        let (Some(i), Some(j)) = (index(pt.x[0], &xs), index(pt.x[1], &ys)) else {
+            return Ok(());
+        };
+        let pix = (ny - 1 - j) * nx + i; // image rows go down, y goes up
+        let m = [u[2 * k], u[2 * k + 1]];
+        for c in 0..2 {
+            images[3 * c][pix] = pt.u[c];
+            images[3 * c + 1][pix] = m[c];
+            images[3 * c + 2][pix] = m[c] - pt.u[c];
+        }
+    }
+    let spacing = xs[1] - xs[0];
+    let grey = vec![255.0; nx * ny];
+    let panels_dir = out.join("panels");
+    std::fs::create_dir_all(&panels_dir)?;
+    let mut paths = Vec::new();
+    for c in 0..2 {
+        let comp = ["ux", "uy"][c];
+        let lo_hi = images[3 * c]
+            .iter()
+            .chain(&images[3 * c + 1])
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        for (k, what) in ["measured", "model (identified)", "model - measured"]
+            .iter()
+            .enumerate()
+        {
+            let path = panels_dir.join(format!("field_{comp}_{k}.png"));
+            femu_plot::image_field_png(
+                &path,
+                &grey,
+                nx,
+                ny,
+                &images[3 * c + k],
+                &femu_plot::ImageField {
+                    title: format!(
+                        "{what} {comp} ({nx} x {ny} grid, {spacing:.3} mm apart; anterior up)"
+                    ),
+                    value_label: format!("{comp} (mm)"),
+                    diverging: k == 2,
+                    range: (k < 2 && lo_hi.0 < lo_hi.1).then_some(lo_hi),
+                    alpha: 1.0,
+                    width: 700,
+                    height: 560,
+                    ..Default::default()
+                },
+            )?;
+            paths.push(path);
+        }
+    }
+    let refs: Vec<&Path> = paths.iter().map(|p| p.as_path()).collect();
+    femu_plot::tile_png(&out.join("fields.png"), &refs, 3)?;
     Ok(())
 }

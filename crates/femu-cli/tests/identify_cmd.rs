@@ -78,7 +78,12 @@ fn synth_then_identify_recovers_table1() {
     for n in s["forward_solves_per_start"].as_array().unwrap() {
         assert!(n.as_u64().unwrap() <= 40, "{n} forward solves");
     }
-    for f in ["parameters.csv", "starts.csv", "cost_history.png"] {
+    for f in [
+        "parameters.csv",
+        "starts.csv",
+        "cost_history.png",
+        "fields.png",
+    ] {
         assert!(out.join(f).exists(), "{f}");
     }
 }
