@@ -42,21 +42,7 @@ fn measured_model(plan: &Plan) -> Result<(Model, String)> {
 }
 
 fn read_plan(args: &IdentifyArgs) -> Result<Plan> {
-    let mut plan = match &args.study {
-        Some(p) => plan::read(p)?,
-        None => Plan::default(),
-    };
-    if let Some(n) = args.elements {
-        plan.elements = Some(n);
-        plan.size_mm = None;
-    }
-    if plan.groups.is_empty() {
-        plan.groups = vec![vec![
-            "D_ISCHIO".into(),
-            "D_SARTORIUS".into(),
-            "D_GRACILIS".into(),
-        ]];
-    }
+    let mut plan = plan::load(args.study.as_deref(), args.elements)?;
     if let Some(r) = args.repeat {
         if r == 0 {
             bail!("--repeat must be at least 1");

@@ -204,6 +204,32 @@ impl Default for Plan {
 /// The seed's measurement noise: 1.5 px = 1.76e-2 mm (§3.1.3).
 pub const SEED_SIGMA_MM: f64 = 1.76e-2;
 
+/// The seed's grouping (§2.4.2): D of ischio, sartorius and gracilis tied.
+pub fn seed_groups() -> Vec<Vec<String>> {
+    vec![vec![
+        "D_ISCHIO".into(),
+        "D_SARTORIUS".into(),
+        "D_GRACILIS".into(),
+    ]]
+}
+
+/// The study of a command: the file if given (else the defaults), `--elements` over it, and the
+/// seed's grouping when the study names none.
+pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Plan> {
+    let mut plan = match study {
+        Some(p) => read(p)?,
+        None => Plan::default(),
+    };
+    if let Some(n) = elements {
+        plan.elements = Some(n);
+        plan.size_mm = None;
+    }
+    if plan.groups.is_empty() {
+        plan.groups = seed_groups();
+    }
+    Ok(plan)
+}
+
 /// Reads and checks a study file.
 pub fn read(path: &Path) -> Result<Plan> {
     let text = std::fs::read_to_string(path)

@@ -125,21 +125,7 @@ pub fn run(args: &SensitivityArgs, quiet: bool) -> Result<()> {
     if !(args.fd_step > 0.0 && args.fd_step < 0.1) {
         bail!("--fd-step must be in (0, 0.1), got {}", args.fd_step);
     }
-    let mut plan = match &args.study {
-        Some(p) => plan::read(p)?,
-        None => Plan::default(),
-    };
-    if let Some(n) = args.elements {
-        plan.elements = Some(n);
-        plan.size_mm = None;
-    }
-    if plan.groups.is_empty() {
-        plan.groups = vec![vec![
-            "D_ISCHIO".into(),
-            "D_SARTORIUS".into(),
-            "D_GRACILIS".into(),
-        ]];
-    }
+    let plan = plan::load(args.study.as_deref(), args.elements)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let (base, skin) = thigh_model(&plan)?;

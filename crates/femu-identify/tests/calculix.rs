@@ -11,7 +11,7 @@ use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::inp::read_ccx_dat_displacements;
 use femu_mesh::locate::PointLocator;
-use femu_mesh::{write_inp, Deck, ElementKind, PointLoad};
+use femu_mesh::{write_inp, Deck, ElementKind};
 use std::collections::HashMap;
 use std::process::Command;
 
@@ -21,30 +21,6 @@ fn ccx_installed() -> bool {
         println!("SKIPPED: ccx not installed (apt-get install calculix-ccx)");
     }
     found
-}
-
-/// The follower pressure of the deck as the equivalent dead nodal forces on the reference faces.
-fn to_dead_loads(deck: &mut Deck) {
-    let mut f = vec![0.0; 2 * deck.mesh.nodes.len()];
-    for p in std::mem::take(&mut deck.pressures) {
-        let [a, b] = deck.mesh.elements[p.element].face_nodes(p.face);
-        let (xa, xb) = (deck.mesh.nodes[a], deck.mesh.nodes[b]);
-        let h = 0.5 * p.magnitude;
-        for n in [a, b] {
-            f[2 * n] -= h * (xb[1] - xa[1]);
-            f[2 * n + 1] += h * (xb[0] - xa[0]);
-        }
-    }
-    deck.point_loads = f
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| **v != 0.0)
-        .map(|(i, &magnitude)| PointLoad {
-            node: i / 2,
-            dof: i % 2,
-            magnitude,
-        })
-        .collect();
 }
 
 /// Rounds the deck's numbers to 14 significant digits (ccx reads 20 characters per field); both
@@ -76,7 +52,7 @@ fn ccx_field_is_identified_back_without_noise() {
     )
     .unwrap();
     let mut deck = contention_deck(&t, &Material::table1(), 20.0 * femu_mesh::MMHG_IN_MPA).unwrap();
-    to_dead_loads(&mut deck);
+    deck.pressures_to_dead_loads();
     ccx_ready(&mut deck);
 
     let dir = std::env::temp_dir().join(format!("femu-identify-ccx-{}", std::process::id()));

@@ -66,7 +66,7 @@ use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
 use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::inp::{read_ccx_dat_displacements, write_inp};
 use femu_mesh::{
-    read_msh, BoundaryCondition, Deck, ElementKind, FacePressure, MaterialDef, PointLoad, StepDef,
+    read_msh, BoundaryCondition, Deck, ElementKind, FacePressure, MaterialDef, StepDef,
 };
 
 /// Contention load: 20 mmHg in MPa.
@@ -279,31 +279,6 @@ fn mean_radial(model: &Model, u: &[f64], nset: &str) -> f64 {
         / nodes.len() as f64
 }
 
-/// Replaces the follower pressures by dead nodal forces equal to them on the reference
-/// geometry (`*CLOAD`).
-fn to_dead_loads(deck: &mut Deck) {
-    let mut f = vec![0.0; 2 * deck.mesh.nodes.len()];
-    for p in std::mem::take(&mut deck.pressures) {
-        let [a, b] = deck.mesh.elements[p.element].face_nodes(p.face);
-        let (xa, xb) = (deck.mesh.nodes[a], deck.mesh.nodes[b]);
-        let h = 0.5 * p.magnitude;
-        for n in [a, b] {
-            f[2 * n] -= h * (xb[1] - xa[1]);
-            f[2 * n + 1] += h * (xb[0] - xa[0]);
-        }
-    }
-    deck.point_loads = f
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| **v != 0.0)
-        .map(|(i, &magnitude)| PointLoad {
-            node: i / 2,
-            dof: i % 2,
-            magnitude,
-        })
-        .collect();
-}
-
 fn step(initial_increment: f64) -> StepDef {
     StepDef {
         initial_increment,
@@ -387,7 +362,7 @@ fn annulus_two_layers_matches_ccx() {
         let case = format!("annulus {kind:?} {factor} x 20 mmHg {load}");
         let mut deck = annulus_deck(kind, 2, 1.0, p, 0.25);
         if dead {
-            to_dead_loads(&mut deck);
+            deck.pressures_to_dead_loads();
             ccx_ready(&mut deck);
         }
         let (model, sol, u_ccx, ratio) = compare_with_ccx(&case, deck);
@@ -503,7 +478,7 @@ fn gmsh_thigh_three_regions_matches_ccx() {
         return;
     }
     let mut dead = gmsh_thigh_deck(P20, 0.25);
-    to_dead_loads(&mut dead);
+    dead.pressures_to_dead_loads();
     ccx_ready(&mut dead);
     let (_, _, _, ratio) = compare_with_ccx("gmsh thigh, 20 mmHg as dead loads", dead);
     assert!(

@@ -81,3 +81,31 @@ pub struct Deck {
     pub pressures: Vec<FacePressure>,
     pub point_loads: Vec<PointLoad>,
 }
+
+impl Deck {
+    /// Replaces the (follower) pressures by dead nodal forces equal to them on the reference
+    /// geometry (`*CLOAD`): what a solver whose static follower pressure is unreliable (ccx 2.20)
+    /// solves exactly. The deck's point loads are replaced.
+    pub fn pressures_to_dead_loads(&mut self) {
+        let mut f = vec![0.0; 2 * self.mesh.nodes.len()];
+        for p in std::mem::take(&mut self.pressures) {
+            let [a, b] = self.mesh.elements[p.element].face_nodes(p.face);
+            let (xa, xb) = (self.mesh.nodes[a], self.mesh.nodes[b]);
+            let h = 0.5 * p.magnitude;
+            for n in [a, b] {
+                f[2 * n] -= h * (xb[1] - xa[1]);
+                f[2 * n + 1] += h * (xb[0] - xa[0]);
+            }
+        }
+        self.point_loads = f
+            .iter()
+            .enumerate()
+            .filter(|(_, v)| **v != 0.0)
+            .map(|(i, &magnitude)| PointLoad {
+                node: i / 2,
+                dof: i % 2,
+                magnitude,
+            })
+            .collect();
+    }
+}
