@@ -5,7 +5,8 @@
 //! `reference_grid.csv` (the finest reference mesh's displacement at the common grid points, in
 //! the measured-field format of conventions.md) and `summary.json`.
 
-use crate::run::StudyResult;
+use crate::rate::RateFit;
+use crate::run::{ElementSummary, MeshRun, StudyResult};
 use crate::study::{ConvergenceStudy, MeshSequence};
 use crate::ConvergenceError;
 use femu_plot::{line_plot_png, LegendPosition, LinePlot, LineStyle, Series};
@@ -109,62 +110,46 @@ pub fn write_outputs(
     }
 
     // The convergence figure.
-    let mut series = Vec::new();
-    for s in result
-        .elements
-        .iter()
-        .filter(|s| s.test == result.loading && s.d_scale == 1.0)
-    {
-        let pts: Vec<(f64, f64)> = result
-            .runs
-            .iter()
-            .filter(|r| {
-                r.test == result.loading
-                    && r.element == s.element
-                    && r.d_scale == 1.0
-                    && r.mesh + 1 < study.meshes.len()
-            })
-            .filter_map(|r| r.max_diff_mm.filter(|d| *d > 0.0).map(|d| (r.h_mm, d)))
-            .collect();
-        if pts.is_empty() {
-            continue;
-        }
-        let rate = s
-            .rate_max
-            .map_or("no rate".to_string(), |f| format!("rate {:.2}", f.rate));
-        series.push(Series::new(
-            &format!("{} max ({rate})", s.element),
-            pts,
+    // The largest differences as lines, the RMS ones as markers, each with its fitted rate.
+    type Diff = fn(&MeshRun) -> Option<f64>;
+    type Rate = fn(&ElementSummary) -> Option<RateFit>;
+    let kinds: [(&str, LineStyle, Diff, Rate); 2] = [
+        (
+            "max",
             LineStyle::LineAndMarkers,
-        ));
-    }
-    for s in result
-        .elements
-        .iter()
-        .filter(|s| s.test == result.loading && s.d_scale == 1.0)
-    {
-        let pts: Vec<(f64, f64)> = result
-            .runs
+            |r| r.max_diff_mm,
+            |s| s.rate_max,
+        ),
+        ("RMS", LineStyle::Markers, |r| r.rms_diff_mm, |s| s.rate_rms),
+    ];
+    let mut series = Vec::new();
+    for (label, style, diff, rate) in kinds {
+        for s in result
+            .elements
             .iter()
-            .filter(|r| {
-                r.test == result.loading
-                    && r.element == s.element
-                    && r.d_scale == 1.0
-                    && r.mesh + 1 < study.meshes.len()
-            })
-            .filter_map(|r| r.rms_diff_mm.filter(|d| *d > 0.0).map(|d| (r.h_mm, d)))
-            .collect();
-        if pts.is_empty() {
-            continue;
+            .filter(|s| s.test == result.loading && s.d_scale == 1.0)
+        {
+            let pts: Vec<(f64, f64)> = result
+                .runs
+                .iter()
+                .filter(|r| {
+                    r.test == result.loading
+                        && r.element == s.element
+                        && r.d_scale == 1.0
+                        && r.mesh + 1 < study.meshes.len()
+                })
+                .filter_map(|r| diff(r).filter(|d| *d > 0.0).map(|d| (r.h_mm, d)))
+                .collect();
+            if pts.is_empty() {
+                continue;
+            }
+            let rate = rate(s).map_or("no rate".to_string(), |f| format!("rate {:.2}", f.rate));
+            series.push(Series::new(
+                &format!("{} {label} ({rate})", s.element),
+                pts,
+                style,
+            ));
         }
-        let rate = s
-            .rate_rms
-            .map_or("no rate".to_string(), |f| format!("rate {:.2}", f.rate));
-        series.push(Series::new(
-            &format!("{} RMS ({rate})", s.element),
-            pts,
-            LineStyle::Markers,
-        ));
     }
     if !series.is_empty() {
         let hs: Vec<f64> = series
