@@ -1,12 +1,13 @@
 //! `femu synth STUDY --out DIR` (the virtual experiment, seed §2.4.1) and
 //! `femu identify STUDY --out DIR [--measured CSV]` (FEMU, seed §2.1.3 and Fig. 9).
 
-use crate::plan::{self, Plan};
+use crate::plan::{self, MeasurementPlan, Optimizer, Plan};
 use crate::sensitivity_cmd::thigh_model;
 use anyhow::{bail, Context, Result};
 use femu_identify::fisher::{self, Tied};
 use femu_identify::fit::{
-    latin_hypercube, levenberg_marquardt, FitResult, FreeParameter, LmOptions, Problem,
+    bfgs, latin_hypercube, levenberg_marquardt, FitResult, FreeParameter, Gradient, LmOptions,
+    Problem,
 };
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::loading::apply_loading;
@@ -34,7 +35,7 @@ pub struct IdentifyArgs {
 }
 
 /// The study's model with the identification test applied, and the measured test's name.
-fn measured_model(plan: &Plan) -> Result<(Model, String)> {
+pub fn measured_model(plan: &Plan) -> Result<(Model, String)> {
     let (mut model, skin) = thigh_model(plan)?;
     let test = plan.tests[plan.identification.test];
     apply_loading(&mut model, &skin, &test).with_context(|| format!("test {}", test.name()))?;
@@ -60,7 +61,7 @@ fn read_plan(args: &IdentifyArgs) -> Result<Plan> {
 
 /// The free parameters: Table 1 (or the study's) values as references, groups tied, fixed ones
 /// left out; bounds a factor either side of the reference.
-fn free_parameters(plan: &Plan, model: &Model) -> Result<(Vec<FreeParameter>, Vec<f64>)> {
+pub fn free_parameters(plan: &Plan, model: &Model) -> Result<(Vec<FreeParameter>, Vec<f64>)> {
     let params = all_parameters(model);
     let names: Vec<String> = params.iter().map(|p| p.name(model)).collect();
     for f in &plan.identification.fixed {
@@ -111,7 +112,7 @@ fn free_parameters(plan: &Plan, model: &Model) -> Result<(Vec<FreeParameter>, Ve
 
 /// The virtual measurement: the model field at the grid points in the tissue for the reference
 /// parameters, plus seeded Gaussian white noise of `sigma` (seed §2.4.1).
-fn virtual_field(
+pub fn virtual_field(
     plan: &Plan,
     model: &Model,
     free: &[FreeParameter],
@@ -224,6 +225,8 @@ struct Summary {
     command: &'static str,
     version: &'static str,
     test: String,
+    optimizer: &'static str,
+    grouped: bool,
     elements: usize,
     measured: String,
     points_in_tissue: usize,
@@ -240,15 +243,60 @@ struct Summary {
     wall_time_s: f64,
 }
 
+/// The measured field of the study's `[measurement]`: `None` for the virtual experiment, else
+/// the file mapped to the model frame and a description of its source.
+pub fn study_measurement(plan: &Plan) -> Result<Option<(MeasuredField, String)>> {
+    match &plan.measurement {
+        MeasurementPlan::Virtual => Ok(None),
+        MeasurementPlan::File { path, frame } => {
+            let f = MeasuredField::read(path)?;
+            Ok(Some((
+                f.to_model_frame(frame.scale, frame.origin, frame.x_axis, frame.y_axis),
+                path.display().to_string(),
+            )))
+        }
+    }
+}
+
 /// `femu identify`.
 pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
-    let t0 = Instant::now();
     let plan = read_plan(args)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    let measured = match &args.measured {
+        Some(p) => Some((MeasuredField::read(p)?, p.display().to_string())),
+        None => study_measurement(&plan)?,
+    };
     let (model, test) = measured_model(&plan)?;
-    let (free, reference) = free_parameters(&plan, &model)?;
-    let virtual_experiment = args.measured.is_none();
+    identify_plan(&plan, &model, &test, measured, &args.out, quiet)
+}
+
+/// One start of the study's optimizer.
+fn fit_start(plan: &Plan, p: &mut Problem, start: &[f64]) -> Result<FitResult> {
+    let lm = LmOptions::default();
+    Ok(match plan.identification.optimizer {
+        Optimizer::LevenbergMarquardt => levenberg_marquardt(p, start, &lm)?,
+        Optimizer::Bfgs => bfgs(p, start, Gradient::Exact, &lm, 200)?,
+        Optimizer::BfgsFiniteDifference => {
+            bfgs(p, start, Gradient::FiniteDifference(5e-4), &lm, 200)?
+        }
+    })
+}
+
+/// The identification of `plan` on `model` (loaded with the measured test `test`) from
+/// `measured` (`None`: the virtual experiment, `[identification] repeat` noise realizations);
+/// writes `out`.
+pub fn identify_plan(
+    plan: &Plan,
+    model: &Model,
+    test: &str,
+    measured: Option<(MeasuredField, String)>,
+    out: &Path,
+    quiet: bool,
+) -> Result<()> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder {}", out.display()))?;
+    let (free, reference) = free_parameters(plan, model)?;
+    let virtual_experiment = measured.is_none();
     let repeats = if virtual_experiment {
         plan.identification.repeat
     } else {
@@ -257,7 +305,8 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
     let starts_n = plan.identification.starts;
     if !quiet {
         eprintln!(
-            "identify: {test}, {} elements, {} free parameters, {} starts x {} noise realizations",
+            "identify ({}): {test}, {} elements, {} free parameters, {} starts x {} noise realizations",
+            plan.identification.optimizer.name(),
             model.mesh.elements.len(),
             free.len(),
             starts_n,
@@ -270,11 +319,11 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
     let mut inside = 0;
     let mut first_field: Option<MeasuredField> = None;
     for rep in 0..repeats {
-        let field = match &args.measured {
-            Some(p) => MeasuredField::read(p)?,
+        let field = match &measured {
+            Some((f, _)) => f.clone(),
             None => virtual_field(
-                &plan,
-                &model,
+                plan,
+                model,
                 &free,
                 &reference,
                 plan.identification.seed + rep as u64,
@@ -285,6 +334,11 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
             starts_n,
             plan.identification.seed.wrapping_mul(7919) + rep as u64,
         );
+        let bar = crate::progress::bar(
+            starts.len(),
+            &format!("identification, repeat {}/{repeats}", rep + 1),
+            quiet,
+        );
         let outcomes: Vec<Result<FitResult>> = starts
             .par_iter()
             .map(|s| {
@@ -294,9 +348,12 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
                     &field,
                     free.clone(),
                 )?;
-                Ok(levenberg_marquardt(&mut p, s, &LmOptions::default())?)
+                let r = fit_start(plan, &mut p, s);
+                bar.inc(1);
+                r
             })
             .collect();
+        bar.finish_and_clear();
         let probe = Problem::new(
             model.clone(),
             SolverOptions::default(),
@@ -345,12 +402,12 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
         match best {
             Some(b) => best_per_repeat.push(b),
             None => {
-                write_starts_csv(&args.out.join("starts.csv"), &free, &all_starts)?;
+                write_starts_csv(&out.join("starts.csv"), &free, &all_starts)?;
                 bail!("repeat {rep}: every start failed (see starts.csv)");
             }
         }
     }
-    write_starts_csv(&args.out.join("starts.csv"), &free, &all_starts)?;
+    write_starts_csv(&out.join("starts.csv"), &free, &all_starts)?;
     let best = &best_per_repeat[0];
     // Confidence from the Jacobian at the optimum: known noise for a virtual experiment, the
     // residual variance otherwise.
@@ -393,18 +450,20 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
             }
         })
         .collect();
-    write_parameters_csv(&args.out.join("parameters.csv"), &parameters)?;
-    write_figures(&args.out, &parameters, best, virtual_experiment, repeats)?;
+    write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
+    write_figures(out, &parameters, best, virtual_experiment, repeats)?;
     if let Some(field) = &first_field {
-        write_field_figures(&args.out, &model, &free, field, &best.theta)?;
+        write_field_figures(out, model, &free, field, &best.theta)?;
     }
     let summary = Summary {
         command: "identify",
         version: env!("CARGO_PKG_VERSION"),
-        test,
+        test: test.to_string(),
+        optimizer: plan.identification.optimizer.name(),
+        grouped: plan.identification.grouped,
         elements: model.mesh.elements.len(),
-        measured: match &args.measured {
-            Some(p) => p.display().to_string(),
+        measured: match &measured {
+            Some((_, source)) => source.clone(),
             None => "virtual experiment (femu synth)".into(),
         },
         points_in_tissue: inside,
@@ -423,7 +482,7 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
         starts: all_starts,
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
-    let path = args.out.join("summary.json");
+    let path = out.join("summary.json");
     std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     if !quiet {
@@ -442,11 +501,7 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
                 100.0 * p.relative_sd
             );
         }
-        eprintln!(
-            "wrote {} ({:.1} s)",
-            args.out.display(),
-            summary.wall_time_s
-        );
+        eprintln!("wrote {} ({:.1} s)", out.display(), summary.wall_time_s);
     }
     Ok(())
 }

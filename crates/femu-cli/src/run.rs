@@ -1,4 +1,4 @@
-//! `femu solve` and `femu demo`: read or build a model, solve it, write the output folder.
+//! `femu solve` and `femu forward`: read or build a model, solve it, write the output folder.
 
 use crate::study;
 use crate::QuadElement;
@@ -177,10 +177,63 @@ pub fn solve_model(
         }
         Err(e) => return Err(e.into()),
     };
-    let t2 = Instant::now();
+    write_solved(
+        model,
+        &solution,
+        error,
+        &SolveContext {
+            input,
+            command,
+            out,
+            figures,
+            quiet,
+            options,
+            read_s,
+            setup_s,
+            solve_s,
+        },
+    )
+}
+
+/// What [`write_solved`] reports besides the solution.
+pub struct SolveContext<'a> {
+    pub input: &'a str,
+    pub command: &'a str,
+    pub out: &'a Path,
+    pub figures: bool,
+    pub quiet: bool,
+    pub options: SolverOptions,
+    pub read_s: f64,
+    pub setup_s: f64,
+    pub solve_s: f64,
+}
+
+/// Writes the output folder of a solved model (`displacements.csv`, `result.vtu`, contact
+/// results, figures, `summary.json`); returns `error` (a solve that stopped midway, whose last
+/// converged state `solution` is) with the folder named.
+pub fn write_solved(
+    model: &Model,
+    solution: &Solution,
+    error: Option<SolveError>,
+    cx: &SolveContext,
+) -> Result<()> {
+    let SolveContext {
+        input,
+        command,
+        out,
+        figures,
+        quiet,
+        options,
+        read_s,
+        setup_s,
+        solve_s,
+    } = *cx;
+    let t0 = Instant::now();
+    std::fs::create_dir_all(out)
+        .with_context(|| format!("cannot create output folder {}", out.display()))?;
     write_displacements_csv(&out.join("displacements.csv"), model, &solution.u)
         .with_context(|| format!("cannot write {}", out.join("displacements.csv").display()))?;
-    write_result_vtu(&out.join("result.vtu"), model, &solution)
+    write_result_vtu(&out.join("result.vtu"), model, solution)
         .with_context(|| format!("cannot write {}", out.join("result.vtu").display()))?;
     let mut body_dirs = Vec::new();
     for b in 0..model.contacts.len() {
@@ -190,14 +243,14 @@ pub fn solve_model(
             out.join(&model.contacts[b].name)
         };
         std::fs::create_dir_all(&dir)?;
-        femu_mech::output::write_contact_csv(&dir, model, &solution, b)
+        femu_mech::output::write_contact_csv(&dir, model, solution, b)
             .with_context(|| format!("cannot write contact results into {}", dir.display()))?;
         body_dirs.push(dir);
     }
     if figures {
-        crate::figures::write_solve_figures(out, &body_dirs, input, model, &solution)?;
+        crate::figures::write_solve_figures(out, &body_dirs, input, model, solution)?;
     }
-    let output_s = t2.elapsed().as_secs_f64();
+    let output_s = t0.elapsed().as_secs_f64();
     let mut element_types = std::collections::BTreeMap::new();
     for el in &model.mesh.elements {
         *element_types.entry(el.kind.deck_name()).or_insert(0) += 1;
@@ -268,7 +321,7 @@ pub fn solve_model(
             factorization_s: r.factorization_time_s,
             triangular_solve_s: r.triangular_solve_time_s,
             output_s,
-            total_s: read_s + t0.elapsed().as_secs_f64(),
+            total_s: read_s + setup_s + solve_s + output_s,
         },
         peak_memory_mb: peak_memory_mb(),
     };
@@ -357,9 +410,9 @@ pub fn solve(
     solve_model(&model, &name, "solve", out, read_s, table, figures, quiet)
 }
 
-/// `femu demo`: the seed's loading tests on the built-in parametric thigh, one sub-folder
+/// `femu forward`: the seed's loading tests on the built-in parametric thigh, one sub-folder
 /// per test.
-pub fn demo(
+pub fn forward(
     out: &Path,
     element: QuadElement,
     elements: usize,
@@ -394,7 +447,7 @@ pub fn demo(
         femu_mech::loading::apply_loading(&mut model, &skin, loading)?;
         if !quiet {
             eprintln!(
-                "demo: {} on the built-in thigh ({} elements, Table 1 materials, femur fixed) -> {}",
+                "forward: {} on the built-in thigh ({} elements, Table 1 materials, femur fixed) -> {}",
                 loading.name(),
                 model.mesh.elements.len(),
                 dir.display()
@@ -404,7 +457,7 @@ pub fn demo(
         solve_model(
             &model,
             &format!("built-in thigh, {}", loading.name()),
-            "demo",
+            "forward",
             &dir,
             read_s,
             false,

@@ -26,40 +26,10 @@ pub struct SensitivityArgs {
     pub no_figures: bool,
 }
 
-/// The built-in thigh of the study with its materials (Table 1 with the study's overrides),
-/// femur fixed, no load; and its skin faces.
+/// The study's model (femu_cli::study_model) and its skin faces.
 pub fn thigh_model(plan: &Plan) -> Result<(Model, Vec<(usize, usize)>)> {
-    let params = femu_geometry::ThighParams {
-        target_elements: if plan.size_mm.is_some() {
-            None
-        } else {
-            Some(plan.elements.unwrap_or(6000))
-        },
-        element_size_mm: plan.size_mm,
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, plan.element.kind())?;
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    let mut materials = femu_geometry::Material::table1();
-    for (region, c10, d) in &plan.materials {
-        let m = materials
-            .iter_mut()
-            .find(|m| m.region.eq_ignore_ascii_case(region))
-            .with_context(|| {
-                format!(
-                    "[materials.{region}]: no such region (FAT, QUADRICEPS, ISCHIO, GRACILIS, SARTORIUS)"
-                )
-            })?;
-        if let Some(c) = c10 {
-            m.c10_mpa = *c;
-        }
-        if let Some(d) = d {
-            m.d_per_mpa = *d;
-        }
-    }
-    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0)?;
-    deck.pressures.clear();
-    Ok((Model::from_deck(deck)?, skin))
+    let m = crate::study_model::study_model(plan)?;
+    Ok((m.model, m.skin))
 }
 
 /// Sensitivities of one test.
@@ -121,19 +91,35 @@ struct Summary {
 
 /// Runs the command.
 pub fn run(args: &SensitivityArgs, quiet: bool) -> Result<()> {
+    let plan = plan::load(args.study.as_deref(), args.elements)?;
+    let (base, skin) = thigh_model(&plan)?;
+    run_plan(&plan, &base, &skin, args, quiet, &mut |_, _, _, _| Ok(()))
+}
+
+/// Called after each test is solved: `(test name, loaded model, solution, solve time s)`.
+pub type OnSolved<'a> = dyn FnMut(&str, &Model, &Solution, f64) -> Result<()> + 'a;
+
+/// The sensitivities of `plan`'s tests on `base` (the study's model, unloaded); `on_solved`
+/// sees each test's solution (`femu run` writes the forward results from it).
+pub fn run_plan(
+    plan: &Plan,
+    base: &Model,
+    skin: &[(usize, usize)],
+    args: &SensitivityArgs,
+    quiet: bool,
+    on_solved: &mut OnSolved,
+) -> Result<()> {
     let t0 = Instant::now();
     if !(args.fd_step > 0.0 && args.fd_step < 0.1) {
         bail!("--fd-step must be in (0, 0.1), got {}", args.fd_step);
     }
-    let plan = plan::load(args.study.as_deref(), args.elements)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
-    let (base, skin) = thigh_model(&plan)?;
-    let params = all_parameters(&base);
-    let names: Vec<String> = params.iter().map(|p| p.name(&base)).collect();
+    let params = all_parameters(base);
+    let names: Vec<String> = params.iter().map(|p| p.name(base)).collect();
     if !quiet {
         eprintln!(
-            "built-in thigh: {} elements, {} nodes; {} tests, {} parameters",
+            "sensitivity: {} elements, {} nodes; {} tests, {} parameters",
             base.mesh.elements.len(),
             base.node_count(),
             plan.tests.len(),
@@ -161,13 +147,18 @@ pub fn run(args: &SensitivityArgs, quiet: bool) -> Result<()> {
         bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
     }
     let mut results = Vec::new();
+    let bar = crate::progress::bar(plan.tests.len(), "solving the tests", quiet);
     for loading in &plan.tests {
-        let r = run_test(&base, &skin, loading, &params, args, quiet)?;
+        bar.set_message(format!("{}: solve and sensitivities", loading.name()));
+        let r = run_test(base, skin, loading, &params, args, quiet)?;
+        on_solved(&r.name, &r.model, &r.solution, r.solve_s)?;
         write_test_outputs(&args.out.join(&r.name), &r, &names)?;
         results.push(r);
+        bar.inc(1);
     }
+    bar.finish_and_clear();
 
-    let thetas: Vec<f64> = params.iter().map(|p| p.value(&base)).collect();
+    let thetas: Vec<f64> = params.iter().map(|p| p.value(base)).collect();
     let columns_of = |r: &TestResult| -> Vec<Vec<f64>> {
         r.du.iter()
             .zip(&thetas)

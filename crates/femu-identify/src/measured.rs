@@ -182,6 +182,48 @@ impl MeasuredField {
         }
         w.flush()
     }
+
+    /// The field in the model frame, from a file frame (image pixels or mm): positions
+    /// `X = origin + s (x e_x + y e_y)`, displacements `U = s (u_x e_x + u_y e_y)`, with `e_x`,
+    /// `e_y` orthonormal model directions of the file's axes and `s` mm per file unit. Weights
+    /// are inverse variances, so they transform as `σ_X² = s² (σ_x² e_x,X² + σ_y² e_y,X²)` — the
+    /// diagonal of the rotated covariance (exact for axes along the model's, ± and swapped).
+    pub fn to_model_frame(
+        &self,
+        scale: f64,
+        origin: [f64; 2],
+        x_axis: [f64; 2],
+        y_axis: [f64; 2],
+    ) -> MeasuredField {
+        let map = |v: [f64; 2]| {
+            [
+                scale * (v[0] * x_axis[0] + v[1] * y_axis[0]),
+                scale * (v[0] * x_axis[1] + v[1] * y_axis[1]),
+            ]
+        };
+        let points = self
+            .points
+            .iter()
+            .map(|p| {
+                let x = map(p.x);
+                let var = [1.0 / p.weight[0], 1.0 / p.weight[1]];
+                let var_model = [
+                    scale * scale * (var[0] * x_axis[0].powi(2) + var[1] * y_axis[0].powi(2)),
+                    scale * scale * (var[0] * x_axis[1].powi(2) + var[1] * y_axis[1].powi(2)),
+                ];
+                MeasuredPoint {
+                    x: [origin[0] + x[0], origin[1] + x[1]],
+                    u: map(p.u),
+                    weight: [1.0 / var_model[0], 1.0 / var_model[1]],
+                }
+            })
+            .collect();
+        let mut comments = self.comments.clone();
+        comments.push(format!(
+            "mapped to the model frame: {scale} mm per unit, origin {origin:?} mm, x axis {x_axis:?}, y axis {y_axis:?}"
+        ));
+        MeasuredField { points, comments }
+    }
 }
 
 #[cfg(test)]
@@ -224,5 +266,21 @@ mod tests {
         assert_eq!(g.points[0].u, f.points[0].u);
         assert_eq!(g.points[0].weight, [4.0, 4.0]);
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn image_frame_maps_to_the_model_frame() {
+        // An image field in px (rows going down) with sigmas (1, 2) px.
+        let f = MeasuredField::parse("x,y,ux,uy,sx,sy\n10,20,1,-2,1,2\n", "t").unwrap();
+        let m = f.to_model_frame(0.1, [-5.0, 7.0], [1.0, 0.0], [0.0, -1.0]);
+        let p = m.points[0];
+        assert!((p.x[0] - (-4.0)).abs() < 1e-12 && (p.x[1] - 5.0).abs() < 1e-12);
+        assert!((p.u[0] - 0.1).abs() < 1e-12 && (p.u[1] - 0.2).abs() < 1e-12);
+        // Weights 1/(0.1)^2 and 1/(0.2)^2.
+        assert!((p.weight[0] - 100.0).abs() < 1e-9 && (p.weight[1] - 25.0).abs() < 1e-9);
+        // Axes swapped: the sigmas swap.
+        let m = f.to_model_frame(1.0, [0.0; 2], [0.0, 1.0], [1.0, 0.0]);
+        assert_eq!(m.points[0].u, [-2.0, 1.0]);
+        assert!((m.points[0].weight[0] - 0.25).abs() < 1e-12);
     }
 }
