@@ -361,6 +361,10 @@ pub fn identify_plan(
             free.clone(),
         )?;
         (inside, masked) = probe.points();
+        if virtual_experiment {
+            // The virtual field holds only the grid points in the tissue; the rest are masked.
+            masked = plan.grid.counts[0] * plan.grid.counts[1] - inside;
+        }
         if first_field.is_none() {
             first_field = Some(field.clone());
         }

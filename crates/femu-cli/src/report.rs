@@ -109,8 +109,8 @@ impl Html {
         self.p(
             "Finite element model updating of thigh tissues: a plane-strain Neo-Hookean model of \
              the thigh cross-section, loading tests, the displacement field measured on a grid, \
-             and C10 and D of every tissue identified from it (the seed study's method, \
-             Frauziols-like; equations and figures cited as in the seed).",
+             and C10 and D of every tissue identified from it (the seed study's method; \
+             equations and figures cited as in the seed).",
         );
     }
 
@@ -297,8 +297,8 @@ impl Html {
 
 const CSS: &str = "body{font-family:system-ui,sans-serif;margin:0;display:flex;color:#222}\
 nav{position:sticky;top:0;align-self:flex-start;width:220px;padding:1em;font-size:90%}\
-main{max-width:1100px;padding:1em 2em}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;margin-top:2em}\
-table{border-collapse:collapse;margin:0.5em 0;font-size:90%}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}\
+main{max-width:1100px;min-width:0;flex:1;padding:1em 2em}h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;margin-top:2em}\
+table{border-collapse:collapse;margin:0.5em 0;font-size:85%;max-width:100%}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}\
 th{background:#f2f2f2}td:first-child{text-align:left}figure{margin:1em 0}img{max-width:100%;border:1px solid #eee}\
 figcaption{font-size:90%;color:#555}pre{background:#f7f7f7;padding:1em;overflow:auto;font-size:85%}\
 .bad{color:#b00}";
@@ -563,7 +563,7 @@ fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> 
     html.h2("Identification (seed Fig. 9)");
     let first = &results[0].1;
     html.p(&format!(
-        "Test <b>{}</b> measured at {} grid points in the tissue ({} masked), from {}; noise \
+        "Test <b>{}</b> measured at {} grid points in the tissue ({} outside it masked), from {}; noise \
          σ = {} mm. Optimizer {} from {} Latin-hypercube starts; relative error of Eq. 4 when the \
          reference is known; 95 % confidence intervals from the Jacobian at the optimum.",
         esc(first["test"].as_str().unwrap_or("")),

@@ -1,4 +1,4 @@
-//! The `femu` binary as a user runs it: the demo, `solve` on decks and on a Gmsh mesh with a
+//! The `femu` binary as a user runs it: `forward` (the seed's tests), `solve` on decks and on a Gmsh mesh with a
 //! study file, and the errors a bad input gets (message naming the line, non-zero exit).
 
 use std::path::{Path, PathBuf};
@@ -46,10 +46,10 @@ fn read_csv(path: &Path) -> Vec<Vec<f64>> {
 }
 
 #[test]
-fn demo_writes_the_output_folder() {
-    let out = scratch("demo");
+fn forward_writes_the_output_folder() {
+    let out = scratch("forward");
     let o = femu(&[
-        "demo",
+        "forward",
         "--elements",
         "1500",
         "--tests",

@@ -752,6 +752,45 @@ impl StaticSolver {
         }
     }
 
+    /// The largest step length in (0, 1] along the current correction `du` for which no
+    /// contact node that is free at `u` penetrates its body deeper than 0.1 element size (gaps
+    /// taken linear in the step); 1 without contact.
+    fn contact_step_limit(&mut self, model: &Model, u: &[f64]) -> f64 {
+        if model.contacts.is_empty() {
+            return 1.0;
+        }
+        let mut full = std::mem::take(&mut self.u_trial);
+        self.add_free(u, 1.0, &mut full);
+        let base = 2 * model.node_count();
+        let mut cap = 1.0f64;
+        for (b, c) in model.contacts.iter().enumerate() {
+            let depth = 0.1 * c.element_size;
+            let eps = self.penalties[b];
+            let t0 = c.first_contact + u[base + b];
+            let t1 = c.first_contact + full[base + b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let x0 = [
+                    model.mesh.nodes[n][0] + u[2 * n],
+                    model.mesh.nodes[n][1] + u[2 * n + 1],
+                ];
+                let g0 = c.body.gap(x0, t0).g;
+                if self.multipliers[b][k] - eps * g0 > 0.0 || g0 <= 0.0 {
+                    continue; // in contact already
+                }
+                let x1 = [
+                    model.mesh.nodes[n][0] + full[2 * n],
+                    model.mesh.nodes[n][1] + full[2 * n + 1],
+                ];
+                let g1 = c.body.gap(x1, t1).g;
+                if g1 < -depth {
+                    cap = cap.min((g0 + depth) / (g0 - g1));
+                }
+            }
+        }
+        self.u_trial = full;
+        cap.clamp(1e-3, 1.0)
+    }
+
     fn add_free(&self, u: &[f64], alpha: f64, out: &mut [f64]) {
         out.copy_from_slice(u);
         for (d, &q) in self.eq.iter().enumerate() {
@@ -819,7 +858,12 @@ impl StaticSolver {
                     "non-finite Newton correction".into(),
                 ));
             }
-            let mut alpha = 1.0;
+            // A full step that drives a free skin node deep into a rigid body meets the stiff
+            // penalty there with a huge residual, and the next step swings back (active-set
+            // chattering on coarse meshes). Cap the step so that no node that is free now ends
+            // deeper than a tenth of the element size (gaps linear along the step).
+            let alpha_cap = self.contact_step_limit(model, u);
+            let mut alpha = alpha_cap;
             let mut accepted = false;
             let active_before = self.active_set;
             for _ in 0..8 {
@@ -840,7 +884,7 @@ impl StaticSolver {
                 // taken as it is: the residual jump comes from the new contacts, whose stiffness
                 // the next tangent includes (semi-smooth Newton); damping it would creep in tiny
                 // steps. Later, the line search applies again, which breaks active-set cycles.
-                let new_contacts = it < 4 && alpha == 1.0 && self.active_set != active_before;
+                let new_contacts = it < 4 && alpha == alpha_cap && self.active_set != active_before;
                 if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts
                 {
                     accepted = rn.is_finite();
