@@ -86,6 +86,54 @@ fn synth_then_identify_recovers_table1() {
     ] {
         assert!(out.join(f).exists(), "{f}");
     }
+
+    // The same field as an image-frame CSV (pixels of 0.05 mm, origin at the image's top-left
+    // corner at (-80, 70) mm, rows going down) identifies the same parameters through the study
+    // file's [measurement] frame.
+    let (s_px, origin) = (0.05, [-80.0, 70.0]);
+    let mut image = String::from("x,y,ux,uy,sx,sy\n");
+    for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+        let v: Vec<f64> = line.split(',').map(|c| c.parse().unwrap()).collect();
+        image.push_str(&format!(
+            "{:.12e},{:.12e},{:.12e},{:.12e},{:.6e},{:.6e}\n",
+            (v[0] - origin[0]) / s_px,
+            -(v[1] - origin[1]) / s_px,
+            v[2] / s_px,
+            -v[3] / s_px,
+            v[4] / s_px,
+            v[5] / s_px
+        ));
+    }
+    write(&dir, "image.csv", &image);
+    let framed = write(
+        &dir,
+        "framed.toml",
+        &format!(
+            "{}[measurement]\nfile = \"image.csv\"\nunits = \"px\"\npixel_size_mm = {s_px}\n\
+             origin_mm = [{}, {}]\nx_axis = [1.0, 0.0]\ny_axis = [0.0, -1.0]\n",
+            std::fs::read_to_string(&study).unwrap(),
+            origin[0],
+            origin[1]
+        ),
+    );
+    let out2 = dir.join("identify-framed");
+    let o = femu(&[
+        "identify",
+        framed.to_str().unwrap(),
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s2: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out2.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(s2["points_in_tissue"], s["points_in_tissue"]);
+    for (p, q) in params.iter().zip(s2["parameters"].as_array().unwrap()) {
+        let (a, b) = (
+            p["identified"].as_f64().unwrap(),
+            q["identified"].as_f64().unwrap(),
+        );
+        assert!(((a - b) / a).abs() < 1e-6, "{}: {a} vs {b}", p["name"]);
+    }
 }
 
 #[test]
