@@ -269,6 +269,8 @@ impl Html {
                 format!("femu {}", env!("CARGO_PKG_VERSION")),
             ],
         ];
+        rows.push(vec!["compiler".into(), env!("FEMU_RUSTC_VERSION").into()]);
+        rows.push(vec!["libraries".into(), env!("FEMU_CRATE_VERSIONS").into()]);
         if let Some(r) = r {
             rows[0][1] = r.femu_version.clone();
             rows.push(vec![
