@@ -238,6 +238,10 @@ struct Summary {
     best_cost: f64,
     starts_per_repeat: usize,
     repeats: usize,
+    /// Multilevel: elements of the coarse model the starts ran on.
+    coarse_elements: Option<usize>,
+    /// Multilevel: forward solves of the refinement on the full model, per repeat.
+    refinement_forward_solves: Vec<usize>,
     forward_solves_per_start: Vec<usize>,
     starts: Vec<StartSummary>,
     wall_time_s: f64,
@@ -269,9 +273,18 @@ pub fn identify(args: &IdentifyArgs, quiet: bool) -> Result<()> {
     identify_plan(&plan, &model, &test, measured, &args.out, quiet)
 }
 
-/// One start of the study's optimizer.
-fn fit_start(plan: &Plan, p: &mut Problem, start: &[f64]) -> Result<FitResult> {
-    let lm = LmOptions::default();
+/// One start of the study's optimizer; `coarse`: the first level of a multilevel
+/// identification, where an approximate optimum is enough (20 iterations, 1e-6 relative cost).
+fn fit_start(plan: &Plan, p: &mut Problem, start: &[f64], coarse: bool) -> Result<FitResult> {
+    let lm = if coarse {
+        LmOptions {
+            max_iterations: 20,
+            cost_tolerance: 1e-6,
+            ..LmOptions::default()
+        }
+    } else {
+        LmOptions::default()
+    };
     Ok(match plan.identification.optimizer {
         Optimizer::LevenbergMarquardt => levenberg_marquardt(p, start, &lm)?,
         Optimizer::Bfgs => bfgs(p, start, Gradient::Exact, &lm, 200)?,
@@ -313,6 +326,26 @@ pub fn identify_plan(
             repeats
         );
     }
+    // Multilevel identification (`coarse_elements`): the starts on a coarse model, the best
+    // refined on this one.
+    let coarse: Option<(Model, usize)> = match plan.identification.coarse_elements {
+        None => None,
+        Some(n) => {
+            let mut cp = plan.clone();
+            cp.elements = Some(n);
+            cp.size_mm = None;
+            let (m, _) = measured_model(&cp).context("[identification] coarse_elements")?;
+            if !quiet {
+                eprintln!(
+                    "multilevel: starts on {} elements, the best refined on {}",
+                    m.mesh.elements.len(),
+                    model.mesh.elements.len()
+                );
+            }
+            Some((m, n))
+        }
+    };
+    let mut refined: Vec<usize> = Vec::new();
     let mut all_starts = Vec::new();
     let mut best_per_repeat: Vec<FitResult> = Vec::new();
     let mut masked = 0;
@@ -339,16 +372,19 @@ pub fn identify_plan(
             &format!("identification, repeat {}/{repeats}", rep + 1),
             quiet,
         );
+        // The starts run on the coarse model when there is one (multilevel): the same data,
+        // the same free parameters, a cheaper forward model.
+        let start_model = coarse.as_ref().map_or(model, |(m, _)| m);
         let outcomes: Vec<Result<FitResult>> = starts
             .par_iter()
             .map(|s| {
                 let mut p = Problem::new(
-                    model.clone(),
+                    start_model.clone(),
                     SolverOptions::default(),
                     &field,
                     free.clone(),
                 )?;
-                let r = fit_start(plan, &mut p, s);
+                let r = fit_start(plan, &mut p, s, coarse.is_some());
                 bar.inc(1);
                 r
             })
@@ -403,6 +439,37 @@ pub fn identify_plan(
                 }
             }
         }
+        // Multilevel: the best coarse optimum continued on the study's model.
+        let best = match (best, &coarse) {
+            (Some(b), Some((_, n))) => {
+                let spin = crate::progress::spinner(
+                    &format!("repeat {rep}: refining the best coarse optimum on the full model"),
+                    quiet,
+                );
+                let mut p = Problem::new(
+                    model.clone(),
+                    SolverOptions::default(),
+                    &field,
+                    free.clone(),
+                )?;
+                let r = fit_start(plan, &mut p, &b.theta, false)
+                    .with_context(|| format!("repeat {rep}: refining the {n}-element optimum"))?;
+                spin.finish_and_clear();
+                if !quiet {
+                    eprintln!(
+                        "  repeat {rep}, refined on {} elements: cost {:.4e}, {} iterations, {} forward solves, {:.1} s",
+                        model.mesh.elements.len(),
+                        r.cost,
+                        r.iterations,
+                        r.forward_solves,
+                        r.wall_time_s
+                    );
+                }
+                refined.push(r.forward_solves);
+                Some(r)
+            }
+            (b, _) => b,
+        };
         match best {
             Some(b) => best_per_repeat.push(b),
             None => {
@@ -479,6 +546,8 @@ pub fn identify_plan(
         best_cost: best.cost,
         starts_per_repeat: starts_n,
         repeats,
+        coarse_elements: coarse.as_ref().map(|(m, _)| m.mesh.elements.len()),
+        refinement_forward_solves: refined,
         forward_solves_per_start: all_starts
             .iter()
             .filter_map(|s| s.result.as_ref().map(|r| r.forward_solves))

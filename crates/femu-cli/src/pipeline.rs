@@ -88,12 +88,18 @@ pub fn init(path: &Path, force: bool, quiet: bool) -> Result<()> {
     Ok(())
 }
 
-/// The demo's study: the example study on `elements` quads.
+/// The demo's study: the example study on `elements` quads; above 6 000 the identification is
+/// multilevel (starts on 2 000 elements, the best refined on the study's mesh).
 pub fn demo_study(elements: usize) -> String {
-    plan::EXAMPLE_STUDY.replace(
+    let text = plan::EXAMPLE_STUDY.replace(
         "elements = 6000                  #",
         &format!("elements = {elements:<17}#"),
-    )
+    );
+    if elements > 6000 {
+        text.replace("# coarse_elements = 2000 ", "coarse_elements = 2000   ")
+    } else {
+        text
+    }
 }
 
 /// `femu demo [--full] [--elements N]`.
@@ -101,7 +107,7 @@ pub fn demo(out: &Path, full: bool, elements: Option<usize>, quiet: bool) -> Res
     let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
     let text = demo_study(n);
     let plan = plan::parse(&text, out).context("the demo study")?;
-    if plan.elements != Some(n) {
+    if plan.elements != Some(n) || (n > 6000) != plan.identification.coarse_elements.is_some() {
         bail!("internal: the demo study did not take --elements {n}");
     }
     if !quiet {

@@ -50,6 +50,7 @@ struct IdentificationEntry {
     repeat: Option<usize>,
     grouped: Option<GroupedEntry>,
     optimizer: Option<String>,
+    coarse_elements: Option<usize>,
 }
 
 /// `grouped = true | false | "both"`.
@@ -100,6 +101,9 @@ pub struct IdentificationPlan {
     /// Fig. 9); `femu identify` runs the grouped one.
     pub both_groupings: bool,
     pub optimizer: Optimizer,
+    /// Multilevel: run the starts on the built-in thigh with this many elements and refine the
+    /// best on the study's mesh.
+    pub coarse_elements: Option<usize>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -706,7 +710,21 @@ pub fn parse(text: &str, base: &Path) -> Result<Plan> {
                 lines.at("identification", 0, "optimizer")
             ),
         };
+        let coarse_elements = match e.coarse_elements {
+            None => None,
+            Some(n) => {
+                let at = lines.at("identification", 0, "coarse_elements");
+                if !matches!(geometry, Geometry::Thigh(_)) {
+                    bail!("{at}: multilevel identification needs the built-in thigh ([thigh])");
+                }
+                if !(100..=500_000).contains(&n) {
+                    bail!("{at} must be in [100, 500000], got {n}");
+                }
+                Some(n)
+            }
+        };
         IdentificationPlan {
+            coarse_elements,
             test,
             fixed: e.fixed,
             bounds_factor,

@@ -257,7 +257,8 @@ pub struct LmOptions {
     pub max_iterations: usize,
     /// Stop when the largest log-parameter step is below this (relative parameter change).
     pub step_tolerance: f64,
-    /// Stop when the cost decreases by less than this fraction in an accepted step.
+    /// Stop when the cost decreases by less than this fraction in an accepted step, or the
+    /// Gauss–Newton model predicts less for the next one.
     pub cost_tolerance: f64,
     /// Initial damping, relative to the diagonal of JᵀJ.
     pub initial_damping: f64,
@@ -268,7 +269,7 @@ impl Default for LmOptions {
         LmOptions {
             max_iterations: 60,
             step_tolerance: 1e-8,
-            cost_tolerance: 1e-14,
+            cost_tolerance: 1e-10,
             initial_damping: 1e-3,
         }
     }
@@ -377,9 +378,27 @@ pub fn levenberg_marquardt(
                 norm: f64::NAN,
             });
         }
-        if max_step < opts.step_tolerance {
+        // The decrease the Gauss–Newton model predicts for this step, `-(g·d + ½ dᵀAd)`: when
+        // it is below the cost tolerance no step can show a decrease the forward solves resolve
+        // (their displacements carry the solver's relative tolerance), so stop rather than
+        // spend forward solves on rejected steps.
+        let d: Vec<f64> = (0..n).map(|p| trial[p] - phi[p]).collect();
+        let predicted = -(dot(&g, &d)
+            + 0.5
+                * (0..n)
+                    .map(|p| d[p] * (0..n).map(|q| a[p][q] * d[q]).sum::<f64>())
+                    .sum::<f64>());
+        let negligible = predicted <= opts.cost_tolerance * cost;
+        if max_step < opts.step_tolerance || negligible {
             converged = true;
-            reason = format!("step below {:.0e}", opts.step_tolerance);
+            reason = if negligible {
+                format!(
+                    "predicted decrease below {:.0e} of the cost",
+                    opts.cost_tolerance
+                )
+            } else {
+                format!("step below {:.0e}", opts.step_tolerance)
+            };
             history.push(LmStep {
                 iteration: it,
                 cost,
