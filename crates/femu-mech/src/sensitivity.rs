@@ -138,7 +138,18 @@ pub struct SensitivityReport {
     pub refactorized: bool,
     /// Largest relative residual `‖K_T x - b‖ / ‖b‖` of the solves.
     pub max_relative_residual: f64,
+    /// Refinement corrections (passes over the factors after the first, per block of
+    /// [`MAX_RHS`] columns).
+    pub refinement_steps: usize,
     pub wall_time_s: f64,
+    /// Of which: element rate forces and the right-hand sides.
+    pub assembly_time_s: f64,
+    /// Numeric factorization of the tangent at the converged state.
+    pub factorization_time_s: f64,
+    /// Passes over the factors (triangular solves).
+    pub triangular_solve_time_s: f64,
+    /// Residuals `B - K_T X` of the refinement.
+    pub residual_time_s: f64,
 }
 
 /// Direct-differentiation sensitivities with buffers kept between calls (the identification
@@ -152,6 +163,13 @@ pub struct DirectSensitivity {
     block: Vec<f64>,
     rhs: Vec<f64>,
     residual: Vec<f64>,
+    /// Equation of each state dof.
+    eqs: Vec<Option<usize>>,
+    /// Norms of the right-hand sides of a block.
+    bnorms: Vec<f64>,
+    /// A block of solutions interleaved (`[i * cols + j]`) and its product with `K_T`.
+    interleaved: Vec<f64>,
+    product: Vec<f64>,
 }
 
 /// Relative residual at which the refinement stops.
@@ -197,16 +215,43 @@ impl DirectSensitivity {
                 .map_err(SensitivityError::Assembly)?;
         }
         if !solver.has_factorization() {
+            let t = Instant::now();
             solver
                 .refactorize()
                 .map_err(SensitivityError::Factorization)?;
             report.refactorized = true;
+            report.factorization_time_s += t.elapsed().as_secs_f64();
         }
+        let t = Instant::now();
         self.element_rate_forces(model, state)?;
+        report.assembly_time_s += t.elapsed().as_secs_f64();
 
+        let n_state = model.state_len();
+        let mut eqs = std::mem::take(&mut self.eqs);
+        eqs.clear();
+        eqs.extend((0..n_state).map(|d| solver.equation_of(d)));
+        let result = self.compute_with(solver, model, state, parameters, out, &eqs, report);
+        self.eqs = eqs;
+        let mut report = result?;
+        report.wall_time_s = t0.elapsed().as_secs_f64();
+        Ok(report)
+    }
+
+    /// [`Self::compute`] once the rate forces are assembled, with `eqs` the equation of each
+    /// state dof.
+    #[allow(clippy::too_many_arguments)]
+    fn compute_with(
+        &mut self,
+        solver: &mut StaticSolver,
+        model: &Model,
+        state: &[f64],
+        parameters: &[Parameter],
+        out: &mut Vec<Vec<f64>>,
+        eqs: &[Option<usize>],
+        mut report: SensitivityReport,
+    ) -> Result<SensitivityReport, SensitivityError> {
         let n_eq = solver.equations();
         let n_state = model.state_len();
-        let eqs: Vec<Option<usize>> = (0..n_state).map(|d| solver.equation_of(d)).collect();
 
         // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
         let active = solver.active_constraints(model, state);
@@ -250,22 +295,33 @@ impl DirectSensitivity {
         };
 
         // B = -∂R/∂θ_k on the free dofs, one column per parameter.
+        let t = Instant::now();
         let np = parameters.len();
         let mut x = std::mem::take(&mut self.block);
         x.clear();
         x.resize(np * n_eq, 0.0);
-        for (k, p) in parameters.iter().enumerate() {
-            let col = &mut x[k * n_eq..(k + 1) * n_eq];
-            let rate = p.rate(model);
-            let (rate_force, scale) = match p.kind {
-                ParameterKind::C10 => (&self.f_c10, rate.c10),
-                ParameterKind::D => (&self.f_invd, rate.inv_d),
-            };
-            for (e, el) in model.mesh.elements.iter().enumerate() {
-                if model.element_material[e] != p.material {
-                    continue;
-                }
-                let fe = &rate_force[e * MAX_DOFS..];
+        // One pass over the elements: the columns of the element's material.
+        let columns: Vec<Vec<(usize, bool, f64)>> = (0..model.materials.len())
+            .map(|m| {
+                parameters
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.material == m)
+                    .map(|(k, p)| {
+                        let rate = p.rate(model);
+                        match p.kind {
+                            ParameterKind::C10 => (k, true, rate.c10),
+                            ParameterKind::D => (k, false, rate.inv_d),
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        for (e, el) in model.mesh.elements.iter().enumerate() {
+            for &(k, c10, scale) in &columns[model.element_material[e]] {
+                let fe = if c10 { &self.f_c10 } else { &self.f_invd };
+                let fe = &fe[e * MAX_DOFS..(e + 1) * MAX_DOFS];
+                let col = &mut x[k * n_eq..(k + 1) * n_eq];
                 for (a, &n) in el.nodes().iter().enumerate() {
                     for i in 0..2 {
                         if let Some(q) = eqs[2 * n + i] {
@@ -275,6 +331,7 @@ impl DirectSensitivity {
                 }
             }
         }
+        report.assembly_time_s += t.elapsed().as_secs_f64();
         let solved = self.solve_block(solver, &mut x, n_eq, &mut report);
         if let Err(e) = solved {
             self.block = x;
@@ -313,7 +370,6 @@ impl DirectSensitivity {
             }
         }
         self.block = x;
-        report.wall_time_s = t0.elapsed().as_secs_f64();
         Ok(report)
     }
 
@@ -392,31 +448,21 @@ impl DirectSensitivity {
             self.rhs.clear();
             self.rhs.extend_from_slice(chunk);
             self.residual.resize(chunk.len(), 0.0);
-            let bnorms: Vec<f64> = self.rhs.chunks(n).map(norm).collect();
+            self.bnorms.clear();
+            self.bnorms.extend(self.rhs.chunks(n).map(norm));
+            self.interleaved.resize(chunk.len(), 0.0);
+            self.product.resize(chunk.len(), 0.0);
+            let t = Instant::now();
             solver.solve_tangent_many(chunk, cols);
+            report.triangular_solve_time_s += t.elapsed().as_secs_f64();
             report.back_substitutions += cols;
             let mut last = f64::INFINITY;
             loop {
-                // R = B - K X, and the worst relative residual of the columns.
-                let tangent: &StaticSolver = solver;
-                let x_cols: &[f64] = chunk;
-                let rhs = &self.rhs;
-                let rel = self
-                    .residual
-                    .par_chunks_mut(n)
-                    .enumerate()
-                    .map(|(c, r)| {
-                        tangent.tangent_mul(&x_cols[c * n..(c + 1) * n], r);
-                        for (ri, bi) in r.iter_mut().zip(&rhs[c * n..(c + 1) * n]) {
-                            *ri = bi - *ri;
-                        }
-                        if bnorms[c] > 0.0 {
-                            norm(r) / bnorms[c]
-                        } else {
-                            0.0
-                        }
-                    })
-                    .reduce(|| 0.0, f64::max);
+                let t = Instant::now();
+                // R = B - K X (one pass over K for all the columns, interleaved), and the
+                // worst relative residual of the columns.
+                let rel = self.residual_of(solver, chunk, cols, n);
+                report.residual_time_s += t.elapsed().as_secs_f64();
                 let converged = rel <= REFINEMENT_TOLERANCE;
                 let stalled = !(rel < 0.5 * last);
                 if converged || (stalled && rel <= ACCEPTABLE_RESIDUAL) {
@@ -429,25 +475,69 @@ impl DirectSensitivity {
                         break;
                     }
                     // The stale factors are too far from K_T: factorize K_T and start again.
+                    let t = Instant::now();
                     solver
                         .refactorize()
                         .map_err(SensitivityError::Factorization)?;
                     report.refactorized = true;
+                    report.factorization_time_s += t.elapsed().as_secs_f64();
                     chunk.copy_from_slice(&self.rhs);
+                    let t = Instant::now();
                     solver.solve_tangent_many(chunk, cols);
+                    report.triangular_solve_time_s += t.elapsed().as_secs_f64();
                     report.back_substitutions += cols;
                     last = f64::INFINITY;
                     continue;
                 }
                 last = rel;
+                let t = Instant::now();
                 solver.solve_tangent_many(&mut self.residual, cols);
+                report.triangular_solve_time_s += t.elapsed().as_secs_f64();
                 report.back_substitutions += cols;
+                report.refinement_steps += 1;
                 for (xi, ci) in chunk.iter_mut().zip(&self.residual) {
                     *xi += ci;
                 }
             }
         }
         Ok(())
+    }
+}
+
+impl DirectSensitivity {
+    /// `self.residual = self.rhs - K_T X` for the `cols` columns of `x` (`n` rows each,
+    /// column-major like the right-hand sides) and the largest relative residual
+    /// `‖r_j‖ / ‖b_j‖` of the columns.
+    fn residual_of(&mut self, solver: &StaticSolver, x: &[f64], cols: usize, n: usize) -> f64 {
+        // Interleave X so that K_T is read once for all the columns.
+        self.interleaved
+            .par_chunks_mut(cols)
+            .enumerate()
+            .for_each(|(i, row)| {
+                for (j, v) in row.iter_mut().enumerate() {
+                    *v = x[j * n + i];
+                }
+            });
+        solver.tangent_mul_many_interleaved(&self.interleaved, &mut self.product, cols);
+        let product = &self.product;
+        let rhs = &self.rhs;
+        let bnorms = &self.bnorms;
+        self.residual
+            .par_chunks_mut(n)
+            .enumerate()
+            .map(|(j, r)| {
+                let mut sum = 0.0;
+                for (i, (ri, bi)) in r.iter_mut().zip(&rhs[j * n..(j + 1) * n]).enumerate() {
+                    *ri = bi - product[i * cols + j];
+                    sum += *ri * *ri;
+                }
+                if bnorms[j] > 0.0 {
+                    sum.sqrt() / bnorms[j]
+                } else {
+                    0.0
+                }
+            })
+            .reduce(|| 0.0, f64::max)
     }
 }
 

@@ -1279,6 +1279,13 @@ impl StaticSolver {
         self.pattern.mul_vec(&self.values, x, y);
     }
 
+    /// `Y = K_T X` on the free dofs for `cols` vectors stored interleaved (`x[i * cols + j]`
+    /// is equation `i` of vector `j`), with the tangent assembled last: one pass over
+    /// the matrix (see [`CscPattern::mul_many_interleaved`]).
+    pub fn tangent_mul_many_interleaved(&self, x: &[f64], y: &mut [f64], cols: usize) {
+        self.pattern.mul_many_interleaved(&self.values, x, y, cols);
+    }
+
     /// The contact constraints active at the state `u` with the multipliers of the last solve:
     /// every candidate node whose contact force `⟨λ̂ - ε g⟩₊` is positive.
     pub fn active_constraints(&self, model: &Model, u: &[f64]) -> Vec<ActiveConstraint> {
