@@ -60,6 +60,8 @@ pub enum FitError {
     Solve(String),
     #[error("sensitivities: {0}")]
     Sensitivity(String),
+    #[error("actuator term: {0}")]
+    Travel(String),
     #[error("the Jacobian is singular: parameter {name} does not change the measured field (column norm {norm:.3e}); fix it or tie it")]
     Unidentifiable { name: String, norm: f64 },
 }
@@ -75,6 +77,9 @@ pub struct Problem {
     measured: Vec<f64>,
     sqrt_w: Vec<f64>,
     masked: usize,
+    /// The actuator term: the measured travel of the force-controlled rigid body (mm) and its
+    /// standard deviation, one more residual `(T_model - T_measured) / σ_T`.
+    travel: Option<(f64, f64)>,
     warm: Option<Vec<f64>>,
     dstate: Vec<Vec<f64>>,
     /// Forward solves and sensitivity evaluations so far.
@@ -140,11 +145,42 @@ impl Problem {
             measured,
             sqrt_w,
             masked,
+            travel: None,
             warm: None,
             dstate: Vec::new(),
             forward_solves: 0,
             jacobians: 0,
         })
+    }
+
+    /// Adds the actuator term of a force-controlled loading test: the rigid body's travel
+    /// beyond first contact measured as `travel_mm ± sigma_mm` (the displacement sensor of the
+    /// compression or indentation device; the seed's §2.1.2.3 force-controlled tests): one
+    /// residual `(T(θ) - T_measured) / σ` whose derivative is the travel component of the
+    /// direct-differentiation sensitivities.
+    pub fn with_travel(mut self, travel_mm: f64, sigma_mm: f64) -> Result<Problem, FitError> {
+        let force_controlled = self.model.contacts.len() == 1
+            && matches!(
+                self.model.contacts[0].control,
+                femu_mech::contact::TravelControl::Force(_)
+            );
+        if !force_controlled {
+            return Err(FitError::Travel(
+                "the actuator term needs one force-controlled rigid body (compression or indentation)".into(),
+            ));
+        }
+        if !(sigma_mm > 0.0 && sigma_mm.is_finite() && travel_mm.is_finite()) {
+            return Err(FitError::Travel(format!(
+                "travel {travel_mm} mm with sigma {sigma_mm} mm: need a finite travel and a positive sigma"
+            )));
+        }
+        self.travel = Some((travel_mm, sigma_mm));
+        Ok(self)
+    }
+
+    /// The rigid body's travel at the last evaluation's state (None without a rigid body).
+    pub fn travel_of(&self, state: &[f64]) -> Option<f64> {
+        (!self.model.contacts.is_empty()).then(|| state[2 * self.model.node_count()])
     }
 
     /// Measured points inside the tissue, and masked ones.
@@ -196,6 +232,10 @@ impl Problem {
         for ((ri, m), w) in r.iter_mut().zip(&self.measured).zip(&self.sqrt_w) {
             *ri = w * (*ri - m);
         }
+        let travel_dof = 2 * self.model.node_count();
+        if let Some((t, sigma)) = self.travel {
+            r.push((sol.state[travel_dof] - t) / sigma);
+        }
         let jac = if jacobian {
             self.jacobians += 1;
             let members: Vec<Parameter> = self
@@ -222,6 +262,10 @@ impl Problem {
                     self.project(&self.dstate[k], &mut col);
                     for ((s, c), w) in sum.iter_mut().zip(&col).zip(&self.sqrt_w) {
                         *s += w * theta * c;
+                    }
+                    if let Some((_, sigma)) = self.travel {
+                        let last = sum.len() - 1;
+                        sum[last] += theta * self.dstate[k][travel_dof] / sigma;
                     }
                     k += 1;
                 }

@@ -230,3 +230,59 @@ fn lm_and_bfgs_reach_the_same_optimum() {
         "LM should need fewer solves than FD-BFGS: {runs:?}"
     );
 }
+
+/// The actuator term (the plate's measured travel): its Jacobian row is the travel component of
+/// the exact sensitivities — checked against central finite differences of the residual (step
+/// 1e-4 in ln θ; agreement 1e-4 relative to the row's largest entry, the finite differences'
+/// own truncation and the solver tolerance) — and it is refused without a force-controlled body.
+#[test]
+fn actuator_travel_term_has_the_exact_derivative() {
+    let model = compression_thigh(400);
+    let free = free_parameters(&model);
+    let (field, reference) = virtual_field(&model, &free);
+    let phi: Vec<f64> = reference.iter().map(|t| (t * 1.1).ln()).collect();
+    let mut p = Problem::new(model.clone(), SolverOptions::default(), &field, free.clone())
+        .unwrap()
+        .with_travel(7.0, 0.01)
+        .unwrap();
+    let (r, j) = p.evaluate(&phi, true).unwrap();
+    let j = j.unwrap();
+    let last = r.len() - 1;
+    assert_eq!(r.len(), 2 * field.points.len() + 1);
+    let row: Vec<f64> = j.iter().map(|c| c[last]).collect();
+    let scale = row.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    assert!(scale > 0.0);
+    let h = 1e-4;
+    for k in 0..free.len() {
+        let mut q = phi.clone();
+        q[k] += h;
+        let (rp, _) = p.evaluate(&q, false).unwrap();
+        q[k] = phi[k] - h;
+        let (rm, _) = p.evaluate(&q, false).unwrap();
+        let fd = (rp[last] - rm[last]) / (2.0 * h);
+        assert!(
+            (fd - row[k]).abs() <= 1e-4 * scale,
+            "{}: exact {} vs finite difference {fd}",
+            free[k].name,
+            row[k]
+        );
+    }
+    // Contention has no rigid body: the term is refused with a message.
+    let t = parametric_thigh(
+        &ThighParams {
+            target_elements: Some(300),
+            ..Default::default()
+        },
+        ElementKind::Cpe4h,
+    )
+    .unwrap();
+    let deck = contention_deck(&t, &Material::table1(), 2.666e-3).unwrap();
+    let m = Model::from_deck(deck).unwrap();
+    let f2 = free_parameters(&m);
+    let e = Problem::new(m, SolverOptions::default(), &field, f2)
+        .unwrap()
+        .with_travel(1.0, 0.01)
+        .err()
+        .expect("refused");
+    assert!(e.to_string().contains("force-controlled"), "{e}");
+}
