@@ -155,7 +155,7 @@ pub fn virtual_field(
                     u[2 * k] + noise.sample(&mut rng),
                     u[2 * k + 1] + noise.sample(&mut rng),
                 ],
-                weight: [1.0; 2],
+                weight: [1.0 / (plan.sigma_mm * plan.sigma_mm); 2],
             })
             .collect(),
         comments: vec![
@@ -238,6 +238,8 @@ struct Summary {
     best_cost: f64,
     starts_per_repeat: usize,
     repeats: usize,
+    /// The actuator term: (measured or reference travel mm, its sigma mm).
+    travel_term: Option<(Option<f64>, f64)>,
     /// Multilevel: elements of the coarse model the starts ran on.
     coarse_elements: Option<usize>,
     /// Multilevel: forward solves of the refinement on the full model, per repeat.
@@ -345,6 +347,24 @@ pub fn identify_plan(
             Some((m, n))
         }
     };
+    // The actuator term: the measured travel, or for the virtual experiment the reference
+    // model's travel (the model carries the reference parameters) plus seeded noise.
+    let reference_travel = match plan.travel {
+        Some((None, _)) => {
+            let mut solver = femu_mech::StaticSolver::new(model, SolverOptions::default())?;
+            let sol = solver
+                .solve(model)
+                .map_err(|e| anyhow::anyhow!("the reference solve for the travel: {e}"))?;
+            Some(
+                sol.bodies
+                    .first()
+                    .context("[measurement] travel_sigma_mm: the test has no rigid body")?
+                    .travel,
+            )
+        }
+        Some((Some(t), _)) => Some(t),
+        None => None,
+    };
     let mut refined: Vec<usize> = Vec::new();
     let mut all_starts = Vec::new();
     let mut best_per_repeat: Vec<FitResult> = Vec::new();
@@ -362,6 +382,28 @@ pub fn identify_plan(
                 plan.identification.seed + rep as u64,
             )?,
         };
+        let travel: Option<(f64, f64)> = match (plan.travel, reference_travel) {
+            (Some((measured_t, sigma)), Some(t)) => {
+                let noise = if measured_t.is_none() {
+                    let mut rng = rand::rngs::StdRng::seed_from_u64(
+                        plan.identification.seed.wrapping_mul(104_729) + rep as u64,
+                    );
+                    Normal::new(0.0, sigma)
+                        .context("travel sigma")?
+                        .sample(&mut rng)
+                } else {
+                    0.0
+                };
+                Some((t + noise, sigma))
+            }
+            _ => None,
+        };
+        let actuator = |p: Problem| -> Result<Problem> {
+            Ok(match travel {
+                Some((t, sigma)) => p.with_travel(t, sigma)?,
+                None => p,
+            })
+        };
         let starts = latin_hypercube(
             &free,
             starts_n,
@@ -378,12 +420,12 @@ pub fn identify_plan(
         let outcomes: Vec<Result<FitResult>> = starts
             .par_iter()
             .map(|s| {
-                let mut p = Problem::new(
+                let mut p = actuator(Problem::new(
                     start_model.clone(),
                     SolverOptions::default(),
                     &field,
                     free.clone(),
-                )?;
+                )?)?;
                 let r = fit_start(plan, &mut p, s, coarse.is_some());
                 bar.inc(1);
                 r
@@ -446,12 +488,12 @@ pub fn identify_plan(
                     &format!("repeat {rep}: refining the best coarse optimum on the full model"),
                     quiet,
                 );
-                let mut p = Problem::new(
+                let mut p = actuator(Problem::new(
                     model.clone(),
                     SolverOptions::default(),
                     &field,
                     free.clone(),
-                )?;
+                )?)?;
                 let r = fit_start(plan, &mut p, &b.theta, false)
                     .with_context(|| format!("repeat {rep}: refining the {n}-element optimum"))?;
                 spin.finish_and_clear();
@@ -483,8 +525,10 @@ pub fn identify_plan(
     // Confidence from the Jacobian at the optimum: known noise for a virtual experiment, the
     // residual variance otherwise.
     let dof = best.data.saturating_sub(free.len()).max(1);
+    // The virtual field is weighted by 1/σ² (whitened, as a CSV with sx, sy is), so its
+    // residuals have unit variance; the actuator term is whitened the same way.
     let s = if virtual_experiment {
-        plan.sigma_mm
+        1.0
     } else {
         (2.0 * best.cost / dof as f64).sqrt()
     };
@@ -546,6 +590,7 @@ pub fn identify_plan(
         best_cost: best.cost,
         starts_per_repeat: starts_n,
         repeats,
+        travel_term: plan.travel.map(|(_, sigma)| (reference_travel, sigma)),
         coarse_elements: coarse.as_ref().map(|(m, _)| m.mesh.elements.len()),
         refinement_forward_solves: refined,
         forward_solves_per_start: all_starts

@@ -170,6 +170,8 @@ struct MeasurementEntry {
     origin_mm: Option<[f64; 2]>,
     x_axis: Option<[f64; 2]>,
     y_axis: Option<[f64; 2]>,
+    travel_mm: Option<f64>,
+    travel_sigma_mm: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -289,6 +291,9 @@ pub struct Plan {
     pub grid: GridSpec,
     pub sigma_mm: f64,
     pub measurement: MeasurementPlan,
+    /// The actuator term: the measured travel of the force-controlled body (mm; `None` for a
+    /// virtual experiment, which synthesizes it) and its standard deviation (mm).
+    pub travel: Option<(Option<f64>, f64)>,
     pub groups: Vec<Vec<String>>,
     pub identification: IdentificationPlan,
     pub steps: Steps,
@@ -634,9 +639,37 @@ pub fn parse(text: &str, base: &Path) -> Result<Plan> {
         None => SEED_SIGMA_MM,
         Some(n) => positive(&lines.at("noise", 0, "sigma_mm"), n.sigma_mm)?,
     };
-    let measurement = match file.measurement {
-        None => MeasurementPlan::Virtual,
-        Some(m) => measurement(m, &lines, base)?,
+    let (measurement, travel) = match file.measurement {
+        None => (MeasurementPlan::Virtual, None),
+        Some(mut m) => {
+            let at = |key: &str| lines.at("measurement", 0, key);
+            let travel = match (m.travel_mm.take(), m.travel_sigma_mm.take()) {
+                (None, None) => None,
+                (t, Some(sigma)) => {
+                    positive(&at("travel_sigma_mm"), sigma)?;
+                    if let Some(t) = t {
+                        if !t.is_finite() {
+                            bail!("{} must be finite", at("travel_mm"));
+                        }
+                    }
+                    Some((t, sigma))
+                }
+                (Some(_), None) => bail!("{}: give travel_sigma_mm too", at("travel_mm")),
+            };
+            let plan = measurement(m, &lines, base)?;
+            match (&plan, travel) {
+                (MeasurementPlan::File { .. }, Some((None, _))) => bail!(
+                    "{}: a measured field needs its measured travel_mm",
+                    at("travel_sigma_mm")
+                ),
+                (MeasurementPlan::Virtual, Some((Some(_), _))) => bail!(
+                    "{}: the virtual experiment synthesizes the travel; give only travel_sigma_mm",
+                    at("travel_mm")
+                ),
+                _ => {}
+            }
+            (plan, travel)
+        }
     };
     let identification = {
         let e = file.identification.unwrap_or_default();
@@ -759,6 +792,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Plan> {
         grid,
         sigma_mm,
         measurement,
+        travel,
         groups: file.parameters.map(|p| p.groups).unwrap_or_default(),
         steps,
     })

@@ -178,8 +178,10 @@ impl Problem {
         Ok(self)
     }
 
-    /// The rigid body's travel at the last evaluation's state (None without a rigid body).
-    pub fn travel_of(&self, state: &[f64]) -> Option<f64> {
+    /// The first rigid body's travel (mm) at the last solved state (None without a rigid body
+    /// or before any solve).
+    pub fn last_travel(&self) -> Option<f64> {
+        let state = self.warm.as_ref()?;
         (!self.model.contacts.is_empty()).then(|| state[2 * self.model.node_count()])
     }
 

@@ -241,10 +241,15 @@ fn actuator_travel_term_has_the_exact_derivative() {
     let free = free_parameters(&model);
     let (field, reference) = virtual_field(&model, &free);
     let phi: Vec<f64> = reference.iter().map(|t| (t * 1.1).ln()).collect();
-    let mut p = Problem::new(model.clone(), SolverOptions::default(), &field, free.clone())
-        .unwrap()
-        .with_travel(7.0, 0.01)
-        .unwrap();
+    let mut p = Problem::new(
+        model.clone(),
+        SolverOptions::default(),
+        &field,
+        free.clone(),
+    )
+    .unwrap()
+    .with_travel(7.0, 0.01)
+    .unwrap();
     let (r, j) = p.evaluate(&phi, true).unwrap();
     let j = j.unwrap();
     let last = r.len() - 1;
