@@ -28,13 +28,21 @@ pub enum UsError {
     Geometry(String),
     /// Digital image correlation failed.
     #[error("DIC: {0}")]
-    Dic(#[from] femu_dic::DicError),
+    Dic(femu_dic::DicError),
     /// A figure could not be drawn.
     #[error("figure {path}: {message}")]
     Plot { path: PathBuf, message: String },
     /// A file could not be written.
     #[error("cannot write {path}: {message}")]
     Write { path: PathBuf, message: String },
+}
+
+// Not `#[from]`: the message already holds the DIC error's text, and a `source` would make
+// `anyhow` print it twice.
+impl From<femu_dic::DicError> for UsError {
+    fn from(e: femu_dic::DicError) -> Self {
+        UsError::Dic(e)
+    }
 }
 
 impl UsError {

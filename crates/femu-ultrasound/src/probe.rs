@@ -285,3 +285,61 @@ mod tests {
         assert!(Transducer { frequency_mhz: 0.5, ..t }.validate().is_err());
     }
 }
+
+/// Places a probe on the skin: along the ray from the centre of the skin nodes towards
+/// `outward` (unit vector, e.g. anterior = +y), at the outermost crossing of the skin faces;
+/// the beam points back along the ray (into the tissue). `skin` lists the `(element, face)`
+/// pairs of the outline.
+pub fn probe_on_skin(
+    mesh: &femu_mesh::Mesh,
+    skin: &[(usize, usize)],
+    outward: [f64; 2],
+    width_mm: f64,
+    depth_mm: f64,
+    px_per_mm: f64,
+) -> Result<Probe, UsError> {
+    if skin.is_empty() {
+        return Err(UsError::Geometry("the mesh has no skin surface to place the probe on".into()));
+    }
+    let mut c = [0.0, 0.0];
+    let mut n = 0.0;
+    for &(e, f) in skin {
+        for k in mesh.elements[e].face_nodes(f) {
+            c[0] += mesh.nodes[k][0];
+            c[1] += mesh.nodes[k][1];
+            n += 1.0;
+        }
+    }
+    c = [c[0] / n, c[1] / n];
+    let len = outward[0].hypot(outward[1]);
+    if !(len > 0.0) {
+        return Err(UsError::param("probe side", "the direction is zero"));
+    }
+    let d = [outward[0] / len, outward[1] / len];
+    let mut best: Option<f64> = None;
+    for &(e, f) in skin {
+        let [a, b] = mesh.elements[e].face_nodes(f);
+        let (p, q) = (mesh.nodes[a], mesh.nodes[b]);
+        let s = [q[0] - p[0], q[1] - p[1]];
+        let den = d[0] * s[1] - d[1] * s[0];
+        if den.abs() < 1e-300 {
+            continue;
+        }
+        let ap = [p[0] - c[0], p[1] - c[1]];
+        let t = (ap[0] * s[1] - ap[1] * s[0]) / den;
+        let u = (ap[0] * d[1] - ap[1] * d[0]) / den;
+        if t > 0.0 && (0.0..=1.0).contains(&u) {
+            best = Some(best.map_or(t, |b: f64| b.max(t)));
+        }
+    }
+    let t = best.ok_or_else(|| {
+        UsError::Geometry(format!("no skin face along {d:?} from the section's centre {c:?}"))
+    })?;
+    Probe::new(
+        [c[0] + t * d[0], c[1] + t * d[1]],
+        [-d[0], -d[1]],
+        width_mm,
+        depth_mm,
+        px_per_mm,
+    )
+}
