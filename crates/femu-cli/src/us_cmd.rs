@@ -121,7 +121,10 @@ fn read_study(
     let mut table: toml::Table = text
         .parse()
         .with_context(|| format!("study file {}", path.display()))?;
-    let take = |t: &mut toml::Table, key: &str| t.remove(key).unwrap_or(toml::Value::Table(Default::default()));
+    let take = |t: &mut toml::Table, key: &str| {
+        t.remove(key)
+            .unwrap_or(toml::Value::Table(Default::default()))
+    };
     let probe: ProbeSection = take(&mut table, "probe")
         .try_into()
         .with_context(|| format!("study file {}: [probe]", path.display()))?;
@@ -196,9 +199,22 @@ pub struct UsSimArgs {
 fn scaled(test: femu_mech::loading::Loading, s: f64) -> femu_mech::loading::Loading {
     use femu_mech::loading::Loading;
     match test {
-        Loading::Contention { pressure } => Loading::Contention { pressure: pressure * s },
-        Loading::Compression { side, force } => Loading::Compression { side, force: force * s },
-        Loading::Indentation { site, radius, force } => Loading::Indentation { site, radius, force: force * s },
+        Loading::Contention { pressure } => Loading::Contention {
+            pressure: pressure * s,
+        },
+        Loading::Compression { side, force } => Loading::Compression {
+            side,
+            force: force * s,
+        },
+        Loading::Indentation {
+            site,
+            radius,
+            force,
+        } => Loading::Indentation {
+            site,
+            radius,
+            force: force * s,
+        },
     }
 }
 
@@ -257,17 +273,20 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
         let mut solver = StaticSolver::new(&m, SolverOptions::default())?;
         let sol = solver
             .solve_with(&m, stages.last().map(|v| v.as_slice()), &mut |_| {})
-            .map_err(|e| anyhow::anyhow!("test {} at {k}/{} of the load: {e}", test.name(), args.steps))?;
+            .map_err(|e| {
+                anyhow::anyhow!(
+                    "test {} at {k}/{} of the load: {e}",
+                    test.name(),
+                    args.steps
+                )
+            })?;
         stages.push(sol.u[..2 * m.node_count()].to_vec());
         skin = sk;
         model = Some(m);
     }
     let model = model.context("no load step")?;
     let u = stages.last().context("no load step")?;
-    let umax = u
-        .chunks(2)
-        .map(|c| c[0].hypot(c[1]))
-        .fold(0.0, f64::max);
+    let umax = u.chunks(2).map(|c| c[0].hypot(c[1])).fold(0.0, f64::max);
     let mut timings = Timings {
         mesh_and_solve: t0.elapsed().as_secs_f64(),
         ..Default::default()
@@ -285,14 +304,7 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
     let t = Instant::now();
     let acoustics = Acoustics::default();
     let bone = bone_faces(&model.mesh, &skin);
-    let phantom = Phantom::generate(
-        &model.mesh,
-        &bone,
-        &acoustics,
-        &probe,
-        3.0 + umax,
-        us.seed,
-    )?;
+    let phantom = Phantom::generate(&model.mesh, &bone, &acoustics, &probe, 3.0 + umax, us.seed)?;
     timings.phantom = t.elapsed().as_secs_f64();
     let opts = experiment::ExperimentOptions {
         transducer: us.transducer(),
@@ -352,10 +364,30 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
             .collect()
     });
     let plots: [(&str, &str, &Vec<f64>, bool); 6] = [
-        ("ux_true.png", "FE displacement ux (lateral)", &maps[2], true),
-        ("uy_true.png", "FE displacement uy (depth, down)", &maps[3], true),
-        ("ux_dic.png", "DIC displacement ux (lateral)", &maps[0], true),
-        ("uy_dic.png", "DIC displacement uy (depth, down)", &maps[1], true),
+        (
+            "ux_true.png",
+            "FE displacement ux (lateral)",
+            &maps[2],
+            true,
+        ),
+        (
+            "uy_true.png",
+            "FE displacement uy (depth, down)",
+            &maps[3],
+            true,
+        ),
+        (
+            "ux_dic.png",
+            "DIC displacement ux (lateral)",
+            &maps[0],
+            true,
+        ),
+        (
+            "uy_dic.png",
+            "DIC displacement uy (depth, down)",
+            &maps[1],
+            true,
+        ),
         ("error_ux.png", "DIC - FE, ux", &err[0], true),
         ("error_uy.png", "DIC - FE, uy", &err[1], true),
     ];
@@ -369,7 +401,11 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
             values,
             &femu_plot::ImageField {
                 title: format!("{title} over the reference image"),
-                value_label: "displacement (px)".into(),
+                value_label: if name.starts_with("error") {
+                    "DIC - FE (px)".into()
+                } else {
+                    "displacement (px)".into()
+                },
                 diverging,
                 ..Default::default()
             },
@@ -462,7 +498,11 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
     if args.repeats == 0 || args.subjects == 0 {
         bail!("--repeats and --subjects must be at least 1");
     }
-    let n = args.frequencies.len() * args.gains.len() * args.dynamics.len() * args.repeats * args.subjects;
+    let n = args.frequencies.len()
+        * args.gains.len()
+        * args.dynamics.len()
+        * args.repeats
+        * args.subjects;
     if n > 2000 {
         bail!("{n} images requested: at most 2000");
     }
@@ -487,16 +527,41 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
         // with each setting would hide the setting's effect on the decorrelation; the seed
         // acquired each setting separately, so each setting gets its own frames).
         for &f in &args.frequencies {
-            for &g in &args.dynamics.iter().flat_map(|&d| args.gains.iter().map(move |&g| (g, d))).collect::<Vec<_>>() {
+            for &g in &args
+                .dynamics
+                .iter()
+                .flat_map(|&d| args.gains.iter().map(move |&g| (g, d)))
+                .collect::<Vec<_>>()
+            {
                 let (gain, dynamic) = g;
                 let mut ph = base.clone();
                 for r in 0..args.repeats {
                     if r > 0 {
-                        ph = ph.decorrelated(args.correlation, us.seed ^ (((s * 7919 + r) as u64) << 20) ^ ((gain * 1e3) as u64) ^ ((dynamic * 1e6) as u64))?;
+                        ph = ph.decorrelated(
+                            args.correlation,
+                            us.seed
+                                ^ (((s * 7919 + r) as u64) << 20)
+                                ^ ((gain * 1e3) as u64)
+                                ^ ((dynamic * 1e6) as u64),
+                        )?;
                     }
-                    let scanner = Scanner { gain_db: gain, dynamic_db: dynamic, ..us.scanner() };
-                    let transducer = Transducer { frequency_mhz: f, ..us.transducer() };
-                    let frame = femu_ultrasound::render(&ph, &state, &probe, &transducer, &scanner, us.seed + (r as u64) * 31 + s as u64 * 7)?;
+                    let scanner = Scanner {
+                        gain_db: gain,
+                        dynamic_db: dynamic,
+                        ..us.scanner()
+                    };
+                    let transducer = Transducer {
+                        frequency_mhz: f,
+                        ..us.transducer()
+                    };
+                    let frame = femu_ultrasound::render(
+                        &ph,
+                        &state,
+                        &probe,
+                        &transducer,
+                        &scanner,
+                        us.seed + (r as u64) * 31 + s as u64 * 7,
+                    )?;
                     let name = format!(
                         "s{}_f{}_g{}_d{}_{:02}.png",
                         s + 1,
@@ -508,8 +573,16 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
                     frame
                         .image
                         .save_png(&args.out.join(&name))
-                        .with_context(|| format!("cannot write {}", args.out.join(&name).display()))?;
-                    manifest += &format!("{name},{},{},{},s{}\n", fmt_num(f), fmt_num(gain), fmt_num(dynamic), s + 1);
+                        .with_context(|| {
+                            format!("cannot write {}", args.out.join(&name).display())
+                        })?;
+                    manifest += &format!(
+                        "{name},{},{},{},s{}\n",
+                        fmt_num(f),
+                        fmt_num(gain),
+                        fmt_num(dynamic),
+                        s + 1
+                    );
                 }
             }
         }
@@ -517,7 +590,11 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
     let mp = args.out.join("manifest.csv");
     std::fs::write(&mp, manifest).with_context(|| format!("cannot write {}", mp.display()))?;
     if !quiet {
-        eprintln!("{n} images in {:.1} s -> {}", t0.elapsed().as_secs_f64(), mp.display());
+        eprintln!(
+            "{n} images in {:.1} s -> {}",
+            t0.elapsed().as_secs_f64(),
+            mp.display()
+        );
     }
     Ok(())
 }
@@ -617,10 +694,18 @@ pub fn run_settings(args: &UsSettingsArgs, quiet: bool) -> Result<()> {
         for c in &report.choices {
             eprintln!(
                 "{}{} MHz, dynamic {} dB: optimal gain {}",
-                if c.subject.is_empty() { String::new() } else { format!("{} ", c.subject) },
+                if c.subject.is_empty() {
+                    String::new()
+                } else {
+                    format!("{} ", c.subject)
+                },
                 fmt_num(c.frequency_mhz),
                 fmt_num(c.dynamic_db),
-                c.optimal_gain_db.map_or("none (every gain saturates)".into(), |g| format!("{} dB", fmt_num(g)))
+                c.optimal_gain_db
+                    .map_or("none (every gain saturates)".into(), |g| format!(
+                        "{} dB",
+                        fmt_num(g)
+                    ))
             );
         }
     }
@@ -657,11 +742,17 @@ pub fn run_noise(args: &UsNoiseArgs, quiet: bool) -> Result<()> {
         regularization_length: args.regularization,
         ..Default::default()
     };
-    let report = noise::analyse(&manifest, &args.region.region()?, &dic, args.alpha, &mut |m| {
-        if !quiet {
-            eprintln!("{m}");
-        }
-    })?;
+    let report = noise::analyse(
+        &manifest,
+        &args.region.region()?,
+        &dic,
+        args.alpha,
+        &mut |m| {
+            if !quiet {
+                eprintln!("{m}");
+            }
+        },
+    )?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let files = noise::write_outputs(&report, &args.out)?;

@@ -129,12 +129,24 @@ fn run_states(
     opts: &ExperimentOptions,
 ) -> Result<Experiment, UsError> {
     if !(opts.grid_step_px >= 1.0) {
-        return Err(UsError::param("grid step", format!("{} px must be at least 1", opts.grid_step_px)));
+        return Err(UsError::param(
+            "grid step",
+            format!("{} px must be at least 1", opts.grid_step_px),
+        ));
     }
     let frames = states
         .iter()
         .enumerate()
-        .map(|(k, st)| render(phantom, st, probe, &opts.transducer, &opts.scanner, opts.noise_seed + k as u64))
+        .map(|(k, st)| {
+            render(
+                phantom,
+                st,
+                probe,
+                &opts.transducer,
+                &opts.scanner,
+                opts.noise_seed + k as u64,
+            )
+        })
         .collect::<Result<Vec<Frame>, UsError>>()?;
     let (w, h) = (frames[0].width, frames[0].height);
     let locator = PointLocator::new(&phantom.mesh);
@@ -160,22 +172,40 @@ fn run_states(
         let roi: Vec<bool> = (0..w * h)
             .map(|k| {
                 let (i, j) = (k % w, k / w);
-                i >= 2 && j >= 2 && i + 3 <= w && j + 3 <= h && usable(&frames[s], k) && usable(&frames[s + 1], k)
+                i >= 2
+                    && j >= 2
+                    && i + 3 <= w
+                    && j + 3 <= h
+                    && usable(&frames[s], k)
+                    && usable(&frames[s + 1], k)
             })
             .collect();
         if !roi.iter().any(|&b| b) {
-            return Err(UsError::Geometry(format!("step {}: no tissue pixel is usable for the DIC in the field of view", s + 1)));
+            return Err(UsError::Geometry(format!(
+                "step {}: no tissue pixel is usable for the DIC in the field of view",
+                s + 1
+            )));
         }
         rois.push(roi);
     }
     let mut dics = Vec::new();
     for s in 0..frames.len() - 1 {
-        let roi = Roi::Mask { width: w, height: h, inside: rois[s].clone() };
-        let d = correlate(&frames[s].image, &frames[s + 1].image, &roi, &opts.dic)
-            .map_err(|e| UsError::Geometry(format!("DIC step {} of {}: {e}", s + 1, frames.len() - 1)))?;
+        let roi = Roi::Mask {
+            width: w,
+            height: h,
+            inside: rois[s].clone(),
+        };
+        let d =
+            correlate(&frames[s].image, &frames[s + 1].image, &roi, &opts.dic).map_err(|e| {
+                UsError::Geometry(format!("DIC step {} of {}: {e}", s + 1, frames.len() - 1))
+            })?;
         dics.push(d);
     }
-    let grid = femu_dic::output::grid(&dics[0], &femu_dic::output::ModelFrame::default(), opts.grid_step_px)?;
+    let grid = femu_dic::output::grid(
+        &dics[0],
+        &femu_dic::output::ModelFrame::default(),
+        opts.grid_step_px,
+    )?;
     let points: Vec<ComparedPoint> = grid
         .iter()
         .filter_map(|g| {
@@ -239,7 +269,10 @@ pub fn field_error(points: &[ComparedPoint], px_per_mm: f64) -> FieldError {
     if n == 0 {
         return FieldError::default();
     }
-    let mut e = FieldError { points: n, ..Default::default() };
+    let mut e = FieldError {
+        points: n,
+        ..Default::default()
+    };
     for c in 0..2 {
         let errs: Vec<f64> = used.iter().map(|p| p.dic_px[c] - p.true_px[c]).collect();
         let (m, s) = crate::stats::mean_sd(&errs);
@@ -250,14 +283,22 @@ pub fn field_error(points: &[ComparedPoint], px_per_mm: f64) -> FieldError {
         e.rms_mm[c] = e.rms_px[c] / px_per_mm;
         e.max_abs_mm[c] = e.max_abs_px[c] / px_per_mm;
     }
-    e.max_true_px = used.iter().fold(0.0, |a, p| a.max(p.true_px[0].hypot(p.true_px[1])));
+    e.max_true_px = used
+        .iter()
+        .fold(0.0, |a, p| a.max(p.true_px[0].hypot(p.true_px[1])));
     e
 }
 
 /// Writes the measured field (`x,y,ux,uy,w`, model frame, mm; conventions.md) of the DIC, or
 /// the FE truth at the same points when `truth` is set.
-pub fn write_field_csv(path: &Path, points: &[ComparedPoint], truth: bool, comments: &[String]) -> Result<(), UsError> {
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| UsError::write(path, e))?);
+pub fn write_field_csv(
+    path: &Path,
+    points: &[ComparedPoint],
+    truth: bool,
+    comments: &[String],
+) -> Result<(), UsError> {
+    let mut f =
+        std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| UsError::write(path, e))?);
     let mut body = String::new();
     for c in comments {
         body += &format!("# {c}\n");
@@ -265,9 +306,13 @@ pub fn write_field_csv(path: &Path, points: &[ComparedPoint], truth: bool, comme
     body += "x,y,ux,uy,w\n";
     for p in points {
         let u = if truth { p.true_mm } else { p.dic_mm };
-        body += &format!("{:.9e},{:.9e},{:.9e},{:.9e},{}\n", p.x_mm[0], p.x_mm[1], u[0], u[1], p.w);
+        body += &format!(
+            "{:.9e},{:.9e},{:.9e},{:.9e},{}\n",
+            p.x_mm[0], p.x_mm[1], u[0], u[1], p.w
+        );
     }
-    f.write_all(body.as_bytes()).map_err(|e| UsError::write(path, e))?;
+    f.write_all(body.as_bytes())
+        .map_err(|e| UsError::write(path, e))?;
     f.flush().map_err(|e| UsError::write(path, e))
 }
 
@@ -300,8 +345,12 @@ pub fn pixel_maps(
             continue;
         }
         let p = [(k % w) as f64, (k / w) as f64];
-        let Some(g) = by_cell.get(&cell(p)) else { continue };
-        let Some(loc) = locator.locate(probe.pixel_to_model(p)) else { continue };
+        let Some(g) = by_cell.get(&cell(p)) else {
+            continue;
+        };
+        let Some(loc) = locator.locate(probe.pixel_to_model(p)) else {
+            continue;
+        };
         let t = probe.displacement_to_pixels([loc.interpolate(u, 2, 0), loc.interpolate(u, 2, 1)]);
         maps[0][k] = g.dic_px[0];
         maps[1][k] = g.dic_px[1];

@@ -128,12 +128,18 @@ impl Manifest {
             };
             let frequency_mhz = num(idx[1], "frequency_mhz")?;
             if !(frequency_mhz > 0.0) {
-                return Err(err(line, format!("frequency_mhz {frequency_mhz} must be positive")));
+                return Err(err(
+                    line,
+                    format!("frequency_mhz {frequency_mhz} must be positive"),
+                ));
             }
             let gain_db = num(idx[2], "gain_db")?;
             let dynamic_db = num(idx[3], "dynamic_db")?;
             if !(dynamic_db > 0.0) {
-                return Err(err(line, format!("dynamic_db {dynamic_db} must be positive")));
+                return Err(err(
+                    line,
+                    format!("dynamic_db {dynamic_db} must be positive"),
+                ));
             }
             let file = f[idx[0]].to_string();
             if file.is_empty() {
@@ -206,7 +212,9 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(dir.join("a.png"), b"x").unwrap();
         let p = dir.join("m.csv");
-        let e = Manifest::parse("file,gain_db\n", &p, &dir).unwrap_err().to_string();
+        let e = Manifest::parse("file,gain_db\n", &p, &dir)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("m.csv:1") && e.contains("frequency_mhz"), "{e}");
         let e = Manifest::parse(
             "# c\nfile,frequency_mhz,gain_db,dynamic_db\na.png,9,34,42\nb.png,9,34,42\n",
@@ -215,12 +223,24 @@ mod tests {
         )
         .unwrap_err()
         .to_string();
-        assert!(e.contains("m.csv:4") && e.contains("b.png") && e.contains("does not exist"), "{e}");
-        let e = Manifest::parse("file,frequency_mhz,gain_db,dynamic_db\na.png,9,x,42\n", &p, &dir)
-            .unwrap_err()
-            .to_string();
+        assert!(
+            e.contains("m.csv:4") && e.contains("b.png") && e.contains("does not exist"),
+            "{e}"
+        );
+        let e = Manifest::parse(
+            "file,frequency_mhz,gain_db,dynamic_db\na.png,9,x,42\n",
+            &p,
+            &dir,
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains(":2") && e.contains("gain_db 'x'"), "{e}");
-        let m = Manifest::parse("subject,file,frequency_mhz,gain_db,dynamic_db\ns1,a.png,9,34,42\n", &p, &dir).unwrap();
+        let m = Manifest::parse(
+            "subject,file,frequency_mhz,gain_db,dynamic_db\ns1,a.png,9,34,42\n",
+            &p,
+            &dir,
+        )
+        .unwrap();
         assert_eq!(m.entries[0].subject, "s1");
         assert_eq!(m.entries[0].setting_label(), "9MHz G34 D42");
         std::fs::remove_dir_all(&dir).ok();

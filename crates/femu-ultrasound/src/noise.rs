@@ -74,7 +74,10 @@ pub fn analyse(
     progress: &mut dyn FnMut(&str),
 ) -> Result<NoiseReport, UsError> {
     if !(alpha > 0.0 && alpha < 1.0) {
-        return Err(UsError::param("alpha", format!("{alpha} is outside (0, 1)")));
+        return Err(UsError::param(
+            "alpha",
+            format!("{alpha} is outside (0, 1)"),
+        ));
     }
     // Group: setting → subject → entries in manifest order.
     let key = |v: f64| (v * 1e6).round() as i64;
@@ -120,11 +123,21 @@ pub fn analyse(
                 .iter()
                 .map(|&k| manifest.open(k, Some(size)))
                 .collect::<Result<Vec<_>, _>>()?;
-            progress(&format!("{label}{}: {} images", if subject.is_empty() { String::new() } else { format!(" {subject}") }, images.len()));
-            let res = femu_dic::noise::successive_pairs(&images, &roi, dic).map_err(|e| UsError::Manifest {
-                path: manifest.path.clone(),
-                line: manifest.entries[idx[0]].line,
-                message: format!("setting {label}: {e}"),
+            progress(&format!(
+                "{label}{}: {} images",
+                if subject.is_empty() {
+                    String::new()
+                } else {
+                    format!(" {subject}")
+                },
+                images.len()
+            ));
+            let res = femu_dic::noise::successive_pairs(&images, &roi, dic).map_err(|e| {
+                UsError::Manifest {
+                    path: manifest.path.clone(),
+                    line: manifest.entries[idx[0]].line,
+                    message: format!("setting {label}: {e}"),
+                }
             })?;
             for (rank, p) in res.iter().enumerate() {
                 pairs.push(PairError {
@@ -162,10 +175,20 @@ pub fn analyse(
         for j in i + 1..settings.len() {
             let (a, b) = (&settings[i], &settings[j]);
             for component in ["ux", "uy"] {
-                let pick = |p: &PairError| if component == "ux" { p.std_ux_px } else { p.std_uy_px };
+                let pick = |p: &PairError| {
+                    if component == "ux" {
+                        p.std_ux_px
+                    } else {
+                        p.std_uy_px
+                    }
+                };
                 let (mut va, mut vb) = (Vec::new(), Vec::new());
                 for pa in &a.pairs {
-                    if let Some(pb) = b.pairs.iter().find(|p| p.subject == pa.subject && p.rank == pa.rank) {
+                    if let Some(pb) = b
+                        .pairs
+                        .iter()
+                        .find(|p| p.subject == pa.subject && p.rank == pa.rank)
+                    {
                         va.push(pick(pa));
                         vb.push(pick(pb));
                     }
@@ -221,8 +244,19 @@ pub fn write_outputs(report: &NoiseReport, out: &Path) -> Result<Vec<String>, Us
         for p in &st.pairs {
             s += &format!(
                 "{},{},{},{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{}\n",
-                st.label, st.frequency_mhz, st.gain_db, st.dynamic_db, p.subject, p.rank + 1, p.reference_line,
-                p.deformed_line, p.std_ux_px, p.std_uy_px, p.mean_ux_px, p.mean_uy_px, p.converged
+                st.label,
+                st.frequency_mhz,
+                st.gain_db,
+                st.dynamic_db,
+                p.subject,
+                p.rank + 1,
+                p.reference_line,
+                p.deformed_line,
+                p.std_ux_px,
+                p.std_uy_px,
+                p.mean_ux_px,
+                p.mean_uy_px,
+                p.converged
             );
         }
     }
@@ -231,8 +265,16 @@ pub fn write_outputs(report: &NoiseReport, out: &Path) -> Result<Vec<String>, Us
     for st in &report.settings {
         s += &format!(
             "{},{},{},{},{},{:.6},{:.6},{:.6},{:.6},{}\n",
-            st.label, st.frequency_mhz, st.gain_db, st.dynamic_db, st.pairs.len(), st.mean_std_ux_px,
-            st.sd_std_ux_px, st.mean_std_uy_px, st.sd_std_uy_px, st.label == report.recommended
+            st.label,
+            st.frequency_mhz,
+            st.gain_db,
+            st.dynamic_db,
+            st.pairs.len(),
+            st.mean_std_ux_px,
+            st.sd_std_ux_px,
+            st.mean_std_uy_px,
+            st.sd_std_uy_px,
+            st.label == report.recommended
         );
     }
     write("settings.csv", s)?;
@@ -240,15 +282,28 @@ pub fn write_outputs(report: &NoiseReport, out: &Path) -> Result<Vec<String>, Us
     for c in &report.comparisons {
         s += &format!(
             "{},{},{},{},{:.6},{:.6},{},{:.6e},{}\n",
-            c.a, c.b, c.component, c.test.n, c.test.mean_difference, c.test.t, c.test.degrees_of_freedom,
-            c.test.p_value, c.significant
+            c.a,
+            c.b,
+            c.component,
+            c.test.n,
+            c.test.mean_difference,
+            c.test.t,
+            c.test.degrees_of_freedom,
+            c.test.p_value,
+            c.significant
         );
     }
     write("ttests.csv", s)?;
     let mut groups = Vec::new();
     for st in &report.settings {
-        groups.push((format!("{} ux", st.label), st.pairs.iter().map(|p| p.std_ux_px).collect()));
-        groups.push((format!("{} uy", st.label), st.pairs.iter().map(|p| p.std_uy_px).collect()));
+        groups.push((
+            format!("{} ux", st.label),
+            st.pairs.iter().map(|p| p.std_ux_px).collect(),
+        ));
+        groups.push((
+            format!("{} uy", st.label),
+            st.pairs.iter().map(|p| p.std_uy_px).collect(),
+        ));
     }
     let p = out.join("random_error.png");
     femu_plot::box_plot_png(

@@ -116,7 +116,11 @@ impl Phantom {
         let draws: Vec<([f64; 2], f64, f64)> = (0..n)
             .map(|_| {
                 let q = [rng.gen_range(lo[0]..hi[0]), rng.gen_range(lo[1]..hi[1])];
-                (probe.probe_to_model(q), rng.gen::<f64>(), rng.sample(StandardNormal))
+                (
+                    probe.probe_to_model(q),
+                    rng.gen::<f64>(),
+                    rng.sample(StandardNormal),
+                )
             })
             .collect();
         let mut scatterers: Vec<Scatterer> = draws

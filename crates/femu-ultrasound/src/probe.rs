@@ -282,7 +282,12 @@ mod tests {
         }
         .psf();
         assert!(hi.sigma_axial_mm < psf.sigma_axial_mm);
-        assert!(Transducer { frequency_mhz: 0.5, ..t }.validate().is_err());
+        assert!(Transducer {
+            frequency_mhz: 0.5,
+            ..t
+        }
+        .validate()
+        .is_err());
     }
 }
 
@@ -299,7 +304,9 @@ pub fn probe_on_skin(
     px_per_mm: f64,
 ) -> Result<Probe, UsError> {
     if skin.is_empty() {
-        return Err(UsError::Geometry("the mesh has no skin surface to place the probe on".into()));
+        return Err(UsError::Geometry(
+            "the mesh has no skin surface to place the probe on".into(),
+        ));
     }
     let mut c = [0.0, 0.0];
     let mut n = 0.0;
@@ -333,7 +340,9 @@ pub fn probe_on_skin(
         }
     }
     let t = best.ok_or_else(|| {
-        UsError::Geometry(format!("no skin face along {d:?} from the section's centre {c:?}"))
+        UsError::Geometry(format!(
+            "no skin face along {d:?} from the section's centre {c:?}"
+        ))
     })?;
     Probe::new(
         [c[0] + t * d[0], c[1] + t * d[1]],

@@ -105,7 +105,8 @@ impl Scanner {
 
     /// Grey level (0–255, not rounded) of a compressed level `L` (dB).
     pub fn grey(&self, level_db: f64) -> f64 {
-        (255.0 * (level_db + self.gain_db - self.black_level_db) / self.dynamic_db).clamp(0.0, 255.0)
+        (255.0 * (level_db + self.gain_db - self.black_level_db) / self.dynamic_db)
+            .clamp(0.0, 255.0)
     }
 }
 
@@ -383,25 +384,26 @@ fn filtered_noise(w: usize, h: usize, sx: f64, sy: f64, rms: f64, seed: u64) -> 
             .collect()
     };
     let (kx, ky) = (kernel(sx.max(0.3)), kernel(sy.max(0.3)));
-    let conv = |src: &[[f64; 2]], n: usize, stride: usize, count: usize, cstride: usize, k: &[f64]| {
-        let r = (k.len() / 2) as isize;
-        let mut out = vec![[0.0; 2]; src.len()];
-        for c in 0..count {
-            for i in 0..n as isize {
-                let mut acc = [0.0; 2];
-                for (m, &kv) in k.iter().enumerate() {
-                    let j = i + m as isize - r;
-                    if j >= 0 && j < n as isize {
-                        let s = src[c * cstride + j as usize * stride];
-                        acc[0] += kv * s[0];
-                        acc[1] += kv * s[1];
+    let conv =
+        |src: &[[f64; 2]], n: usize, stride: usize, count: usize, cstride: usize, k: &[f64]| {
+            let r = (k.len() / 2) as isize;
+            let mut out = vec![[0.0; 2]; src.len()];
+            for c in 0..count {
+                for i in 0..n as isize {
+                    let mut acc = [0.0; 2];
+                    for (m, &kv) in k.iter().enumerate() {
+                        let j = i + m as isize - r;
+                        if j >= 0 && j < n as isize {
+                            let s = src[c * cstride + j as usize * stride];
+                            acc[0] += kv * s[0];
+                            acc[1] += kv * s[1];
+                        }
                     }
+                    out[c * cstride + i as usize * stride] = acc;
                 }
-                out[c * cstride + i as usize * stride] = acc;
             }
-        }
-        out
-    };
+            out
+        };
     v = conv(&v, w, 1, h, w, &kx);
     v = conv(&v, h, w, w, 1, &ky);
     // White noise of variance 2 (two components) through k: variance 2 Σkx² Σky².

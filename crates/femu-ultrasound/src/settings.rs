@@ -17,14 +17,28 @@ use std::path::Path;
 #[derive(Debug, Clone, PartialEq)]
 pub enum Region {
     All,
-    Rect { x0: usize, y0: usize, x1: usize, y1: usize },
-    Mask { width: usize, height: usize, inside: Vec<bool> },
+    Rect {
+        x0: usize,
+        y0: usize,
+        x1: usize,
+        y1: usize,
+    },
+    Mask {
+        width: usize,
+        height: usize,
+        inside: Vec<bool>,
+    },
 }
 
 impl Region {
     /// Parses `x0,y0,x1,y1` (pixels, corners, x1 > x0, y1 > y0).
     pub fn parse_rect(s: &str) -> Result<Region, UsError> {
-        let bad = || UsError::param("--roi", format!("'{s}' is not x0,y0,x1,y1 (pixels, x1 > x0, y1 > y0)"));
+        let bad = || {
+            UsError::param(
+                "--roi",
+                format!("'{s}' is not x0,y0,x1,y1 (pixels, x1 > x0, y1 > y0)"),
+            )
+        };
         let v: Vec<usize> = s
             .split(',')
             .map(|t| t.trim().parse::<usize>().map_err(|_| bad()))
@@ -32,7 +46,12 @@ impl Region {
         if v.len() != 4 || v[2] <= v[0] || v[3] <= v[1] {
             return Err(bad());
         }
-        Ok(Region::Rect { x0: v[0], y0: v[1], x1: v[2], y1: v[3] })
+        Ok(Region::Rect {
+            x0: v[0],
+            y0: v[1],
+            x1: v[2],
+            y1: v[3],
+        })
     }
 
     /// A mask from an image file: pixels brighter than half the maximum are inside.
@@ -43,7 +62,11 @@ impl Region {
         Ok(Region::Mask {
             width: img.width,
             height: img.height,
-            inside: img.data.iter().map(|&v| max > 0.0 && v > 0.5 * max).collect(),
+            inside: img
+                .data
+                .iter()
+                .map(|&v| max > 0.0 && v > 0.5 * max)
+                .collect(),
         })
     }
 
@@ -55,16 +78,24 @@ impl Region {
                 if *x1 > width || *y1 > height {
                     return Err(UsError::param(
                         "--roi",
-                        format!("{x0},{y0},{x1},{y1} reaches outside the {width} x {height} px image"),
+                        format!(
+                            "{x0},{y0},{x1},{y1} reaches outside the {width} x {height} px image"
+                        ),
                     ));
                 }
                 Ok(Some(
                     (0..width * height)
-                        .map(|k| (*x0..*x1).contains(&(k % width)) && (*y0..*y1).contains(&(k / width)))
+                        .map(|k| {
+                            (*x0..*x1).contains(&(k % width)) && (*y0..*y1).contains(&(k / width))
+                        })
                         .collect(),
                 ))
             }
-            Region::Mask { width: w, height: h, inside } => {
+            Region::Mask {
+                width: w,
+                height: h,
+                inside,
+            } => {
                 if (*w, *h) != (width, height) {
                     return Err(UsError::param(
                         "--mask",
@@ -82,10 +113,20 @@ impl Region {
     /// The same region for the DIC.
     pub fn dic_roi(&self, width: usize, height: usize) -> Result<femu_dic::Roi, UsError> {
         Ok(match self {
-            Region::All => femu_dic::Roi::Rect(femu_dic::Rect { x: 0, y: 0, w: width, h: height }),
+            Region::All => femu_dic::Roi::Rect(femu_dic::Rect {
+                x: 0,
+                y: 0,
+                w: width,
+                h: height,
+            }),
             Region::Rect { x0, y0, x1, y1 } => {
                 self.mask(width, height)?;
-                femu_dic::Roi::Rect(femu_dic::Rect { x: *x0, y: *y0, w: x1 - x0, h: y1 - y0 })
+                femu_dic::Roi::Rect(femu_dic::Rect {
+                    x: *x0,
+                    y: *y0,
+                    w: x1 - x0,
+                    h: y1 - y0,
+                })
             }
             Region::Mask { .. } => femu_dic::Roi::Mask {
                 width,
@@ -165,21 +206,39 @@ pub fn analyse(manifest: &Manifest, opts: &SettingsOptions) -> Result<SettingsRe
     let mask = opts.region.mask(w, h)?;
     let mut images = Vec::new();
     for (k, e) in manifest.entries.iter().enumerate() {
-        let img = if k == 0 { first.clone() } else { manifest.open(k, Some((w, h)))? };
+        let img = if k == 0 {
+            first.clone()
+        } else {
+            manifest.open(k, Some((w, h)))?
+        };
         let stats = grey_stats(&img.data, mask.as_deref())?;
         let texture = texture_by_depth(&img.data, w, h, mask.as_deref(), opts.depth_band_px)?;
-        images.push(ImageReport { entry: e.clone(), stats, texture });
+        images.push(ImageReport {
+            entry: e.clone(),
+            stats,
+            texture,
+        });
     }
     let pixels_in_region = images[0].stats.pixels;
     // Optimal gain per (subject, frequency, dynamic).
     let key = |e: &Entry| (e.subject.clone(), ord(e.frequency_mhz), ord(e.dynamic_db));
-    let mut groups: BTreeMap<(String, i64, i64), BTreeMap<i64, Vec<&ImageReport>>> = BTreeMap::new();
+    let mut groups: BTreeMap<(String, i64, i64), BTreeMap<i64, Vec<&ImageReport>>> =
+        BTreeMap::new();
     for r in &images {
-        groups.entry(key(&r.entry)).or_default().entry(ord(r.entry.gain_db)).or_default().push(r);
+        groups
+            .entry(key(&r.entry))
+            .or_default()
+            .entry(ord(r.entry.gain_db))
+            .or_default()
+            .push(r);
     }
     let mut choices = Vec::new();
     for ((subject, _, _), by_gain) in &groups {
-        let any = by_gain.values().next().and_then(|v| v.first()).map(|r| &r.entry);
+        let any = by_gain
+            .values()
+            .next()
+            .and_then(|v| v.first())
+            .map(|r| &r.entry);
         let Some(e0) = any else { continue };
         let gains: Vec<(f64, f64, f64, usize)> = by_gain
             .values()
@@ -209,9 +268,13 @@ pub fn analyse(manifest: &Manifest, opts: &SettingsOptions) -> Result<SettingsRe
     // Texture per frequency (mean over its images, band by band).
     let mut by_f: BTreeMap<i64, (f64, Vec<f64>, Vec<usize>)> = BTreeMap::new();
     for r in &images {
-        let slot = by_f
-            .entry(ord(r.entry.frequency_mhz))
-            .or_insert_with(|| (r.entry.frequency_mhz, vec![0.0; r.texture.len()], vec![0; r.texture.len()]));
+        let slot = by_f.entry(ord(r.entry.frequency_mhz)).or_insert_with(|| {
+            (
+                r.entry.frequency_mhz,
+                vec![0.0; r.texture.len()],
+                vec![0; r.texture.len()],
+            )
+        });
         for (b, &v) in r.texture.iter().enumerate() {
             if v.is_finite() {
                 slot.1[b] += v;
@@ -222,7 +285,13 @@ pub fn analyse(manifest: &Manifest, opts: &SettingsOptions) -> Result<SettingsRe
     let texture_by_frequency = by_f
         .into_values()
         .map(|(f, s, c)| {
-            (f, s.iter().zip(&c).map(|(s, &c)| if c > 0 { s / c as f64 } else { f64::NAN }).collect())
+            (
+                f,
+                s.iter()
+                    .zip(&c)
+                    .map(|(s, &c)| if c > 0 { s / c as f64 } else { f64::NAN })
+                    .collect(),
+            )
         })
         .collect();
     Ok(SettingsReport {
@@ -260,17 +329,38 @@ pub fn write_outputs(
         let (e, g) = (&r.entry, &r.stats);
         s += &format!(
             "{},{},{},{},{},{},{},{:.4},{:.4},{:.6},{:.6},{},{},{},{:.4}\n",
-            e.line, e.file, e.subject, e.frequency_mhz, e.gain_db, e.dynamic_db, g.pixels, g.mean, g.std,
-            g.fraction_black, g.fraction_white, g.p01, g.p99, g.range_1_99, g.entropy_bits
+            e.line,
+            e.file,
+            e.subject,
+            e.frequency_mhz,
+            e.gain_db,
+            e.dynamic_db,
+            g.pixels,
+            g.mean,
+            g.std,
+            g.fraction_black,
+            g.fraction_white,
+            g.p01,
+            g.p99,
+            g.range_1_99,
+            g.entropy_bits
         );
     }
     csv("images.csv", s, &mut files)?;
-    let mut s = String::from("subject,frequency_mhz,dynamic_db,gain_db,images,mean_std,mean_saturation,optimal\n");
+    let mut s = String::from(
+        "subject,frequency_mhz,dynamic_db,gain_db,images,mean_std,mean_saturation,optimal\n",
+    );
     for c in &report.choices {
         for g in &c.gains {
             s += &format!(
                 "{},{},{},{},{},{:.4},{:.6},{}\n",
-                c.subject, c.frequency_mhz, c.dynamic_db, g.0, g.3, g.1, g.2,
+                c.subject,
+                c.frequency_mhz,
+                c.dynamic_db,
+                g.0,
+                g.3,
+                g.1,
+                g.2,
                 c.optimal_gain_db == Some(g.0)
             );
         }
@@ -283,7 +373,11 @@ pub fn write_outputs(
     };
     let mut s = format!(
         "depth_{},{}\n",
-        if opts.pixel_size_mm.is_some() { "mm" } else { "px" },
+        if opts.pixel_size_mm.is_some() {
+            "mm"
+        } else {
+            "px"
+        },
         report
             .texture_by_frequency
             .iter()
@@ -322,7 +416,10 @@ pub fn write_outputs(
             .map(|(g, h, n)| {
                 Series::new(
                     &format!("gain {} dB", fmt_num(*g)),
-                    h.iter().enumerate().map(|(v, c)| (v as f64, c / *n as f64)).collect(),
+                    h.iter()
+                        .enumerate()
+                        .map(|(v, c)| (v as f64, c / *n as f64))
+                        .collect(),
                     LineStyle::Line,
                 )
             })
@@ -334,7 +431,11 @@ pub fn write_outputs(
             &p,
             &series,
             &LinePlot {
-                title: format!("Grey-level histograms, {} MHz, dynamic {} dB (seed Fig. 5)", fmt_num(f), fmt_num(d)),
+                title: format!(
+                    "Grey-level histograms, {} MHz, dynamic {} dB (seed Fig. 5)",
+                    fmt_num(f),
+                    fmt_num(d)
+                ),
                 x_label: "grey level (0-255)".into(),
                 y_label: "pixels (%)".into(),
                 x_range: Some((0.0, 255.0)),
@@ -358,15 +459,28 @@ pub fn write_outputs(
     let mut spread: Vec<Series> = report
         .choices
         .iter()
-        .map(|c| Series::new(&label(c), c.gains.iter().map(|g| (g.0, g.1)).collect(), LineStyle::LineAndMarkers))
+        .map(|c| {
+            Series::new(
+                &label(c),
+                c.gains.iter().map(|g| (g.0, g.1)).collect(),
+                LineStyle::LineAndMarkers,
+            )
+        })
         .collect();
     let chosen: Vec<(f64, f64)> = report
         .choices
         .iter()
-        .filter_map(|c| c.optimal_gain_db.and_then(|g| c.gains.iter().find(|x| x.0 == g).map(|x| (x.0, x.1))))
+        .filter_map(|c| {
+            c.optimal_gain_db
+                .and_then(|g| c.gains.iter().find(|x| x.0 == g).map(|x| (x.0, x.1)))
+        })
         .collect();
     if !chosen.is_empty() {
-        spread.push(Series::new("optimal (saturation within threshold)", chosen, LineStyle::Markers));
+        spread.push(Series::new(
+            "optimal (saturation within threshold)",
+            chosen,
+            LineStyle::Markers,
+        ));
     }
     let p = out.join("optimal_gain.png");
     femu_plot::line_plot_png(
@@ -384,14 +498,26 @@ pub fn write_outputs(
     let mut sat: Vec<Series> = report
         .choices
         .iter()
-        .map(|c| Series::new(&label(c), c.gains.iter().map(|g| (g.0, 100.0 * g.2)).collect(), LineStyle::LineAndMarkers))
+        .map(|c| {
+            Series::new(
+                &label(c),
+                c.gains.iter().map(|g| (g.0, 100.0 * g.2)).collect(),
+                LineStyle::LineAndMarkers,
+            )
+        })
         .collect();
-    let (gmin, gmax) = report.images.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |a, r| {
-        (a.0.min(r.entry.gain_db), a.1.max(r.entry.gain_db))
-    });
+    let (gmin, gmax) = report
+        .images
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, r| {
+            (a.0.min(r.entry.gain_db), a.1.max(r.entry.gain_db))
+        });
     sat.push(Series::new(
         &format!("threshold {} %", 100.0 * report.saturation_threshold),
-        vec![(gmin, 100.0 * report.saturation_threshold), (gmax, 100.0 * report.saturation_threshold)],
+        vec![
+            (gmin, 100.0 * report.saturation_threshold),
+            (gmax, 100.0 * report.saturation_threshold),
+        ],
         LineStyle::Line,
     ));
     let p = out.join("saturation.png");
@@ -426,7 +552,14 @@ pub fn write_outputs(
             &tex,
             &LinePlot {
                 title: "Texture against depth per frequency (seed Fig. 4)".into(),
-                x_label: format!("depth ({})", if opts.pixel_size_mm.is_some() { "mm" } else { "px from the image top" }),
+                x_label: format!(
+                    "depth ({})",
+                    if opts.pixel_size_mm.is_some() {
+                        "mm"
+                    } else {
+                        "px from the image top"
+                    }
+                ),
                 y_label: "mean grey-level gradient (grey levels/px)".into(),
                 ..Default::default()
             },

@@ -150,7 +150,7 @@ pub fn texture_by_depth(
 
 /// Speckle size: the lag (pixels, linearly interpolated) where the normalized autocovariance
 /// of `values` along x (`axis = 0`, lateral) or y (`axis = 1`, axial) over the rectangle
-/// `[x0, x1) x [y0, y1)` first drops below 1/2 — half the full width at half maximum of the
+/// `[x0, x1) x [y0, y1)` (each row normalized first) first drops below 1/2 — half the full width at half maximum of the
 /// autocorrelation peak. Errors if it never drops within a quarter of the rectangle.
 pub fn correlation_length(
     values: &[f64],
@@ -160,19 +160,36 @@ pub fn correlation_length(
 ) -> Result<f64, UsError> {
     let [x0, y0, x1, y1] = rect;
     if x1 <= x0 + 4 || y1 <= y0 + 4 || values.len() < y1 * width || x1 > width {
-        return Err(UsError::param("rectangle", format!("{rect:?} is too small or outside the image")));
+        return Err(UsError::param(
+            "rectangle",
+            format!("{rect:?} is too small or outside the image"),
+        ));
     }
-    let n = ((x1 - x0) * (y1 - y0)) as f64;
-    let mean = (y0..y1)
-        .flat_map(|y| (x0..x1).map(move |x| (x, y)))
-        .map(|(x, y)| values[y * width + x])
-        .sum::<f64>()
-        / n;
+    // Each row normalized to zero mean and unit variance: a depth trend (attenuation, TGC)
+    // is not speckle and must not count as correlation.
+    let mut z = vec![0.0; width * y1];
+    for y in y0..y1 {
+        let row = &values[y * width + x0..y * width + x1];
+        let (m, s) = mean_sd(row);
+        for x in x0..x1 {
+            z[y * width + x] = if s > 0.0 {
+                (values[y * width + x] - m) / s
+            } else {
+                0.0
+            };
+        }
+    }
+    let values = &z;
+    let mean = 0.0;
     let cov = |lag: usize| -> f64 {
         let (mut s, mut c) = (0.0, 0usize);
         for y in y0..y1 - if axis == 1 { lag } else { 0 } {
             for x in x0..x1 - if axis == 0 { lag } else { 0 } {
-                let (xx, yy) = if axis == 0 { (x + lag, y) } else { (x, y + lag) };
+                let (xx, yy) = if axis == 0 {
+                    (x + lag, y)
+                } else {
+                    (x, y + lag)
+                };
                 s += (values[y * width + x] - mean) * (values[yy * width + xx] - mean);
                 c += 1;
             }
@@ -183,7 +200,11 @@ pub fn correlation_length(
     if !(c0 > 0.0) {
         return Err(UsError::param("image", "no variation over the rectangle"));
     }
-    let max_lag = if axis == 0 { (x1 - x0) / 4 } else { (y1 - y0) / 4 };
+    let max_lag = if axis == 0 {
+        (x1 - x0) / 4
+    } else {
+        (y1 - y0) / 4
+    };
     let mut prev = 1.0;
     for lag in 1..=max_lag {
         let r = cov(lag) / c0;
@@ -220,7 +241,11 @@ pub fn paired_t_test(a: &[f64], b: &[f64]) -> Result<PairedTTest, UsError> {
     if a.len() != b.len() {
         return Err(UsError::param(
             "paired t-test",
-            format!("{} and {} values: the samples must pair up", a.len(), b.len()),
+            format!(
+                "{} and {} values: the samples must pair up",
+                a.len(),
+                b.len()
+            ),
         ));
     }
     let n = a.len();
@@ -278,7 +303,17 @@ mod tests {
 
     #[test]
     fn stats_of_a_known_image() {
-        let g: Vec<f64> = (0..100).map(|k| if k < 10 { 0.0 } else if k < 15 { 255.0 } else { 100.0 }).collect();
+        let g: Vec<f64> = (0..100)
+            .map(|k| {
+                if k < 10 {
+                    0.0
+                } else if k < 15 {
+                    255.0
+                } else {
+                    100.0
+                }
+            })
+            .collect();
         let s = grey_stats(&g, None).unwrap();
         assert_eq!(s.pixels, 100);
         assert!((s.fraction_black - 0.1).abs() < 1e-12 && (s.fraction_white - 0.05).abs() < 1e-12);

@@ -96,7 +96,11 @@ impl Acoustics {
     /// Checks the ranges: densities in (0, 10 000] /mm², levels within ±80 dB, attenuation in
     /// [0, 50] dB/cm/MHz.
     pub fn validate(&self) -> Result<(), crate::UsError> {
-        for t in self.tissues.iter().chain(std::iter::once(&self.default_tissue)) {
+        for t in self
+            .tissues
+            .iter()
+            .chain(std::iter::once(&self.default_tissue))
+        {
             let name = |k: &str| format!("tissue {}: {k}", t.name);
             if !(t.density_per_mm2 > 0.0 && t.density_per_mm2 <= 10_000.0) {
                 return Err(crate::UsError::param(
