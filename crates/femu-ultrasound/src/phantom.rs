@@ -77,7 +77,7 @@ impl Phantom {
         seed: u64,
     ) -> Result<Phantom, UsError> {
         acoustics.validate()?;
-        if !(margin_mm >= 0.0 && margin_mm <= 100.0) {
+        if !(0.0..=100.0).contains(&margin_mm) {
             return Err(UsError::param(
                 "margin_mm",
                 format!("{margin_mm} is outside [0, 100]"),

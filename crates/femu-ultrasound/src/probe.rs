@@ -248,49 +248,6 @@ impl Psf {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn pixel_model_round_trip_and_orientation() {
-        let p = Probe::new([1.0, 60.0], [0.0, -2.0], 40.0, 30.0, 10.0).unwrap();
-        assert_eq!(p.size_px(), (400, 300));
-        // Probe on the anterior skin firing down: lateral axis +x, rows go down in y.
-        assert_eq!(p.lateral(), [1.0, 0.0]);
-        let x = p.pixel_to_model([0.0, 0.0]);
-        assert!((x[0] - (1.0 - 20.0 + 0.05)).abs() < 1e-12 && (x[1] - (60.0 - 0.05)).abs() < 1e-12);
-        let q = p.model_to_pixel([3.3, 41.7]);
-        let back = p.pixel_to_model(q);
-        assert!((back[0] - 3.3).abs() < 1e-12 && (back[1] - 41.7).abs() < 1e-12);
-        let u = p.displacement_to_model(p.displacement_to_pixels([0.3, -0.7]));
-        assert!((u[0] - 0.3).abs() < 1e-12 && (u[1] + 0.7).abs() < 1e-12);
-        assert!(Probe::new([0.0, 0.0], [0.0, 0.0], 40.0, 30.0, 10.0).is_err());
-        assert!(Probe::new([0.0, 0.0], [0.0, 1.0], -4.0, 30.0, 10.0).is_err());
-    }
-
-    #[test]
-    fn psf_sizes_follow_the_wavelength() {
-        let t = Transducer::default();
-        let psf = t.psf();
-        let lambda = 1.54 / 9.0;
-        assert!((psf.sigma_axial_mm * FWHM_PER_SIGMA - lambda).abs() < 1e-12);
-        assert!((psf.sigma_lateral_mm * FWHM_PER_SIGMA - 3.0 * lambda).abs() < 1e-12);
-        let hi = Transducer {
-            frequency_mhz: 13.0,
-            ..t
-        }
-        .psf();
-        assert!(hi.sigma_axial_mm < psf.sigma_axial_mm);
-        assert!(Transducer {
-            frequency_mhz: 0.5,
-            ..t
-        }
-        .validate()
-        .is_err());
-    }
-}
-
 /// Places a probe on the skin: along the ray from the centre of the skin nodes towards
 /// `outward` (unit vector, e.g. anterior = +y), at the outermost crossing of the skin faces;
 /// the beam points back along the ray (into the tissue). `skin` lists the `(element, face)`
@@ -351,4 +308,47 @@ pub fn probe_on_skin(
         depth_mm,
         px_per_mm,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pixel_model_round_trip_and_orientation() {
+        let p = Probe::new([1.0, 60.0], [0.0, -2.0], 40.0, 30.0, 10.0).unwrap();
+        assert_eq!(p.size_px(), (400, 300));
+        // Probe on the anterior skin firing down: lateral axis +x, rows go down in y.
+        assert_eq!(p.lateral(), [1.0, 0.0]);
+        let x = p.pixel_to_model([0.0, 0.0]);
+        assert!((x[0] - (1.0 - 20.0 + 0.05)).abs() < 1e-12 && (x[1] - (60.0 - 0.05)).abs() < 1e-12);
+        let q = p.model_to_pixel([3.3, 41.7]);
+        let back = p.pixel_to_model(q);
+        assert!((back[0] - 3.3).abs() < 1e-12 && (back[1] - 41.7).abs() < 1e-12);
+        let u = p.displacement_to_model(p.displacement_to_pixels([0.3, -0.7]));
+        assert!((u[0] - 0.3).abs() < 1e-12 && (u[1] + 0.7).abs() < 1e-12);
+        assert!(Probe::new([0.0, 0.0], [0.0, 0.0], 40.0, 30.0, 10.0).is_err());
+        assert!(Probe::new([0.0, 0.0], [0.0, 1.0], -4.0, 30.0, 10.0).is_err());
+    }
+
+    #[test]
+    fn psf_sizes_follow_the_wavelength() {
+        let t = Transducer::default();
+        let psf = t.psf();
+        let lambda = 1.54 / 9.0;
+        assert!((psf.sigma_axial_mm * FWHM_PER_SIGMA - lambda).abs() < 1e-12);
+        assert!((psf.sigma_lateral_mm * FWHM_PER_SIGMA - 3.0 * lambda).abs() < 1e-12);
+        let hi = Transducer {
+            frequency_mhz: 13.0,
+            ..t
+        }
+        .psf();
+        assert!(hi.sigma_axial_mm < psf.sigma_axial_mm);
+        assert!(Transducer {
+            frequency_mhz: 0.5,
+            ..t
+        }
+        .validate()
+        .is_err());
+    }
 }

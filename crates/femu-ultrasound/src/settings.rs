@@ -304,6 +304,9 @@ pub fn analyse(manifest: &Manifest, opts: &SettingsOptions) -> Result<SettingsRe
     })
 }
 
+/// `(gain, summed histogram in %, images)` of one gain.
+type GainHistogram = (f64, [f64; 256], usize);
+
 /// A setting value as an ordered key (1e-6 resolution).
 fn ord(v: f64) -> i64 {
     (v * 1e6).round() as i64
@@ -396,7 +399,7 @@ pub fn write_outputs(
     csv("texture_depth.csv", s, &mut files)?;
 
     // Fig. 5: histograms per (frequency, dynamic), one curve per gain (mean over subjects).
-    let mut hist: BTreeMap<(i64, i64), BTreeMap<i64, (f64, [f64; 256], usize)>> = BTreeMap::new();
+    let mut hist: BTreeMap<(i64, i64), BTreeMap<i64, GainHistogram>> = BTreeMap::new();
     for r in &report.images {
         let e = &r.entry;
         let slot = hist
