@@ -254,6 +254,9 @@ struct Summary {
 pub fn study_measurement(plan: &Plan) -> Result<Option<(MeasuredField, String)>> {
     match &plan.measurement {
         MeasurementPlan::Virtual => Ok(None),
+        MeasurementPlan::Ultrasound => bail!(
+            "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
+        ),
         MeasurementPlan::File { path, frame } => {
             let f = MeasuredField::read(path)?;
             Ok(Some((
@@ -312,6 +315,10 @@ pub fn identify_plan(
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
     let (free, reference) = free_parameters(plan, model)?;
     let virtual_experiment = measured.is_none();
+    // The reference parameters are known for the virtual experiments: noise on the FE field, or
+    // the DIC of simulated images (the model carries the reference parameters).
+    let reference_known =
+        virtual_experiment || matches!(plan.measurement, MeasurementPlan::Ultrasound);
     let repeats = if virtual_experiment {
         plan.identification.repeat
     } else {
@@ -554,9 +561,9 @@ pub fn identify_plan(
             };
             ParameterSummary {
                 name: f.name.clone(),
-                reference: virtual_experiment.then_some(reference[k]),
+                reference: reference_known.then_some(reference[k]),
                 identified: t,
-                relative_error: virtual_experiment.then_some(errors[0]),
+                relative_error: reference_known.then_some(errors[0]),
                 relative_sd: sd,
                 ci95: [t * (-1.96 * sd).exp(), t * (1.96 * sd).exp()],
                 mean_relative_error: (virtual_experiment && repeats > 1).then(|| mean(&errors)),
@@ -566,7 +573,7 @@ pub fn identify_plan(
         })
         .collect();
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
-    write_figures(out, &parameters, best, virtual_experiment, repeats)?;
+    write_figures(out, &parameters, best, reference_known, repeats)?;
     if let Some(field) = &first_field {
         write_field_figures(out, model, &free, field, &best.theta)?;
     }

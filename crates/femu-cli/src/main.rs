@@ -17,6 +17,7 @@ mod run;
 mod sensitivity_cmd;
 mod study;
 mod study_model;
+mod us_cmd;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -230,6 +231,19 @@ enum Command {
     /// DIC random error: correlates successive images of unloaded tissue and reports the
     /// standard deviation of ux and uy per pair (CSV, box plot).
     DicNoise(dic_cmd::DicNoiseArgs),
+    /// Virtual experiment with images: simulated B-mode images of the unloaded and loaded
+    /// thigh (same scatterers moved by the FE field), DIC, comparison with the FE field;
+    /// writes ref.png, def.png, measured.csv (for identify --measured), maps, summary.json.
+    UsSim(us_cmd::UsSimArgs),
+    /// Simulated B-mode images of the unloaded built-in thigh over a grid of frequencies,
+    /// gains, dynamic ranges and repeated acquisitions, with their manifest.csv.
+    UsScan(us_cmd::UsScanArgs),
+    /// Scanner settings from grey-level histograms (seed §2.2, Figs. 4–6): saturation and
+    /// spread per image, the optimal gain per dynamic range, texture against depth.
+    UsSettings(us_cmd::UsSettingsArgs),
+    /// DIC random error of repeated acquisitions per setting, paired t-tests between settings,
+    /// the recommended setting (seed §3.1.3, Fig. 7).
+    UsNoise(us_cmd::UsNoiseArgs),
 }
 
 /// The named demo tests.
@@ -350,6 +364,10 @@ fn main() -> ExitCode {
         }
         Command::Dic(args) => dic_cmd::run(&args, cli.quiet),
         Command::DicNoise(args) => dic_cmd::run_noise(&args, cli.quiet),
+        Command::UsSim(args) => us_cmd::sim(&args, cli.quiet),
+        Command::UsScan(args) => us_cmd::scan(&args, cli.quiet),
+        Command::UsSettings(args) => us_cmd::run_settings(&args, cli.quiet),
+        Command::UsNoise(args) => us_cmd::run_noise(&args, cli.quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -117,7 +117,7 @@ pub fn demo(out: &Path, full: bool, elements: Option<usize>, quiet: bool) -> Res
             out.display()
         );
     }
-    run_plan(&plan, &text, "demo", out, quiet)
+    run_plan(&plan, None, &text, "demo", out, quiet)
 }
 
 /// `femu run STUDY --out DIR`.
@@ -128,6 +128,7 @@ pub fn run(study: &Path, out: &Path, quiet: bool) -> Result<()> {
     let plan = plan::load(Some(study), None)?;
     run_plan(
         &plan,
+        Some(study),
         &text,
         &format!("run {}", study.display()),
         out,
@@ -135,13 +136,24 @@ pub fn run(study: &Path, out: &Path, quiet: bool) -> Result<()> {
     )
 }
 
-/// Runs the steps of `plan` into `out`, then writes the report.
-fn run_plan(plan: &Plan, text: &str, command: &str, out: &Path, quiet: bool) -> Result<()> {
+/// Runs the steps of `plan` (read from `study`, or from its copy in `out` for the demo) into
+/// `out`, then writes the report.
+fn run_plan(
+    plan: &Plan,
+    study: Option<&Path>,
+    text: &str,
+    command: &str,
+    out: &Path,
+    quiet: bool,
+) -> Result<()> {
     let t0 = Instant::now();
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
-    std::fs::write(out.join("study.toml"), text)
-        .with_context(|| format!("cannot write {}", out.join("study.toml").display()))?;
+    let copy = out.join("study.toml");
+    if study.is_none_or(|s| s != copy) {
+        std::fs::write(&copy, text).with_context(|| format!("cannot write {}", copy.display()))?;
+    }
+    let study = study.unwrap_or(&copy);
     let mut record = RunRecord {
         femu_version: env!("CARGO_PKG_VERSION").into(),
         command: command.into(),
@@ -154,7 +166,7 @@ fn run_plan(plan: &Plan, text: &str, command: &str, out: &Path, quiet: bool) -> 
         steps: Vec::new(),
         total_seconds: 0.0,
     };
-    let result = steps(plan, out, quiet, &mut record);
+    let result = steps(plan, study, out, quiet, &mut record);
     if let Err(e) = &result {
         // The failed step is the last one recorded as running; name it.
         if let Some(last) = record.steps.last_mut() {
@@ -216,7 +228,7 @@ fn skip(record: &mut RunRecord, out: &Path, name: &str, why: &str) -> Result<()>
     record.save(out)
 }
 
-fn steps(plan: &Plan, out: &Path, quiet: bool, record: &mut RunRecord) -> Result<()> {
+fn steps(plan: &Plan, study: &Path, out: &Path, quiet: bool, record: &mut RunRecord) -> Result<()> {
     // 1. The model.
     let t = begin(record, out, "model", Some("model"))?;
     let spin = crate::progress::spinner("meshing the model", quiet);
@@ -315,7 +327,13 @@ fn steps(plan: &Plan, out: &Path, quiet: bool, record: &mut RunRecord) -> Result
     apply_loading(&mut measured_model, &built.skin, &test)
         .with_context(|| format!("test {}", test.name()))?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
-    let measured = write_measurement(plan, &measured_model, &out.join("measurement"), quiet)?;
+    let measured = write_measurement(
+        plan,
+        study,
+        &measured_model,
+        &out.join("measurement"),
+        quiet,
+    )?;
     finish(record, out, t)?;
 
     let groupings: Vec<(bool, &str)> = if plan.identification.both_groupings {
@@ -437,6 +455,7 @@ fn write_model(
 /// identification fits (`None`: the virtual experiment, drawn per noise realization).
 fn write_measurement(
     plan: &Plan,
+    study: &Path,
     model: &Model,
     dir: &Path,
     quiet: bool,
@@ -465,6 +484,24 @@ fn write_measurement(
                 );
             }
             Ok(None)
+        }
+        MeasurementPlan::Ultrasound => {
+            let args = crate::us_cmd::UsSimArgs {
+                study: Some(study.to_path_buf()),
+                out: dir.to_path_buf(),
+                elements: None,
+                element: 16,
+                regularization: None,
+                grid_step: 16.0,
+                levels: 3,
+                steps: 4,
+            };
+            crate::us_cmd::sim(&args, quiet)?;
+            let field = femu_identify::measured::MeasuredField::read(&path)?;
+            Ok(Some((
+                field,
+                "DIC of simulated B-mode images (femu us-sim)".to_string(),
+            )))
         }
         MeasurementPlan::File { .. } => {
             let (field, source) =

@@ -36,6 +36,8 @@ struct PlanFile {
     parameters: Option<ParametersEntry>,
     identification: Option<IdentificationEntry>,
     run: Option<RunEntry>,
+    probe: Option<crate::us_cmd::ProbeSection>,
+    ultrasound: Option<crate::us_cmd::UltrasoundSection>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -222,6 +224,10 @@ pub enum MeasurementPlan {
     Virtual,
     /// A measured-field CSV (conventions.md) in its own frame, mapped to the model's.
     File { path: PathBuf, frame: Frame },
+    /// The virtual experiment with images (issue 8, `femu us-sim`): B-mode images of the
+    /// unloaded and loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by
+    /// the DIC; the identification fits the DIC field.
+    Ultrasound,
 }
 
 /// The map from a measured field's frame (image pixels or mm) to the model frame (mm):
@@ -297,6 +303,10 @@ pub struct Plan {
     pub groups: Vec<Vec<String>>,
     pub identification: IdentificationPlan,
     pub steps: Steps,
+    /// `[probe]` and `[ultrasound]`: the simulated B-mode acquisition (`femu us-sim`,
+    /// `[measurement] source = "ultrasound"`).
+    pub probe: crate::us_cmd::ProbeSection,
+    pub ultrasound: crate::us_cmd::UltrasoundSection,
 }
 
 impl Default for Plan {
@@ -793,6 +803,8 @@ pub fn parse(text: &str, base: &Path) -> Result<Plan> {
         sigma_mm,
         measurement,
         travel,
+        probe: file.probe.unwrap_or_default(),
+        ultrasound: file.ultrasound.unwrap_or_default(),
         groups: file.parameters.map(|p| p.groups).unwrap_or_default(),
         steps,
     })
@@ -807,6 +819,15 @@ fn measurement(m: MeasurementEntry, lines: &KeyLines, base: &Path) -> Result<Mea
         .unwrap_or(if m.file.is_some() { "file" } else { "virtual" })
         .to_ascii_lowercase();
     match source.as_str() {
+        "ultrasound" => {
+            if m.file.is_some() || m.units.is_some() || m.origin_mm.is_some() {
+                bail!(
+                    "{}: the ultrasound experiment writes its own field in the model frame",
+                    at("source")
+                );
+            }
+            Ok(MeasurementPlan::Ultrasound)
+        }
         "virtual" => {
             if m.file.is_some() {
                 bail!("{}: a virtual measurement reads no file", at("file"));

@@ -34,6 +34,9 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     if let Some(v) = sensitivity_section(&mut html, &dir.join("sensitivity")) {
         summary.insert("sensitivity".into(), v);
     }
+    if let Some(v) = measurement_section(&mut html, &dir.join("measurement")) {
+        summary.insert("measurement".into(), v);
+    }
     if let Some(v) = identification_section(&mut html, dir)? {
         summary.insert("identification".into(), v);
     }
@@ -549,6 +552,51 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<Value> {
             "test": x["test"], "sensitivity_index": x["sensitivity_index"],
             "sensitivity_over_solve": x["sensitivity_over_solve"]})).collect::<Vec<_>>()),
     }))
+}
+
+/// The images of a simulated ultrasound measurement (`femu us-sim`) and the DIC's error
+/// against the FE field.
+fn measurement_section(html: &mut Html, dir: &Path) -> Option<Value> {
+    let s = read_json(&dir.join("summary.json"))?;
+    html.h2("Measurement: simulated ultrasound and DIC");
+    let e = &s["error"];
+    html.p(&format!(
+        "B-mode images of the unloaded and loaded thigh ({} x {} px, {} scatterers moved by the FE \
+         field, {} MHz, gain {} dB, dynamic {} dB) correlated by the global Q4 DIC in {} load \
+         steps. DIC against the FE field over {} points in the tissue: RMS ({}, {}) px = ({}, {}) \
+         mm, largest ({}, {}) px, for displacements up to {} px.",
+        s["image_px"][0],
+        s["image_px"][1],
+        s["scatterers"],
+        num(&s["transducer"]["frequency_mhz"]).map(g).unwrap_or_default(),
+        num(&s["scanner"]["gain_db"]).map(g).unwrap_or_default(),
+        num(&s["scanner"]["dynamic_db"]).map(g).unwrap_or_default(),
+        s["dic_steps"],
+        e["points"],
+        num(&e["rms_px"][0]).map(g).unwrap_or_default(),
+        num(&e["rms_px"][1]).map(g).unwrap_or_default(),
+        num(&e["rms_mm"][0]).map(g).unwrap_or_default(),
+        num(&e["rms_mm"][1]).map(g).unwrap_or_default(),
+        num(&e["max_abs_px"][0]).map(g).unwrap_or_default(),
+        num(&e["max_abs_px"][1]).map(g).unwrap_or_default(),
+        num(&s["error"]["max_true_px"]).map(g).unwrap_or_default(),
+    ));
+    for (f, caption) in [
+        ("ref.png", "Simulated B-mode image, unloaded."),
+        (
+            "def.png",
+            "Simulated B-mode image, loaded (the same scatterers moved by the FE field).",
+        ),
+        (
+            "uy_dic.png",
+            "DIC displacement uy (depth) over the reference image.",
+        ),
+        ("error_ux.png", "DIC minus FE, ux."),
+        ("error_uy.png", "DIC minus FE, uy."),
+    ] {
+        html.figure(&dir.join(f), caption);
+    }
+    Some(json!({"dic_error": s["error"], "image_px": s["image_px"], "dic_steps": s["dic_steps"]}))
 }
 
 fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> {
