@@ -60,7 +60,7 @@ enum Command {
     /// The demo, no input needed: the seed's numerical example end to end on the built-in thigh
     /// (sensitivity of the three tests, the compression test measured on a 64 x 64 grid with the
     /// seed's noise, identification ungrouped and grouped from five starts, Fig. 9 errors) and
-    /// its report (report.html) — about a minute on two cores; --full for the paper scale.
+    /// its report (report.html) — about 30 s on two cores; --full for the paper scale.
     Demo {
         /// Output folder.
         #[arg(long, default_value = "out/demo")]
@@ -68,7 +68,7 @@ enum Command {
         /// The paper scale: 25 000 elements (several minutes).
         #[arg(long)]
         full: bool,
-        /// Target number of elements of the built-in thigh (default 2 000; 25 000 with --full).
+        /// Target number of elements of the built-in thigh (default 4 000; 25 000 with --full).
         #[arg(long)]
         elements: Option<usize>,
     },
