@@ -1,22 +1,11 @@
 //! The `femu` binary as a user runs it: `forward` (the seed's tests), `solve` on decks and on a Gmsh mesh with a
 //! study file, and the errors a bad input gets (message naming the line, non-zero exit).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Output;
 
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("femu runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-cli-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{femu, scratch};
 
 /// The `summary.json` of an output folder.
 fn summary(out: &Path) -> serde_json::Value {

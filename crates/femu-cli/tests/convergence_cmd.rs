@@ -1,22 +1,8 @@
 //! `femu convergence STUDY --out DIR` as a user runs it: the output folder of a small study on
 //! the built-in thigh, and the error a bad study file gets.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("femu runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-conv-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{femu, scratch};
 
 /// Three small meshes (300 to 1 200 quads), contention, CPE4H and CPE4, no locking study; the
 /// tolerance is the DIC noise (2e-2 mm) since the meshes are far coarser than the seed's.

@@ -3,21 +3,9 @@
 
 use femu_dic::lab::{self, Speckle};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("femu runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-dic-cli-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{femu, scratch};
 
 /// A reference and a translated speckle image (0.4, -0.25) px, 8-bit PNG.
 fn pair(dir: &Path) -> (PathBuf, PathBuf) {

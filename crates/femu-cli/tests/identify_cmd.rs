@@ -1,28 +1,8 @@
 //! `femu synth` and `femu identify` as a user runs them: a nearly noise-free virtual
 //! experiment written to CSV and identified back from it, and the errors of bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("run femu")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-id-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
-}
+mod common;
+use common::{femu, scratch, write};
 
 /// Compression on a 600-quad thigh, noise 1e-9 mm, D of ischio, sartorius and gracilis tied:
 /// identified back from the CSV to 0.1 % (the noise is far below the model's sensitivity).

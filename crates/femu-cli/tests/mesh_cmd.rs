@@ -1,21 +1,10 @@
 //! `femu mesh thigh` and `femu mesh labels` as a user runs them: the output folder, its
 //! summary, and clear errors on bad input.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("femu runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-mesh-test-{}-{name}", std::process::id()));
-    std::fs::remove_dir_all(&dir).ok();
-    dir
-}
+mod common;
+use common::{femu, scratch};
 
 fn summary(dir: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).unwrap()).unwrap()

@@ -5,23 +5,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("femu runs")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-run-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn json(path: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
-}
+mod common;
+use common::{femu, json, scratch};
 
 /// A small thigh (400 quads), contention and compression, a 24 x 24 grid, two starts.
 const TINY: &str = r#"

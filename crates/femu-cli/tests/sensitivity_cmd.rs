@@ -2,21 +2,9 @@
 //! differentiation against finite differences through the command, the outputs, and bad input.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
-fn femu(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .output()
-        .expect("run femu")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-sens-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{femu, scratch};
 
 fn write_study(dir: &Path, text: &str) -> PathBuf {
     let p = dir.join("study.toml");
