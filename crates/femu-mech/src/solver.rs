@@ -814,6 +814,8 @@ impl StaticSolver {
         let floor = 1e-300;
         let mut energy0 = 0.0;
         let mut first_residual = f64::INFINITY;
+        // Active sets of the states the accepted steps started from (cycle detection).
+        let mut set_history: Vec<(usize, u64)> = Vec::new();
         for it in 0..opt.max_iterations {
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
@@ -866,6 +868,7 @@ impl StaticSolver {
             let mut alpha = alpha_cap;
             let mut accepted = false;
             let active_before = self.active_set;
+            let mut halved_cycle = false;
             for _ in 0..8 {
                 let mut trial = std::mem::take(&mut self.u_trial);
                 self.add_free(u, alpha, &mut trial);
@@ -884,6 +887,18 @@ impl StaticSolver {
                 // taken as it is: the residual jump comes from the new contacts, whose stiffness
                 // the next tangent includes (semi-smooth Newton); damping it would creep in tiny
                 // steps. Later, the line search applies again, which breaks active-set cycles.
+                // A full step that returns to the active set of two iterations ago is a
+                // semismooth-Newton 2-cycle (one node toggling between contact and free): take
+                // half the step instead, which lands near the kink the cycle jumps over.
+                let cycling = !halved_cycle
+                    && self.active_set != active_before
+                    && set_history.len() >= 2
+                    && set_history[set_history.len() - 2] == self.active_set;
+                if cycling {
+                    halved_cycle = true;
+                    alpha *= 0.5;
+                    continue;
+                }
                 let new_contacts = it < 4 && alpha == alpha_cap && self.active_set != active_before;
                 if !opt.line_search || rn < rnorm || !rn.is_finite() || at_round_off || new_contacts
                 {
@@ -921,6 +936,7 @@ impl StaticSolver {
                 )));
             }
             std::mem::swap(u, &mut self.u_trial);
+            set_history.push(active_before);
             let last = record.iterations.last_mut().expect("pushed above");
             last.residual_norm = rnorm;
             last.reference_force = fref;
