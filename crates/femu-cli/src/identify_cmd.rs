@@ -178,15 +178,26 @@ pub fn synth(args: &IdentifyArgs, quiet: bool) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let (model, test) = measured_model(&plan)?;
-    let (free, reference) = free_parameters(&plan, &model)?;
-    let field = virtual_field(&plan, &model, &free, &reference, plan.identification.seed)?;
-    let path = args.out.join("measured.csv");
+    write_virtual_measurement(&plan, &model, &test, &args.out.join("measured.csv"), quiet)
+}
+
+/// The virtual experiment's first noise realization of `model` (loaded with the test `test`)
+/// written to `path` as the measured-field CSV.
+pub fn write_virtual_measurement(
+    plan: &Plan,
+    model: &Model,
+    test: &str,
+    path: &Path,
+    quiet: bool,
+) -> Result<()> {
+    let (free, reference) = free_parameters(plan, model)?;
+    let field = virtual_field(plan, model, &free, &reference, plan.identification.seed)?;
     field
-        .write(&path, Some(plan.sigma_mm))
+        .write(path, Some(plan.sigma_mm))
         .with_context(|| format!("cannot write {}", path.display()))?;
     if !quiet {
         eprintln!(
-            "{test}: {} measured points, noise {} mm -> {}",
+            "{test}: virtual experiment, {} measured points in the tissue, noise {} mm -> {}",
             field.points.len(),
             plan.sigma_mm,
             path.display()

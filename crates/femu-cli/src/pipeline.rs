@@ -465,25 +465,8 @@ fn write_measurement(
     let path: PathBuf = dir.join("measured.csv");
     match &plan.measurement {
         MeasurementPlan::Virtual => {
-            let (free, reference) = identify_cmd::free_parameters(plan, model)?;
-            let field = identify_cmd::virtual_field(
-                plan,
-                model,
-                &free,
-                &reference,
-                plan.identification.seed,
-            )?;
-            field
-                .write(&path, Some(plan.sigma_mm))
-                .with_context(|| format!("cannot write {}", path.display()))?;
-            if !quiet {
-                eprintln!(
-                    "measurement: virtual experiment, {} points in the tissue, sigma {} mm -> {}",
-                    field.points.len(),
-                    plan.sigma_mm,
-                    path.display()
-                );
-            }
+            let test = plan.tests[plan.identification.test].name();
+            identify_cmd::write_virtual_measurement(plan, model, &test, &path, quiet)?;
             Ok(None)
         }
         MeasurementPlan::Ultrasound => {
