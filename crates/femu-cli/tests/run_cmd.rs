@@ -385,3 +385,54 @@ fn the_demo_runs_every_step() {
     assert!(worst("grouped") < worst("ungrouped"));
     assert!(out.join("report.html").exists() && out.join("identify/fig9_errors.png").exists());
 }
+
+/// The two other geometries of a study: a segmented MRI slice (`[labels]`, the shared label
+/// map; skipped with a message when `../shared/data` is absent) and then the deck its model step
+/// wrote (`[model] deck`: the skin is the deck's `*DLOAD` faces, `[materials.FAT]` overrides
+/// the deck's material). Both solve the compression test.
+#[test]
+fn label_image_and_deck_geometries_run() {
+    let image = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data/mri/thigh_001_slice06_labels.png");
+    if !image.exists() {
+        eprintln!("SKIPPED: {} is absent", image.display());
+        return;
+    }
+    let forward_only = "[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+                        [run]\nsensitivity = false\nidentification = false\n";
+    let (o, out) = run(
+        &format!(
+            "[model]\nsize_mm = 3.0\n[labels]\nimage = \"{}\"\n\
+             map = \"1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=ischio\"\n\
+             bone = [7]\npixel_size_mm = 0.7422\n{forward_only}",
+            image.display()
+        ),
+        "labels",
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = json(&out.join("summary.json"));
+    assert_eq!(s["model"]["regions"].as_object().unwrap().len(), 5);
+    assert_eq!(s["forward"]["compression-anterior"]["status"], "converged");
+    let travel_labels = s["forward"]["compression-anterior"]["rigid_bodies"][0]["travel_mm"]
+        .as_f64()
+        .unwrap();
+    let deck = out.join("model/mesh.inp");
+    let (o, out2) = run(
+        &format!(
+            "[model]\ndeck = \"{}\"\n[materials.FAT]\nc10_kpa = 1.6\n{forward_only}",
+            deck.display()
+        ),
+        "deck",
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s2 = json(&out2.join("summary.json"));
+    assert!(s2["model"]["skin_faces"].as_u64().unwrap() > 50);
+    let c = &s2["forward"]["compression-anterior"];
+    assert_eq!(c["status"], "converged");
+    // Twice as stiff a fat layer: the plate travels less for the same force.
+    let travel_deck = c["rigid_bodies"][0]["travel_mm"].as_f64().unwrap();
+    assert!(
+        travel_deck < 0.95 * travel_labels,
+        "{travel_deck} vs {travel_labels}"
+    );
+}
