@@ -383,6 +383,8 @@ pub fn identify_plan(
         Some((Some(t), _)) => Some(t),
         None => None,
     };
+    // Counts the measured points in the tissue (the problems locate them again for themselves).
+    let locator = PointLocator::new(&model.mesh);
     let mut refined: Vec<usize> = Vec::new();
     let mut all_starts = Vec::new();
     let mut best_per_repeat: Vec<FitResult> = Vec::new();
@@ -450,13 +452,12 @@ pub fn identify_plan(
             })
             .collect();
         bar.finish_and_clear();
-        let probe = Problem::new(
-            model.clone(),
-            SolverOptions::default(),
-            &field,
-            free.clone(),
-        )?;
-        (inside, masked) = probe.points();
+        inside = field
+            .points
+            .iter()
+            .filter(|p| locator.locate(p.x).is_some())
+            .count();
+        masked = field.points.len() - inside;
         if virtual_experiment {
             // The virtual field holds only the grid points in the tissue; the rest are masked.
             masked = plan.grid.counts[0] * plan.grid.counts[1] - inside;

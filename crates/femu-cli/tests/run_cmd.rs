@@ -28,18 +28,23 @@ starts = 2
 seed = 3
 "#;
 
+/// `femu run STUDY --out OUT --quiet`.
+fn run_file(study: &Path, out: &Path) -> Output {
+    femu(&[
+        "run",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ])
+}
+
 fn run(study: &str, name: &str) -> (Output, PathBuf) {
     let dir = scratch(name);
     let path = dir.join("study.toml");
     std::fs::write(&path, study).unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "run",
-        path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = run_file(&path, &out);
     (o, out)
 }
 
@@ -246,13 +251,7 @@ fn a_run_that_fails_midway_keeps_its_finished_steps() {
     )
     .unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "run",
-        study.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = run_file(&study, &out);
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("field.csv:3"), "{err}");
@@ -306,13 +305,7 @@ fn init_writes_a_study_that_runs_and_will_not_overwrite() {
         .replace("sensitivity = true ", "sensitivity = false");
     std::fs::write(&path, small).unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "run",
-        path.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--quiet",
-    ]);
+    let o = run_file(&path, &out);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out
         .join("forward/indentation-anterior/deformed_le11.png")

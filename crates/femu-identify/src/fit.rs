@@ -355,6 +355,35 @@ pub struct FitResult {
     pub data: usize,
 }
 
+impl FitResult {
+    /// The fields every optimizer fills the same way: parameters from the log-parameters
+    /// `phi`, the start, the forward solves and Jacobians since (`solves0`, `jac0`), the wall
+    /// time since `t0`; the rest empty, for the optimizer to set.
+    fn started(
+        problem: &Problem,
+        start: &[f64],
+        phi: &[f64],
+        solves0: usize,
+        jac0: usize,
+        t0: Instant,
+    ) -> FitResult {
+        FitResult {
+            theta: phi.iter().map(|p| p.exp()).collect(),
+            start: start.to_vec(),
+            cost: f64::NAN,
+            iterations: 0,
+            forward_solves: problem.forward_solves - solves0,
+            jacobians: problem.jacobians - jac0,
+            converged: false,
+            reason: String::new(),
+            history: Vec::new(),
+            wall_time_s: t0.elapsed().as_secs_f64(),
+            data: 0,
+            jacobian: Vec::new(),
+        }
+    }
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -504,18 +533,14 @@ pub fn levenberg_marquardt(
     // The problem's state is that of the last evaluation, which may be a rejected trial:
     // the Jacobian returned is the one at `phi`.
     Ok(FitResult {
-        theta: phi.iter().map(|p| p.exp()).collect(),
-        start: start.to_vec(),
         cost,
         iterations,
-        forward_solves: problem.forward_solves - solves0,
-        jacobians: problem.jacobians - jac0,
         converged,
         reason,
         history,
-        wall_time_s: t0.elapsed().as_secs_f64(),
         data: r.len(),
         jacobian: j,
+        ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }
 
@@ -714,17 +739,12 @@ pub fn bfgs(
         }
     }
     Ok(FitResult {
-        theta: phi.iter().map(|p| p.exp()).collect(),
-        start: start.to_vec(),
         cost,
         iterations,
-        forward_solves: problem.forward_solves - solves0,
-        jacobians: problem.jacobians - jac0,
         converged,
         reason,
         history,
-        wall_time_s: t0.elapsed().as_secs_f64(),
         data: r.len(),
-        jacobian: Vec::new(),
+        ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }
