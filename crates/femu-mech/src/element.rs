@@ -12,7 +12,9 @@
 //! Local dof `2a + i` is component `i` of local node `a`. Node order and faces are drawn in the
 //! `femu-mesh` crate documentation.
 
-use crate::material::{cof2, det2, Hyperelastic, NonPositiveJacobian, Tensor2, DCOF};
+use crate::material::{
+    cof2, det2, Hyperelastic, NeoHookeanRate, NonPositiveJacobian, Tensor2, DCOF,
+};
 use femu_mesh::ElementKind;
 
 /// Largest number of nodes of an element, and of local dofs.
@@ -182,6 +184,45 @@ pub trait SolidElement: Sync {
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian>;
 
+    /// The internal forces of the two unit Neo-Hookean rate energies at local displacements
+    /// `u`: `f_c10` of `W = I1bar - 3` and `f_inv_d` of `W = (J - 1)²` (see
+    /// [`NeoHookeanRate`]); the Neo-Hookean force is `C10 f_c10 + (1/D) f_inv_d`, so these
+    /// are `∂f_int/∂C10` and `∂f_int/∂(1/D)` (parameter sensitivities, seed §2.3). The default
+    /// evaluates the element twice; formulations override it with one pass over the Gauss
+    /// points.
+    fn rate_forces(
+        &self,
+        geo: &ElementGeometry,
+        u: &[[f64; 2]],
+        f_c10: &mut [f64],
+        f_inv_d: &mut [f64],
+    ) -> Result<(), NonPositiveJacobian> {
+        for (rate, force) in [
+            (
+                NeoHookeanRate {
+                    c10: 1.0,
+                    inv_d: 0.0,
+                },
+                f_c10,
+            ),
+            (
+                NeoHookeanRate {
+                    c10: 0.0,
+                    inv_d: 1.0,
+                },
+                f_inv_d,
+            ),
+        ] {
+            let mut out = ElementResult {
+                energy: 0.0,
+                force,
+                stiffness: None,
+            };
+            self.evaluate(geo, &rate, u, &mut out)?;
+        }
+        Ok(())
+    }
+
     /// Element-average Cauchy stress `[σxx, σyy, σzz, σxy]` at local displacements `u`.
     fn cauchy_stress(
         &self,
@@ -284,6 +325,40 @@ impl SolidElement for DisplacementElement {
         Ok(())
     }
 
+    /// One pass: at each Gauss point the isochoric unit stress and the volumetric one,
+    /// `P = U'(J) cof F` with `U = (J - 1)²`.
+    fn rate_forces(
+        &self,
+        geo: &ElementGeometry,
+        u: &[[f64; 2]],
+        f_c10: &mut [f64],
+        f_inv_d: &mut [f64],
+    ) -> Result<(), NonPositiveJacobian> {
+        let n = geo.n_nodes;
+        f_c10[..2 * n].fill(0.0);
+        f_inv_d[..2 * n].fill(0.0);
+        let (iso, vol) = (
+            NeoHookeanRate {
+                c10: 1.0,
+                inv_d: 0.0,
+            },
+            NeoHookeanRate {
+                c10: 0.0,
+                inv_d: 1.0,
+            },
+        );
+        for g in 0..geo.n_gauss {
+            let gp = &geo.gauss[g];
+            let f = geo.deformation_gradient(g, u);
+            let r = iso.response_isochoric(&f, false)?;
+            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &r.pk1, None, f_c10, None);
+            let p = vol.volumetric(det2(&f))[1];
+            let pk1 = cof2(&f).map(|c| p * c);
+            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &pk1, None, f_inv_d, None);
+        }
+        Ok(())
+    }
+
     fn cauchy_stress(
         &self,
         geo: &ElementGeometry,
@@ -377,6 +452,49 @@ impl SolidElement for MeanDilatationElement {
         Ok(())
     }
 
+    /// One pass: the isochoric unit force at each Gauss point, and `U'(θ) g` with
+    /// `U = (θ - 1)²` for the volumetric one (`g = V_e ∂θ/∂u`, as in [`Self::evaluate`]).
+    fn rate_forces(
+        &self,
+        geo: &ElementGeometry,
+        u: &[[f64; 2]],
+        f_c10: &mut [f64],
+        f_inv_d: &mut [f64],
+    ) -> Result<(), NonPositiveJacobian> {
+        let n = geo.n_nodes;
+        let nd = 2 * n;
+        f_c10[..nd].fill(0.0);
+        f_inv_d[..nd].fill(0.0);
+        let unit = NeoHookeanRate {
+            c10: 1.0,
+            inv_d: 0.0,
+        };
+        let mut volume = 0.0;
+        for g in 0..geo.n_gauss {
+            let gp = &geo.gauss[g];
+            let f = geo.deformation_gradient(g, u);
+            let r = unit.response_isochoric(&f, false)?;
+            volume += gp.weight * det2(&f);
+            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &r.pk1, None, f_c10, None);
+            let c = cof2(&f);
+            for a in 0..n {
+                let d = gp.dn_dx[a];
+                f_inv_d[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
+                f_inv_d[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
+            }
+        }
+        let theta = volume / geo.area;
+        let p = NeoHookeanRate {
+            c10: 0.0,
+            inv_d: 1.0,
+        }
+        .volumetric(theta)[1];
+        for v in &mut f_inv_d[..nd] {
+            *v *= p;
+        }
+        Ok(())
+    }
+
     fn cauchy_stress(
         &self,
         geo: &ElementGeometry,
@@ -427,6 +545,44 @@ mod tests {
             }
             for (k, e) in [1.0, 0.0, 0.0, 1.0].iter().enumerate() {
                 assert!((m[k] - e).abs() < 1e-14);
+            }
+        }
+    }
+
+    /// The one-pass rate forces of the hybrid element equal two evaluations with the unit rate
+    /// energies (to round-off: the same sums in another order).
+    #[test]
+    fn one_pass_rate_forces_match_two_evaluations() {
+        let x = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
+        let u = [[0.01, -0.02], [0.05, 0.03], [-0.04, 0.08], [0.02, -0.01]];
+        for kind in [ElementKind::Cpe4h, ElementKind::Cpe4] {
+            check_rate_forces(kind, &x, &u);
+        }
+        let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
+        check_rate_forces(ElementKind::Cpe3, &tri, &u[..3]);
+    }
+
+    fn check_rate_forces(kind: ElementKind, x: &[[f64; 2]; MAX_NODES], u: &[[f64; 2]]) {
+        let geo = ElementGeometry::new(kind, x).unwrap();
+        let element = formulation(kind);
+        let (mut c10, mut inv_d) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS]);
+        element.rate_forces(&geo, u, &mut c10, &mut inv_d).unwrap();
+        let (mut c10_ref, mut inv_d_ref) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS]);
+        for (a, b, f) in [(1.0, 0.0, &mut c10_ref), (0.0, 1.0, &mut inv_d_ref)] {
+            let mut out = ElementResult {
+                energy: 0.0,
+                force: f,
+                stiffness: None,
+            };
+            element
+                .evaluate(&geo, &NeoHookeanRate { c10: a, inv_d: b }, u, &mut out)
+                .unwrap();
+        }
+        for (got, want) in [(&c10, &c10_ref), (&inv_d, &inv_d_ref)] {
+            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            assert!(scale > 1e-3, "a non-trivial force");
+            for (g, w) in got.iter().zip(want.iter()) {
+                assert!((g - w).abs() <= 1e-14 * scale, "{g} vs {w}");
             }
         }
     }

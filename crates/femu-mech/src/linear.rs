@@ -558,6 +558,57 @@ impl TangentSolver {
         }
     }
 
+    /// `Y = A X` for `cols` vectors stored interleaved (as [`CscPattern::mul_many_interleaved`]),
+    /// by rows in parallel: row `r` of `A` is column `r` read through the transposed positions,
+    /// so each output row is a gather owned by one thread (no scatter, no reduction).
+    pub fn mul_many_interleaved(
+        &self,
+        pattern: &CscPattern,
+        values: &[f64],
+        x: &[f64],
+        y: &mut [f64],
+        cols: usize,
+    ) {
+        assert!(cols > 0 && x.len() == pattern.n * cols && y.len() == pattern.n * cols);
+        assert_eq!(values.len(), pattern.nnz());
+        /// The product with the number of columns known at compile time (registers, no
+        /// bounds checks in the inner loop).
+        fn rows<const C: usize>(
+            pattern: &CscPattern,
+            transpose: &[usize],
+            values: &[f64],
+            x: &[f64],
+            y: &mut [f64],
+        ) {
+            use rayon::prelude::*;
+            y.par_chunks_exact_mut(C)
+                .with_min_len(256)
+                .enumerate()
+                .for_each(|(r, yr)| {
+                    let mut acc = [0.0; C];
+                    for k in pattern.col_ptr[r]..pattern.col_ptr[r + 1] {
+                        let a = values[transpose[k]];
+                        let c = pattern.row_idx[k];
+                        let xr: &[f64; C] = x[c * C..(c + 1) * C].try_into().expect("C values");
+                        for j in 0..C {
+                            acc[j] += a * xr[j];
+                        }
+                    }
+                    yr.copy_from_slice(&acc);
+                });
+        }
+        macro_rules! dispatch {
+            ($($c:literal)*) => {
+                match cols {
+                    $($c => rows::<$c>(pattern, &self.transpose, values, x, y),)*
+                    _ => unreachable!("at most MAX_RHS columns"),
+                }
+            };
+        }
+        assert!(cols <= MAX_RHS);
+        dispatch!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16);
+    }
+
     /// The factorization used last.
     pub fn last(&self) -> Option<Factorization> {
         self.last
@@ -611,6 +662,10 @@ mod tests {
             }
         }
         let mut ts = TangentSolver::new(&p, None).unwrap();
+        // The parallel row-wise product equals the column-wise one (unsymmetric values).
+        let mut y_rows = [0.0; 9];
+        ts.mul_many_interleaved(&p, &v, &interleaved, &mut y_rows, 3);
+        assert_eq!(y_rows, y);
         assert_eq!(ts.factorize(&p, &v).unwrap(), Factorization::Lu);
         p.mul_vec(&v, &x, &mut b);
         ts.solve_in_place(&mut b);

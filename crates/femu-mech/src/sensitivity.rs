@@ -28,7 +28,7 @@
 //! refinement preconditioned with the stale factors, which converges in one or two steps; if it
 //! does not, the exact tangent is factorized.
 
-use crate::element::{formulation, ElementResult, MAX_DOFS};
+use crate::element::{formulation, MAX_DOFS};
 use crate::linear::MAX_RHS;
 use crate::material::NeoHookeanRate;
 use crate::model::Model;
@@ -172,8 +172,14 @@ pub struct DirectSensitivity {
     product: Vec<f64>,
 }
 
-/// Relative residual at which the refinement stops.
-const REFINEMENT_TOLERANCE: f64 = 1e-12;
+/// Largest relative residual `‖K_T x - b‖ / ‖b‖` at which the refinement stops. The linear
+/// systems are solved as accurately as the state they differentiate: the refinement stops at
+/// the Newton solve's own relative force-residual tolerance ([`SolverOptions::residual_tolerance`],
+/// 1e-8 by default), and never looser than this. Solving further would add digits the
+/// converged state does not have (its force residual moves `∂u/∂θ` by the same relative amount).
+///
+/// [`SolverOptions::residual_tolerance`]: crate::SolverOptions::residual_tolerance
+const LOOSEST_REFINEMENT_TOLERANCE: f64 = 1e-8;
 /// Relative residual accepted when the refinement stalls (round-off of the tangent's
 /// conditioning; a direct solve with exact factors reaches the same level).
 const ACCEPTABLE_RESIDUAL: f64 = 1e-10;
@@ -252,6 +258,10 @@ impl DirectSensitivity {
     ) -> Result<SensitivityReport, SensitivityError> {
         let n_eq = solver.equations();
         let n_state = model.state_len();
+        let tolerance = solver
+            .options
+            .residual_tolerance
+            .min(LOOSEST_REFINEMENT_TOLERANCE);
 
         // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
         let active = solver.active_constraints(model, state);
@@ -278,7 +288,7 @@ impl DirectSensitivity {
                 z[i * n_eq + q] = v;
             }
         }
-        self.solve_block(solver, &mut z, n_eq, &mut report)?;
+        self.solve_block(solver, &mut z, n_eq, tolerance, &mut report)?;
         let schur = if m > 0 {
             let s = faer::Mat::<f64>::from_fn(m, m, |i, j| {
                 g_entries[i]
@@ -332,7 +342,7 @@ impl DirectSensitivity {
             }
         }
         report.assembly_time_s += t.elapsed().as_secs_f64();
-        let solved = self.solve_block(solver, &mut x, n_eq, &mut report);
+        let solved = self.solve_block(solver, &mut x, n_eq, tolerance, &mut report);
         if let Err(e) = solved {
             self.block = x;
             return Err(e);
@@ -391,33 +401,11 @@ impl DirectSensitivity {
                 let geo = &model.geometry[e];
                 let ue = model.gather(e, state);
                 let element = formulation(geo.kind);
-                for (rate, f) in [
-                    (
-                        NeoHookeanRate {
-                            c10: 1.0,
-                            inv_d: 0.0,
-                        },
-                        fc,
-                    ),
-                    (
-                        NeoHookeanRate {
-                            c10: 0.0,
-                            inv_d: 1.0,
-                        },
-                        fd,
-                    ),
-                ] {
-                    let mut out = ElementResult {
-                        energy: 0.0,
-                        force: f,
-                        stiffness: None,
-                    };
-                    if element
-                        .evaluate(geo, &rate, &ue[..geo.n_nodes], &mut out)
-                        .is_err()
-                    {
-                        return Some(e);
-                    }
+                if element
+                    .rate_forces(geo, &ue[..geo.n_nodes], fc, fd)
+                    .is_err()
+                {
+                    return Some(e);
                 }
                 None
             })
@@ -434,13 +422,14 @@ impl DirectSensitivity {
 
     /// Solves `K_T X = B` in place (`block` holds the columns of B, `n` rows each, and returns
     /// X) with the tangent assembled last, by iterative refinement with the solver's current
-    /// factors, [`MAX_RHS`] columns per pass over the factors; factorizes `K_T` itself if the
-    /// refinement does not converge.
+    /// factors down to the relative residual `tolerance`, [`MAX_RHS`] columns per pass over
+    /// the factors; factorizes `K_T` itself if the refinement does not converge.
     fn solve_block(
         &mut self,
         solver: &mut StaticSolver,
         block: &mut [f64],
         n: usize,
+        tolerance: f64,
         report: &mut SensitivityReport,
     ) -> Result<(), SensitivityError> {
         for chunk in block.chunks_mut(MAX_RHS * n) {
@@ -463,9 +452,9 @@ impl DirectSensitivity {
                 // worst relative residual of the columns.
                 let rel = self.residual_of(solver, chunk, cols, n);
                 report.residual_time_s += t.elapsed().as_secs_f64();
-                let converged = rel <= REFINEMENT_TOLERANCE;
+                let converged = rel <= tolerance;
                 let stalled = !(rel < 0.5 * last);
-                if converged || (stalled && rel <= ACCEPTABLE_RESIDUAL) {
+                if converged || (stalled && rel <= ACCEPTABLE_RESIDUAL.max(tolerance)) {
                     report.max_relative_residual = report.max_relative_residual.max(rel);
                     break;
                 }

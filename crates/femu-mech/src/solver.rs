@@ -1299,7 +1299,8 @@ impl StaticSolver {
     /// is equation `i` of vector `j`), with the tangent assembled last: one pass over
     /// the matrix (see [`CscPattern::mul_many_interleaved`]).
     pub fn tangent_mul_many_interleaved(&self, x: &[f64], y: &mut [f64], cols: usize) {
-        self.pattern.mul_many_interleaved(&self.values, x, y, cols);
+        self.lu
+            .mul_many_interleaved(&self.pattern, &self.values, x, y, cols);
     }
 
     /// The contact constraints active at the state `u` with the multipliers of the last solve:
