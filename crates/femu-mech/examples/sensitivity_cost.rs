@@ -76,7 +76,7 @@ fn main() {
             let warm_s = t0.elapsed().as_secs_f64();
             times[t].push((solve_s, sens_s));
             println!(
-                "{} #{r}: solve {solve_s:.3} s ({} iterations, {} factorizations {:.3} s, {:?}), \
+                "{} #{r}: solve {solve_s:.3} s ({} iterations, {} factorizations {:.3} s, assembly {:.3} s, {:?}), \
                  sensitivities {sens_s:.3} s = {:.1} % (again with warm buffers {warm_s:.3} s; {} back-substitutions, refactorized {}, \
                  residual {:.1e}, {} active; rate forces + rhs {:.3} s, factorization {:.3} s, \
                  triangular solves {:.3} s, residuals {:.3} s, {} refinement steps, rest {:.3} s)",
@@ -84,6 +84,7 @@ fn main() {
                 solution.report.newton_iterations,
                 solution.report.factorizations,
                 solution.report.factorization_time_s,
+                solution.report.assembly_time_s,
                 solution.report.factorization,
                 100.0 * sens_s / solve_s,
                 report.back_substitutions,

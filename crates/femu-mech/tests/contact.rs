@@ -418,7 +418,8 @@ fn badly_placed_bodies_are_refused_before_solving() {
 /// force-controlled indentation (about 12 mm of travel) whose Newton iterations used to cycle
 /// as skin nodes came into contact one by one. With the contact-limited step and the 2-cycle
 /// halving it converges at 2 000 and 3 000 quads, the indenter carries the load, and the
-/// penetration stays within its limit. (Coarser meshes, 300–1 200 quads, still cycle: issue 3.)
+/// penetration stays within its limit. (Coarser meshes cannot carry the load at all: see
+/// [`coarse_thigh_indentation_stops_at_its_limit_point`].)
 #[test]
 fn thigh_indentation_converges() {
     use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
@@ -455,5 +456,77 @@ fn thigh_indentation_converges() {
             b.travel
         );
         assert!(b.max_penetration <= b.penetration_limit, "{elements}");
+    }
+}
+
+/// The same indentation on a 1 200-quad thigh: the discrete model itself cannot carry 0.1 N/mm.
+/// Under displacement control its force–travel curve flattens near 0.08 N/mm by 12 mm of
+/// travel (the coarse skin facets fold around the indenter; past about 12.7 mm the elements
+/// under it collapse), so force control has no equilibrium to find. The solver must say so:
+/// the error names the body and the limit point instead of only reporting a failed line
+/// search.
+#[test]
+fn coarse_thigh_indentation_stops_at_its_limit_point() {
+    use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+    use femu_mech::loading::{apply_loading, Loading, Side};
+    use femu_mech::SolveError;
+    let t = parametric_thigh(
+        &ThighParams {
+            target_elements: Some(1200),
+            ..Default::default()
+        },
+        ElementKind::Cpe4h,
+    )
+    .unwrap();
+    let skin = t.mesh.surfaces["SKIN"].clone();
+    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
+    deck.pressures.clear();
+    let mut model = Model::from_deck(deck).unwrap();
+    let loading = Loading::Indentation {
+        site: Side::Anterior,
+        radius: 10.0,
+        force: 0.1,
+    };
+    apply_loading(&mut model, &skin, &loading).unwrap();
+
+    // Displacement control: the curve up to 12.2 mm stays well below the requested force and
+    // its last millimetre is far softer than its stiffest stretch.
+    let mut by_travel = model.clone();
+    by_travel.contacts[0].control = TravelControl::Displacement(12.2);
+    let sol = solve(&by_travel, SolverOptions::default());
+    let curve: Vec<[f64; 2]> = sol
+        .report
+        .increments
+        .iter()
+        .filter(|r| r.converged)
+        .map(|r| r.bodies[0])
+        .collect();
+    let peak = curve.iter().fold(0.0f64, |m, p| m.max(p[1]));
+    assert!(peak < 0.085, "peak force {peak} N/mm");
+    let stiffest = curve
+        .windows(2)
+        .map(|w| (w[1][1] - w[0][1]) / (w[1][0] - w[0][0]))
+        .fold(0.0f64, f64::max);
+    let end = curve.last().unwrap();
+    let before = curve.iter().rev().find(|p| p[0] <= end[0] - 1.0).unwrap();
+    let last_mm = (end[1] - before[1]) / (end[0] - before[0]);
+    assert!(
+        last_mm < 0.5 * stiffest,
+        "last-millimetre stiffness {last_mm:.2e} vs stiffest {stiffest:.2e} N/mm²"
+    );
+
+    // Force control fails, and the error explains why.
+    let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+    match solver.solve(&model) {
+        Err(SolveError::NotConverged {
+            reason, partial, ..
+        }) => {
+            assert!(reason.contains("limit point"), "{reason}");
+            assert!(reason.contains("indentation-anterior"), "{reason}");
+            let reached = partial.bodies[0].force;
+            assert!(reached > 0.05 && reached < 0.085, "reached {reached} N/mm");
+        }
+        Ok(s) => panic!("converged to force {}", s.bodies[0].force),
+        Err(e) => panic!("unexpected error: {e}"),
     }
 }
