@@ -407,7 +407,14 @@ impl SparseLdlt {
                 Default::default(),
             )
             .map_err(|e| LinearSolveError::Other(format!("LDLT: {e:?}")))?;
-        if self.l_values.iter().any(|v| !v.is_finite()) {
+        let non_finite = {
+            use rayon::prelude::*;
+            self.l_values
+                .par_iter()
+                .with_min_len(1 << 14)
+                .any(|v| !v.is_finite())
+        };
+        if non_finite {
             return Err(LinearSolveError::Other(
                 "LDLT produced non-finite factors".into(),
             ));
@@ -487,14 +494,17 @@ impl TangentSolver {
         })
     }
 
-    /// max |A - Aᵀ| / max |A|.
+    /// max |A - Aᵀ| / max |A| (in parallel over the entries: it runs before every
+    /// factorization; maxima do not depend on the order).
     pub fn asymmetry(&self, values: &[f64]) -> f64 {
-        let mut amax = 0.0f64;
-        let mut dmax = 0.0f64;
-        for (k, &t) in self.transpose.iter().enumerate() {
-            amax = amax.max(values[k].abs());
-            dmax = dmax.max((values[k] - values[t]).abs());
-        }
+        use rayon::prelude::*;
+        let (amax, dmax) = self
+            .transpose
+            .par_iter()
+            .with_min_len(1 << 14)
+            .enumerate()
+            .map(|(k, &t)| (values[k].abs(), (values[k] - values[t]).abs()))
+            .reduce(|| (0.0f64, 0.0f64), |a, b| (a.0.max(b.0), a.1.max(b.1)));
         if amax > 0.0 {
             dmax / amax
         } else {
