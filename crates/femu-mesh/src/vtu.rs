@@ -564,7 +564,7 @@ print('ok')
             1e-5,
             1e-4,
             9.999999999999999e-5,
-            1.0000000000000001e-5,
+            f64::from_bits(1e-5f64.to_bits() + 1),
             9.99999999999e-6,
             1e16,
             9999999999999998.0,
@@ -592,7 +592,7 @@ print('ok')
                 values.push(k as f64 / (1u64 << j) as f64);
             }
         }
-        values.push(1658206780088562.25);
+        values.push(1658206780088562.0 + 0.25); // exactly representable: a tie
         let mut ryu = ryu::Buffer::new();
         let mut buf = Vec::new();
         for v in values.into_iter().filter(|v| v.is_finite()) {
