@@ -177,6 +177,9 @@ pub fn solve_model(
         }
         Err(e) => return Err(e.into()),
     };
+    // The factors, tangent and element buffers are not needed for the output: free them first
+    // (the output's own buffers then never add to the solve's peak memory).
+    drop(solver);
     write_solved(
         model,
         &solution,

@@ -53,6 +53,9 @@ impl CscPattern {
     /// (numbered after every equation of `self`, in increasing order) coupled with the sorted
     /// equations `rows` of `self`; the result is `n_total x n_total` and structurally symmetric.
     pub fn bordered(&self, n_total: usize, borders: &[(usize, Vec<usize>)]) -> CscPattern {
+        if borders.is_empty() && n_total == self.n {
+            return self.clone();
+        }
         let mut extra: Vec<Vec<usize>> = vec![Vec::new(); self.n];
         for (q, rows) in borders {
             for &r in rows {
@@ -147,24 +150,43 @@ pub struct NodeGraph {
 
 impl NodeGraph {
     /// Nodes are adjacent when they share an element.
+    ///
+    /// Built without a list per node: the elements of each node are gathered first (CSR, by
+    /// counting), then each node's neighbours are the nodes of its elements, sorted and
+    /// deduplicated in one reused buffer.
     pub fn from_elements<'a>(n_nodes: usize, elements: impl Iterator<Item = &'a [usize]>) -> Self {
-        let mut lists: Vec<Vec<usize>> = (0..n_nodes).map(|n| vec![n]).collect();
-        for nodes in elements {
-            for &a in nodes {
-                for &b in nodes {
-                    if a != b {
-                        lists[a].push(b);
-                    }
-                }
+        let elements: Vec<&[usize]> = elements.collect();
+        // Elements of each node: `node_el[node_el_ptr[n]..node_el_ptr[n + 1]]`.
+        let mut node_el_ptr = vec![0usize; n_nodes + 1];
+        for nodes in &elements {
+            for &a in *nodes {
+                node_el_ptr[a + 1] += 1;
+            }
+        }
+        for n in 0..n_nodes {
+            node_el_ptr[n + 1] += node_el_ptr[n];
+        }
+        let mut fill = node_el_ptr.clone();
+        let mut node_el = vec![0usize; node_el_ptr[n_nodes]];
+        for (e, nodes) in elements.iter().enumerate() {
+            for &a in *nodes {
+                node_el[fill[a]] = e;
+                fill[a] += 1;
             }
         }
         let mut ptr = Vec::with_capacity(n_nodes + 1);
-        let mut adj = Vec::new();
+        let mut adj = Vec::with_capacity(4 * node_el.len() + n_nodes);
+        let mut buf: Vec<usize> = Vec::new();
         ptr.push(0);
-        for mut l in lists {
-            l.sort_unstable();
-            l.dedup();
-            adj.extend_from_slice(&l);
+        for n in 0..n_nodes {
+            buf.clear();
+            buf.push(n);
+            for &e in &node_el[node_el_ptr[n]..node_el_ptr[n + 1]] {
+                buf.extend_from_slice(elements[e]);
+            }
+            buf.sort_unstable();
+            buf.dedup();
+            adj.extend_from_slice(&buf);
             ptr.push(adj.len());
         }
         NodeGraph { ptr, adj }
@@ -445,6 +467,30 @@ impl SparseLdlt {
     }
 }
 
+/// Position of the transposed entry of each stored entry of `pattern` (rows sorted in each
+/// column), or `None` if the pattern is not structurally symmetric.
+///
+/// One sweep instead of a binary search per entry: visiting the columns in increasing order,
+/// the entries `(r, c)` of row `r` come in increasing `c`, which is exactly the order of the
+/// rows of column `r`; so the transposed entry of the k-th visited entry of row `r` is the k-th
+/// entry of column `r`, and checking that its row is `c` verifies the symmetry.
+fn transpose_positions(pattern: &CscPattern) -> Option<Vec<usize>> {
+    let mut next: Vec<usize> = pattern.col_ptr[..pattern.n].to_vec();
+    let mut transpose = vec![usize::MAX; pattern.nnz()];
+    for c in 0..pattern.n {
+        for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
+            let r = pattern.row_idx[k];
+            let t = next[r];
+            if t >= pattern.col_ptr[r + 1] || pattern.row_idx[t] != c {
+                return None;
+            }
+            next[r] += 1;
+            transpose[k] = t;
+        }
+    }
+    Some(transpose)
+}
+
 /// Which factorization the last [`TangentSolver::factorize`] used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum Factorization {
@@ -476,18 +522,17 @@ impl TangentSolver {
     /// Symbolic analysis for `pattern` (structurally symmetric), with an optional elimination
     /// order for the LDLᵀ (see [`SparseLdlt::new`]).
     pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
-        let mut transpose = vec![usize::MAX; pattern.nnz()];
-        for c in 0..pattern.n {
-            for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
-                let r = pattern.row_idx[k];
-                transpose[k] = pattern.position(c, r).ok_or_else(|| {
-                    LinearSolveError::Other("pattern is not structurally symmetric".into())
-                })?;
-            }
-        }
+        // The transposed positions and the symbolic LDLᵀ are independent: one thread each.
+        let (transpose, ldlt) = rayon::join(
+            || transpose_positions(pattern),
+            || SparseLdlt::new(pattern, order),
+        );
+        let transpose = transpose.ok_or_else(|| {
+            LinearSolveError::Other("pattern is not structurally symmetric".into())
+        })?;
         Ok(TangentSolver {
             transpose,
-            ldlt: SparseLdlt::new(pattern, order)?,
+            ldlt: ldlt?,
             lu: None,
             last: None,
             symmetry_tolerance: 1e-12,
@@ -628,6 +673,54 @@ impl TangentSolver {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The sweep finds the same transposed positions as a search per entry, on a bordered
+    /// pattern, and refuses an unsymmetric pattern.
+    #[test]
+    fn transpose_positions_match_a_search_per_entry() {
+        let graph =
+            NodeGraph::from_elements(6, [[0usize, 1, 4, 3], [1, 2, 5, 4]].iter().map(|e| &e[..]));
+        // Node 3 fully prescribed, node 5 x only.
+        let eq = [
+            0,
+            1,
+            2,
+            3,
+            4,
+            5,
+            usize::MAX,
+            usize::MAX,
+            6,
+            7,
+            usize::MAX,
+            8,
+        ];
+        let base = graph.dof_pattern(&eq, 9);
+        let p = base.bordered(10, &[(9, vec![0, 4, 8])]);
+        let t = transpose_positions(&p).unwrap();
+        for c in 0..p.n {
+            for k in p.col_ptr[c]..p.col_ptr[c + 1] {
+                assert_eq!(Some(t[k]), p.position(c, p.row_idx[k]));
+            }
+        }
+        let mut pairs = vec![(0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (1, 2)];
+        assert!(transpose_positions(&CscPattern::from_pairs(3, &mut pairs)).is_none());
+        let mut pairs = vec![(0, 0), (1, 0), (1, 1), (2, 2), (0, 2)];
+        assert!(transpose_positions(&CscPattern::from_pairs(3, &mut pairs)).is_none());
+    }
+
+    /// Adjacency of two quads sharing an edge: sorted, self included.
+    #[test]
+    fn node_graph_of_two_quads() {
+        let graph =
+            NodeGraph::from_elements(6, [[0usize, 1, 4, 3], [1, 2, 5, 4]].iter().map(|e| &e[..]));
+        let lists: Vec<&[usize]> = (0..6)
+            .map(|n| &graph.adj[graph.ptr[n]..graph.ptr[n + 1]])
+            .collect();
+        assert_eq!(lists[0], [0, 1, 3, 4]);
+        assert_eq!(lists[1], [0, 1, 2, 3, 4, 5]);
+        assert_eq!(lists[5], [1, 2, 4, 5]);
+    }
 
     #[test]
     fn solves_small_unsymmetric_system() {

@@ -6,6 +6,7 @@ use crate::element::{ElementGeometry, MAX_NODES};
 use crate::load::PressureFace;
 use crate::material::NeoHookean;
 use femu_mesh::{BoundaryCondition, Deck, Mesh, PointLoad, StepDef};
+use rayon::prelude::*;
 
 /// Problems found while building a model.
 #[derive(Debug, thiserror::Error)]
@@ -81,25 +82,30 @@ impl Model {
                     })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let mut geometry = Vec::with_capacity(mesh.elements.len());
-        for (e, el) in mesh.elements.iter().enumerate() {
-            if element_material
-                .get(e)
-                .is_none_or(|&m| m >= materials.len())
-            {
-                return Err(ModelError::NoMaterial {
-                    label: mesh.element_labels[e],
-                });
-            }
-            let (x, _) = mesh.element_coords(e);
-            let geo =
-                ElementGeometry::new(el.kind, &x).map_err(|b| ModelError::InvertedElement {
-                    label: mesh.element_labels[e],
-                    gauss_point: b.gauss_point + 1,
-                    det_j: b.det_j,
-                })?;
-            geometry.push(geo);
-        }
+        // Element geometry in parallel; the errors are then reported in element order (the
+        // first bad element, as a serial loop would).
+        let geometry: Vec<Result<ElementGeometry, ModelError>> = (0..mesh.elements.len())
+            .into_par_iter()
+            .map(|e| {
+                if element_material
+                    .get(e)
+                    .is_none_or(|&m| m >= materials.len())
+                {
+                    return Err(ModelError::NoMaterial {
+                        label: mesh.element_labels[e],
+                    });
+                }
+                let (x, _) = mesh.element_coords(e);
+                ElementGeometry::new(mesh.elements[e].kind, &x).map_err(|b| {
+                    ModelError::InvertedElement {
+                        label: mesh.element_labels[e],
+                        gauss_point: b.gauss_point + 1,
+                        det_j: b.det_j,
+                    }
+                })
+            })
+            .collect();
+        let geometry = geometry.into_iter().collect::<Result<Vec<_>, _>>()?;
         let mut faces = Vec::with_capacity(pressures.len());
         for p in &pressures {
             let el = &mesh.elements[p.element];

@@ -314,6 +314,58 @@ impl std::fmt::Debug for StaticSolver {
     }
 }
 
+/// For each element `e`, `slots[e*KE + r*nd + c]` is the position in the values of `pattern` of
+/// its local entry (row r, column c) (`NONE` if either dof is prescribed or beyond the element's
+/// `nd` dofs), `eq` being the equation of each dof.
+///
+/// One binary search per pair of element nodes instead of one per pair of dofs: the columns of
+/// a node's two free dofs have the same rows (the free dofs of the node's neighbours, node by
+/// node, then any border rows; see [`NodeGraph::dof_pattern`] and [`CscPattern::bordered`]), and
+/// the free dofs of a neighbour are consecutive rows; so the offset of a neighbour within one
+/// column gives its entries in both.
+fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Vec<usize> {
+    let mut slots = vec![NONE; model.mesh.elements.len() * KE];
+    slots.par_chunks_mut(KE).enumerate().for_each(|(e, slots)| {
+        let nodes = model.mesh.elements[e].nodes();
+        let nd = 2 * nodes.len();
+        let mut dofs = [NONE; MAX_DOFS];
+        for (a, &n) in nodes.iter().enumerate() {
+            dofs[2 * a] = eq[2 * n];
+            dofs[2 * a + 1] = eq[2 * n + 1];
+        }
+        let first_free = |a: usize| {
+            [dofs[2 * a], dofs[2 * a + 1]]
+                .into_iter()
+                .find(|&q| q != NONE)
+        };
+        for a in 0..nodes.len() {
+            let Some(ca) = first_free(a) else { continue };
+            for b in 0..nodes.len() {
+                let Some(rb) = first_free(b) else { continue };
+                let offset =
+                    pattern.position(rb, ca).expect("entry in pattern") - pattern.col_ptr[ca];
+                for i in 0..2 {
+                    let c = dofs[2 * a + i];
+                    if c == NONE {
+                        continue;
+                    }
+                    let mut pos = pattern.col_ptr[c] + offset;
+                    for j in 0..2 {
+                        let r = dofs[2 * b + j];
+                        if r == NONE {
+                            continue;
+                        }
+                        debug_assert_eq!(pattern.position(r, c), Some(pos));
+                        slots[(2 * b + j) * nd + 2 * a + i] = pos;
+                        pos += 1;
+                    }
+                }
+            }
+        }
+    });
+    slots
+}
+
 impl StaticSolver {
     /// Numbers the dofs, builds the sparse pattern and its symbolic LU.
     pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
@@ -356,8 +408,12 @@ impl StaticSolver {
             model.mesh.elements.iter().map(|e| e.nodes()),
         );
         let n_eq_nodes = eq[..n_nodes_dof].iter().filter(|&&q| q != NONE).count();
-        let base = graph.dof_pattern(&eq[..n_nodes_dof], n_eq_nodes);
-        let mut ordering = graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes)?;
+        // The ordering (the longest step) and the pattern both only read the graph.
+        let (ordering, base) = rayon::join(
+            || graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes),
+            || graph.dof_pattern(&eq[..n_nodes_dof], n_eq_nodes),
+        );
+        let mut ordering = ordering?;
         // Bordered system: each force-controlled body couples its travel with the free dofs of
         // its candidate nodes; the travels are numbered and eliminated last.
         let borders: Vec<(usize, Vec<usize>)> = model
@@ -378,28 +434,12 @@ impl StaticSolver {
             .collect();
         let pattern = base.bordered(n_eq, &borders);
         ordering.extend(borders.iter().map(|b| b.0));
-        let elem_eqs = |e: usize| {
-            let mut dofs = [NONE; MAX_DOFS];
-            for (a, &n) in model.mesh.elements[e].nodes().iter().enumerate() {
-                dofs[2 * a] = eq[2 * n];
-                dofs[2 * a + 1] = eq[2 * n + 1];
-            }
-            dofs
-        };
-        let mut slots = vec![NONE; n_el * KE];
-        slots.par_chunks_mut(KE).enumerate().for_each(|(e, slots)| {
-            let dofs = elem_eqs(e);
-            let nd = 2 * model.mesh.elements[e].kind.node_count();
-            for r in 0..nd {
-                for c in 0..nd {
-                    if dofs[r] != NONE && dofs[c] != NONE {
-                        slots[r * nd + c] = pattern
-                            .position(dofs[r], dofs[c])
-                            .expect("entry in pattern");
-                    }
-                }
-            }
-        });
+        // The slots and the symbolic factorization are independent: one thread each.
+        let (slots, lu) = rayon::join(
+            || element_slots(model, &eq, &pattern),
+            || TangentSolver::new(&pattern, Some(&ordering)),
+        );
+        let lu = lu?;
         let contact_slots: Vec<Vec<[usize; 8]>> = model
             .contacts
             .iter()
@@ -445,7 +485,6 @@ impl StaticSolver {
         for p in &model.point_loads {
             point_force[2 * p.node + p.dof] += p.magnitude;
         }
-        let lu = TangentSolver::new(&pattern, Some(&ordering))?;
         let nnz = pattern.nnz();
         Ok(StaticSolver {
             options,
@@ -1411,5 +1450,55 @@ impl StaticSolver {
     pub fn assemble_at(&mut self, model: &Model, u: &[f64]) -> Result<(), String> {
         self.assemble(model, u, 1.0, true)
             .map_err(|e| e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::DeckBuilder;
+    use femu_mesh::generate;
+    use femu_mesh::ElementKind;
+
+    /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
+    /// triangles with fully, x-only and y-only prescribed nodes.
+    #[test]
+    fn element_slots_match_a_search_per_entry() {
+        let quads = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);
+        for g in [generate::split_into_triangles(&quads), quads] {
+            let deck = DeckBuilder::new(g)
+                .material_everywhere(0.01, 1.0)
+                .fix("BOTTOM")
+                .displacement("LEFT", 0, 0.0)
+                .displacement("TOP", 1, 0.1)
+                .build();
+            let model = Model::from_deck(deck).unwrap();
+            let solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+            let slots = element_slots(&model, &solver.eq, &solver.pattern);
+            for (e, el) in model.mesh.elements.iter().enumerate() {
+                let nd = 2 * el.kind.node_count();
+                let dofs: Vec<usize> = el
+                    .nodes()
+                    .iter()
+                    .flat_map(|&n| [solver.eq[2 * n], solver.eq[2 * n + 1]])
+                    .collect();
+                for r in 0..MAX_DOFS {
+                    for c in 0..MAX_DOFS {
+                        let expected = if r < nd && c < nd && dofs[r] != NONE && dofs[c] != NONE {
+                            solver.pattern.position(dofs[r], dofs[c]).unwrap()
+                        } else {
+                            NONE
+                        };
+                        if r < nd && c < nd {
+                            assert_eq!(
+                                slots[e * KE + r * nd + c],
+                                expected,
+                                "element {e} ({r}, {c})"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 }

@@ -402,8 +402,13 @@ impl<'f> Parser<'f> {
         if f.text.is_empty() {
             return Err(self.err(f.line, "a number is missing (empty field)"));
         }
-        let s = f.text.replace(['d', 'D'], "e");
-        match s.parse::<f64>() {
+        // Fortran exponents (1.5D3): rewritten only when present (no allocation otherwise).
+        let parsed = if f.text.contains(['d', 'D']) {
+            f.text.replace(['d', 'D'], "e").parse::<f64>()
+        } else {
+            f.text.parse::<f64>()
+        };
+        match parsed {
             Ok(v) if v.is_finite() => Ok(v),
             _ => Err(self.err(f.line, format!("cannot read '{}' as a number", f.text))),
         }

@@ -7,7 +7,12 @@
 //! file ParaView cannot open.
 //!
 //! Points are written in 3D with z = 0; cells are `VTK_QUAD` (9) and `VTK_TRIANGLE` (5).
+//!
+//! The text of the large arrays is formatted in blocks of rows in parallel (rayon) with `ryu`
+//! and `itoa`, then written in order; the bytes are those of Rust's `{:?}` / `{}` formatting
+//! (see [`push_f64`]).
 
+use rayon::prelude::*;
 use std::fs;
 use std::io::{self, BufWriter, Write};
 use std::path::Path;
@@ -172,20 +177,127 @@ fn xml_escape(s: &str) -> String {
     out
 }
 
-fn write_f64_rows(w: &mut impl Write, data: &[f64], per_row: usize) -> io::Result<()> {
-    for row in data.chunks(per_row.max(1)) {
-        let mut first = true;
-        for v in row {
-            if first {
-                write!(w, "          {v:?}")?;
-                first = false;
-            } else {
-                write!(w, " {v:?}")?;
+/// Rows formatted per parallel task.
+const ROWS_PER_TASK: usize = 2048;
+
+/// Whether the two shortest round-trip digit strings of `v` can be equally close to it (a tie,
+/// which ryu breaks to even and Rust's formatter upwards). A tie needs the exact decimal value of
+/// `v` to end one digit after the shortest string, so to have at most 18 significant digits
+/// (shortest strings have at most 17). With `v = m 2^e`, `m` odd, the exact value is an odd
+/// integer when `e = 0` (its last digit is never a tie against a coarser ulp), even when
+/// `e > 0` (a trailing 5 at the k-th digit would need fewer factors of 2 than the ulp has), and
+/// `m 5^-e / 10^-e` when `e < 0`, whose significant digits are those of `m 5^-e`. So only
+/// `e < 0` with `m 5^-e < 10^18` can tie: dyadic values with few binary digits, e.g. `X.25`
+/// near 1e15; never the full-mantissa results of a computation in practice.
+fn may_tie(v: f64) -> bool {
+    let bits = v.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i64;
+    let fraction = bits & ((1u64 << 52) - 1);
+    let (mut m, mut e) = if biased == 0 {
+        (fraction, -1074)
+    } else {
+        (fraction | (1u64 << 52), biased - 1075)
+    };
+    if m == 0 {
+        return false;
+    }
+    let tz = m.trailing_zeros();
+    m >>= tz;
+    e += i64::from(tz);
+    e < 0 && -e <= 26 && u128::from(m) * 5u128.pow((-e) as u32) < 1_000_000_000_000_000_000
+}
+
+/// Appends `v` exactly as `format!("{v:?}")` would: the shortest digits that round-trip
+/// (ryu and Rust's formatter both produce the shortest, closest-to-exact digit string; the rare
+/// values where they could differ, see [`may_tie`], go through `{:?}`), in decimal notation
+/// with at least one fractional digit for `1e-4 ≤ |v| < 1e16` and zero, and as `de-5` /
+/// `d.ddde-5` (no `+`, no padding) otherwise. ryu's notation matches Rust's except for
+/// `1e-5 ≤ |v| < 1e-4`, which ryu writes as `0.0000ddd` and is rewritten here. Non-finite
+/// values (never written: [`check`] refuses them) go through `{:?}` too.
+fn push_f64(buf: &mut Vec<u8>, v: f64, ryu: &mut ryu::Buffer) {
+    if !v.is_finite() || may_tie(v) {
+        buf.extend_from_slice(format!("{v:?}").as_bytes());
+        return;
+    }
+    let s = ryu.format_finite(v).as_bytes();
+    let (sign, digits) = match s.split_first() {
+        Some((b'-', rest)) => (&s[..1], rest),
+        _ => (&s[..0], s),
+    };
+    match digits.strip_prefix(b"0.0000") {
+        Some(d) if !d.is_empty() && d[0] != b'0' => {
+            buf.extend_from_slice(sign);
+            buf.push(d[0]);
+            if d.len() > 1 {
+                buf.push(b'.');
+                buf.extend_from_slice(&d[1..]);
             }
+            buf.extend_from_slice(b"e-5");
         }
-        writeln!(w)?;
+        _ => buf.extend_from_slice(s),
+    }
+}
+
+/// Blocks formatted before they are written (bounds the text held in memory at once).
+const BLOCKS_PER_WAVE: usize = 8;
+
+/// Writes the rows of `data` (`per_row` values each, separated by blanks, indented), formatted
+/// by `row` in parallel blocks of [`ROWS_PER_TASK`] rows, [`BLOCKS_PER_WAVE`] blocks at a
+/// time, in order.
+fn write_rows<T: Sync>(
+    w: &mut impl Write,
+    data: &[T],
+    per_row: usize,
+    row: impl Fn(&mut Vec<u8>, &[T]) + Sync,
+) -> io::Result<()> {
+    let per_row = per_row.max(1);
+    for wave in data.chunks(per_row * ROWS_PER_TASK * BLOCKS_PER_WAVE) {
+        let blocks: Vec<Vec<u8>> = wave
+            .par_chunks(per_row * ROWS_PER_TASK)
+            .map(|block| {
+                let mut buf = Vec::with_capacity(block.len() * 24);
+                for r in block.chunks(per_row) {
+                    buf.extend_from_slice(b"          ");
+                    row(&mut buf, r);
+                    buf.push(b'\n');
+                }
+                buf
+            })
+            .collect();
+        for b in &blocks {
+            w.write_all(b)?;
+        }
     }
     Ok(())
+}
+
+fn write_f64_rows(w: &mut impl Write, data: &[f64], per_row: usize) -> io::Result<()> {
+    write_rows(w, data, per_row, |buf, row| {
+        let mut ryu = ryu::Buffer::new();
+        for (k, &v) in row.iter().enumerate() {
+            if k > 0 {
+                buf.push(b' ');
+            }
+            push_f64(buf, v, &mut ryu);
+        }
+    })
+}
+
+/// Writes integers, `per_row` per row, as `{}` would.
+fn write_int_rows<T: itoa::Integer + Copy + Sync>(
+    w: &mut impl Write,
+    data: &[T],
+    per_row: usize,
+) -> io::Result<()> {
+    write_rows(w, data, per_row, |buf, row| {
+        let mut itoa = itoa::Buffer::new();
+        for (k, &v) in row.iter().enumerate() {
+            if k > 0 {
+                buf.push(b' ');
+            }
+            buf.extend_from_slice(itoa.format(v).as_bytes());
+        }
+    })
 }
 
 fn write_field(w: &mut impl Write, f: &VtuField) -> io::Result<()> {
@@ -263,10 +375,7 @@ fn write_to(
             r#"        <DataArray type="Int32" Name="{}" format="ascii">"#,
             xml_escape(f.name)
         )?;
-        for row in f.data.chunks(16) {
-            let row: Vec<String> = row.iter().map(|v| v.to_string()).collect();
-            writeln!(w, "          {}", row.join(" "))?;
-        }
+        write_int_rows(w, f.data, 16)?;
         writeln!(w, "        </DataArray>")?;
     }
     writeln!(w, "      </CellData>")?;
@@ -277,9 +386,13 @@ fn write_to(
         w,
         r#"        <DataArray type="Float64" Name="Points" NumberOfComponents="3" format="ascii">"#
     )?;
-    for p in &mesh.nodes {
-        writeln!(w, "          {:?} {:?} 0", p[0], p[1])?;
-    }
+    write_rows(w, &mesh.nodes, 1, |buf, p| {
+        let mut ryu = ryu::Buffer::new();
+        push_f64(buf, p[0][0], &mut ryu);
+        buf.push(b' ');
+        push_f64(buf, p[0][1], &mut ryu);
+        buf.extend_from_slice(b" 0");
+    })?;
     writeln!(w, "        </DataArray>")?;
     writeln!(w, "      </Points>")?;
 
@@ -288,38 +401,40 @@ fn write_to(
         w,
         r#"        <DataArray type="Int64" Name="connectivity" format="ascii">"#
     )?;
-    for el in &mesh.elements {
-        let c: Vec<String> = el.nodes().iter().map(|n| n.to_string()).collect();
-        writeln!(w, "          {}", c.join(" "))?;
-    }
+    write_rows(w, &mesh.elements, 1, |buf, el| {
+        let mut itoa = itoa::Buffer::new();
+        for (k, &n) in el[0].nodes().iter().enumerate() {
+            if k > 0 {
+                buf.push(b' ');
+            }
+            buf.extend_from_slice(itoa.format(n).as_bytes());
+        }
+    })?;
     writeln!(w, "        </DataArray>")?;
     writeln!(
         w,
         r#"        <DataArray type="Int64" Name="offsets" format="ascii">"#
     )?;
-    let mut offset = 0usize;
-    for row in mesh.elements.chunks(16) {
-        let row: Vec<String> = row
-            .iter()
-            .map(|el| {
-                offset += el.kind.node_count();
-                offset.to_string()
-            })
-            .collect();
-        writeln!(w, "          {}", row.join(" "))?;
-    }
+    let offsets: Vec<usize> = mesh
+        .elements
+        .iter()
+        .scan(0usize, |offset, el| {
+            *offset += el.kind.node_count();
+            Some(*offset)
+        })
+        .collect();
+    write_int_rows(w, &offsets, 16)?;
     writeln!(w, "        </DataArray>")?;
     writeln!(
         w,
         r#"        <DataArray type="UInt8" Name="types" format="ascii">"#
     )?;
-    for row in mesh.elements.chunks(16) {
-        let row: Vec<String> = row
-            .iter()
-            .map(|el| el.kind.vtk_cell_type().to_string())
-            .collect();
-        writeln!(w, "          {}", row.join(" "))?;
-    }
+    let types: Vec<u8> = mesh
+        .elements
+        .iter()
+        .map(|el| el.kind.vtk_cell_type())
+        .collect();
+    write_int_rows(w, &types, 16)?;
     writeln!(w, "        </DataArray>")?;
     writeln!(w, "      </Cells>")?;
     writeln!(w, "    </Piece>")?;
@@ -427,6 +542,68 @@ print('ok')
             Err(_) => println!("python3 not found: XML check skipped"),
         }
         let _ = fs::remove_file(&path);
+    }
+
+    /// `push_f64` writes the bytes of `{:?}`: random bit patterns (every exponent), random
+    /// values around each power of ten (both sides of the notation switches at 1e-5, 1e-4 and
+    /// 1e16), and special cases.
+    #[test]
+    fn floats_are_written_as_debug_formatting() {
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut values = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            1e-5,
+            1e-4,
+            9.999999999999999e-5,
+            f64::from_bits(1e-5f64.to_bits() + 1),
+            9.99999999999e-6,
+            1e16,
+            9999999999999998.0,
+            1e15,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::MAX,
+            f64::EPSILON,
+            0.1 + 0.2,
+        ];
+        for _ in 0..200_000 {
+            values.push(f64::from_bits(next()));
+        }
+        for e in -30..=30 {
+            for _ in 0..2_000 {
+                let m = (next() >> 11) as f64 / (1u64 << 53) as f64 * 10.0;
+                values.push(m * 10f64.powi(e));
+                values.push(-m * 10f64.powi(e));
+            }
+        }
+        // Dyadic values with few binary digits (the candidates for ties) at every scale.
+        for j in 0..=60 {
+            for _ in 0..1_000 {
+                let k = (next() >> (11 + (next() % 40))) | 1;
+                values.push(k as f64 / (1u64 << j) as f64);
+            }
+        }
+        values.push(1658206780088562.0 + 0.25); // exactly representable: a tie
+        let mut ryu = ryu::Buffer::new();
+        let mut buf = Vec::new();
+        for v in values.into_iter().filter(|v| v.is_finite()) {
+            buf.clear();
+            push_f64(&mut buf, v, &mut ryu);
+            assert_eq!(
+                std::str::from_utf8(&buf).unwrap(),
+                format!("{v:?}"),
+                "{v:e}"
+            );
+        }
     }
 
     #[test]
