@@ -198,20 +198,8 @@ pub trait SolidElement: Sync {
         f_inv_d: &mut [f64],
     ) -> Result<(), NonPositiveJacobian> {
         for (rate, force) in [
-            (
-                NeoHookeanRate {
-                    c10: 1.0,
-                    inv_d: 0.0,
-                },
-                f_c10,
-            ),
-            (
-                NeoHookeanRate {
-                    c10: 0.0,
-                    inv_d: 1.0,
-                },
-                f_inv_d,
-            ),
+            (NeoHookeanRate::UNIT_C10, f_c10),
+            (NeoHookeanRate::UNIT_INV_D, f_inv_d),
         ] {
             let mut out = ElementResult {
                 energy: 0.0,
@@ -337,16 +325,7 @@ impl SolidElement for DisplacementElement {
         let n = geo.n_nodes;
         f_c10[..2 * n].fill(0.0);
         f_inv_d[..2 * n].fill(0.0);
-        let (iso, vol) = (
-            NeoHookeanRate {
-                c10: 1.0,
-                inv_d: 0.0,
-            },
-            NeoHookeanRate {
-                c10: 0.0,
-                inv_d: 1.0,
-            },
-        );
+        let (iso, vol) = (NeoHookeanRate::UNIT_C10, NeoHookeanRate::UNIT_INV_D);
         for g in 0..geo.n_gauss {
             let gp = &geo.gauss[g];
             let f = geo.deformation_gradient(g, u);
@@ -465,10 +444,7 @@ impl SolidElement for MeanDilatationElement {
         let nd = 2 * n;
         f_c10[..nd].fill(0.0);
         f_inv_d[..nd].fill(0.0);
-        let unit = NeoHookeanRate {
-            c10: 1.0,
-            inv_d: 0.0,
-        };
+        let unit = NeoHookeanRate::UNIT_C10;
         let mut volume = 0.0;
         for g in 0..geo.n_gauss {
             let gp = &geo.gauss[g];
@@ -484,11 +460,7 @@ impl SolidElement for MeanDilatationElement {
             }
         }
         let theta = volume / geo.area;
-        let p = NeoHookeanRate {
-            c10: 0.0,
-            inv_d: 1.0,
-        }
-        .volumetric(theta)[1];
+        let p = NeoHookeanRate::UNIT_INV_D.volumetric(theta)[1];
         for v in &mut f_inv_d[..nd] {
             *v *= p;
         }

@@ -218,6 +218,19 @@ pub struct NeoHookeanRate {
     pub inv_d: f64,
 }
 
+impl NeoHookeanRate {
+    /// `∂W/∂C10`: the energy `I1bar - 3`.
+    pub const UNIT_C10: NeoHookeanRate = NeoHookeanRate {
+        c10: 1.0,
+        inv_d: 0.0,
+    };
+    /// `∂W/∂(1/D)`: the energy `(J - 1)²`.
+    pub const UNIT_INV_D: NeoHookeanRate = NeoHookeanRate {
+        c10: 0.0,
+        inv_d: 1.0,
+    };
+}
+
 impl Hyperelastic for NeoHookeanRate {
     fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
         neo_hookean_isochoric(self.c10, i1, j)

@@ -84,10 +84,7 @@ impl Parameter {
     /// The rate energy `∂W/∂θ` (see [`NeoHookeanRate`]).
     fn rate(&self, model: &Model) -> NeoHookeanRate {
         match self.kind {
-            ParameterKind::C10 => NeoHookeanRate {
-                c10: 1.0,
-                inv_d: 0.0,
-            },
+            ParameterKind::C10 => NeoHookeanRate::UNIT_C10,
             ParameterKind::D => {
                 let d = model.materials[self.material].law.d;
                 NeoHookeanRate {

@@ -422,27 +422,8 @@ fn badly_placed_bodies_are_refused_before_solving() {
 /// [`coarse_thigh_indentation_stops_at_its_limit_point`].)
 #[test]
 fn thigh_indentation_converges() {
-    use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
-    use femu_mech::loading::{apply_loading, Loading, Side};
     for elements in [2000, 3000] {
-        let t = parametric_thigh(
-            &ThighParams {
-                target_elements: Some(elements),
-                ..Default::default()
-            },
-            ElementKind::Cpe4h,
-        )
-        .unwrap();
-        let skin = t.mesh.surfaces["SKIN"].clone();
-        let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
-        deck.pressures.clear();
-        let mut model = Model::from_deck(deck).unwrap();
-        let loading = Loading::Indentation {
-            site: Side::Anterior,
-            radius: 10.0,
-            force: 0.1,
-        };
-        apply_loading(&mut model, &skin, &loading).unwrap();
+        let model = thigh_indentation_model(elements);
         let sol = solve(&model, SolverOptions::default());
         let b = &sol.bodies[0];
         assert!(
@@ -467,27 +448,8 @@ fn thigh_indentation_converges() {
 /// search.
 #[test]
 fn coarse_thigh_indentation_stops_at_its_limit_point() {
-    use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
-    use femu_mech::loading::{apply_loading, Loading, Side};
     use femu_mech::SolveError;
-    let t = parametric_thigh(
-        &ThighParams {
-            target_elements: Some(1200),
-            ..Default::default()
-        },
-        ElementKind::Cpe4h,
-    )
-    .unwrap();
-    let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
-    deck.pressures.clear();
-    let mut model = Model::from_deck(deck).unwrap();
-    let loading = Loading::Indentation {
-        site: Side::Anterior,
-        radius: 10.0,
-        force: 0.1,
-    };
-    apply_loading(&mut model, &skin, &loading).unwrap();
+    let model = thigh_indentation_model(1200);
 
     // Displacement control: the curve up to 12.2 mm stays well below the requested force and
     // its last millimetre is far softer than its stiffest stretch.
@@ -529,4 +491,30 @@ fn coarse_thigh_indentation_stops_at_its_limit_point() {
         Ok(s) => panic!("converged to force {}", s.bodies[0].force),
         Err(e) => panic!("unexpected error: {e}"),
     }
+}
+
+/// The built-in thigh with about `elements` CPE4H quads, Table 1 materials, femur fixed, and
+/// the 10 mm indenter on the anterior side pushed with 0.1 N/mm (force control).
+fn thigh_indentation_model(elements: usize) -> Model {
+    use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+    use femu_mech::loading::{apply_loading, Loading, Side};
+    let t = parametric_thigh(
+        &ThighParams {
+            target_elements: Some(elements),
+            ..Default::default()
+        },
+        ElementKind::Cpe4h,
+    )
+    .unwrap();
+    let skin = t.mesh.surfaces["SKIN"].clone();
+    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
+    deck.pressures.clear();
+    let mut model = Model::from_deck(deck).unwrap();
+    let loading = Loading::Indentation {
+        site: Side::Anterior,
+        radius: 10.0,
+        force: 0.1,
+    };
+    apply_loading(&mut model, &skin, &loading).unwrap();
+    model
 }
