@@ -91,11 +91,9 @@ pub fn write_solve_figures(
         curve.extend(
             solution
                 .report
-                .increments
-                .iter()
-                .filter(|r| r.converged)
-                .filter_map(|r| r.bodies.get(b))
-                .map(|s| (s[0], s[1])),
+                .force_travel(b)
+                .into_iter()
+                .map(|[t, f]| (t, f)),
         );
         let path = dir.join("force_displacement.png");
         line_plot_png(

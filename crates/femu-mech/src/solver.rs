@@ -124,6 +124,18 @@ pub struct SolveReport {
     pub factorization: Option<Factorization>,
 }
 
+impl SolveReport {
+    /// The force–travel curve of rigid body `body`: `[travel (mm), force (N/mm)]` at the end of
+    /// every converged increment.
+    pub fn force_travel(&self, body: usize) -> Vec<[f64; 2]> {
+        self.increments
+            .iter()
+            .filter(|r| r.converged)
+            .filter_map(|r| r.bodies.get(body).copied())
+            .collect()
+    }
+}
+
 /// A converged (or partially converged, see [`SolveError`]) state.
 #[derive(Debug, Clone)]
 pub struct Solution {
@@ -165,19 +177,12 @@ const LIMIT_POINT_STIFFNESS_RATIO: f64 = 0.25;
 /// The secant stiffness `ΔF/Δt` between consecutive converged increments is compared with the
 /// largest over the step; the last one below [`LIMIT_POINT_STIFFNESS_RATIO`] of it is a limit
 /// point.
-fn limit_point_hint(model: &Model, increments: &[IncrementRecord]) -> Option<String> {
-    let converged: Vec<&IncrementRecord> = increments
-        .iter()
-        .filter(|r| r.converged && !r.bodies.is_empty())
-        .collect();
+fn limit_point_hint(model: &Model, report: &SolveReport) -> Option<String> {
     for (b, c) in model.contacts.iter().enumerate() {
         let TravelControl::Force(target) = c.control else {
             continue;
         };
-        let curve: Vec<[f64; 2]> = converged
-            .iter()
-            .filter_map(|r| r.bodies.get(b).copied())
-            .collect();
+        let curve = report.force_travel(b);
         let secants: Vec<f64> = curve
             .windows(2)
             .filter(|w| (w[1][0] - w[0][0]).abs() > 1e-12)
@@ -1312,7 +1317,7 @@ impl StaticSolver {
                         report.lambda = lambda;
                         report.wall_time_s = t0.elapsed().as_secs_f64();
                         let mut reason = failure.to_string();
-                        if let Some(hint) = limit_point_hint(model, &report.increments) {
+                        if let Some(hint) = limit_point_hint(model, &report) {
                             reason.push_str("; ");
                             reason.push_str(&hint);
                         }

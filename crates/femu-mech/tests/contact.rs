@@ -236,13 +236,7 @@ fn plate_force_balance_symmetry_and_penetration() {
         sol2.bodies[0].force
     );
     // The force–displacement curve is recorded and increasing.
-    let curve: Vec<[f64; 2]> = sol
-        .report
-        .increments
-        .iter()
-        .filter(|r| r.converged)
-        .map(|r| r.bodies[0])
-        .collect();
+    let curve = sol.report.force_travel(0);
     assert!(
         curve.len() >= 2
             && curve
@@ -456,13 +450,7 @@ fn coarse_thigh_indentation_stops_at_its_limit_point() {
     let mut by_travel = model.clone();
     by_travel.contacts[0].control = TravelControl::Displacement(12.2);
     let sol = solve(&by_travel, SolverOptions::default());
-    let curve: Vec<[f64; 2]> = sol
-        .report
-        .increments
-        .iter()
-        .filter(|r| r.converged)
-        .map(|r| r.bodies[0])
-        .collect();
+    let curve = sol.report.force_travel(0);
     let peak = curve.iter().fold(0.0f64, |m, p| m.max(p[1]));
     assert!(peak < 0.085, "peak force {peak} N/mm");
     let stiffest = curve
