@@ -20,6 +20,7 @@ pub mod output;
 pub mod reference;
 pub mod sensitivity;
 pub mod solver;
+pub mod split;
 
 pub use material::{Hyperelastic, NeoHookean};
 pub use model::{Model, ModelError};

@@ -15,6 +15,8 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::Side;
 use faer::{Conj, MatMut, Par};
 
+use crate::split::{DofSplit, SplitLdlt};
+
 /// Largest number of right-hand sides solved at once (the workspace is sized for it once).
 pub const MAX_RHS: usize = 16;
 
@@ -230,6 +232,22 @@ impl NodeGraph {
         eq: &[usize],
         n_eq: usize,
     ) -> Result<Vec<usize>, LinearSolveError> {
+        let (perm, _) = self.amd_node_order()?;
+        let mut order = Vec::with_capacity(n_eq);
+        for &node in &perm {
+            for i in 0..2 {
+                let q = eq[2 * node + i];
+                if q != usize::MAX {
+                    order.push(q);
+                }
+            }
+        }
+        Ok(order)
+    }
+
+    /// Approximate-minimum-degree ordering of the nodes: `(perm, perm_inv)`, `perm[k]` being the
+    /// node eliminated k-th.
+    pub fn amd_node_order(&self) -> Result<(Vec<usize>, Vec<usize>), LinearSolveError> {
         let n = self.ptr.len() - 1;
         let mut perm = vec![0usize; n];
         let mut perm_inv = vec![0usize; n];
@@ -246,16 +264,7 @@ impl NodeGraph {
             MemStack::new(&mut mem),
         )
         .map_err(|e| LinearSolveError::Other(format!("AMD ordering: {e:?}")))?;
-        let mut order = Vec::with_capacity(n_eq);
-        for &node in &perm {
-            for i in 0..2 {
-                let q = eq[2 * node + i];
-                if q != usize::MAX {
-                    order.push(q);
-                }
-            }
-        }
-        Ok(order)
+        Ok((perm, perm_inv))
     }
 }
 
@@ -495,7 +504,15 @@ fn transpose_positions(pattern: &CscPattern) -> Option<Vec<usize>> {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum Factorization {
     Ldlt,
+    /// LDLᵀ of the two halves of a bisected mesh at once ([`crate::split::SplitLdlt`]).
+    SplitLdlt,
     Lu,
+}
+
+/// The factorization tried first for symmetric tangents.
+enum SymmetricFactor {
+    Whole(Box<SparseLdlt>),
+    Split(Box<SplitLdlt>),
 }
 
 /// Factorizes Newton tangents on one pattern, choosing LDLᵀ for symmetric values and LU
@@ -503,7 +520,7 @@ pub enum Factorization {
 pub struct TangentSolver {
     /// Position of the transposed entry of each stored entry.
     transpose: Vec<usize>,
-    ldlt: SparseLdlt,
+    ldlt: SymmetricFactor,
     lu: Option<SparseLu>,
     last: Option<Factorization>,
     /// Relative asymmetry above which LU is used.
@@ -532,7 +549,26 @@ impl TangentSolver {
         })?;
         Ok(TangentSolver {
             transpose,
-            ldlt: ldlt?,
+            ldlt: SymmetricFactor::Whole(Box::new(ldlt?)),
+            lu: None,
+            last: None,
+            symmetry_tolerance: 1e-12,
+        })
+    }
+
+    /// As [`Self::new`], with symmetric tangents factorized by halves of `split` in parallel
+    /// ([`SplitLdlt`]).
+    pub fn new_split(pattern: &CscPattern, split: &DofSplit) -> Result<Self, LinearSolveError> {
+        let (transpose, ldlt) = rayon::join(
+            || transpose_positions(pattern),
+            || SplitLdlt::new(pattern, split),
+        );
+        let transpose = transpose.ok_or_else(|| {
+            LinearSolveError::Other("pattern is not structurally symmetric".into())
+        })?;
+        Ok(TangentSolver {
+            transpose,
+            ldlt: SymmetricFactor::Split(Box::new(ldlt?)),
             lu: None,
             last: None,
             symmetry_tolerance: 1e-12,
@@ -564,11 +600,17 @@ impl TangentSolver {
         values: &[f64],
     ) -> Result<Factorization, LinearSolveError> {
         self.last = None;
-        if self.asymmetry(values) <= self.symmetry_tolerance
-            && self.ldlt.factorize(pattern, values).is_ok()
-        {
-            self.last = Some(Factorization::Ldlt);
-            return Ok(Factorization::Ldlt);
+        if self.asymmetry(values) <= self.symmetry_tolerance {
+            let done = match &mut self.ldlt {
+                SymmetricFactor::Whole(f) => {
+                    f.factorize(pattern, values).map(|_| Factorization::Ldlt)
+                }
+                SymmetricFactor::Split(f) => f.factorize(values).map(|_| Factorization::SplitLdlt),
+            };
+            if let Ok(kind) = done {
+                self.last = Some(kind);
+                return Ok(kind);
+            }
         }
         if self.lu.is_none() {
             self.lu = Some(SparseLu::new(pattern)?);
@@ -590,7 +632,10 @@ impl TangentSolver {
     /// after the other: one pass over the factors for all of them.
     pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
         match self.last {
-            Some(Factorization::Ldlt) => self.ldlt.solve_many_in_place(rhs, columns),
+            Some(Factorization::Ldlt | Factorization::SplitLdlt) => match &mut self.ldlt {
+                SymmetricFactor::Whole(f) => f.solve_many_in_place(rhs, columns),
+                SymmetricFactor::Split(f) => f.solve_many_in_place(rhs, columns),
+            },
             Some(Factorization::Lu) => self
                 .lu
                 .as_mut()
@@ -603,7 +648,10 @@ impl TangentSolver {
     /// Solves `Aᵀ x = rhs` in place with the last factorization.
     pub fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
         match self.last {
-            Some(Factorization::Ldlt) => self.ldlt.solve_in_place(rhs),
+            Some(Factorization::Ldlt | Factorization::SplitLdlt) => match &mut self.ldlt {
+                SymmetricFactor::Whole(f) => f.solve_in_place(rhs),
+                SymmetricFactor::Split(f) => f.solve_many_in_place(rhs, 1),
+            },
             Some(Factorization::Lu) => self
                 .lu
                 .as_mut()

@@ -12,6 +12,7 @@ use crate::contact::{BodyState, TravelControl};
 use crate::element::{formulation, ElementResult, MAX_DOFS};
 use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, TangentSolver};
 use crate::model::Model;
+use crate::split::DofSplit;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
@@ -47,6 +48,10 @@ pub struct SolverOptions {
     pub growth: f64,
     /// Increment reduction factor on a cut-back (Abaqus uses 0.25).
     pub cutback: f64,
+    /// Models with at least this many free node equations are bisected and the symmetric
+    /// tangent factorized by halves in parallel ([`crate::split::SplitLdlt`]); smaller ones
+    /// whole. Both are exact direct solves.
+    pub split_min_equations: usize,
 }
 
 impl Default for SolverOptions {
@@ -59,6 +64,7 @@ impl Default for SolverOptions {
             line_search: true,
             growth: 1.5,
             cutback: 0.25,
+            split_min_equations: 10_000,
         }
     }
 }
@@ -371,6 +377,17 @@ fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Vec<usize
     slots
 }
 
+/// Largest separator (equations) for which the tangent is factorized by halves: its dense
+/// Schur complement costs `s³` per factorization and `8 s²` bytes (2 000: 32 MB, a few
+/// hundredths of a second, while the separator of a 25 000-quad thigh is about 250).
+const MAX_SEPARATOR_EQUATIONS: usize = 2000;
+
+/// How the equations are factorized: whole in a fill-reducing order, or by halves.
+enum EquationPlan {
+    Whole(Vec<usize>),
+    Split(DofSplit),
+}
+
 impl StaticSolver {
     /// Numbers the dofs, builds the sparse pattern and its symbolic LU.
     pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
@@ -413,12 +430,26 @@ impl StaticSolver {
             model.mesh.elements.iter().map(|e| e.nodes()),
         );
         let n_eq_nodes = eq[..n_nodes_dof].iter().filter(|&&q| q != NONE).count();
-        // The ordering (the longest step) and the pattern both only read the graph.
-        let (ordering, base) = rayon::join(
-            || graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes),
+        // The ordering (the longest step) and the pattern both only read the graph. A large
+        // model is bisected and its halves factorized in parallel (`SplitLdlt`); a small one,
+        // or one whose separator would be too large for a dense Schur complement, is ordered
+        // whole by AMD.
+        let (plan, base) = rayon::join(
+            || -> Result<EquationPlan, SolveError> {
+                if n_eq_nodes >= options.split_min_equations {
+                    if let Some(split) = graph.split_by_elimination_tree(&eq[..n_nodes_dof])? {
+                        if split.separator.len() <= MAX_SEPARATOR_EQUATIONS {
+                            return Ok(EquationPlan::Split(split));
+                        }
+                    }
+                }
+                Ok(EquationPlan::Whole(
+                    graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes)?,
+                ))
+            },
             || graph.dof_pattern(&eq[..n_nodes_dof], n_eq_nodes),
         );
-        let mut ordering = ordering?;
+        let mut plan = plan?;
         // Bordered system: each force-controlled body couples its travel with the free dofs of
         // its candidate nodes; the travels are numbered and eliminated last.
         let borders: Vec<(usize, Vec<usize>)> = model
@@ -438,11 +469,17 @@ impl StaticSolver {
             })
             .collect();
         let pattern = base.bordered(n_eq, &borders);
-        ordering.extend(borders.iter().map(|b| b.0));
+        match &mut plan {
+            EquationPlan::Whole(ordering) => ordering.extend(borders.iter().map(|b| b.0)),
+            EquationPlan::Split(split) => split.separator.extend(borders.iter().map(|b| b.0)),
+        }
         // The slots and the symbolic factorization are independent: one thread each.
         let (slots, lu) = rayon::join(
             || element_slots(model, &eq, &pattern),
-            || TangentSolver::new(&pattern, Some(&ordering)),
+            || match &plan {
+                EquationPlan::Whole(ordering) => TangentSolver::new(&pattern, Some(ordering)),
+                EquationPlan::Split(split) => TangentSolver::new_split(&pattern, split),
+            },
         );
         let lu = lu?;
         let contact_slots: Vec<Vec<[usize; 8]>> = model

@@ -1,0 +1,928 @@
+//! Domain-split sparse LDLᵀ: the two halves of the mesh factorized at the same time, one per
+//! core, coupled through a dense Schur complement on the separator.
+//!
+//! faer's supernodal LDLᵀ runs its supernodes one after the other, so on a plane mesh it uses one
+//! core. The elimination tree of the AMD ordering has, near its root, two groups of disjoint
+//! subtrees of about equal work ([`NodeGraph::split_by_elimination_tree`]); their equations are
+//! the interiors `A` and `B`, which are not coupled, and the ancestors left over are a vertex
+//! separator `S`, so that the tangent is, in the order `[A, B, S]`,
+//!
+//! ```text
+//!     K = | K_AA   0     K_AS |
+//!         | 0      K_BB  K_BS |
+//!         | K_SA   K_SB  K_SS |
+//! ```
+//!
+//! Each half `M_A = [K_AA K_AS; K_SA K_SS]` (a principal submatrix of `K`, so as definite as
+//! `K`) is factorized by faer with its interior in AMD's order and the separator last (the same
+//! factor entries as AMD's whole factorization, so no extra fill); the last
+//! `s` columns of its factor give `Ŝ_A = L_SS D_S L_SSᵀ = K_SS - K_SA K_AA⁻¹ K_AS`. The Schur
+//! complement of `K` on the separator is then `S̃ = Ŝ_A + Ŝ_B - K_SS` (dense, LU with partial
+//! pivoting), and a solve is the block forward substitution through the interiors of both
+//! factors (in parallel), a dense solve on the separator, and the block back substitution (in
+//! parallel). This is the first level of a nested-dissection multifrontal factorization
+//! (George 1973; Duff & Reid 1983), with faer doing the work inside each half.
+
+use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
+use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
+use faer::linalg::matmul::matmul;
+use faer::linalg::triangular_solve::{
+    solve_unit_lower_triangular_in_place, solve_unit_upper_triangular_in_place,
+};
+use faer::reborrow::{Reborrow, ReborrowMut};
+use faer::sparse::linalg::cholesky::supernodal::{SupernodalLdltRef, SymbolicSupernodalCholesky};
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
+};
+use faer::sparse::linalg::SupernodalThreshold;
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::{Accum, MatMut, MatRef, Par, Side};
+
+const NONE: usize = usize::MAX;
+
+/// A cut of the free equations: two interiors (each in its elimination order) that do not
+/// touch, and the separator between them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DofSplit {
+    pub interiors: [Vec<usize>; 2],
+    pub separator: Vec<usize>,
+}
+
+/// The transposed pattern (rows sorted).
+fn transpose(pattern: &CscPattern) -> CscPattern {
+    let n = pattern.n;
+    let mut col_ptr = vec![0usize; n + 1];
+    for &r in &pattern.row_idx {
+        col_ptr[r + 1] += 1;
+    }
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    let mut next = col_ptr.clone();
+    let mut row_idx = vec![0usize; pattern.nnz()];
+    for c in 0..n {
+        for &r in &pattern.row_idx[pattern.col_ptr[c]..pattern.col_ptr[c + 1]] {
+            row_idx[next[r]] = c;
+            next[r] += 1;
+        }
+    }
+    CscPattern {
+        n,
+        col_ptr,
+        row_idx,
+    }
+}
+
+/// The supernodal structure of a factorization made with supernodes forced.
+fn supernodal(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+    match symbolic.raw() {
+        SymbolicCholeskyRaw::Supernodal(s) => s,
+        SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodes are forced"),
+    }
+}
+
+/// Largest share of the work one half may take in [`NodeGraph::split_by_elimination_tree`].
+const MAX_HALF_SHARE: f64 = 0.505;
+
+/// Largest separator (nodes) [`NodeGraph::split_by_elimination_tree`] looks for.
+const MAX_SEPARATOR_NODES: usize = 1000;
+
+impl NodeGraph {
+    /// Splits along the elimination tree of the AMD ordering: two groups of disjoint subtrees
+    /// that share the factorization work about equally, and the separator made of the
+    /// ancestors they leave (the top of the tree, where AMD's factor is already dense). The
+    /// halves keep AMD's order, so the split adds no fill: the total factor is AMD's.
+    ///
+    /// Starting from the roots, the candidate subtrees are shared between two groups (heaviest
+    /// first into the lighter group); while the heavier group exceeds [`MAX_HALF_SHARE`] of the
+    /// work, the heaviest subtree's root moves to the separator and its children become
+    /// candidates. The work of a subtree is the sum over its columns of the squared column
+    /// count. `None` when no balance is found within [`MAX_SEPARATOR_NODES`].
+    pub fn split_by_elimination_tree(
+        &self,
+        eq: &[usize],
+    ) -> Result<Option<DofSplit>, LinearSolveError> {
+        use faer::sparse::linalg::cholesky::simplicial::prefactorize_symbolic_cholesky;
+        let n_nodes = self.ptr.len() - 1;
+        let (perm, perm_inv) = self.amd_node_order()?;
+        // Upper triangle of the node graph in elimination order.
+        let mut col_ptr = Vec::with_capacity(n_nodes + 1);
+        let mut row_idx = Vec::with_capacity(self.adj.len() / 2 + n_nodes);
+        col_ptr.push(0);
+        for &node in &perm {
+            let k = perm_inv[node];
+            let start = row_idx.len();
+            row_idx.extend(
+                self.adj[self.ptr[node]..self.ptr[node + 1]]
+                    .iter()
+                    .map(|&m| perm_inv[m])
+                    .filter(|&r| r <= k),
+            );
+            row_idx[start..].sort_unstable();
+            col_ptr.push(row_idx.len());
+        }
+        let mut etree = vec![0isize; n_nodes];
+        let mut counts = vec![0usize; n_nodes];
+        let mut mem = MemBuffer::new(StackReq::new::<usize>(n_nodes));
+        prefactorize_symbolic_cholesky::<usize>(
+            &mut etree,
+            &mut counts,
+            SymbolicSparseColMatRef::new_checked(n_nodes, n_nodes, &col_ptr, None, &row_idx),
+            MemStack::new(&mut mem),
+        );
+        let parent = |k: usize| usize::try_from(etree[k]).ok();
+        // Subtree work (a parent is eliminated after its children).
+        let mut work: Vec<f64> = counts.iter().map(|&c| (c as f64) * (c as f64)).collect();
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); n_nodes];
+        let mut candidates = Vec::new();
+        for k in 0..n_nodes {
+            match parent(k) {
+                Some(p) => {
+                    work[p] += work[k];
+                    children[p].push(k);
+                }
+                None => candidates.push(k),
+            }
+        }
+        let mut separator: Vec<usize> = Vec::new();
+        let bins = loop {
+            candidates.sort_unstable_by(|&a, &b| work[b].total_cmp(&work[a]));
+            let total: f64 = candidates.iter().map(|&k| work[k]).sum();
+            let mut bins = [Vec::new(), Vec::new()];
+            let mut load = [0.0f64; 2];
+            for &k in &candidates {
+                let lighter = usize::from(load[1] < load[0]);
+                bins[lighter].push(k);
+                load[lighter] += work[k];
+            }
+            if total > 0.0 && load[0].max(load[1]) <= MAX_HALF_SHARE * total {
+                break bins;
+            }
+            if candidates.is_empty() || separator.len() >= MAX_SEPARATOR_NODES {
+                return Ok(None);
+            }
+            let heaviest = candidates.remove(0);
+            separator.push(heaviest);
+            candidates.extend_from_slice(&children[heaviest]);
+        };
+        // Label every elimination step: separator 2, then each subtree by its group (top down).
+        let mut label = vec![u8::MAX; n_nodes];
+        for &k in &separator {
+            label[k] = 2;
+        }
+        for (b, roots) in bins.iter().enumerate() {
+            for &k in roots {
+                label[k] = b as u8;
+            }
+        }
+        for k in (0..n_nodes).rev() {
+            if label[k] == u8::MAX {
+                label[k] = label[parent(k).expect("a non-root outside the separator")];
+            }
+        }
+        let mut interiors = [Vec::new(), Vec::new()];
+        let mut separator_eqs = Vec::new();
+        for (k, &node) in perm.iter().enumerate() {
+            let dofs = [eq[2 * node], eq[2 * node + 1]]
+                .into_iter()
+                .filter(|&q| q != NONE);
+            match label[k] {
+                2 => separator_eqs.extend(dofs),
+                b => interiors[b as usize].extend(dofs),
+            }
+        }
+        if interiors.iter().any(|i| i.is_empty()) {
+            return Ok(None);
+        }
+        Ok(Some(DofSplit {
+            interiors,
+            separator: separator_eqs,
+        }))
+    }
+}
+
+/// One half: the interior's equations then the separator's, factorized by faer.
+struct Half {
+    /// Equation of each local row, in elimination order: `n_interior` interior ones, then the
+    /// separator's.
+    eqs: Vec<usize>,
+    n_interior: usize,
+    /// Lower triangle of this half's matrix (local numbering, rows sorted).
+    pattern: CscPattern,
+    /// Position in the tangent's values of each stored entry of `pattern`.
+    source: Vec<usize>,
+    values: Vec<f64>,
+    symbolic: SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    /// 1 / D of the interior pivots.
+    inv_d: Vec<f64>,
+    /// Supernodes holding interior columns (they come first).
+    interior_supernodes: usize,
+    mem: MemBuffer,
+    /// `L_SS` (unit lower), then `L_SS D_S`, s x s column-major.
+    l_ss: Vec<f64>,
+    l_ss_d: Vec<f64>,
+    /// `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (s x s column-major).
+    schur: Vec<f64>,
+    /// Local right-hand sides (local rows x MAX_RHS, column-major) and a product buffer.
+    work: Vec<f64>,
+    tmp: Vec<f64>,
+}
+
+impl Half {
+    fn new(
+        pattern: &CscPattern,
+        interior: &[usize],
+        separator: &[usize],
+    ) -> Result<Self, LinearSolveError> {
+        let n_interior = interior.len();
+        let eqs: Vec<usize> = interior.iter().chain(separator).copied().collect();
+        let n = eqs.len();
+        let mut local = vec![NONE; pattern.n];
+        for (i, &q) in eqs.iter().enumerate() {
+            local[q] = i;
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        let mut source = Vec::new();
+        let mut column: Vec<(usize, usize)> = Vec::new();
+        col_ptr.push(0);
+        for (j, &q) in eqs.iter().enumerate() {
+            column.clear();
+            for k in pattern.col_ptr[q]..pattern.col_ptr[q + 1] {
+                let i = local[pattern.row_idx[k]];
+                if i != NONE && i >= j {
+                    column.push((i, k));
+                }
+            }
+            column.sort_unstable();
+            row_idx.extend(column.iter().map(|c| c.0));
+            source.extend(column.iter().map(|c| c.1));
+            col_ptr.push(row_idx.len());
+        }
+        let lower = CscPattern {
+            n,
+            col_ptr,
+            row_idx,
+        };
+        // With the identity ordering faer's symbolic analysis reads the upper triangle as
+        // given (whatever the side), and its supernodal numeric factorization the lower one.
+        let upper = transpose(&lower);
+        let symbolic = factorize_symbolic_cholesky(
+            SymbolicSparseColMatRef::new_checked(n, n, &upper.col_ptr, None, &upper.row_idx),
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold::FORCE_SUPERNODAL,
+                ..Default::default()
+            },
+        )
+        .map_err(|e| LinearSolveError::Other(format!("symbolic LDLT of a half: {e:?}")))?;
+        let SymbolicCholeskyRaw::Supernodal(supernodal) = symbolic.raw() else {
+            return Err(LinearSolveError::Other(
+                "expected a supernodal factorization".into(),
+            ));
+        };
+        let interior_supernodes = (0..supernodal.n_supernodes())
+            .filter(|&s| supernodal.supernode_begin()[s] < n_interior)
+            .count();
+        let max_pattern = (0..supernodal.n_supernodes())
+            .map(|s| supernodal.nnz_per_super()[s])
+            .max()
+            .unwrap_or(0);
+        let max_cols = (0..supernodal.n_supernodes())
+            .map(|s| supernodal.supernode_end()[s] - supernodal.supernode_begin()[s])
+            .max()
+            .unwrap_or(0);
+        let s = separator.len();
+        let req = symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default());
+        Ok(Half {
+            l_values: vec![0.0; symbolic.len_val()],
+            values: vec![0.0; lower.nnz()],
+            eqs,
+            n_interior,
+            pattern: lower,
+            source,
+            symbolic,
+            inv_d: vec![0.0; n_interior],
+            interior_supernodes,
+            mem: MemBuffer::new(req),
+            l_ss: vec![0.0; s * s],
+            l_ss_d: vec![0.0; s * s],
+            schur: vec![0.0; s * s],
+            work: vec![0.0; n * MAX_RHS],
+            tmp: vec![0.0; (max_pattern + max_cols) * MAX_RHS],
+        })
+    }
+
+    /// Factorizes this half of `tangent` and forms its separator Schur complement.
+    fn factorize(&mut self, tangent: &[f64]) -> Result<(), LinearSolveError> {
+        for (v, &k) in self.values.iter_mut().zip(&self.source) {
+            *v = tangent[k];
+        }
+        let n = self.eqs.len();
+        let a = SparseColMatRef::new(
+            SymbolicSparseColMatRef::new_checked(
+                n,
+                n,
+                &self.pattern.col_ptr,
+                None,
+                &self.pattern.row_idx,
+            ),
+            &self.values,
+        );
+        self.symbolic
+            .factorize_numeric_ldlt(
+                &mut self.l_values,
+                a,
+                Side::Lower,
+                Default::default(),
+                Par::Seq,
+                MemStack::new(&mut self.mem),
+                Default::default(),
+            )
+            .map_err(|e| LinearSolveError::Other(format!("LDLT of a half: {e:?}")))?;
+        if self.l_values.iter().any(|v| !v.is_finite()) {
+            return Err(LinearSolveError::Other(
+                "LDLT produced non-finite factors".into(),
+            ));
+        }
+        let n_interior = self.n_interior;
+        let s = n - n_interior;
+        let symbolic = supernodal(&self.symbolic);
+        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
+        self.l_ss.fill(0.0);
+        for sn in 0..symbolic.n_supernodes() {
+            let node = factor.supernode(sn);
+            let start = node.start();
+            let ls = node.val();
+            let ncols = ls.ncols();
+            for jj in 0..ncols {
+                let j = start + jj;
+                let d = ls[(jj, jj)];
+                if j < n_interior {
+                    self.inv_d[j] = d.recip();
+                    continue;
+                }
+                let lj = j - n_interior;
+                let col = &mut self.l_ss[lj * s..(lj + 1) * s];
+                col[lj] = 1.0;
+                for ii in jj + 1..ncols {
+                    col[start + ii - n_interior] = ls[(ii, jj)];
+                }
+                for (idx, &r) in node.pattern().iter().enumerate() {
+                    col[r - n_interior] = ls[(ncols + idx, jj)];
+                }
+                for (w, l) in self.l_ss_d[lj * s..(lj + 1) * s].iter_mut().zip(col.iter()) {
+                    *w = l * d;
+                }
+            }
+        }
+        if s > 0 {
+            let l = MatRef::from_column_major_slice(&self.l_ss, s, s);
+            let ld = MatRef::from_column_major_slice(&self.l_ss_d, s, s);
+            matmul(
+                MatMut::from_column_major_slice_mut(&mut self.schur, s, s),
+                Accum::Replace,
+                ld,
+                l.transpose(),
+                1.0,
+                Par::Seq,
+            );
+        }
+        Ok(())
+    }
+
+    /// Loads the interior rows of `rhs` (`k` columns of length `n_total`, column-major) and runs
+    /// the forward substitution through the interior: afterwards the interior rows hold
+    /// `L_AA⁻¹ b_A` and the separator rows `-L_SA L_AA⁻¹ b_A`.
+    fn forward(&mut self, rhs: &[f64], n_total: usize, k: usize) {
+        let n = self.eqs.len();
+        let n_interior = self.n_interior;
+        for j in 0..k {
+            let (col, b) = (
+                &mut self.work[j * n..(j + 1) * n],
+                &rhs[j * n_total..(j + 1) * n_total],
+            );
+            for (x, &q) in col[..n_interior].iter_mut().zip(&self.eqs) {
+                *x = b[q];
+            }
+            col[n_interior..].fill(0.0);
+        }
+        let symbolic = supernodal(&self.symbolic);
+        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
+        let mut x = MatMut::from_column_major_slice_mut(&mut self.work[..n * k], n, k);
+        for sn in 0..self.interior_supernodes {
+            let node = factor.supernode(sn);
+            let start = node.start();
+            let ls = node.val();
+            let size = ls.ncols();
+            // Interior columns of this supernode (all but possibly the last one).
+            let m = size.min(n_interior - start);
+            let top = ls.subrows(0, size).subcols(0, m);
+            let (diag, below) = top.split_at_row(m);
+            solve_unit_lower_triangular_in_place(diag, x.rb_mut().subrows_mut(start, m), Par::Seq);
+            // Rows below the interior columns: the rest of the diagonal block, then the pattern.
+            let rest = size - m;
+            let pattern = node.pattern();
+            let rows = rest + pattern.len();
+            if rows == 0 {
+                continue;
+            }
+            let bot = ls.subrows(size, pattern.len()).subcols(0, m);
+            let mut tmp = MatMut::from_column_major_slice_mut(&mut self.tmp[..rows * k], rows, k);
+            matmul(
+                tmp.rb_mut().subrows_mut(0, rest),
+                Accum::Replace,
+                below,
+                x.rb().subrows(start, m),
+                1.0,
+                Par::Seq,
+            );
+            matmul(
+                tmp.rb_mut().subrows_mut(rest, pattern.len()),
+                Accum::Replace,
+                bot,
+                x.rb().subrows(start, m),
+                1.0,
+                Par::Seq,
+            );
+            for j in 0..k {
+                for i in 0..rest {
+                    x[(start + m + i, j)] -= tmp[(i, j)];
+                }
+                for (idx, &r) in pattern.iter().enumerate() {
+                    x[(r, j)] -= tmp[(rest + idx, j)];
+                }
+            }
+        }
+    }
+
+    /// With the separator's solution `x_s` (`s` x `k`, column-major), scales the interior by
+    /// `D⁻¹` and runs the back substitution through the interior (see [`Self::write_interior`]).
+    fn backward(&mut self, x_s: &[f64], k: usize) {
+        let n = self.eqs.len();
+        let n_interior = self.n_interior;
+        let s = n - n_interior;
+        for j in 0..k {
+            let col = &mut self.work[j * n..(j + 1) * n];
+            for (x, d) in col[..n_interior].iter_mut().zip(&self.inv_d) {
+                *x *= d;
+            }
+            col[n_interior..].copy_from_slice(&x_s[j * s..(j + 1) * s]);
+        }
+        let symbolic = supernodal(&self.symbolic);
+        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
+        let mut x = MatMut::from_column_major_slice_mut(&mut self.work[..n * k], n, k);
+        for sn in (0..self.interior_supernodes).rev() {
+            let node = factor.supernode(sn);
+            let start = node.start();
+            let ls = node.val();
+            let size = ls.ncols();
+            let m = size.min(n_interior - start);
+            let top = ls.subrows(0, size).subcols(0, m);
+            let (diag, below) = top.split_at_row(m);
+            let rest = size - m;
+            let pattern = node.pattern();
+            let rows = rest + pattern.len();
+            if rows > 0 {
+                let mut tmp =
+                    MatMut::from_column_major_slice_mut(&mut self.tmp[..rows * k], rows, k);
+                for j in 0..k {
+                    for i in 0..rest {
+                        tmp[(i, j)] = x[(start + m + i, j)];
+                    }
+                    for (idx, &r) in pattern.iter().enumerate() {
+                        tmp[(rest + idx, j)] = x[(r, j)];
+                    }
+                }
+                let bot = ls.subrows(size, pattern.len()).subcols(0, m);
+                matmul(
+                    x.rb_mut().subrows_mut(start, m),
+                    Accum::Add,
+                    below.transpose(),
+                    tmp.rb().subrows(0, rest),
+                    -1.0,
+                    Par::Seq,
+                );
+                matmul(
+                    x.rb_mut().subrows_mut(start, m),
+                    Accum::Add,
+                    bot.transpose(),
+                    tmp.rb().subrows(rest, pattern.len()),
+                    -1.0,
+                    Par::Seq,
+                );
+            }
+            solve_unit_upper_triangular_in_place(
+                diag.transpose(),
+                x.rb_mut().subrows_mut(start, m),
+                Par::Seq,
+            );
+        }
+    }
+
+    /// Writes the interior's solution into `out` (`k` columns of length `n_total`).
+    fn write_interior(&self, out: &mut [f64], n_total: usize, k: usize) {
+        let n = self.eqs.len();
+        for j in 0..k {
+            let (col, o) = (
+                &self.work[j * n..(j + 1) * n],
+                &mut out[j * n_total..(j + 1) * n_total],
+            );
+            for (&v, &q) in col[..self.n_interior].iter().zip(&self.eqs) {
+                o[q] = v;
+            }
+        }
+    }
+}
+
+/// Domain-split LDLᵀ of symmetric tangents on one pattern (see the module documentation).
+pub struct SplitLdlt {
+    halves: [Half; 2],
+    separator: Vec<usize>,
+    /// (position in the tangent's values, column-major index in s x s) of every stored entry of
+    /// `K_SS`.
+    k_ss: Vec<(usize, usize)>,
+    /// `S̃`, then its LU factors (s x s column-major).
+    dense: Vec<f64>,
+    perm: Vec<usize>,
+    perm_inv: Vec<usize>,
+    dense_mem: MemBuffer,
+    /// Separator right-hand sides (s x MAX_RHS) and an output buffer for the interiors.
+    separator_rhs: Vec<f64>,
+    factorized: bool,
+}
+
+impl std::fmt::Debug for SplitLdlt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SplitLdlt")
+            .field(
+                "interiors",
+                &[self.halves[0].n_interior, self.halves[1].n_interior],
+            )
+            .field("separator", &self.separator.len())
+            .field("factorized", &self.factorized)
+            .finish()
+    }
+}
+
+impl SplitLdlt {
+    /// Symbolic analysis of both halves of `pattern` (structurally symmetric, full) for `split`.
+    pub fn new(pattern: &CscPattern, split: &DofSplit) -> Result<Self, LinearSolveError> {
+        let mut seen = vec![0u8; pattern.n];
+        for &q in split.interiors.iter().flatten().chain(&split.separator) {
+            if q >= pattern.n || seen[q] != 0 {
+                return Err(LinearSolveError::Other(format!(
+                    "the split lists equation {q} twice or out of range"
+                )));
+            }
+            seen[q] = 1;
+        }
+        if seen.contains(&0) {
+            return Err(LinearSolveError::Other("the split misses equations".into()));
+        }
+        // The interiors must not touch.
+        let mut part = vec![2u8; pattern.n];
+        for (p, interior) in split.interiors.iter().enumerate() {
+            for &q in interior {
+                part[q] = p as u8;
+            }
+        }
+        for c in 0..pattern.n {
+            for &r in &pattern.row_idx[pattern.col_ptr[c]..pattern.col_ptr[c + 1]] {
+                if part[c] < 2 && part[r] < 2 && part[r] != part[c] {
+                    return Err(LinearSolveError::Other(format!(
+                        "equations {r} and {c} of different halves are coupled"
+                    )));
+                }
+            }
+        }
+        let (a, b) = rayon::join(
+            || Half::new(pattern, &split.interiors[0], &split.separator),
+            || Half::new(pattern, &split.interiors[1], &split.separator),
+        );
+        let s = split.separator.len();
+        let mut local = vec![NONE; pattern.n];
+        for (i, &q) in split.separator.iter().enumerate() {
+            local[q] = i;
+        }
+        let mut k_ss = Vec::new();
+        for (j, &c) in split.separator.iter().enumerate() {
+            for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
+                let i = local[pattern.row_idx[k]];
+                if i != NONE {
+                    k_ss.push((k, i + j * s));
+                }
+            }
+        }
+        let req = StackReq::any_of(&[
+            faer::linalg::lu::partial_pivoting::factor::lu_in_place_scratch::<usize, f64>(
+                s,
+                s,
+                Par::Seq,
+                Default::default(),
+            ),
+            faer::linalg::lu::partial_pivoting::solve::solve_in_place_scratch::<usize, f64>(
+                s,
+                MAX_RHS,
+                Par::Seq,
+            ),
+        ]);
+        Ok(SplitLdlt {
+            halves: [a?, b?],
+            separator: split.separator.clone(),
+            k_ss,
+            dense: vec![0.0; s * s],
+            perm: vec![0; s],
+            perm_inv: vec![0; s],
+            dense_mem: MemBuffer::new(req),
+            separator_rhs: vec![0.0; s * MAX_RHS],
+            factorized: false,
+        })
+    }
+
+    /// Sizes: the two interiors and the separator (equations).
+    pub fn sizes(&self) -> [usize; 3] {
+        [
+            self.halves[0].n_interior,
+            self.halves[1].n_interior,
+            self.separator.len(),
+        ]
+    }
+
+    /// Numeric factorization of the symmetric `values` on the pattern given to [`Self::new`].
+    pub fn factorize(&mut self, values: &[f64]) -> Result<(), LinearSolveError> {
+        self.factorized = false;
+        let [a, b] = &mut self.halves;
+        let (ra, rb) = rayon::join(|| a.factorize(values), || b.factorize(values));
+        ra?;
+        rb?;
+        let s = self.separator.len();
+        if s == 0 {
+            self.factorized = true;
+            return Ok(());
+        }
+        for ((d, x), y) in self.dense.iter_mut().zip(&a.schur).zip(&b.schur) {
+            *d = x + y;
+        }
+        for &(k, idx) in &self.k_ss {
+            self.dense[idx] -= values[k];
+        }
+        let scale = self.dense.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mut lu = MatMut::from_column_major_slice_mut(&mut self.dense, s, s);
+        faer::linalg::lu::partial_pivoting::factor::lu_in_place(
+            lu.rb_mut(),
+            &mut self.perm,
+            &mut self.perm_inv,
+            Par::Seq,
+            MemStack::new(&mut self.dense_mem),
+            Default::default(),
+        );
+        // A pivot at rounding level of the largest entry: the tangent is singular.
+        for i in 0..s {
+            let p = lu[(i, i)];
+            if !p.is_finite() || p.abs() <= 1e-14 * scale {
+                return Err(LinearSolveError::Singular(self.separator[i]));
+            }
+        }
+        self.factorized = true;
+        Ok(())
+    }
+
+    /// Solves `A X = B` in place for `columns` (≤ [`MAX_RHS`]) right-hand sides stored one
+    /// after the other.
+    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
+        assert!(self.factorized, "solve before factorize");
+        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
+        let n = rhs.len() / columns;
+        let k = columns;
+        let s = self.separator.len();
+        {
+            let [a, b] = &mut self.halves;
+            let rhs = &*rhs;
+            rayon::join(|| a.forward(rhs, n, k), || b.forward(rhs, n, k));
+        }
+        let [a, b] = &self.halves;
+        for j in 0..k {
+            let (na, nb) = (a.eqs.len(), b.eqs.len());
+            let fa = &a.work[j * na + a.n_interior..(j + 1) * na];
+            let fb = &b.work[j * nb + b.n_interior..(j + 1) * nb];
+            for (i, &q) in self.separator.iter().enumerate() {
+                self.separator_rhs[j * s + i] = rhs[j * n + q] + fa[i] + fb[i];
+            }
+        }
+        if s > 0 {
+            let lu = MatRef::from_column_major_slice(&self.dense, s, s);
+            faer::linalg::lu::partial_pivoting::solve::solve_in_place_with_conj(
+                lu,
+                lu,
+                faer::perm::PermRef::new_checked(&self.perm, &self.perm_inv, s),
+                faer::Conj::No,
+                MatMut::from_column_major_slice_mut(&mut self.separator_rhs[..s * k], s, k),
+                Par::Seq,
+                MemStack::new(&mut self.dense_mem),
+            );
+        }
+        let x_s = &self.separator_rhs[..s * k];
+        let [a, b] = &mut self.halves;
+        rayon::join(|| a.backward(x_s, k), || b.backward(x_s, k));
+        a.write_interior(rhs, n, k);
+        b.write_interior(rhs, n, k);
+        for j in 0..k {
+            for (i, &q) in self.separator.iter().enumerate() {
+                rhs[j * n + q] = x_s[j * s + i];
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linear::SparseLdlt;
+    use rand::{Rng, SeedableRng};
+
+    /// An `nx` x `ny` grid of quads (nodes jiggled, seeded), its node graph and coordinates.
+    fn grid(
+        nx: usize,
+        ny: usize,
+        rng: &mut rand::rngs::StdRng,
+    ) -> (Vec<[usize; 4]>, Vec<[f64; 2]>) {
+        let node = |i: usize, j: usize| j * (nx + 1) + i;
+        let mut coords = Vec::new();
+        for j in 0..=ny {
+            for i in 0..=nx {
+                coords.push([
+                    i as f64 + rng.gen_range(-0.2..0.2),
+                    j as f64 + rng.gen_range(-0.2..0.2),
+                ]);
+            }
+        }
+        let mut quads = Vec::new();
+        for j in 0..ny {
+            for i in 0..nx {
+                quads.push([
+                    node(i, j),
+                    node(i + 1, j),
+                    node(i + 1, j + 1),
+                    node(i, j + 1),
+                ]);
+            }
+        }
+        (quads, coords)
+    }
+
+    /// A symmetric matrix on `pattern`: per element a random symmetric block (positive
+    /// definite `BᵀB + I`, or shifted to be indefinite), assembled; plus an optional dense
+    /// border row (the last equation) coupled to `border_rows`.
+    fn assemble(
+        quads: &[[usize; 4]],
+        eq: &[usize],
+        pattern: &CscPattern,
+        shift: f64,
+        border: Option<(usize, &[usize])>,
+        rng: &mut rand::rngs::StdRng,
+    ) -> Vec<f64> {
+        let mut values = vec![0.0; pattern.nnz()];
+        for q in quads {
+            let dofs: Vec<usize> = q.iter().flat_map(|&n| [eq[2 * n], eq[2 * n + 1]]).collect();
+            let b: Vec<f64> = (0..64).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            for r in 0..8 {
+                for c in 0..8 {
+                    let mut v: f64 = (0..8).map(|k| b[k * 8 + r] * b[k * 8 + c]).sum();
+                    if r == c {
+                        v += 1.0 - shift;
+                    }
+                    if dofs[r] != NONE && dofs[c] != NONE {
+                        values[pattern.position(dofs[r], dofs[c]).unwrap()] += v;
+                    }
+                }
+            }
+        }
+        if let Some((q, rows)) = border {
+            for &r in rows {
+                let v = rng.gen_range(-1.0..1.0);
+                values[pattern.position(r, q).unwrap()] += v;
+                values[pattern.position(q, r).unwrap()] += v;
+            }
+            values[pattern.position(q, q).unwrap()] += 5.0;
+        }
+        values
+    }
+
+    fn check(shift: f64, with_border: bool) {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let (quads, coords) = grid(30, 17, &mut rng);
+        let n_nodes = coords.len();
+        let graph = NodeGraph::from_elements(n_nodes, quads.iter().map(|q| &q[..]));
+        // The bottom edge fixed, and the x dof of one more node.
+        let mut eq = vec![0usize; 2 * n_nodes];
+        let mut n_eq = 0;
+        for n in 0..n_nodes {
+            for i in 0..2 {
+                let fixed = coords[n][1] < 0.5 || (n == 40 && i == 0);
+                eq[2 * n + i] = if fixed { NONE } else { n_eq };
+                n_eq += usize::from(!fixed);
+            }
+        }
+        let mut split = graph
+            .split_by_elimination_tree(&eq)
+            .unwrap()
+            .expect("a grid splits");
+        // Two halves of similar size and a separator of the order of a cut across the grid
+        // (17 active nodes high, 31 wide).
+        let [a, b] = [split.interiors[0].len(), split.interiors[1].len()];
+        assert!(a.min(b) * 3 > a.max(b), "{a} vs {b}");
+        assert!(
+            split.separator.len() <= 2 * 2 * 31,
+            "{}",
+            split.separator.len()
+        );
+        let base = graph.dof_pattern(&eq, n_eq);
+        let border_rows: Vec<usize> = (0..n_eq).step_by(7).collect();
+        let (pattern, n_total) = if with_border {
+            split.separator.push(n_eq);
+            (
+                base.bordered(n_eq + 1, &[(n_eq, border_rows.clone())]),
+                n_eq + 1,
+            )
+        } else {
+            (base, n_eq)
+        };
+        let values = assemble(
+            &quads,
+            &eq,
+            &pattern,
+            shift,
+            with_border.then_some((n_eq, &border_rows[..])),
+            &mut rng,
+        );
+        let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
+        split_ldlt.factorize(&values).unwrap();
+        let mut whole = SparseLdlt::new(&pattern, None).unwrap();
+        whole.factorize(&pattern, &values).unwrap();
+        let k = 3;
+        let b: Vec<f64> = (0..n_total * k).map(|_| rng.gen_range(-1.0..1.0)).collect();
+        let (mut x_split, mut x_whole) = (b.clone(), b.clone());
+        split_ldlt.solve_many_in_place(&mut x_split, k);
+        whole.solve_many_in_place(&mut x_whole, k);
+        // Residuals of the split solve, relative to |b| (both are direct solves of a matrix of
+        // condition number ~1e3: agreement to 1e-10 leaves room for rounding).
+        let mut ax = vec![0.0; n_total];
+        for j in 0..k {
+            pattern.mul_vec(&values, &x_split[j * n_total..(j + 1) * n_total], &mut ax);
+            let r = ax
+                .iter()
+                .zip(&b[j * n_total..(j + 1) * n_total])
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            assert!(r < 1e-10, "residual {r}");
+        }
+        let scale = x_whole.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = x_split
+            .iter()
+            .zip(&x_whole)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            diff < 1e-10 * scale,
+            "split vs whole: {diff} (scale {scale})"
+        );
+    }
+
+    /// The split solve equals faer's whole LDLᵀ on a definite matrix.
+    #[test]
+    fn split_ldlt_matches_whole_ldlt() {
+        check(0.0, false);
+    }
+
+    /// ... on an indefinite one (negative eigenvalues, nonsingular) with a dense border
+    /// equation in the separator (a force-controlled rigid body).
+    #[test]
+    fn split_ldlt_matches_whole_ldlt_indefinite_bordered() {
+        check(1.3, true);
+    }
+
+    /// A split whose interiors touch, or that misses an equation, is refused.
+    #[test]
+    fn split_ldlt_refuses_bad_splits() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+        let (quads, coords) = grid(4, 4, &mut rng);
+        let graph = NodeGraph::from_elements(coords.len(), quads.iter().map(|q| &q[..]));
+        let eq: Vec<usize> = (0..2 * coords.len()).collect();
+        let pattern = graph.dof_pattern(&eq, eq.len());
+        let good = graph.split_by_elimination_tree(&eq).unwrap().unwrap();
+        assert!(SplitLdlt::new(&pattern, &good).is_ok());
+        let mut touching = good.clone();
+        let q = touching.separator.pop().unwrap();
+        touching.interiors[0].push(q);
+        let err = SplitLdlt::new(&pattern, &touching).unwrap_err().to_string();
+        assert!(err.contains("coupled"), "{err}");
+        let mut missing = good;
+        missing.separator.pop();
+        let err = SplitLdlt::new(&pattern, &missing).unwrap_err().to_string();
+        assert!(err.contains("misses"), "{err}");
+    }
+}
