@@ -430,26 +430,6 @@ impl StaticSolver {
             model.mesh.elements.iter().map(|e| e.nodes()),
         );
         let n_eq_nodes = eq[..n_nodes_dof].iter().filter(|&&q| q != NONE).count();
-        // The ordering (the longest step) and the pattern both only read the graph. A large
-        // model is bisected and its halves factorized in parallel (`SplitLdlt`); a small one,
-        // or one whose separator would be too large for a dense Schur complement, is ordered
-        // whole by AMD.
-        let (plan, base) = rayon::join(
-            || -> Result<EquationPlan, SolveError> {
-                if n_eq_nodes >= options.split_min_equations {
-                    if let Some(split) = graph.split_by_elimination_tree(&eq[..n_nodes_dof])? {
-                        if split.separator.len() <= MAX_SEPARATOR_EQUATIONS {
-                            return Ok(EquationPlan::Split(split));
-                        }
-                    }
-                }
-                Ok(EquationPlan::Whole(
-                    graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes)?,
-                ))
-            },
-            || graph.dof_pattern(&eq[..n_nodes_dof], n_eq_nodes),
-        );
-        let mut plan = plan?;
         // Bordered system: each force-controlled body couples its travel with the free dofs of
         // its candidate nodes; the travels are numbered and eliminated last.
         let borders: Vec<(usize, Vec<usize>)> = model
@@ -468,19 +448,40 @@ impl StaticSolver {
                 (eq[n_nodes_dof + b], rows)
             })
             .collect();
-        let pattern = base.bordered(n_eq, &borders);
+        // The ordering (the longest step) on one thread, the pattern and the element slots on
+        // the other. A large model is split in two halves factorized in parallel (`SplitLdlt`);
+        // a small one, or one whose separator would be too large for a dense Schur complement,
+        // is ordered whole by AMD.
+        let (plan, (pattern, slots)) = rayon::join(
+            || -> Result<EquationPlan, SolveError> {
+                if n_eq_nodes >= options.split_min_equations {
+                    if let Some(split) = graph.split_by_elimination_tree(&eq[..n_nodes_dof])? {
+                        if split.separator.len() <= MAX_SEPARATOR_EQUATIONS {
+                            return Ok(EquationPlan::Split(split));
+                        }
+                    }
+                }
+                Ok(EquationPlan::Whole(
+                    graph.fill_reducing_dof_order(&eq[..n_nodes_dof], n_eq_nodes)?,
+                ))
+            },
+            || {
+                let pattern = graph
+                    .dof_pattern(&eq[..n_nodes_dof], n_eq_nodes)
+                    .bordered(n_eq, &borders);
+                let slots = element_slots(model, &eq, &pattern);
+                (pattern, slots)
+            },
+        );
+        let mut plan = plan?;
         match &mut plan {
             EquationPlan::Whole(ordering) => ordering.extend(borders.iter().map(|b| b.0)),
             EquationPlan::Split(split) => split.separator.extend(borders.iter().map(|b| b.0)),
         }
-        // The slots and the symbolic factorization are independent: one thread each.
-        let (slots, lu) = rayon::join(
-            || element_slots(model, &eq, &pattern),
-            || match &plan {
-                EquationPlan::Whole(ordering) => TangentSolver::new(&pattern, Some(ordering)),
-                EquationPlan::Split(split) => TangentSolver::new_split(&pattern, split),
-            },
-        );
+        let lu = match &plan {
+            EquationPlan::Whole(ordering) => TangentSolver::new(&pattern, Some(ordering)),
+            EquationPlan::Split(split) => TangentSolver::new_split(&pattern, split),
+        };
         let lu = lu?;
         let contact_slots: Vec<Vec<[usize; 8]>> = model
             .contacts
