@@ -29,7 +29,7 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{
     solve_unit_lower_triangular_in_place, solve_unit_upper_triangular_in_place,
 };
-use faer::reborrow::{Reborrow, ReborrowMut};
+use faer::reborrow::ReborrowMut;
 use faer::sparse::linalg::cholesky::supernodal::{SupernodalLdltRef, SymbolicSupernodalCholesky};
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
@@ -421,7 +421,7 @@ impl Half {
         }
         let symbolic = supernodal(&self.symbolic);
         let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
-        let mut x = MatMut::from_column_major_slice_mut(&mut self.work[..n * k], n, k);
+        let work = &mut self.work[..n * k];
         for sn in 0..self.interior_supernodes {
             let node = factor.supernode(sn);
             let start = node.start();
@@ -429,40 +429,34 @@ impl Half {
             let size = ls.ncols();
             // Interior columns of this supernode (all but possibly the last one).
             let m = size.min(n_interior - start);
-            let top = ls.subrows(0, size).subcols(0, m);
-            let (diag, below) = top.split_at_row(m);
-            solve_unit_lower_triangular_in_place(diag, x.rb_mut().subrows_mut(start, m), Par::Seq);
-            // Rows below the interior columns: the rest of the diagonal block, then the pattern.
+            solve_unit_lower_triangular_in_place(
+                ls.subrows(0, m).subcols(0, m),
+                MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
+                Par::Seq,
+            );
+            // The rows below the interior columns, stored one after the other: the rest of the
+            // diagonal block (rows start + m .. start + size), then the pattern.
             let rest = size - m;
             let pattern = node.pattern();
             let rows = rest + pattern.len();
             if rows == 0 {
                 continue;
             }
-            let bot = ls.subrows(size, pattern.len()).subcols(0, m);
-            let mut tmp = MatMut::from_column_major_slice_mut(&mut self.tmp[..rows * k], rows, k);
+            let tmp = &mut self.tmp[..rows * k];
             matmul(
-                tmp.rb_mut().subrows_mut(0, rest),
+                MatMut::from_column_major_slice_mut(&mut *tmp, rows, k),
                 Accum::Replace,
-                below,
-                x.rb().subrows(start, m),
+                ls.subrows(m, rows).subcols(0, m),
+                MatRef::from_column_major_slice(&*work, n, k).subrows(start, m),
                 1.0,
                 Par::Seq,
             );
-            matmul(
-                tmp.rb_mut().subrows_mut(rest, pattern.len()),
-                Accum::Replace,
-                bot,
-                x.rb().subrows(start, m),
-                1.0,
-                Par::Seq,
-            );
-            for j in 0..k {
-                for i in 0..rest {
-                    x[(start + m + i, j)] -= tmp[(i, j)];
+            for (xc, tc) in work.chunks_exact_mut(n).zip(tmp.chunks_exact(rows)) {
+                for (x, t) in xc[start + m..start + size].iter_mut().zip(&tc[..rest]) {
+                    *x -= t;
                 }
-                for (idx, &r) in pattern.iter().enumerate() {
-                    x[(r, j)] -= tmp[(rest + idx, j)];
+                for (&r, t) in pattern.iter().zip(&tc[rest..]) {
+                    xc[r] -= t;
                 }
             }
         }
@@ -483,50 +477,36 @@ impl Half {
         }
         let symbolic = supernodal(&self.symbolic);
         let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
-        let mut x = MatMut::from_column_major_slice_mut(&mut self.work[..n * k], n, k);
+        let work = &mut self.work[..n * k];
         for sn in (0..self.interior_supernodes).rev() {
             let node = factor.supernode(sn);
             let start = node.start();
             let ls = node.val();
             let size = ls.ncols();
             let m = size.min(n_interior - start);
-            let top = ls.subrows(0, size).subcols(0, m);
-            let (diag, below) = top.split_at_row(m);
             let rest = size - m;
             let pattern = node.pattern();
             let rows = rest + pattern.len();
             if rows > 0 {
-                let mut tmp =
-                    MatMut::from_column_major_slice_mut(&mut self.tmp[..rows * k], rows, k);
-                for j in 0..k {
-                    for i in 0..rest {
-                        tmp[(i, j)] = x[(start + m + i, j)];
-                    }
-                    for (idx, &r) in pattern.iter().enumerate() {
-                        tmp[(rest + idx, j)] = x[(r, j)];
+                let tmp = &mut self.tmp[..rows * k];
+                for (xc, tc) in work.chunks_exact(n).zip(tmp.chunks_exact_mut(rows)) {
+                    tc[..rest].copy_from_slice(&xc[start + m..start + size]);
+                    for (t, &r) in tc[rest..].iter_mut().zip(pattern) {
+                        *t = xc[r];
                     }
                 }
-                let bot = ls.subrows(size, pattern.len()).subcols(0, m);
                 matmul(
-                    x.rb_mut().subrows_mut(start, m),
+                    MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
                     Accum::Add,
-                    below.transpose(),
-                    tmp.rb().subrows(0, rest),
-                    -1.0,
-                    Par::Seq,
-                );
-                matmul(
-                    x.rb_mut().subrows_mut(start, m),
-                    Accum::Add,
-                    bot.transpose(),
-                    tmp.rb().subrows(rest, pattern.len()),
+                    ls.subrows(m, rows).subcols(0, m).transpose(),
+                    MatRef::from_column_major_slice(&*tmp, rows, k),
                     -1.0,
                     Par::Seq,
                 );
             }
             solve_unit_upper_triangular_in_place(
-                diag.transpose(),
-                x.rb_mut().subrows_mut(start, m),
+                ls.subrows(0, m).subcols(0, m).transpose(),
+                MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
                 Par::Seq,
             );
         }
