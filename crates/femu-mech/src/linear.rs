@@ -2,9 +2,10 @@
 //! factorization per Newton iteration with a workspace allocated once.
 //!
 //! [`TangentSolver`] checks the symmetry of every tangent: a symmetric one (hyperelastic
-//! elements, dead loads, follower pressure on closed outlines, which is conservative) is
-//! factorized by supernodal LDLᵀ with an AMD ordering; an unsymmetric one (pressure on part of an
-//! outline, force-controlled rigid bodies) by sparse LU with partial pivoting.
+//! elements, dead loads, follower pressure on closed outlines, which is conservative, rigid
+//! bodies with their bordered force equation) is factorized by supernodal LDLᵀ with an AMD
+//! ordering, by halves on two cores for large models ([`crate::split::SplitLdlt`]); an
+//! unsymmetric one (pressure on part of an outline) by sparse LU with partial pivoting.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::linalg::cholesky::{

@@ -83,10 +83,10 @@ fn supernodal(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky
 }
 
 /// Largest share of the work one half may take in [`NodeGraph::split_by_elimination_tree`].
-const MAX_HALF_SHARE: f64 = 0.55;
+pub const MAX_HALF_SHARE: f64 = 0.55;
 
 /// Largest separator (nodes) [`NodeGraph::split_by_elimination_tree`] looks for.
-const MAX_SEPARATOR_NODES: usize = 1000;
+pub const MAX_SEPARATOR_NODES: usize = 1000;
 
 impl NodeGraph {
     /// Splits along the elimination tree of the AMD ordering: two groups of disjoint subtrees
@@ -97,8 +97,9 @@ impl NodeGraph {
     /// Starting from the roots, the candidate subtrees are shared between two groups (heaviest
     /// first into the lighter group); while the heavier group exceeds [`MAX_HALF_SHARE`] of the
     /// work, the heaviest subtree's root moves to the separator and its children become
-    /// candidates. The work of a subtree is the sum over its columns of the squared column
-    /// count. `None` when no balance is found within [`MAX_SEPARATOR_NODES`].
+    /// candidates. The work of a subtree is the sum over its node columns of (free dofs x
+    /// column count)², the flops of their elimination. `None` when no balance is found within
+    /// [`MAX_SEPARATOR_NODES`].
     pub fn split_by_elimination_tree(
         &self,
         eq: &[usize],
