@@ -540,36 +540,32 @@ impl TangentSolver {
     /// Symbolic analysis for `pattern` (structurally symmetric), with an optional elimination
     /// order for the LDLᵀ (see [`SparseLdlt::new`]).
     pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
-        // The transposed positions and the symbolic LDLᵀ are independent: one thread each.
-        let (transpose, ldlt) = rayon::join(
-            || transpose_positions(pattern),
-            || SparseLdlt::new(pattern, order),
-        );
-        let transpose = transpose.ok_or_else(|| {
-            LinearSolveError::Other("pattern is not structurally symmetric".into())
-        })?;
-        Ok(TangentSolver {
-            transpose,
-            ldlt: SymmetricFactor::Whole(Box::new(ldlt?)),
-            lu: None,
-            last: None,
-            symmetry_tolerance: 1e-12,
+        Self::with_symmetric_factor(pattern, || {
+            SparseLdlt::new(pattern, order).map(|f| SymmetricFactor::Whole(Box::new(f)))
         })
     }
 
     /// As [`Self::new`], with symmetric tangents factorized by halves of `split` in parallel
     /// ([`SplitLdlt`]).
     pub fn new_split(pattern: &CscPattern, split: &DofSplit) -> Result<Self, LinearSolveError> {
-        let (transpose, ldlt) = rayon::join(
-            || transpose_positions(pattern),
-            || SplitLdlt::new(pattern, split),
-        );
+        Self::with_symmetric_factor(pattern, || {
+            SplitLdlt::new(pattern, split).map(|f| SymmetricFactor::Split(Box::new(f)))
+        })
+    }
+
+    /// The transposed positions and the symbolic analysis (`factor`) are independent: one
+    /// thread each.
+    fn with_symmetric_factor(
+        pattern: &CscPattern,
+        factor: impl FnOnce() -> Result<SymmetricFactor, LinearSolveError> + Send,
+    ) -> Result<Self, LinearSolveError> {
+        let (transpose, ldlt) = rayon::join(|| transpose_positions(pattern), factor);
         let transpose = transpose.ok_or_else(|| {
             LinearSolveError::Other("pattern is not structurally symmetric".into())
         })?;
         Ok(TangentSolver {
             transpose,
-            ldlt: SymmetricFactor::Split(Box::new(ldlt?)),
+            ldlt: ldlt?,
             lu: None,
             last: None,
             symmetry_tolerance: 1e-12,

@@ -10,6 +10,8 @@ use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
 
+mod common;
+
 /// Tight Newton tolerances: the assertions are about the discretisation and the contact
 /// enforcement, not about where Newton stopped.
 fn tight() -> SolverOptions {
@@ -484,25 +486,14 @@ fn coarse_thigh_indentation_stops_at_its_limit_point() {
 /// The built-in thigh with about `elements` CPE4H quads, Table 1 materials, femur fixed, and
 /// the 10 mm indenter on the anterior side pushed with 0.1 N/mm (force control).
 fn thigh_indentation_model(elements: usize) -> Model {
-    use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
-    use femu_mech::loading::{apply_loading, Loading, Side};
-    let t = parametric_thigh(
-        &ThighParams {
-            target_elements: Some(elements),
-            ..Default::default()
-        },
+    use femu_mech::loading::{Loading, Side};
+    common::thigh_model(
+        elements,
         ElementKind::Cpe4h,
+        &Loading::Indentation {
+            site: Side::Anterior,
+            radius: 10.0,
+            force: 0.1,
+        },
     )
-    .unwrap();
-    let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
-    deck.pressures.clear();
-    let mut model = Model::from_deck(deck).unwrap();
-    let loading = Loading::Indentation {
-        site: Side::Anterior,
-        radius: 10.0,
-        force: 0.1,
-    };
-    apply_loading(&mut model, &skin, &loading).unwrap();
-    model
 }

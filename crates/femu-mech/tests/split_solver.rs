@@ -3,28 +3,13 @@
 //! force-controlled compression (a bordered equation in the separator) and force-controlled
 //! indentation, on a built-in thigh small enough for a test, with the split forced.
 
-use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+use common::thigh_model as thigh;
 use femu_mech::linear::Factorization;
-use femu_mech::loading::{apply_loading, Loading};
+use femu_mech::loading::Loading;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::ElementKind;
 
-fn thigh(elements: usize, kind: ElementKind, loading: &Loading) -> Model {
-    let t = parametric_thigh(
-        &ThighParams {
-            target_elements: Some(elements),
-            ..Default::default()
-        },
-        kind,
-    )
-    .unwrap();
-    let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
-    deck.pressures.clear();
-    let mut model = Model::from_deck(deck).unwrap();
-    apply_loading(&mut model, &skin, loading).unwrap();
-    model
-}
+mod common;
 
 fn compare(model: &Model) {
     let options = |split_min_equations| SolverOptions {
