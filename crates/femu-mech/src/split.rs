@@ -633,15 +633,6 @@ impl SplitLdlt {
         })
     }
 
-    /// Sizes: the two interiors and the separator (equations).
-    pub fn sizes(&self) -> [usize; 3] {
-        [
-            self.halves[0].n_interior,
-            self.halves[1].n_interior,
-            self.separator.len(),
-        ]
-    }
-
     /// Numeric factorization of the symmetric `values` on the pattern given to [`Self::new`].
     pub fn factorize(&mut self, values: &[f64]) -> Result<(), LinearSolveError> {
         self.factorized = false;
