@@ -26,6 +26,7 @@
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_unit_lower_triangular_in_place, solve_unit_upper_triangular_in_place,
 };
@@ -392,11 +393,16 @@ impl Half {
         if s > 0 {
             let l = MatRef::from_column_major_slice(&self.l_ss, s, s);
             let ld = MatRef::from_column_major_slice(&self.l_ss_d, s, s);
-            matmul(
+            // Ŝ is symmetric and L unit lower triangular: only the lower triangle of
+            // (L D) Lᵀ is formed, from the triangles of its factors (a sixth of a full product).
+            triangular::matmul(
                 MatMut::from_column_major_slice_mut(&mut self.schur, s, s),
+                BlockStructure::TriangularLower,
                 Accum::Replace,
                 ld,
+                BlockStructure::TriangularLower,
                 l.transpose(),
+                BlockStructure::UnitTriangularUpper,
                 1.0,
                 Par::Seq,
             );
@@ -611,7 +617,7 @@ impl SplitLdlt {
             faer::linalg::lu::partial_pivoting::factor::lu_in_place_scratch::<usize, f64>(
                 s,
                 s,
-                Par::Seq,
+                DENSE_PAR,
                 Default::default(),
             ),
             faer::linalg::lu::partial_pivoting::solve::solve_in_place_scratch::<usize, f64>(
@@ -651,13 +657,19 @@ impl SplitLdlt {
         for &(k, idx) in &self.k_ss {
             self.dense[idx] -= values[k];
         }
+        // The halves formed the lower triangles only; S̃ is symmetric.
+        for j in 0..s {
+            for i in j + 1..s {
+                self.dense[i * s + j] = self.dense[j * s + i];
+            }
+        }
         let scale = self.dense.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mut lu = MatMut::from_column_major_slice_mut(&mut self.dense, s, s);
         faer::linalg::lu::partial_pivoting::factor::lu_in_place(
             lu.rb_mut(),
             &mut self.perm,
             &mut self.perm_inv,
-            Par::Seq,
+            DENSE_PAR,
             MemStack::new(&mut self.dense_mem),
             Default::default(),
         );
@@ -718,6 +730,12 @@ impl SplitLdlt {
         }
     }
 }
+
+/// The dense separator LU runs after both halves, when both cores are free.
+const DENSE_PAR: Par = Par::Rayon(match std::num::NonZeroUsize::new(2) {
+    Some(n) => n,
+    None => unreachable!(),
+});
 
 #[cfg(test)]
 mod tests {
