@@ -279,7 +279,7 @@ pub struct StaticSolver {
     n_eq: usize,
     pattern: CscPattern,
     /// For element e, `slots[e*64 + r*nd + c]` is the position of local entry (r, c) in `values`.
-    slots: Vec<usize>,
+    slots: Vec<Slot>,
     /// Prescribed dofs and their end-of-step values.
     prescribed: Vec<(usize, f64)>,
     /// Dead nodal forces at λ = 1 (2 per node).
@@ -325,17 +325,27 @@ impl std::fmt::Debug for StaticSolver {
     }
 }
 
+/// A position in the tangent values, 32 bits: the element slots are read at every assembly and
+/// half the size is half the memory traffic (a tangent with 2³² entries would need some 50 GB).
+type Slot = u32;
+/// No position: the entry's row or column is a prescribed dof.
+const NO_SLOT: Slot = Slot::MAX;
+
 /// For each element `e`, `slots[e*KE + r*nd + c]` is the position in the values of `pattern` of
-/// its local entry (row r, column c) (`NONE` if either dof is prescribed or beyond the element's
-/// `nd` dofs), `eq` being the equation of each dof.
+/// its local entry (row r, column c) (`NO_SLOT` if either dof is prescribed or beyond the
+/// element's `nd` dofs), `eq` being the equation of each dof; `None` if the pattern has too
+/// many entries for a [`Slot`].
 ///
 /// One binary search per pair of element nodes instead of one per pair of dofs: the columns of
 /// a node's two free dofs have the same rows (the free dofs of the node's neighbours, node by
 /// node, then any border rows; see [`NodeGraph::dof_pattern`] and [`CscPattern::bordered`]), and
 /// the free dofs of a neighbour are consecutive rows; so the offset of a neighbour within one
 /// column gives its entries in both.
-fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Vec<usize> {
-    let mut slots = vec![NONE; model.mesh.elements.len() * KE];
+fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Option<Vec<Slot>> {
+    if pattern.nnz() >= NO_SLOT as usize {
+        return None;
+    }
+    let mut slots = vec![NO_SLOT; model.mesh.elements.len() * KE];
     slots.par_chunks_mut(KE).enumerate().for_each(|(e, slots)| {
         let nodes = model.mesh.elements[e].nodes();
         let nd = 2 * nodes.len();
@@ -367,14 +377,14 @@ fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Vec<usize
                             continue;
                         }
                         debug_assert_eq!(pattern.position(r, c), Some(pos));
-                        slots[(2 * b + j) * nd + 2 * a + i] = pos;
+                        slots[(2 * b + j) * nd + 2 * a + i] = pos as Slot;
                         pos += 1;
                     }
                 }
             }
         }
     });
-    slots
+    Some(slots)
 }
 
 /// Largest separator (equations) for which the tangent is factorized by halves: its dense
@@ -474,6 +484,12 @@ impl StaticSolver {
             },
         );
         let mut plan = plan?;
+        let slots = slots.ok_or_else(|| {
+            SolveError::Setup(LinearSolveError::Other(format!(
+                "the tangent has {} entries, more than this solver addresses (2^32)",
+                pattern.nnz()
+            )))
+        })?;
         match &mut plan {
             EquationPlan::Whole(ordering) => ordering.extend(borders.iter().map(|b| b.0)),
             EquationPlan::Split(split) => split.separator.extend(borders.iter().map(|b| b.0)),
@@ -655,9 +671,9 @@ impl StaticSolver {
             if with_tangent {
                 let ke = &self.ke[e * KE..e * KE + nd * nd];
                 let slots = &self.slots[e * KE..e * KE + nd * nd];
-                for (s, v) in slots.iter().zip(ke) {
-                    if *s != NONE {
-                        self.values[*s] += v;
+                for (&s, v) in slots.iter().zip(ke) {
+                    if s != NO_SLOT {
+                        self.values[s as usize] += v;
                     }
                 }
             }
@@ -696,8 +712,8 @@ impl StaticSolver {
                 for i in 0..4 {
                     for j in 0..4 {
                         let pos = slots[local[i] * nd + local[j]];
-                        if pos != NONE {
-                            self.values[pos] += kl[i][j];
+                        if pos != NO_SLOT {
+                            self.values[pos as usize] += kl[i][j];
                         }
                     }
                 }
@@ -1517,7 +1533,7 @@ mod tests {
                 .build();
             let model = Model::from_deck(deck).unwrap();
             let solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
-            let slots = element_slots(&model, &solver.eq, &solver.pattern);
+            let slots = element_slots(&model, &solver.eq, &solver.pattern).unwrap();
             for (e, el) in model.mesh.elements.iter().enumerate() {
                 let nd = 2 * el.kind.node_count();
                 let dofs: Vec<usize> = el
@@ -1528,9 +1544,9 @@ mod tests {
                 for r in 0..MAX_DOFS {
                     for c in 0..MAX_DOFS {
                         let expected = if r < nd && c < nd && dofs[r] != NONE && dofs[c] != NONE {
-                            solver.pattern.position(dofs[r], dofs[c]).unwrap()
+                            solver.pattern.position(dofs[r], dofs[c]).unwrap() as Slot
                         } else {
-                            NONE
+                            NO_SLOT
                         };
                         if r < nd && c < nd {
                             assert_eq!(
