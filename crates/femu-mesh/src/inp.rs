@@ -97,9 +97,13 @@ struct Field<'a> {
     line: usize,
 }
 
+/// Fields of one data record: a node line has 3, a quad line 5; longer records (sets,
+/// continuation lines) spill to the heap.
+type Fields<'a> = smallvec::SmallVec<[Field<'a>; 6]>;
+
 struct Record<'a> {
     line: usize,
-    fields: Vec<Field<'a>>,
+    fields: Fields<'a>,
 }
 
 struct Param {
@@ -174,7 +178,7 @@ fn lex<'a>(text: &'a str, file: &str) -> Result<Vec<Block<'a>>> {
                 message: "data line before the first keyword".to_string(),
             });
         };
-        let mut fields: Vec<Field<'a>> = t
+        let mut fields: Fields<'a> = t
             .split(',')
             .map(|s| Field {
                 text: s.trim(),
