@@ -158,14 +158,16 @@ pub struct DirectSensitivity {
     f_invd: Vec<f64>,
     /// The right-hand sides / solutions, one column per parameter.
     block: Vec<f64>,
-    rhs: Vec<f64>,
-    residual: Vec<f64>,
+    /// Three blocks of [`MAX_RHS`] columns at most: the right-hand sides of the refinement,
+    /// their residuals, and the solutions interleaved (`[i * cols + j]`). On a first call it is
+    /// the solver's element-matrix buffer, idle between assemblies and already in memory (see
+    /// [`DirectSensitivity::compute`]).
+    work: Vec<f64>,
     /// Equation of each state dof.
     eqs: Vec<Option<usize>>,
     /// Norms of the right-hand sides of a block.
     bnorms: Vec<f64>,
-    /// A block of solutions interleaved (`[i * cols + j]`) and its product with `K_T`.
-    interleaved: Vec<f64>,
+    /// The product of `K_T` with the interleaved solutions.
     product: Vec<f64>,
 }
 
@@ -233,7 +235,21 @@ impl DirectSensitivity {
         let mut eqs = std::mem::take(&mut self.eqs);
         eqs.clear();
         eqs.extend((0..n_state).map(|d| solver.equation_of(d)));
+        // Work blocks: while this has none large enough (a first call), it borrows the
+        // solver's element-matrix buffer (13 MB at paper scale, idle until the next assembly,
+        // and already in memory: a fresh 12 MB would cost thousands of page faults) and gives
+        // it back below, whatever the outcome.
+        let active = solver.active_constraints(model, state).len();
+        let columns = parameters.len().max(active).clamp(1, MAX_RHS);
+        let need = 3 * columns * solver.equations();
+        let borrowed = self.work.len() < need && solver.element_scratch().len() >= need;
+        if borrowed {
+            std::mem::swap(&mut self.work, solver.element_scratch());
+        }
         let result = self.compute_with(solver, model, state, parameters, out, &eqs, report);
+        if borrowed {
+            std::mem::swap(&mut self.work, solver.element_scratch());
+        }
         self.eqs = eqs;
         let mut report = result?;
         report.wall_time_s = t0.elapsed().as_secs_f64();
@@ -324,11 +340,19 @@ impl DirectSensitivity {
                     .collect()
             })
             .collect();
-        for (e, el) in model.mesh.elements.iter().enumerate() {
-            for &(k, c10, scale) in &columns[model.element_material[e]] {
-                let fe = if c10 { &self.f_c10 } else { &self.f_invd };
-                let fe = &fe[e * MAX_DOFS..(e + 1) * MAX_DOFS];
-                let col = &mut x[k * n_eq..(k + 1) * n_eq];
+        // The columns are independent: one task each, over the elements of its material.
+        let (f_c10, f_invd) = (&self.f_c10, &self.f_invd);
+        x.par_chunks_mut(n_eq).enumerate().for_each(|(k, col)| {
+            let p = &parameters[k];
+            let Some(&(_, c10, scale)) = columns[p.material].iter().find(|c| c.0 == k) else {
+                return;
+            };
+            let fe_all = if c10 { f_c10 } else { f_invd };
+            for (e, el) in model.mesh.elements.iter().enumerate() {
+                if model.element_material[e] != p.material {
+                    continue;
+                }
+                let fe = &fe_all[e * MAX_DOFS..(e + 1) * MAX_DOFS];
                 for (a, &n) in el.nodes().iter().enumerate() {
                     for i in 0..2 {
                         if let Some(q) = eqs[2 * n + i] {
@@ -337,7 +361,7 @@ impl DirectSensitivity {
                     }
                 }
             }
-        }
+        });
         report.assembly_time_s += t.elapsed().as_secs_f64();
         let solved = self.solve_block(solver, &mut x, n_eq, tolerance, &mut report);
         if let Err(e) = solved {
@@ -431,13 +455,17 @@ impl DirectSensitivity {
     ) -> Result<(), SensitivityError> {
         for chunk in block.chunks_mut(MAX_RHS * n) {
             let cols = chunk.len() / n;
-            self.rhs.clear();
-            self.rhs.extend_from_slice(chunk);
-            self.residual.resize(chunk.len(), 0.0);
+            let len = chunk.len();
+            if self.work.len() < 3 * len {
+                self.work.resize(3 * len, 0.0);
+            }
+            let (rhs, rest) = self.work.split_at_mut(len);
+            let (residual, rest) = rest.split_at_mut(len);
+            let interleaved = &mut rest[..len];
+            rhs.copy_from_slice(chunk);
             self.bnorms.clear();
-            self.bnorms.extend(self.rhs.chunks(n).map(norm));
-            self.interleaved.resize(chunk.len(), 0.0);
-            self.product.resize(chunk.len(), 0.0);
+            self.bnorms.extend(rhs.chunks(n).map(norm));
+            self.product.resize(len, 0.0);
             let t = Instant::now();
             solver.solve_tangent_many(chunk, cols);
             report.triangular_solve_time_s += t.elapsed().as_secs_f64();
@@ -447,7 +475,17 @@ impl DirectSensitivity {
                 let t = Instant::now();
                 // R = B - K X (one pass over K for all the columns, interleaved), and the
                 // worst relative residual of the columns.
-                let rel = self.residual_of(solver, chunk, cols, n);
+                let rel = residual_of(
+                    solver,
+                    chunk,
+                    cols,
+                    n,
+                    rhs,
+                    &self.bnorms,
+                    interleaved,
+                    &mut self.product,
+                    residual,
+                );
                 report.residual_time_s += t.elapsed().as_secs_f64();
                 let converged = rel <= tolerance;
                 let stalled = !(rel < 0.5 * last);
@@ -467,7 +505,7 @@ impl DirectSensitivity {
                         .map_err(SensitivityError::Factorization)?;
                     report.refactorized = true;
                     report.factorization_time_s += t.elapsed().as_secs_f64();
-                    chunk.copy_from_slice(&self.rhs);
+                    chunk.copy_from_slice(rhs);
                     let t = Instant::now();
                     solver.solve_tangent_many(chunk, cols);
                     report.triangular_solve_time_s += t.elapsed().as_secs_f64();
@@ -477,11 +515,11 @@ impl DirectSensitivity {
                 }
                 last = rel;
                 let t = Instant::now();
-                solver.solve_tangent_many(&mut self.residual, cols);
+                solver.solve_tangent_many(residual, cols);
                 report.triangular_solve_time_s += t.elapsed().as_secs_f64();
                 report.back_substitutions += cols;
                 report.refinement_steps += 1;
-                for (xi, ci) in chunk.iter_mut().zip(&self.residual) {
+                for (xi, ci) in chunk.iter_mut().zip(residual.iter()) {
                     *xi += ci;
                 }
             }
@@ -490,41 +528,48 @@ impl DirectSensitivity {
     }
 }
 
-impl DirectSensitivity {
-    /// `self.residual = self.rhs - K_T X` for the `cols` columns of `x` (`n` rows each,
-    /// column-major like the right-hand sides) and the largest relative residual
-    /// `‖r_j‖ / ‖b_j‖` of the columns.
-    fn residual_of(&mut self, solver: &StaticSolver, x: &[f64], cols: usize, n: usize) -> f64 {
-        // Interleave X so that K_T is read once for all the columns.
-        self.interleaved
-            .par_chunks_mut(cols)
-            .enumerate()
-            .for_each(|(i, row)| {
-                for (j, v) in row.iter_mut().enumerate() {
-                    *v = x[j * n + i];
-                }
-            });
-        solver.tangent_mul_many_interleaved(&self.interleaved, &mut self.product, cols);
-        let product = &self.product;
-        let rhs = &self.rhs;
-        let bnorms = &self.bnorms;
-        self.residual
-            .par_chunks_mut(n)
-            .enumerate()
-            .map(|(j, r)| {
-                let mut sum = 0.0;
-                for (i, (ri, bi)) in r.iter_mut().zip(&rhs[j * n..(j + 1) * n]).enumerate() {
-                    *ri = bi - product[i * cols + j];
-                    sum += *ri * *ri;
-                }
-                if bnorms[j] > 0.0 {
-                    sum.sqrt() / bnorms[j]
-                } else {
-                    0.0
-                }
-            })
-            .reduce(|| 0.0, f64::max)
-    }
+/// `residual = rhs - K_T X` for the `cols` columns of `x` (`n` rows each, column-major like
+/// the right-hand sides) and the largest relative residual `‖r_j‖ / ‖b_j‖` of the columns
+/// (`bnorms`: the norms of the right-hand sides; `interleaved` and `product`: work blocks).
+#[allow(clippy::too_many_arguments)]
+fn residual_of(
+    solver: &StaticSolver,
+    x: &[f64],
+    cols: usize,
+    n: usize,
+    rhs: &[f64],
+    bnorms: &[f64],
+    interleaved: &mut [f64],
+    product: &mut [f64],
+    residual: &mut [f64],
+) -> f64 {
+    // Interleave X so that K_T is read once for all the columns.
+    interleaved
+        .par_chunks_mut(cols)
+        .enumerate()
+        .for_each(|(i, row)| {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = x[j * n + i];
+            }
+        });
+    solver.tangent_mul_many_interleaved(interleaved, product, cols);
+    let product = &*product;
+    residual
+        .par_chunks_mut(n)
+        .enumerate()
+        .map(|(j, r)| {
+            let mut sum = 0.0;
+            for (i, (ri, bi)) in r.iter_mut().zip(&rhs[j * n..(j + 1) * n]).enumerate() {
+                *ri = bi - product[i * cols + j];
+                sum += *ri * *ri;
+            }
+            if bnorms[j] > 0.0 {
+                sum.sqrt() / bnorms[j]
+            } else {
+                0.0
+            }
+        })
+        .reduce(|| 0.0, f64::max)
 }
 
 fn norm(v: &[f64]) -> f64 {

@@ -622,6 +622,12 @@ impl StaticSolver {
         lambda: f64,
         with_tangent: bool,
     ) -> Result<(), AttemptFailure> {
+        let ke_len = model.mesh.elements.len() * KE;
+        if self.ke.len() != ke_len {
+            // Borrowed through `element_scratch` and not given back.
+            self.ke.clear();
+            self.ke.resize(ke_len, 0.0);
+        }
         let failed = self
             .fe
             .par_chunks_mut(MAX_DOFS)
@@ -1471,6 +1477,13 @@ impl StaticSolver {
         self.pattern.mul_vec(&self.values, x, y);
     }
 
+    /// The element-matrix buffer (`64` values per element), idle between assemblies: work
+    /// memory another computation may borrow between two assemblies and swap back. If it is
+    /// not given back, the next assembly allocates it again.
+    pub fn element_scratch(&mut self) -> &mut Vec<f64> {
+        &mut self.ke
+    }
+
     /// `Y = K_T X` on the free dofs for `cols` vectors stored interleaved (`x[i * cols + j]`
     /// is equation `i` of vector `j`), with the tangent assembled last: one pass over
     /// the matrix (see [`CscPattern::mul_many_interleaved`]).
@@ -1521,6 +1534,26 @@ mod tests {
 
     /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
     /// triangles with fully, x-only and y-only prescribed nodes.
+    /// A solve whose element-matrix buffer was borrowed and not given back allocates it again
+    /// and gives the same state.
+    #[test]
+    fn element_scratch_not_given_back_is_reallocated() {
+        let g = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);
+        let deck = DeckBuilder::new(g)
+            .material_everywhere(0.01, 1.0)
+            .fix("BOTTOM")
+            .displacement("TOP", 1, 0.1)
+            .build();
+        let model = Model::from_deck(deck).unwrap();
+        let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+        let first = solver.solve(&model).unwrap().u;
+        let taken = std::mem::take(solver.element_scratch());
+        assert_eq!(taken.len(), model.mesh.elements.len() * KE);
+        let again = solver.solve(&model).unwrap().u;
+        assert_eq!(first, again);
+        assert_eq!(solver.element_scratch().len(), taken.len());
+    }
+
     #[test]
     fn element_slots_match_a_search_per_entry() {
         let quads = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);
