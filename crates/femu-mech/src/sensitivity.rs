@@ -159,16 +159,15 @@ pub struct DirectSensitivity {
     /// The right-hand sides / solutions, one column per parameter.
     block: Vec<f64>,
     /// Three blocks of [`MAX_RHS`] columns at most: the right-hand sides of the refinement,
-    /// their residuals, and the solutions interleaved (`[i * cols + j]`). On a first call it is
-    /// the solver's element-matrix buffer, idle between assemblies and already in memory (see
+    /// their residuals (which first hold the solutions interleaved, `[i * cols + j]`), and the
+    /// product of `K_T` with the interleaved solutions. Usually the solver's element-matrix
+    /// buffer, idle between assemblies and already in memory (see
     /// [`DirectSensitivity::compute`]).
     work: Vec<f64>,
     /// Equation of each state dof.
     eqs: Vec<Option<usize>>,
     /// Norms of the right-hand sides of a block.
     bnorms: Vec<f64>,
-    /// The product of `K_T` with the interleaved solutions.
-    product: Vec<f64>,
 }
 
 /// Largest relative residual `‖K_T x - b‖ / ‖b‖` at which the refinement stops. The linear
@@ -461,11 +460,10 @@ impl DirectSensitivity {
             }
             let (rhs, rest) = self.work.split_at_mut(len);
             let (residual, rest) = rest.split_at_mut(len);
-            let interleaved = &mut rest[..len];
+            let product = &mut rest[..len];
             rhs.copy_from_slice(chunk);
             self.bnorms.clear();
             self.bnorms.extend(rhs.chunks(n).map(norm));
-            self.product.resize(len, 0.0);
             let t = Instant::now();
             solver.solve_tangent_many(chunk, cols);
             report.triangular_solve_time_s += t.elapsed().as_secs_f64();
@@ -475,17 +473,7 @@ impl DirectSensitivity {
                 let t = Instant::now();
                 // R = B - K X (one pass over K for all the columns, interleaved), and the
                 // worst relative residual of the columns.
-                let rel = residual_of(
-                    solver,
-                    chunk,
-                    cols,
-                    n,
-                    rhs,
-                    &self.bnorms,
-                    interleaved,
-                    &mut self.product,
-                    residual,
-                );
+                let rel = residual_of(solver, chunk, cols, n, rhs, &self.bnorms, product, residual);
                 report.residual_time_s += t.elapsed().as_secs_f64();
                 let converged = rel <= tolerance;
                 let stalled = !(rel < 0.5 * last);
@@ -530,7 +518,8 @@ impl DirectSensitivity {
 
 /// `residual = rhs - K_T X` for the `cols` columns of `x` (`n` rows each, column-major like
 /// the right-hand sides) and the largest relative residual `‖r_j‖ / ‖b_j‖` of the columns
-/// (`bnorms`: the norms of the right-hand sides; `interleaved` and `product`: work blocks).
+/// (`bnorms`: the norms of the right-hand sides; `product`: a work block). `residual` first
+/// holds the interleaved solutions.
 #[allow(clippy::too_many_arguments)]
 fn residual_of(
     solver: &StaticSolver,
@@ -539,12 +528,12 @@ fn residual_of(
     n: usize,
     rhs: &[f64],
     bnorms: &[f64],
-    interleaved: &mut [f64],
     product: &mut [f64],
     residual: &mut [f64],
 ) -> f64 {
-    // Interleave X so that K_T is read once for all the columns.
-    interleaved
+    // Interleave X (into the residual block, free until the product is known) so that K_T is
+    // read once for all the columns.
+    residual
         .par_chunks_mut(cols)
         .enumerate()
         .for_each(|(i, row)| {
@@ -552,7 +541,7 @@ fn residual_of(
                 *v = x[j * n + i];
             }
         });
-    solver.tangent_mul_many_interleaved(interleaved, product, cols);
+    solver.tangent_mul_many_interleaved(residual, product, cols);
     let product = &*product;
     residual
         .par_chunks_mut(n)
