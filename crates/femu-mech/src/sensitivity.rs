@@ -32,7 +32,7 @@ use crate::element::{formulation, MAX_DOFS};
 use crate::linear::MAX_RHS;
 use crate::material::NeoHookeanRate;
 use crate::model::Model;
-use crate::solver::StaticSolver;
+use crate::solver::{ActiveConstraint, StaticSolver};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
@@ -238,14 +238,14 @@ impl DirectSensitivity {
         // solver's element-matrix buffer (13 MB at paper scale, idle until the next assembly,
         // and already in memory: a fresh 12 MB would cost thousands of page faults) and gives
         // it back below, whatever the outcome.
-        let active = solver.active_constraints(model, state).len();
-        let columns = parameters.len().max(active).clamp(1, MAX_RHS);
+        let active = solver.active_constraints(model, state);
+        let columns = parameters.len().max(active.len()).clamp(1, MAX_RHS);
         let need = 3 * columns * solver.equations();
         let borrowed = self.work.len() < need && solver.element_scratch().len() >= need;
         if borrowed {
             std::mem::swap(&mut self.work, solver.element_scratch());
         }
-        let result = self.compute_with(solver, model, state, parameters, out, &eqs, report);
+        let result = self.compute_with(solver, model, &active, parameters, out, &eqs, report);
         if borrowed {
             std::mem::swap(&mut self.work, solver.element_scratch());
         }
@@ -255,14 +255,14 @@ impl DirectSensitivity {
         Ok(report)
     }
 
-    /// [`Self::compute`] once the rate forces are assembled, with `eqs` the equation of each
-    /// state dof.
+    /// [`Self::compute`] once the rate forces are assembled, with `active` the contact
+    /// constraints active at the state and `eqs` the equation of each state dof.
     #[allow(clippy::too_many_arguments)]
     fn compute_with(
         &mut self,
         solver: &mut StaticSolver,
         model: &Model,
-        state: &[f64],
+        active: &[ActiveConstraint],
         parameters: &[Parameter],
         out: &mut Vec<Vec<f64>>,
         eqs: &[Option<usize>],
@@ -276,7 +276,6 @@ impl DirectSensitivity {
             .min(LOOSEST_REFINEMENT_TOLERANCE);
 
         // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
-        let active = solver.active_constraints(model, state);
         report.active_constraints = active.len();
         let base = 2 * model.node_count();
         let g_entries: Vec<Vec<(usize, f64)>> = active
