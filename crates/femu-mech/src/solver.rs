@@ -1316,7 +1316,14 @@ impl StaticSolver {
                 });
             }
             increment += 1;
-            let target = (lambda + dlambda).min(1.0);
+            // An increment that would leave a sliver of the load (under a quarter of itself)
+            // for a last increment of its own takes the sliver too: the last increment is the
+            // one converged fully, and a separate tiny one would cost a whole Newton solve.
+            let target = if lambda + 1.25 * dlambda >= 1.0 {
+                1.0
+            } else {
+                lambda + dlambda
+            };
             let dl = target - lambda;
             // Predictor: linear extrapolation of the last converged increment.
             u.copy_from_slice(&self.u_conv);
