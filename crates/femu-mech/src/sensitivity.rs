@@ -321,31 +321,15 @@ impl DirectSensitivity {
         let mut x = std::mem::take(&mut self.block);
         x.clear();
         x.resize(np * n_eq, 0.0);
-        // One pass over the elements: the columns of the element's material.
-        let columns: Vec<Vec<(usize, bool, f64)>> = (0..model.materials.len())
-            .map(|m| {
-                parameters
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, p)| p.material == m)
-                    .map(|(k, p)| {
-                        let rate = p.rate(model);
-                        match p.kind {
-                            ParameterKind::C10 => (k, true, rate.c10),
-                            ParameterKind::D => (k, false, rate.inv_d),
-                        }
-                    })
-                    .collect()
-            })
-            .collect();
         // The columns are independent: one task each, over the elements of its material.
         let (f_c10, f_invd) = (&self.f_c10, &self.f_invd);
         x.par_chunks_mut(n_eq).enumerate().for_each(|(k, col)| {
             let p = &parameters[k];
-            let Some(&(_, c10, scale)) = columns[p.material].iter().find(|c| c.0 == k) else {
-                return;
+            let rate = p.rate(model);
+            let (fe_all, scale) = match p.kind {
+                ParameterKind::C10 => (f_c10, rate.c10),
+                ParameterKind::D => (f_invd, rate.inv_d),
             };
-            let fe_all = if c10 { f_c10 } else { f_invd };
             for (e, el) in model.mesh.elements.iter().enumerate() {
                 if model.element_material[e] != p.material {
                     continue;

@@ -1539,8 +1539,6 @@ mod tests {
     use femu_mesh::generate;
     use femu_mesh::ElementKind;
 
-    /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
-    /// triangles with fully, x-only and y-only prescribed nodes.
     /// A solve whose element-matrix buffer was borrowed and not given back allocates it again
     /// and gives the same state.
     #[test]
@@ -1561,6 +1559,8 @@ mod tests {
         assert_eq!(solver.element_scratch().len(), taken.len());
     }
 
+    /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
+    /// triangles with fully, x-only and y-only prescribed nodes.
     #[test]
     fn element_slots_match_a_search_per_entry() {
         let quads = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);
