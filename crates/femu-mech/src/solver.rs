@@ -34,17 +34,20 @@ pub struct SolverOptions {
     /// body in frictionless contact has a path-independent solution: the intermediate
     /// increments only lead Newton to the final load, so they stop at this looser residual (no
     /// energy test) and the last increment is converged to [`Self::residual_tolerance`] and
-    /// [`Self::energy_tolerance`]. 1e-3 is still five times tighter than Abaqus's default
-    /// (5e-3 of the average force, applied to every increment). Set it equal to
-    /// `residual_tolerance` to converge every increment fully.
+    /// [`Self::energy_tolerance`]. The default 2e-2 (of the 2-norm of the load) sits near
+    /// Abaqus's default (5e-3 of the time-averaged force, in the max-norm, applied to every
+    /// increment): on the paper-scale compression test it lets most increments stop after
+    /// two or three iterations, 25 in all against 32 with 1e-3, for the same final state. Set
+    /// it equal to `residual_tolerance` to converge every increment fully.
     pub intermediate_tolerance: f64,
     /// Newton iterations per increment before a cut-back.
     pub max_iterations: usize,
     /// Backtracking line search on the directional residual.
     pub line_search: bool,
     /// Increment growth factor after an easy increment (≤ 4 iterations; the increment doubles
-    /// after ≤ 2). Counted with the looser [`Self::intermediate_tolerance`], which saves one or
-    /// two iterations per increment.
+    /// after ≤ 2 whatever this is). Counted with the looser [`Self::intermediate_tolerance`],
+    /// which saves one or two iterations per increment. An increment that grew too far is
+    /// cut back (see [`Self::cutback`]); one whose Newton crawls is cut back early.
     pub growth: f64,
     /// Increment reduction factor on a cut-back (Abaqus uses 0.25).
     pub cutback: f64,
@@ -59,10 +62,10 @@ impl Default for SolverOptions {
         SolverOptions {
             residual_tolerance: 1e-8,
             energy_tolerance: 1e-9,
-            intermediate_tolerance: 1e-3,
+            intermediate_tolerance: 2e-2,
             max_iterations: 20,
             line_search: true,
-            growth: 1.5,
+            growth: 2.0,
             cutback: 0.25,
             split_min_equations: 10_000,
         }
@@ -330,6 +333,12 @@ impl std::fmt::Debug for StaticSolver {
 type Slot = u32;
 /// No position: the entry's row or column is a prescribed dof.
 const NO_SLOT: Slot = Slot::MAX;
+
+/// Relative residual below which the last increment's Newton iterations make the contact
+/// multipliers' Uzawa update (see [`StaticSolver::newton`]): 1e-3 is past the active-set
+/// changes and inside the quadratic regime on the seed's tests, so the gaps the update uses are
+/// those of the converged state to a few digits.
+const EARLY_AUGMENTATION: f64 = 1e-3;
 
 /// For each element `e`, `slots[e*KE + r*nd + c]` is the position in the values of `pattern` of
 /// its local entry (row r, column c) (`NO_SLOT` if either dof is prescribed or beyond the
@@ -864,38 +873,29 @@ impl StaticSolver {
             let t = c.first_contact + u[base + b];
             let eps = self.penalties[b];
             let limit = c.penetration_tolerance * c.element_size;
-            let gaps: Vec<f64> = c
-                .nodes
-                .iter()
-                .map(|&n| {
-                    c.body
-                        .gap(
-                            [
-                                model.mesh.nodes[n][0] + u[2 * n],
-                                model.mesh.nodes[n][1] + u[2 * n + 1],
-                            ],
-                            t,
-                        )
-                        .g
-                })
-                .collect();
+            let gap = |n: usize| {
+                let x = model.mesh.nodes[n];
+                c.body.gap([x[0] + u[2 * n], x[1] + u[2 * n + 1]], t).g
+            };
             // Complementarity error: a penetration, or a gap at a node that still carries a
             // contact force (the multiplier overshot).
-            let violation = gaps
-                .iter()
-                .zip(&self.multipliers[b])
-                .fold(0.0f64, |m, (&g, &lam)| {
-                    if g < 0.0 {
-                        m.max(-g)
-                    } else if lam - eps * g > 0.0 {
-                        m.max(g)
-                    } else {
-                        m
-                    }
-                });
+            let violation =
+                c.nodes
+                    .iter()
+                    .zip(&self.multipliers[b])
+                    .fold(0.0f64, |m, (&n, &lam)| {
+                        let g = gap(n);
+                        if g < 0.0 {
+                            m.max(-g)
+                        } else if lam - eps * g > 0.0 {
+                            m.max(g)
+                        } else {
+                            m
+                        }
+                    });
             if violation > limit {
-                for (m, g) in self.multipliers[b].iter_mut().zip(&gaps) {
-                    *m = (*m - eps * g).max(0.0);
+                for (m, &n) in self.multipliers[b].iter_mut().zip(&c.nodes) {
+                    *m = (*m - eps * gap(n)).max(0.0);
                 }
                 self.augmentations[b] += 1;
                 updated = true;
@@ -1118,6 +1118,24 @@ impl StaticSolver {
             last.step_length = alpha;
             last.max_correction = alpha * max_du;
             let res_ok = rnorm <= opt.residual_tolerance * fref.max(floor);
+            // The last increment's augmented-Lagrangian updates are made inside its Newton
+            // iterations, as soon as the iterate is close to equilibrium (the quadratic regime,
+            // contact set settled): the iterations that follow then converge the state and the
+            // multipliers together, instead of converging the state, updating, and converging
+            // again (two iterations fewer per update). `newton_augmented` still checks the
+            // penetration of the converged state.
+            if lambda >= 1.0 - 1e-12
+                && !res_ok
+                && rnorm <= EARLY_AUGMENTATION * fref.max(floor)
+                && self.augment(model, u)
+            {
+                self.assemble(model, u, lambda, true)?;
+                (rnorm, fref) = self.norms();
+                if it == 0 {
+                    first_residual = rnorm;
+                }
+                continue;
+            }
             let energy_ok = energy * alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
             let intermediate_ok = lambda < 1.0 - 1e-12
                 && rnorm
@@ -1129,6 +1147,23 @@ impl StaticSolver {
             }
             if it == 0 {
                 first_residual = rnorm;
+            }
+            // Crawling: nine or more iterations and the relative residual not halved over
+            // the last four. A Newton that has found its basin converges quadratically; one
+            // that crawls (a nearly singular tangent in a region the load step jumped into,
+            // e.g. a fold forming at a plate's edge under a large increment) rarely recovers
+            // in the iterations left, and a cut-back is cheaper than waiting for the limit.
+            let n_it = record.iterations.len();
+            if it >= 8 && n_it >= 5 {
+                let old = &record.iterations[n_it - 5];
+                let then = old.residual_norm / old.reference_force.max(floor);
+                if rnorm / fref.max(floor) > 0.5 * then {
+                    return Err(AttemptFailure::Diverged(format!(
+                        "crawling after {} iterations (|R|/f = {:.3e}, four iterations before {then:.3e})",
+                        it + 1,
+                        rnorm / fref.max(floor)
+                    )));
+                }
             }
             if it >= 7 && rnorm > first_residual {
                 return Err(AttemptFailure::Diverged(format!(
