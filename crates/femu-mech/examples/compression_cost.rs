@@ -3,7 +3,8 @@
 //!
 //! ```text
 //! cargo run --release -p femu-mech --example compression_cost -- \
-//!     [elements 25000] [cpe4|cpe4h] [intermediate_tolerance 2e-2] [growth 2] [penalty_factor 10]
+//!     [elements 25000] [cpe4|cpe4h] [intermediate_tolerance 2e-2] [growth 2] [penalty_factor 10] \
+//!     [initial_increment 0.02]
 //! ```
 //!
 //! Prints, per increment, the load factor, the number of Newton iterations and after each
@@ -49,6 +50,7 @@ fn main() {
     let mut model = Model::from_deck(deck).expect("model");
     apply_loading(&mut model, &skin, &Loading::SEED_COMPRESSION).expect("compression");
     model.contacts[0].penalty_factor = arg(5, model.contacts[0].penalty_factor);
+    model.step.initial_increment = arg(6, model.step.initial_increment);
     println!(
         "{} elements ({kind:?}), intermediate tolerance {:e}, growth {}, penalty factor {}",
         model.mesh.elements.len(),
