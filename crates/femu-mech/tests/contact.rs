@@ -1,6 +1,7 @@
 //! Rigid-body contact: finite-difference check of the contact tangent and of the bordered
 //! force-control equation, force balance, Hertz line contact, symmetry, force vs displacement
-//! control, and the errors a badly placed body gets before any solve.
+//! control, the last increment's multiplier updates inside Newton, and the errors a badly placed
+//! body gets before any solve.
 
 use femu_mech::build::DeckBuilder;
 use femu_mech::contact::{ContactError, RigidContact, RigidCylinder, RigidPlate, TravelControl};
@@ -132,6 +133,59 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
             })
             .sum();
         assert!(r[n - 1].is_finite() && sum_nodes.is_finite());
+    }
+}
+
+/// The last increment updates the contact multipliers inside its Newton iterations: with the
+/// default tolerances the plate's penalty alone leaves a penetration above the limit, so at
+/// least one Uzawa update is made, yet no iteration before the increment's last one reaches the
+/// residual tolerance (the old converge, update, converge again sequence would show one), and
+/// the converged state meets the penetration limit and the force balance.
+#[test]
+fn last_increment_updates_multipliers_inside_newton() {
+    let (mut model, top) = block_model(
+        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
+        1.75e-3,
+        18.0,
+    );
+    let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
+    model.contacts.push(
+        RigidContact::new(
+            "plate",
+            &model.mesh,
+            &top,
+            Arc::new(plate),
+            TravelControl::Force(0.1),
+        )
+        .unwrap(),
+    );
+    let options = SolverOptions::default();
+    let sol = solve(&model, options);
+    let body = &sol.bodies[0];
+    assert!(body.augmentations >= 1, "no Uzawa update was needed");
+    assert!(
+        body.max_penetration <= body.penetration_limit,
+        "penetration {} > {}",
+        body.max_penetration,
+        body.penetration_limit
+    );
+    assert!(
+        (body.force - 0.1).abs() < 1e-8 * 0.1,
+        "force {}",
+        body.force
+    );
+    let last = sol.report.increments.last().unwrap();
+    assert!(last.converged && last.lambda == 1.0);
+    let its = &last.iterations;
+    for it in &its[..its.len() - 1] {
+        assert!(
+            it.residual_norm > options.residual_tolerance * it.reference_force,
+            "iteration {} of the last increment had converged already: {:?}",
+            it.iteration,
+            its.iter()
+                .map(|i| i.residual_norm / i.reference_force)
+                .collect::<Vec<_>>()
+        );
     }
 }
 
