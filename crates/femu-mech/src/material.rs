@@ -268,15 +268,12 @@ pub fn log_strain(f: &Tensor2) -> [f64; 4] {
     if r < 1e-14 * mean.abs().max(1.0) {
         return [e1, e1, 0.0, 0.0];
     }
-    // Eigenvector of the larger eigenvalue: (cos φ, sin φ), 2φ = atan2(2 bxy, bxx - byy).
-    let phi = 0.5 * (2.0 * bxy).atan2(bxx - byy);
-    let (s, c) = phi.sin_cos();
-    [
-        e1 * c * c + e2 * s * s,
-        e1 * s * s + e2 * c * c,
-        0.0,
-        (e1 - e2) * s * c,
-    ]
+    // Eigenvector of the larger eigenvalue: (cos φ, sin φ) with cos 2φ = (bxx - byy) / (2 r),
+    // sin 2φ = bxy / r; `e1 c² + e2 s² = (e1 + e2)/2 + (e1 - e2)/2 cos 2φ` and so on, without
+    // evaluating φ.
+    let (cos2, sin2) = (half_diff / r, bxy / r);
+    let (m, h) = (0.5 * (e1 + e2), 0.5 * (e1 - e2));
+    [m + h * cos2, m - h * cos2, 0.0, h * sin2]
 }
 
 #[cfg(test)]
