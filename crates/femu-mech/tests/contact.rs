@@ -61,6 +61,28 @@ fn block_model(g: GeneratedMesh, c10: f64, d: f64) -> (Model, Vec<(usize, usize)
     (Model::from_deck(deck).unwrap(), top)
 }
 
+/// A 40 x 20 mm CPE4H block (C10 1.75 kPa, D 18 /MPa), bottom fixed, under a flat plate
+/// centred above it and pressed with 0.1 N/mm (force control).
+fn plate_on_block() -> Model {
+    let (mut model, top) = block_model(
+        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
+        1.75e-3,
+        18.0,
+    );
+    let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
+    model.contacts.push(
+        RigidContact::new(
+            "plate",
+            &model.mesh,
+            &top,
+            Arc::new(plate),
+            TravelControl::Force(0.1),
+        )
+        .unwrap(),
+    );
+    model
+}
+
 fn solve(model: &Model, options: SolverOptions) -> Solution {
     let mut solver = StaticSolver::new(model, options).unwrap();
     solver.solve(model).expect("converges")
@@ -143,22 +165,7 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
 /// the converged state meets the penetration limit and the force balance.
 #[test]
 fn last_increment_updates_multipliers_inside_newton() {
-    let (mut model, top) = block_model(
-        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
-        1.75e-3,
-        18.0,
-    );
-    let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model.contacts.push(
-        RigidContact::new(
-            "plate",
-            &model.mesh,
-            &top,
-            Arc::new(plate),
-            TravelControl::Force(0.1),
-        )
-        .unwrap(),
-    );
+    let model = plate_on_block();
     let options = SolverOptions::default();
     let sol = solve(&model, options);
     let body = &sol.bodies[0];
@@ -194,22 +201,7 @@ fn last_increment_updates_multipliers_inside_newton() {
 /// penetration is within 1e-3 of the element size.
 #[test]
 fn plate_force_balance_symmetry_and_penetration() {
-    let (mut model, top) = block_model(
-        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
-        1.75e-3,
-        18.0,
-    );
-    let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model.contacts.push(
-        RigidContact::new(
-            "plate",
-            &model.mesh,
-            &top,
-            Arc::new(plate),
-            TravelControl::Force(0.1),
-        )
-        .unwrap(),
-    );
+    let mut model = plate_on_block();
     model.step.initial_increment = 0.25;
     let sol = solve(&model, tight());
     let body = &sol.bodies[0];
