@@ -62,24 +62,17 @@ fn block_model(g: GeneratedMesh, c10: f64, d: f64) -> (Model, Vec<(usize, usize)
 }
 
 /// A 40 x 20 mm CPE4H block (C10 1.75 kPa, D 18 /MPa), bottom fixed, under a flat plate
-/// centred above it and pressed with 0.1 N/mm (force control).
-fn plate_on_block() -> Model {
+/// centred above it, pressed under `control`.
+fn plate_on_block(control: TravelControl) -> Model {
     let (mut model, top) = block_model(
         graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
         1.75e-3,
         18.0,
     );
     let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model.contacts.push(
-        RigidContact::new(
-            "plate",
-            &model.mesh,
-            &top,
-            Arc::new(plate),
-            TravelControl::Force(0.1),
-        )
-        .unwrap(),
-    );
+    model
+        .contacts
+        .push(RigidContact::new("plate", &model.mesh, &top, Arc::new(plate), control).unwrap());
     model
 }
 
@@ -165,7 +158,7 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
 /// the converged state meets the penetration limit and the force balance.
 #[test]
 fn last_increment_updates_multipliers_inside_newton() {
-    let model = plate_on_block();
+    let model = plate_on_block(TravelControl::Force(0.1));
     let options = SolverOptions::default();
     let sol = solve(&model, options);
     let body = &sol.bodies[0];
@@ -201,7 +194,7 @@ fn last_increment_updates_multipliers_inside_newton() {
 /// penetration is within 1e-3 of the element size.
 #[test]
 fn plate_force_balance_symmetry_and_penetration() {
-    let mut model = plate_on_block();
+    let mut model = plate_on_block(TravelControl::Force(0.1));
     model.step.initial_increment = 0.25;
     let sol = solve(&model, tight());
     let body = &sol.bodies[0];
@@ -257,22 +250,7 @@ fn plate_force_balance_symmetry_and_penetration() {
     }
     assert!(asym < 1e-10 * umax, "asymmetry {asym:.3e} of {umax:.3e}");
     // Displacement control to the travel just found gives back the force.
-    let (mut model2, top2) = block_model(
-        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
-        1.75e-3,
-        18.0,
-    );
-    let plate = RigidPlate::new([0.0, 25.0], [0.0, -1.0]).unwrap();
-    model2.contacts.push(
-        RigidContact::new(
-            "plate",
-            &model2.mesh,
-            &top2,
-            Arc::new(plate),
-            TravelControl::Displacement(body.travel),
-        )
-        .unwrap(),
-    );
+    let mut model2 = plate_on_block(TravelControl::Displacement(body.travel));
     model2.step.initial_increment = 0.25;
     let sol2 = solve(&model2, tight());
     // Same travel, same force — up to the augmented-Lagrangian multipliers, which the two runs
