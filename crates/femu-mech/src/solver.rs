@@ -281,8 +281,15 @@ pub struct StaticSolver {
     eq: Vec<usize>,
     n_eq: usize,
     pattern: CscPattern,
-    /// For element e, `slots[e*64 + r*nd + c]` is the position of local entry (r, c) in `values`.
-    slots: Vec<Slot>,
+    /// The element entries summed into each tangent value (see [`TangentGather`]).
+    gather: TangentGather,
+    /// Per pressure face of the model: the positions in `values` of its 4 x 4 load stiffness
+    /// (`NO_SLOT` for a prescribed row or column).
+    face_slots: Vec<[Slot; 16]>,
+    /// Per node: the element force entries (`e * MAX_DOFS + 2a`) summed into its residual, in
+    /// element order; `node_sources[node_ptr[n]..node_ptr[n + 1]]`.
+    node_ptr: Vec<u32>,
+    node_sources: Vec<u32>,
     /// Prescribed dofs and their end-of-step values.
     prescribed: Vec<(usize, f64)>,
     /// Dead nodal forces at λ = 1 (2 per node).
@@ -396,6 +403,95 @@ fn element_slots(model: &Model, eq: &[usize], pattern: &CscPattern) -> Option<Ve
     Some(slots)
 }
 
+/// The element-matrix entries that add up to each tangent value: value `p` is the sum of
+/// `ke[source[k]]` over `k` in `ptr[p]..ptr[p + 1]` (`ke[e * KE + r * nd + c]` being entry
+/// (r, c) of element e), in element order, so the tangent is summed in the same order as a
+/// scatter over the elements would, to the bit, but each value is written once and the values
+/// can be shared between threads (no two write the same one). On the paper-scale thigh an
+/// assembly with the tangent takes 0.014 s against 0.017 s with a serial scatter (best of 40,
+/// the two alternated); the index costs 10 MB and about 0.01 s at setup.
+#[derive(Debug, Default)]
+struct TangentGather {
+    ptr: Vec<u32>,
+    source: Vec<u32>,
+}
+
+/// Values per parallel task of [`TangentGather::gather`].
+const GATHER_CHUNK: usize = 16 * 1024;
+
+impl TangentGather {
+    /// The transpose of the element slots (a counting sort by position); `None` if the element
+    /// entries do not fit 32-bit indices.
+    fn new(slots: &[Slot], nnz: usize) -> Option<Self> {
+        if slots.len() >= u32::MAX as usize {
+            return None;
+        }
+        // Counts of position p at p + 2; their running sum puts the start of p at p + 1, which
+        // the fill then advances to the end of p, i.e. the start of p + 1 at p + 1: no second
+        // array of insertion points.
+        let mut ptr = vec![0u32; nnz + 2];
+        for &p in slots {
+            if p != NO_SLOT {
+                ptr[p as usize + 2] += 1;
+            }
+        }
+        for k in 2..nnz + 2 {
+            ptr[k] += ptr[k - 1];
+        }
+        let mut source = vec![0u32; ptr[nnz + 1] as usize];
+        for (k, &p) in slots.iter().enumerate() {
+            if p != NO_SLOT {
+                let at = &mut ptr[p as usize + 1];
+                source[*at as usize] = k as u32;
+                *at += 1;
+            }
+        }
+        ptr.truncate(nnz + 1);
+        Some(TangentGather { ptr, source })
+    }
+
+    /// `values[p] = Σ ke[source[k]]` for every position, in parallel blocks.
+    fn gather(&self, ke: &[f64], values: &mut [f64]) {
+        values
+            .par_chunks_mut(GATHER_CHUNK)
+            .enumerate()
+            .for_each(|(c, block)| {
+                let first = c * GATHER_CHUNK;
+                for (i, v) in block.iter_mut().enumerate() {
+                    let p = first + i;
+                    let range = self.ptr[p] as usize..self.ptr[p + 1] as usize;
+                    *v = self.source[range]
+                        .iter()
+                        .fold(0.0, |sum, &k| sum + ke[k as usize]);
+                }
+            });
+    }
+}
+
+/// Per node, the element force entries `e * MAX_DOFS + 2a` of its element incidences, in
+/// element order (CSR: pointers, sources).
+fn node_sources(model: &Model) -> (Vec<u32>, Vec<u32>) {
+    let n = model.node_count();
+    let mut ptr = vec![0u32; n + 1];
+    for el in &model.mesh.elements {
+        for &node in el.nodes() {
+            ptr[node + 1] += 1;
+        }
+    }
+    for k in 0..n {
+        ptr[k + 1] += ptr[k];
+    }
+    let mut next = ptr[..n].to_vec();
+    let mut sources = vec![0u32; ptr[n] as usize];
+    for (e, el) in model.mesh.elements.iter().enumerate() {
+        for (a, &node) in el.nodes().iter().enumerate() {
+            sources[next[node] as usize] = (e * MAX_DOFS + 2 * a) as u32;
+            next[node] += 1;
+        }
+    }
+    (ptr, sources)
+}
+
 /// Largest separator (equations) for which the tangent is factorized by halves: its dense
 /// Schur complement costs `s³` per factorization and `8 s²` bytes (2 000: 32 MB, a few
 /// hundredths of a second, while the separator of a 25 000-quad thigh is about 250).
@@ -489,16 +585,33 @@ impl StaticSolver {
                     .dof_pattern(&eq[..n_nodes_dof], n_eq_nodes)
                     .bordered(n_eq, &borders);
                 let slots = element_slots(model, &eq, &pattern);
-                (pattern, slots)
+                let face_slots: Option<Vec<[Slot; 16]>> = slots.as_ref().map(|slots| {
+                    model
+                        .pressures
+                        .iter()
+                        .map(|face| {
+                            let [la, lb] = face.local;
+                            let local = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
+                            let nd = 2 * model.mesh.elements[face.element].kind.node_count();
+                            let slots = &slots[face.element * KE..];
+                            std::array::from_fn(|k| slots[local[k / 4] * nd + local[k % 4]])
+                        })
+                        .collect()
+                });
+                let gather = slots
+                    .as_deref()
+                    .and_then(|slots| TangentGather::new(slots, pattern.nnz()));
+                (pattern, gather.zip(face_slots))
             },
         );
         let mut plan = plan?;
-        let slots = slots.ok_or_else(|| {
+        let (gather, face_slots) = slots.ok_or_else(|| {
             SolveError::Setup(LinearSolveError::Other(format!(
                 "the tangent has {} entries, more than this solver addresses (2^32)",
                 pattern.nnz()
             )))
         })?;
+        let (node_ptr, node_sources) = node_sources(model);
         match &mut plan {
             EquationPlan::Whole(ordering) => ordering.extend(borders.iter().map(|b| b.0)),
             EquationPlan::Split(split) => split.separator.extend(borders.iter().map(|b| b.0)),
@@ -559,7 +672,10 @@ impl StaticSolver {
             eq,
             n_eq,
             pattern,
-            slots,
+            gather,
+            face_slots,
+            node_ptr,
+            node_sources,
             prescribed,
             point_force,
             ke: vec![0.0; n_el * KE],
@@ -670,28 +786,44 @@ impl StaticSolver {
         for (fx, p) in self.fext.iter_mut().zip(&self.point_force) {
             *fx += lambda * p;
         }
-        for (r, p) in self.residual.iter_mut().zip(&self.point_force) {
-            *r = -lambda * p;
-        }
-        if with_tangent {
-            self.values.fill(0.0);
-        }
-        for (e, el) in model.mesh.elements.iter().enumerate() {
-            let nd = 2 * el.kind.node_count();
-            let fe = &self.fe[e * MAX_DOFS..];
-            for (a, &n) in el.nodes().iter().enumerate() {
-                self.residual[2 * n] += fe[2 * a];
-                self.residual[2 * n + 1] += fe[2 * a + 1];
-            }
-            if with_tangent {
-                let ke = &self.ke[e * KE..e * KE + nd * nd];
-                let slots = &self.slots[e * KE..e * KE + nd * nd];
-                for (&s, v) in slots.iter().zip(ke) {
-                    if s != NO_SLOT {
-                        self.values[s as usize] += v;
+        // Residual and tangent gathered from the element results (each entry summed in
+        // element order, as a scatter would), node blocks and value blocks in parallel.
+        let (fe, node_ptr, node_sources, point_force) = (
+            &self.fe,
+            &self.node_ptr,
+            &self.node_sources,
+            &self.point_force,
+        );
+        let n_node_dofs = 2 * model.node_count();
+        let (node_residual, body_residual) = self.residual.split_at_mut(n_node_dofs);
+        let mut gather_residual = || {
+            node_residual
+                .par_chunks_mut(2 * 1024)
+                .enumerate()
+                .for_each(|(c, block)| {
+                    for (i, r) in block.chunks_exact_mut(2).enumerate() {
+                        let n = c * 1024 + i;
+                        let (mut rx, mut ry) = (
+                            -lambda * point_force[2 * n],
+                            -lambda * point_force[2 * n + 1],
+                        );
+                        for &k in &node_sources[node_ptr[n] as usize..node_ptr[n + 1] as usize] {
+                            rx += fe[k as usize];
+                            ry += fe[k as usize + 1];
+                        }
+                        r[0] = rx;
+                        r[1] = ry;
                     }
-                }
-            }
+                });
+        };
+        if with_tangent {
+            let (gather, ke, values) = (&self.gather, &self.ke, &mut self.values);
+            rayon::join(&mut gather_residual, || gather.gather(ke, values));
+        } else {
+            gather_residual();
+        }
+        for (r, p) in body_residual.iter_mut().zip(&point_force[n_node_dofs..]) {
+            *r = -lambda * p;
         }
         self.add_pressure(model, u, lambda, with_tangent);
         self.add_contact(model, u, lambda, with_tangent);
@@ -704,9 +836,9 @@ impl StaticSolver {
     }
 
     /// Adds the follower-pressure loads: `-f_ext` to the residual, `f_ext` to the reference
-    /// force, and the load stiffness through the slots of the face's element.
+    /// force, and the load stiffness through the face's slots.
     fn add_pressure(&mut self, model: &Model, u: &[f64], lambda: f64, with_tangent: bool) {
-        for face in &model.pressures {
+        for (face_index, face) in model.pressures.iter().enumerate() {
             let [na, nb] = face.nodes;
             let f = face.external_force(
                 model.current_position(na, u),
@@ -719,17 +851,10 @@ impl StaticSolver {
                 self.fext[d] += fi;
             }
             if with_tangent {
-                let [la, lb] = face.local;
-                let local = [2 * la, 2 * la + 1, 2 * lb, 2 * lb + 1];
-                let nd = 2 * model.mesh.elements[face.element].kind.node_count();
-                let slots = &self.slots[face.element * KE..];
                 let kl = face.load_stiffness(lambda);
-                for i in 0..4 {
-                    for j in 0..4 {
-                        let pos = slots[local[i] * nd + local[j]];
-                        if pos != NO_SLOT {
-                            self.values[pos as usize] += kl[i][j];
-                        }
+                for (k, &pos) in self.face_slots[face_index].iter().enumerate() {
+                    if pos != NO_SLOT {
+                        self.values[pos as usize] += kl[k / 4][k % 4];
                     }
                 }
             }
@@ -1596,6 +1721,35 @@ mod tests {
 
     /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
     /// triangles with fully, x-only and y-only prescribed nodes.
+    #[test]
+    fn tangent_gather_equals_a_serial_scatter_to_the_bit() {
+        let quads = generate::rectangle(2.0, 1.0, 6, 4, ElementKind::Cpe4);
+        for g in [generate::split_into_triangles(&quads), quads] {
+            let deck = DeckBuilder::new(g)
+                .material_everywhere(0.01, 1.0)
+                .fix("BOTTOM")
+                .build();
+            let model = Model::from_deck(deck).unwrap();
+            let solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+            let slots = element_slots(&model, &solver.eq, &solver.pattern).unwrap();
+            let nnz = solver.pattern.nnz();
+            let gather = TangentGather::new(&slots, nnz).unwrap();
+            // Element matrices of irregular values, so that the summation order shows.
+            let ke: Vec<f64> = (0..slots.len())
+                .map(|k| ((k * 7919) % 1013) as f64 / 97.0 - 5.0 + 1e-9 * k as f64)
+                .collect();
+            let mut scattered = vec![0.0; nnz];
+            for (k, &p) in slots.iter().enumerate() {
+                if p != NO_SLOT {
+                    scattered[p as usize] += ke[k];
+                }
+            }
+            let mut gathered = vec![f64::NAN; nnz];
+            gather.gather(&ke, &mut gathered);
+            assert_eq!(gathered, scattered);
+        }
+    }
+
     #[test]
     fn element_slots_match_a_search_per_entry() {
         let quads = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);
