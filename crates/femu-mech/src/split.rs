@@ -354,11 +354,6 @@ impl Half {
                 Default::default(),
             )
             .map_err(|e| LinearSolveError::Other(format!("LDLT of a half: {e:?}")))?;
-        if self.l_values.iter().any(|v| !v.is_finite()) {
-            return Err(LinearSolveError::Other(
-                "LDLT produced non-finite factors".into(),
-            ));
-        }
         let n_interior = self.n_interior;
         let s = n - n_interior;
         let symbolic = supernodal(&self.symbolic);
@@ -406,6 +401,15 @@ impl Half {
                 1.0,
                 Par::Seq,
             );
+        }
+        // Non-finite factors are caught at the pivots, without a pass over all of L: an entry
+        // L_ij comes out non-finite from a zero or non-finite pivot d_j, or from non-finite
+        // input, and then turns non-finite the pivot d_i of its row's column (d_i -= L_ij² d_j)
+        // or, for a separator row, the Schur complement, which `SplitLdlt::factorize` checks.
+        if !self.inv_d.iter().all(|d| d.is_finite()) {
+            return Err(LinearSolveError::Other(
+                "LDLT produced non-finite factors".into(),
+            ));
         }
         Ok(())
     }
@@ -740,6 +744,11 @@ impl SplitLdlt {
                 self.dense[i * s + j] = self.dense[j * s + i];
             }
         }
+        if !self.dense.iter().all(|v| v.is_finite()) {
+            return Err(LinearSolveError::Other(
+                "LDLT produced a non-finite separator Schur complement".into(),
+            ));
+        }
         let scale = self.dense.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         let mut lu = MatMut::from_column_major_slice_mut(&mut self.dense, s, s);
         faer::linalg::lu::partial_pivoting::factor::lu_in_place(
@@ -902,9 +911,14 @@ mod tests {
         values
     }
 
-    fn check(shift: f64, with_border: bool) {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
-        let (quads, coords) = grid(30, 17, &mut rng);
+    /// A jiggled 30 x 17 grid, bottom fixed (and a border equation if asked), split; its
+    /// pattern, the split, random element values (`shift` on the diagonal) and the equations.
+    fn grid_system(
+        shift: f64,
+        with_border: bool,
+        rng: &mut rand::rngs::StdRng,
+    ) -> (CscPattern, DofSplit, Vec<f64>, usize) {
+        let (quads, coords) = grid(30, 17, rng);
         let n_nodes = coords.len();
         let graph = NodeGraph::from_elements(n_nodes, quads.iter().map(|q| &q[..]));
         // The bottom edge fixed, and the x dof of one more node.
@@ -947,8 +961,14 @@ mod tests {
             &pattern,
             shift,
             with_border.then_some((n_eq, &border_rows[..])),
-            &mut rng,
+            rng,
         );
+        (pattern, split, values, n_total)
+    }
+
+    fn check(shift: f64, with_border: bool) {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let (pattern, split, values, n_total) = grid_system(shift, with_border, &mut rng);
         let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
         split_ldlt.factorize(&values).unwrap();
         let mut whole = SparseLdlt::new(&pattern, None).unwrap();
@@ -1011,6 +1031,38 @@ mod tests {
     }
 
     /// A split whose interiors touch, or that misses an equation, is refused.
+    /// A NaN anywhere in the tangent (an interior pivot, an interior off-diagonal entry, the
+    /// separator) makes the factorization fail, though only pivots and the separator's Schur
+    /// complement are checked.
+    #[test]
+    fn split_ldlt_reports_non_finite_factors() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let (pattern, split, values, _) = grid_system(8.0, false, &mut rng);
+        let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
+        split_ldlt
+            .factorize(&values)
+            .expect("finite values factorize");
+        let interior = &split.interiors[0];
+        let (q0, q1) = (interior[0], interior[interior.len() / 2]);
+        let coupled = pattern.row_idx[pattern.col_ptr[q1]..pattern.col_ptr[q1 + 1]]
+            .iter()
+            .copied()
+            .find(|&r| r != q1 && interior.contains(&r))
+            .expect("an interior neighbour");
+        let s0 = split.separator[0];
+        // Symmetric tangents only reach this factorization (it reads one triangle, in its own
+        // order): the off-diagonal NaN goes into both mirrored entries.
+        for (r, c) in [(q0, q0), (coupled, q1), (s0, s0)] {
+            let mut bad = values.clone();
+            bad[pattern.position(r, c).unwrap()] = f64::NAN;
+            bad[pattern.position(c, r).unwrap()] = f64::NAN;
+            assert!(
+                split_ldlt.factorize(&bad).is_err(),
+                "NaN at ({r}, {c}) not reported"
+            );
+        }
+    }
+
     #[test]
     fn split_ldlt_refuses_bad_splits() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(1);
