@@ -1719,8 +1719,8 @@ mod tests {
         assert_eq!(solver.element_scratch().len(), taken.len());
     }
 
-    /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
-    /// triangles with fully, x-only and y-only prescribed nodes.
+    /// [`TangentGather`] sums each tangent value in element order, as a serial scatter of the
+    /// element matrices does: the same values to the bit, on quads and triangles.
     #[test]
     fn tangent_gather_equals_a_serial_scatter_to_the_bit() {
         let quads = generate::rectangle(2.0, 1.0, 6, 4, ElementKind::Cpe4);
@@ -1750,6 +1750,8 @@ mod tests {
         }
     }
 
+    /// [`element_slots`] equals a binary search per (row, column) dof pair, on quads and
+    /// triangles with fully, x-only and y-only prescribed nodes.
     #[test]
     fn element_slots_match_a_search_per_entry() {
         let quads = generate::rectangle(2.0, 1.0, 5, 3, ElementKind::Cpe4);

@@ -537,17 +537,21 @@ impl Half {
     /// per iteration). The updates of a supernode's pattern rows are summed in a contiguous
     /// buffer and scattered once.
     fn forward_one(&mut self) {
-        let symbolic = supernodal(&self.symbolic);
-        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
-        let offsets = symbolic.col_ptr_for_val();
         let x = &mut self.work[..self.eqs.len()];
-        for sn in 0..self.interior_supernodes {
-            let node = factor.supernode(sn);
-            let (start, size, pattern) = (node.start(), node.val().ncols(), node.pattern());
+        for block in interior_blocks(
+            &self.symbolic,
+            &self.l_values,
+            self.n_interior,
+            self.interior_supernodes,
+        ) {
+            let InteriorBlock {
+                start,
+                size,
+                interior: m,
+                pattern,
+                values,
+            } = block;
             let rows = size + pattern.len();
-            let values = &self.l_values[offsets[sn]..offsets[sn + 1]];
-            // Interior columns of this supernode (all but possibly the last ones).
-            let m = size.min(self.n_interior - start);
             let update = &mut self.tmp[..pattern.len()];
             update.fill(0.0);
             for (j, column) in values.chunks_exact(rows).take(m).enumerate() {
@@ -572,16 +576,23 @@ impl Half {
     /// by `D⁻¹`, separator rows set), as dot products in plain loops against the supernode's
     /// pattern rows gathered once into a contiguous buffer (see [`Self::forward_one`]).
     fn backward_one(&mut self) {
-        let symbolic = supernodal(&self.symbolic);
-        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
-        let offsets = symbolic.col_ptr_for_val();
         let x = &mut self.work[..self.eqs.len()];
-        for sn in (0..self.interior_supernodes).rev() {
-            let node = factor.supernode(sn);
-            let (start, size, pattern) = (node.start(), node.val().ncols(), node.pattern());
+        for block in interior_blocks(
+            &self.symbolic,
+            &self.l_values,
+            self.n_interior,
+            self.interior_supernodes,
+        )
+        .rev()
+        {
+            let InteriorBlock {
+                start,
+                size,
+                interior: m,
+                pattern,
+                values,
+            } = block;
             let rows = size + pattern.len();
-            let values = &self.l_values[offsets[sn]..offsets[sn + 1]];
-            let m = size.min(self.n_interior - start);
             let below = &mut self.tmp[..pattern.len()];
             for (b, &r) in below.iter_mut().zip(pattern) {
                 *b = x[r];
@@ -815,6 +826,41 @@ impl SplitLdlt {
             }
         }
     }
+}
+
+/// A supernode of a half's factor with interior columns: its first column, its column count,
+/// how many of them are interior (all but possibly the last ones), the rows below its diagonal
+/// block and its values (column-major, `size + pattern.len()` rows).
+struct InteriorBlock<'a> {
+    start: usize,
+    size: usize,
+    interior: usize,
+    pattern: &'a [usize],
+    values: &'a [f64],
+}
+
+/// The first `count` supernodes of `symbolic` (those holding interior columns), in elimination
+/// order, with their values in `l_values`.
+fn interior_blocks<'a>(
+    symbolic: &'a SymbolicCholesky<usize>,
+    l_values: &'a [f64],
+    n_interior: usize,
+    count: usize,
+) -> impl DoubleEndedIterator<Item = InteriorBlock<'a>> {
+    let symbolic = supernodal(symbolic);
+    let offsets = symbolic.col_ptr_for_val();
+    let factor = SupernodalLdltRef::new(symbolic, l_values);
+    (0..count).map(move |sn| {
+        let node = factor.supernode(sn);
+        let (start, size) = (node.start(), node.val().ncols());
+        InteriorBlock {
+            start,
+            size,
+            interior: size.min(n_interior - start),
+            pattern: node.pattern(),
+            values: &l_values[offsets[sn]..offsets[sn + 1]],
+        }
+    })
 }
 
 /// `a · b` with four partial sums (one chain of dependent additions would wait on the
