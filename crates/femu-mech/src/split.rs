@@ -544,13 +544,8 @@ impl Half {
             self.n_interior,
             self.interior_supernodes,
         ) {
-            let InteriorBlock {
-                start,
-                size,
-                interior: m,
-                pattern,
-                values,
-            } = block;
+            let (start, size, m) = (block.start, block.size, block.interior);
+            let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
             let update = &mut self.tmp[..pattern.len()];
             update.fill(0.0);
@@ -585,13 +580,8 @@ impl Half {
         )
         .rev()
         {
-            let InteriorBlock {
-                start,
-                size,
-                interior: m,
-                pattern,
-                values,
-            } = block;
+            let (start, size, m) = (block.start, block.size, block.interior);
+            let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
             let below = &mut self.tmp[..pattern.len()];
             for (b, &r) in below.iter_mut().zip(pattern) {
