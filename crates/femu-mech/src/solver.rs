@@ -419,6 +419,9 @@ struct TangentGather {
 /// Values per parallel task of [`TangentGather::gather`].
 const GATHER_CHUNK: usize = 16 * 1024;
 
+/// Nodes per parallel task of the residual gather.
+const GATHER_NODES: usize = 1024;
+
 impl TangentGather {
     /// The transpose of the element slots (a counting sort by position); `None` if the element
     /// entries do not fit 32-bit indices.
@@ -426,27 +429,13 @@ impl TangentGather {
         if slots.len() >= u32::MAX as usize {
             return None;
         }
-        // Counts of position p at p + 2; their running sum puts the start of p at p + 1, which
-        // the fill then advances to the end of p, i.e. the start of p + 1 at p + 1: no second
-        // array of insertion points.
-        let mut ptr = vec![0u32; nnz + 2];
-        for &p in slots {
-            if p != NO_SLOT {
-                ptr[p as usize + 2] += 1;
-            }
-        }
-        for k in 2..nnz + 2 {
-            ptr[k] += ptr[k - 1];
-        }
-        let mut source = vec![0u32; ptr[nnz + 1] as usize];
-        for (k, &p) in slots.iter().enumerate() {
-            if p != NO_SLOT {
-                let at = &mut ptr[p as usize + 1];
-                source[*at as usize] = k as u32;
-                *at += 1;
-            }
-        }
-        ptr.truncate(nnz + 1);
+        let (ptr, source) = group_by_key(nnz, || {
+            slots
+                .iter()
+                .enumerate()
+                .filter(|(_, &p)| p != NO_SLOT)
+                .map(|(k, &p)| (p as usize, k as u32))
+        });
         Some(TangentGather { ptr, source })
     }
 
@@ -471,25 +460,39 @@ impl TangentGather {
 /// Per node, the element force entries `e * MAX_DOFS + 2a` of its element incidences, in
 /// element order (CSR: pointers, sources).
 fn node_sources(model: &Model) -> (Vec<u32>, Vec<u32>) {
-    let n = model.node_count();
-    let mut ptr = vec![0u32; n + 1];
-    for el in &model.mesh.elements {
-        for &node in el.nodes() {
-            ptr[node + 1] += 1;
-        }
+    group_by_key(model.node_count(), || {
+        model.mesh.elements.iter().enumerate().flat_map(|(e, el)| {
+            el.nodes()
+                .iter()
+                .enumerate()
+                .map(move |(a, &node)| (node, (e * MAX_DOFS + 2 * a) as u32))
+        })
+    })
+}
+
+/// Counting sort of `(key, value)` pairs by key (`key < n_keys`), keeping their order within a
+/// key: CSR pointers (`n_keys + 1`) and the values. `pairs` is iterated twice (count, fill).
+/// The counts of key q go to q + 2; their running sum puts the start of q at q + 1, which the
+/// fill advances to the end of q, i.e. the start of q + 1: no second array of insertion points.
+fn group_by_key<I: Iterator<Item = (usize, u32)>>(
+    n_keys: usize,
+    pairs: impl Fn() -> I,
+) -> (Vec<u32>, Vec<u32>) {
+    let mut ptr = vec![0u32; n_keys + 2];
+    for (q, _) in pairs() {
+        ptr[q + 2] += 1;
     }
-    for k in 0..n {
-        ptr[k + 1] += ptr[k];
+    for k in 2..n_keys + 2 {
+        ptr[k] += ptr[k - 1];
     }
-    let mut next = ptr[..n].to_vec();
-    let mut sources = vec![0u32; ptr[n] as usize];
-    for (e, el) in model.mesh.elements.iter().enumerate() {
-        for (a, &node) in el.nodes().iter().enumerate() {
-            sources[next[node] as usize] = (e * MAX_DOFS + 2 * a) as u32;
-            next[node] += 1;
-        }
+    let mut values = vec![0u32; ptr[n_keys + 1] as usize];
+    for (q, v) in pairs() {
+        let at = &mut ptr[q + 1];
+        values[*at as usize] = v;
+        *at += 1;
     }
-    (ptr, sources)
+    ptr.truncate(n_keys + 1);
+    (ptr, values)
 }
 
 /// Largest separator (equations) for which the tangent is factorized by halves: its dense
@@ -798,11 +801,11 @@ impl StaticSolver {
         let (node_residual, body_residual) = self.residual.split_at_mut(n_node_dofs);
         let mut gather_residual = || {
             node_residual
-                .par_chunks_mut(2 * 1024)
+                .par_chunks_mut(2 * GATHER_NODES)
                 .enumerate()
                 .for_each(|(c, block)| {
                     for (i, r) in block.chunks_exact_mut(2).enumerate() {
-                        let n = c * 1024 + i;
+                        let n = c * GATHER_NODES + i;
                         let (mut rx, mut ry) = (
                             -lambda * point_force[2 * n],
                             -lambda * point_force[2 * n + 1],

@@ -533,17 +533,12 @@ impl Half {
 
     /// The forward substitution of [`Self::forward`] for one right-hand side (loaded in
     /// `work`), in plain loops: most supernodes are 2–8 columns wide, where a call to a dense
-    /// kernel per supernode costs more than its arithmetic (GMRES corrections make one solve
-    /// per iteration). The updates of a supernode's pattern rows are summed in a contiguous
+    /// kernel per supernode costs more than its arithmetic (each Newton correction is one such
+    /// solve). The updates of a supernode's pattern rows are summed in a contiguous
     /// buffer and scattered once.
     fn forward_one(&mut self) {
         let x = &mut self.work[..self.eqs.len()];
-        for block in interior_blocks(
-            &self.symbolic,
-            &self.l_values,
-            self.n_interior,
-            self.interior_supernodes,
-        ) {
+        for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior) {
             let (start, size, m) = (block.start, block.size, block.interior);
             let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
@@ -572,14 +567,7 @@ impl Half {
     /// pattern rows gathered once into a contiguous buffer (see [`Self::forward_one`]).
     fn backward_one(&mut self) {
         let x = &mut self.work[..self.eqs.len()];
-        for block in interior_blocks(
-            &self.symbolic,
-            &self.l_values,
-            self.n_interior,
-            self.interior_supernodes,
-        )
-        .rev()
-        {
+        for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior).rev() {
             let (start, size, m) = (block.start, block.size, block.interior);
             let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
@@ -829,17 +817,18 @@ struct InteriorBlock<'a> {
     values: &'a [f64],
 }
 
-/// The first `count` supernodes of `symbolic` (those holding interior columns), in elimination
-/// order, with their values in `l_values`.
+/// The supernodes of `symbolic` holding interior columns (the first ones: interior columns are
+/// numbered first), in elimination order, with their values in `l_values`.
 fn interior_blocks<'a>(
     symbolic: &'a SymbolicCholesky<usize>,
     l_values: &'a [f64],
     n_interior: usize,
-    count: usize,
 ) -> impl DoubleEndedIterator<Item = InteriorBlock<'a>> {
     let symbolic = supernodal(symbolic);
     let offsets = symbolic.col_ptr_for_val();
     let factor = SupernodalLdltRef::new(symbolic, l_values);
+    let count = symbolic.supernode_begin()[..symbolic.n_supernodes()]
+        .partition_point(|&begin| begin < n_interior);
     (0..count).map(move |sn| {
         let node = factor.supernode(sn);
         let (start, size) = (node.start(), node.val().ncols());
@@ -1036,7 +1025,7 @@ mod tests {
             diff < 1e-10 * scale,
             "split vs whole: {diff} (scale {scale})"
         );
-        // One column at a time (the plain-loop path of GMRES corrections) gives the same
+        // One column at a time (the plain-loop path of Newton corrections) gives the same
         // solutions as the blocked path.
         for j in 0..k {
             let mut one = b[j * n_total..(j + 1) * n_total].to_vec();
