@@ -23,6 +23,7 @@ pub mod reference;
 pub mod sensitivity;
 pub mod solver;
 pub mod split;
+pub mod supernodal;
 
 pub use material::{Hyperelastic, NeoHookean};
 pub use model::{Model, ModelError};

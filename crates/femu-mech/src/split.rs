@@ -24,9 +24,9 @@
 //! (George 1973; Duff & Reid 1983), with faer doing the work inside each half.
 
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
+use crate::supernodal::PartialLdlt;
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::matmul::matmul;
-use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::linalg::triangular_solve::{
     solve_unit_lower_triangular_in_place, solve_unit_upper_triangular_in_place,
 };
@@ -230,11 +230,9 @@ struct Half {
     inv_d: Vec<f64>,
     /// Supernodes holding interior columns (they come first).
     interior_supernodes: usize,
-    mem: MemBuffer,
-    /// `L_SS` (unit lower), then `L_SS D_S`, s x s column-major.
-    l_ss: Vec<f64>,
-    l_ss_d: Vec<f64>,
-    /// `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (s x s column-major).
+    /// The interior's factorization, stopped at the separator.
+    partial: PartialLdlt,
+    /// `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (s x s column-major, lower triangle).
     schur: Vec<f64>,
     /// Local right-hand sides (local rows x MAX_RHS, column-major) and a product buffer.
     work: Vec<f64>,
@@ -307,7 +305,7 @@ impl Half {
             .max()
             .unwrap_or(0);
         let s = separator.len();
-        let req = symbolic.factorize_numeric_ldlt_scratch::<f64>(Par::Seq, Default::default());
+        let partial = PartialLdlt::new(supernodal);
         Ok(Half {
             l_values: vec![0.0; symbolic.len_val()],
             values: vec![0.0; lower.nnz()],
@@ -318,9 +316,7 @@ impl Half {
             symbolic,
             inv_d: vec![0.0; n_interior],
             interior_supernodes,
-            mem: MemBuffer::new(req),
-            l_ss: vec![0.0; s * s],
-            l_ss_d: vec![0.0; s * s],
+            partial,
             schur: vec![0.0; s * s],
             work: vec![0.0; n * MAX_RHS],
             tmp: vec![0.0; (max_pattern + max_cols) * MAX_RHS],
@@ -343,22 +339,14 @@ impl Half {
             ),
             &self.values,
         );
-        self.symbolic
-            .factorize_numeric_ldlt(
-                &mut self.l_values,
-                a,
-                Side::Lower,
-                Default::default(),
-                Par::Seq,
-                MemStack::new(&mut self.mem),
-                Default::default(),
-            )
-            .map_err(|e| LinearSolveError::Other(format!("LDLT of a half: {e:?}")))?;
         let n_interior = self.n_interior;
         let s = n - n_interior;
         let symbolic = supernodal(&self.symbolic);
+        self.partial
+            .factorize(symbolic, &mut self.l_values, a, n_interior)?;
+        // The interior pivots, and the separator's columns: Ŝ's lower triangle.
+        self.schur.fill(0.0);
         let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
-        self.l_ss.fill(0.0);
         for sn in 0..symbolic.n_supernodes() {
             let node = factor.supernode(sn);
             let start = node.start();
@@ -366,41 +354,19 @@ impl Half {
             let ncols = ls.ncols();
             for jj in 0..ncols {
                 let j = start + jj;
-                let d = ls[(jj, jj)];
                 if j < n_interior {
-                    self.inv_d[j] = d.recip();
+                    self.inv_d[j] = ls[(jj, jj)].recip();
                     continue;
                 }
                 let lj = j - n_interior;
-                let col = &mut self.l_ss[lj * s..(lj + 1) * s];
-                col[lj] = 1.0;
-                for ii in jj + 1..ncols {
+                let col = &mut self.schur[lj * s..(lj + 1) * s];
+                for ii in jj..ncols {
                     col[start + ii - n_interior] = ls[(ii, jj)];
                 }
                 for (idx, &r) in node.pattern().iter().enumerate() {
                     col[r - n_interior] = ls[(ncols + idx, jj)];
                 }
-                for (w, l) in self.l_ss_d[lj * s..(lj + 1) * s].iter_mut().zip(col.iter()) {
-                    *w = l * d;
-                }
             }
-        }
-        if s > 0 {
-            let l = MatRef::from_column_major_slice(&self.l_ss, s, s);
-            let ld = MatRef::from_column_major_slice(&self.l_ss_d, s, s);
-            // Ŝ is symmetric and L unit lower triangular: only the lower triangle of
-            // (L D) Lᵀ is formed, from the triangles of its factors (a sixth of a full product).
-            triangular::matmul(
-                MatMut::from_column_major_slice_mut(&mut self.schur, s, s),
-                BlockStructure::TriangularLower,
-                Accum::Replace,
-                ld,
-                BlockStructure::TriangularLower,
-                l.transpose(),
-                BlockStructure::UnitTriangularUpper,
-                1.0,
-                Par::Seq,
-            );
         }
         // Non-finite factors are caught at the pivots, without a pass over all of L: an entry
         // L_ij comes out non-finite from a zero or non-finite pivot d_j, or from non-finite
