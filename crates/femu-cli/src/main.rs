@@ -7,6 +7,7 @@ mod bench;
 mod convergence_cmd;
 mod dic_cmd;
 mod figures;
+mod huge_pages;
 mod identify_cmd;
 mod mesh_cmd;
 mod pipeline;
@@ -22,6 +23,9 @@ mod us_cmd;
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
+
+#[global_allocator]
+static ALLOCATOR: huge_pages::HugePageAlloc = huge_pages::HugePageAlloc;
 
 #[derive(Parser, Debug)]
 #[command(
