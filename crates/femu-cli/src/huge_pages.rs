@@ -7,8 +7,8 @@
 //! faults, and the kernel frees it faster at exit. Measured side by side on the contention
 //! deck (14 interleaved runs, a slow phase of the host): `femu solve` 0.471 → 0.414 s best,
 //! 0.534 → 0.461 s median; assembly 0.082 → 0.071 s median; peak memory 126 → 131 MB (the
-//! glibc tunable: 0.412 s best, 0.492 s median). Where the kernel has transparent huge pages off (`never`) or refuses the
-//! advice, the blocks stay on normal pages: it is only an advice.
+//! glibc tunable: 0.412 s best, 0.492 s median). Where the kernel has transparent huge pages
+//! off (`never`) or refuses the advice, the blocks stay on normal pages: it is only an advice.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 
