@@ -577,8 +577,10 @@ pub struct SplitLdlt {
     /// (position in the tangent's values, column-major index in s x s) of every stored entry of
     /// `K_SS`.
     k_ss: Vec<(usize, usize)>,
-    /// `S̃`, then its LU factors (s x s column-major).
+    /// `S̃`, then its Cholesky factor (lower triangle) or its LU factors (s x s column-major).
     dense: Vec<f64>,
+    /// Whether `dense` holds a Cholesky factor (`S̃` definite) or LU factors.
+    dense_cholesky: bool,
     perm: Vec<usize>,
     perm_inv: Vec<usize>,
     dense_mem: MemBuffer,
@@ -650,6 +652,11 @@ impl SplitLdlt {
             }
         }
         let req = StackReq::any_of(&[
+            faer::linalg::cholesky::llt::factor::cholesky_in_place_scratch::<f64>(
+                s,
+                DENSE_PAR,
+                Default::default(),
+            ),
             faer::linalg::lu::partial_pivoting::factor::lu_in_place_scratch::<usize, f64>(
                 s,
                 s,
@@ -667,6 +674,7 @@ impl SplitLdlt {
             separator: split.separator.clone(),
             k_ss,
             dense: vec![0.0; s * s],
+            dense_cholesky: false,
             perm: vec![0; s],
             perm_inv: vec![0; s],
             dense_mem: MemBuffer::new(req),
@@ -687,24 +695,31 @@ impl SplitLdlt {
             self.factorized = true;
             return Ok(());
         }
-        for ((d, x), y) in self.dense.iter_mut().zip(&a.schur).zip(&b.schur) {
-            *d = x + y;
-        }
-        for &(k, idx) in &self.k_ss {
-            self.dense[idx] -= values[k];
-        }
-        // The halves formed the lower triangles only; S̃ is symmetric.
-        for j in 0..s {
-            for i in j + 1..s {
-                self.dense[i * s + j] = self.dense[j * s + i];
-            }
-        }
+        self.assemble_dense(values);
         if !self.dense.iter().all(|v| v.is_finite()) {
             return Err(LinearSolveError::Other(
                 "LDLT produced a non-finite separator Schur complement".into(),
             ));
         }
         let scale = self.dense.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        // S̃ is definite when the tangent is (a principal submatrix's Schur complement): then
+        // Cholesky, half the flops of LU; otherwise S̃ is formed again (Cholesky uses the
+        // upper triangle as workspace) for LU with partial pivoting.
+        let cholesky = faer::linalg::cholesky::llt::factor::cholesky_in_place(
+            MatMut::from_column_major_slice_mut(&mut self.dense, s, s),
+            Default::default(),
+            DENSE_PAR,
+            MemStack::new(&mut self.dense_mem),
+            Default::default(),
+        );
+        // A squared pivot at rounding level of the largest entry: singular, as for LU below.
+        self.dense_cholesky =
+            cholesky.is_ok() && (0..s).all(|i| self.dense[i * s + i].powi(2) > 1e-14 * scale);
+        if self.dense_cholesky {
+            self.factorized = true;
+            return Ok(());
+        }
+        self.assemble_dense(values);
         let mut lu = MatMut::from_column_major_slice_mut(&mut self.dense, s, s);
         faer::linalg::lu::partial_pivoting::factor::lu_in_place(
             lu.rb_mut(),
@@ -723,6 +738,24 @@ impl SplitLdlt {
         }
         self.factorized = true;
         Ok(())
+    }
+
+    /// `S̃ = Ŝ_A + Ŝ_B - K_SS` into `dense` (both triangles), from the halves' Schur
+    /// complements (lower triangles) and the tangent `values`.
+    fn assemble_dense(&mut self, values: &[f64]) {
+        let s = self.separator.len();
+        let [a, b] = &self.halves;
+        for ((d, x), y) in self.dense.iter_mut().zip(&a.schur).zip(&b.schur) {
+            *d = x + y;
+        }
+        for &(k, idx) in &self.k_ss {
+            self.dense[idx] -= values[k];
+        }
+        for j in 0..s {
+            for i in j + 1..s {
+                self.dense[i * s + j] = self.dense[j * s + i];
+            }
+        }
     }
 
     /// Solves `A X = B` in place for `columns` (≤ [`MAX_RHS`]) right-hand sides stored one
@@ -747,7 +780,15 @@ impl SplitLdlt {
                 self.separator_rhs[j * s + i] = rhs[j * n + q] + fa[i] + fb[i];
             }
         }
-        if s > 0 {
+        if s > 0 && self.dense_cholesky {
+            faer::linalg::cholesky::llt::solve::solve_in_place_with_conj(
+                MatRef::from_column_major_slice(&self.dense, s, s),
+                faer::Conj::No,
+                MatMut::from_column_major_slice_mut(&mut self.separator_rhs[..s * k], s, k),
+                Par::Seq,
+                MemStack::new(&mut self.dense_mem),
+            );
+        } else if s > 0 {
             let lu = MatRef::from_column_major_slice(&self.dense, s, s);
             faer::linalg::lu::partial_pivoting::solve::solve_in_place_with_conj(
                 lu,
@@ -962,6 +1003,8 @@ mod tests {
         let (pattern, split, values, n_total) = grid_system(shift, with_border, &mut rng);
         let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
         split_ldlt.factorize(&values).unwrap();
+        // The definite matrix's S̃ is factorized by Cholesky, the indefinite one's by LU.
+        assert_eq!(split_ldlt.dense_cholesky, shift == 0.0);
         let mut whole = SparseLdlt::new(&pattern, None).unwrap();
         whole.factorize(&pattern, &values).unwrap();
         let k = 3;
