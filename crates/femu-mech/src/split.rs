@@ -24,7 +24,7 @@
 //! (George 1973; Duff & Reid 1983), with faer doing the work inside each half.
 
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
-use crate::supernodal::PartialLdlt;
+use crate::supernodal::{LowerView, PartialLdlt};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::{
@@ -37,7 +37,7 @@ use faer::sparse::linalg::cholesky::{
     SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
-use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::sparse::SymbolicSparseColMatRef;
 use faer::{Accum, MatMut, MatRef, Par, Side};
 
 const NONE: usize = usize::MAX;
@@ -223,7 +223,6 @@ struct Half {
     pattern: CscPattern,
     /// Position in the tangent's values of each stored entry of `pattern`.
     source: Vec<usize>,
-    values: Vec<f64>,
     symbolic: SymbolicCholesky<usize>,
     l_values: Vec<f64>,
     /// 1 / D of the interior pivots.
@@ -308,7 +307,6 @@ impl Half {
         let partial = PartialLdlt::new(supernodal);
         Ok(Half {
             l_values: vec![0.0; symbolic.len_val()],
-            values: vec![0.0; lower.nnz()],
             eqs,
             n_interior,
             pattern: lower,
@@ -325,20 +323,13 @@ impl Half {
 
     /// Factorizes this half of `tangent` and forms its separator Schur complement.
     fn factorize(&mut self, tangent: &[f64]) -> Result<(), LinearSolveError> {
-        for (v, &k) in self.values.iter_mut().zip(&self.source) {
-            *v = tangent[k];
-        }
         let n = self.eqs.len();
-        let a = SparseColMatRef::new(
-            SymbolicSparseColMatRef::new_checked(
-                n,
-                n,
-                &self.pattern.col_ptr,
-                None,
-                &self.pattern.row_idx,
-            ),
-            &self.values,
-        );
+        let a = LowerView {
+            col_ptr: &self.pattern.col_ptr,
+            row_idx: &self.pattern.row_idx,
+            source: &self.source,
+            values: tangent,
+        };
         let n_interior = self.n_interior;
         let s = n - n_interior;
         let symbolic = supernodal(&self.symbolic);

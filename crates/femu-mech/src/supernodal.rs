@@ -23,10 +23,20 @@ use faer::linalg::matmul::matmul;
 use faer::linalg::triangular_solve::solve_unit_lower_triangular_in_place;
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::sparse::linalg::cholesky::supernodal::SymbolicSupernodalCholesky;
-use faer::sparse::SparseColMatRef;
 use faer::{Accum, MatMut, MatRef, Par};
 
 const NONE: usize = usize::MAX;
+
+/// The lower triangle of a matrix (CSC, rows sorted) whose values are read from another
+/// matrix's: entry `k` (row `row_idx[k]`) is `values[source[k]]`. A half's entries are read
+/// straight from the tangent's values, without a copy.
+#[derive(Debug, Clone, Copy)]
+pub struct LowerView<'a> {
+    pub col_ptr: &'a [usize],
+    pub row_idx: &'a [usize],
+    pub source: &'a [usize],
+    pub values: &'a [f64],
+}
 
 /// The structure and the workspace of [`PartialLdlt::factorize`], built once per pattern.
 pub struct PartialLdlt {
@@ -108,19 +118,20 @@ impl PartialLdlt {
         }
     }
 
-    /// Factorizes the first `n_interior` columns of `a_lower` (lower triangle, the pattern of
-    /// `symbolic`) into `l_values` and leaves the Schur complement on the other columns in
-    /// their places. A zero interior pivot is an error naming its column.
+    /// Factorizes the first `n_interior` columns of `a` (its lower triangle has the pattern
+    /// analysed by `symbolic`) into `l_values` and leaves the Schur complement on the other
+    /// columns in their places. A zero interior pivot is an error naming its column.
     pub fn factorize(
         &mut self,
         symbolic: &SymbolicSupernodalCholesky<usize>,
         l_values: &mut [f64],
-        a_lower: SparseColMatRef<'_, usize, f64>,
+        a: LowerView<'_>,
         n_interior: usize,
     ) -> Result<(), LinearSolveError> {
         let offsets = symbolic.col_ptr_for_val();
         assert_eq!(l_values.len(), symbolic.len_val());
-        assert_eq!(a_lower.nrows(), symbolic.nrows());
+        assert_eq!(a.col_ptr.len(), symbolic.nrows() + 1);
+        assert_eq!(a.row_idx.len(), a.source.len());
         for s in 0..symbolic.n_supernodes() {
             let (s_start, s_end, s_pattern) = supernode(symbolic, s);
             let s_ncols = s_end - s_start;
@@ -133,11 +144,8 @@ impl PartialLdlt {
             ls.fill(0.0);
             for j in s_start..s_end {
                 let jj = j - s_start;
-                for (&i, &v) in a_lower
-                    .row_idx_of_col_raw(j)
-                    .iter()
-                    .zip(a_lower.val_of_col(j))
-                {
+                for k in a.col_ptr[j]..a.col_ptr[j + 1] {
+                    let (i, v) = (a.row_idx[k], a.values[a.source[k]]);
                     if i < j {
                         continue;
                     }
@@ -385,7 +393,7 @@ mod tests {
         SymmetricOrdering,
     };
     use faer::sparse::linalg::SupernodalThreshold;
-    use faer::sparse::SymbolicSparseColMatRef;
+    use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
     use faer::Side;
     use rand::{Rng, SeedableRng};
 
@@ -484,6 +492,13 @@ mod tests {
             SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx),
             &values,
         );
+        let source: Vec<usize> = (0..values.len()).collect();
+        let view = LowerView {
+            col_ptr: &col_ptr,
+            row_idx: &row_idx,
+            source: &source,
+            values: &values,
+        };
         // The boundary: one column into the last supernode of at least three columns that
         // starts past the middle.
         let straddled = (0..sn.n_supernodes())
@@ -536,7 +551,9 @@ mod tests {
             let mut partial = PartialLdlt::new(sn);
             partial.avx2_fma &= simd;
             let mut l_values = vec![0.0; symbolic.len_val()];
-            partial.factorize(sn, &mut l_values, a, n_interior).unwrap();
+            partial
+                .factorize(sn, &mut l_values, view, n_interior)
+                .unwrap();
             let scale = whole.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let mut schur_scale = 0.0f64;
             let mut max_diff = [0.0f64; 2];
@@ -590,13 +607,16 @@ mod tests {
         for v in &mut values[col_ptr[0]..col_ptr[1]] {
             *v = 0.0;
         }
-        let a = SparseColMatRef::new(
-            SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx),
-            &values,
-        );
+        let source: Vec<usize> = (0..values.len()).collect();
+        let view = LowerView {
+            col_ptr: &col_ptr,
+            row_idx: &row_idx,
+            source: &source,
+            values: &values,
+        };
         let mut l_values = vec![0.0; symbolic.len_val()];
         let err = PartialLdlt::new(sn)
-            .factorize(sn, &mut l_values, a, n / 2)
+            .factorize(sn, &mut l_values, view, n / 2)
             .unwrap_err();
         assert!(matches!(err, LinearSolveError::Singular(0)), "{err}");
     }
