@@ -5,8 +5,8 @@
 //! - [`load`]: follower pressure with load stiffness.
 //! - [`model`]: a checked model built from a resolved deck.
 //! - [`solver`]: incremental Newton–Raphson with line search and cut-back, sparse LU reused.
-//! - [`linear`] and [`split`]: the sparse factorizations (faer LDLᵀ/LU; large models by halves
-//!   on two cores).
+//! - [`linear`], [`split`] and [`supernodal`]: the sparse factorizations (faer LDLᵀ/LU; large
+//!   models by halves on two cores, each half's LDLᵀ stopped at the separator).
 //! - [`sensitivity`]: exact parameter sensitivities by direct differentiation (seed §2.3).
 //! - [`output`]: displacements CSV, VTU with LE and Cauchy stress, summary JSON.
 

@@ -14,14 +14,16 @@
 //! ```
 //!
 //! Each half `M_A = [K_AA K_AS; K_SA K_SS]` (a principal submatrix of `K`, so as definite as
-//! `K`) is factorized by faer with its interior in AMD's order and the separator last (the same
-//! factor entries as AMD's whole factorization, so no extra fill); the last
-//! `s` columns of its factor give `Ŝ_A = L_SS D_S L_SSᵀ = K_SS - K_SA K_AA⁻¹ K_AS`. The Schur
-//! complement of `K` on the separator is then `S̃ = Ŝ_A + Ŝ_B - K_SS` (dense, LU with partial
-//! pivoting), and a solve is the block forward substitution through the interiors of both
-//! factors (in parallel), a dense solve on the separator, and the block back substitution (in
-//! parallel). This is the first level of a nested-dissection multifrontal factorization
-//! (George 1973; Duff & Reid 1983), with faer doing the work inside each half.
+//! `K`) is analysed by faer (supernodal symbolic LDLᵀ) with its interior in AMD's order and the
+//! separator last (the same factor entries as AMD's whole factorization, so no extra fill), and
+//! factorized by [`crate::supernodal::PartialLdlt`] up to the separator: its interior columns
+//! hold `L_AA`, `D_A` and `L_SA`, and its separator columns are left holding
+//! `Ŝ_A = K_SS - K_SA K_AA⁻¹ K_AS`. The Schur complement of `K` on the separator is then
+//! `S̃ = Ŝ_A + Ŝ_B - K_SS` (dense: Cholesky when definite, LU with partial pivoting otherwise),
+//! and a solve is the block forward substitution through the interiors of both factors (in
+//! parallel), a dense solve on the separator, and the block back substitution (in parallel).
+//! This is the first level of a nested-dissection multifrontal factorization (George 1973;
+//! Duff & Reid 1983).
 
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
 use crate::supernodal::{LowerView, PartialLdlt};
@@ -213,7 +215,7 @@ impl NodeGraph {
     }
 }
 
-/// One half: the interior's equations then the separator's, factorized by faer.
+/// One half: the interior's equations then the separator's, factorized up to the separator.
 struct Half {
     /// Equation of each local row, in elimination order: `n_interior` interior ones, then the
     /// separator's.
