@@ -78,7 +78,7 @@ fn transpose(pattern: &CscPattern) -> CscPattern {
 }
 
 /// The supernodal structure of a factorization made with supernodes forced.
-fn supernodal(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
+pub(crate) fn supernodal(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
     match symbolic.raw() {
         SymbolicCholeskyRaw::Supernodal(s) => s,
         SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodes are forced"),

@@ -388,9 +388,9 @@ fn has_avx2_fma() -> bool {
 mod tests {
     use super::*;
     use crate::linear::NodeGraph;
+    use crate::split::supernodal;
     use faer::sparse::linalg::cholesky::{
-        factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymbolicCholeskyRaw,
-        SymmetricOrdering,
+        factorize_symbolic_cholesky, CholeskySymbolicParams, SymbolicCholesky, SymmetricOrdering,
     };
     use faer::sparse::linalg::SupernodalThreshold;
     use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -473,10 +473,18 @@ mod tests {
         (n, col_ptr, row_idx, values, symbolic)
     }
 
-    fn supernodes(symbolic: &SymbolicCholesky<usize>) -> &SymbolicSupernodalCholesky<usize> {
-        match symbolic.raw() {
-            SymbolicCholeskyRaw::Supernodal(s) => s,
-            SymbolicCholeskyRaw::Simplicial(_) => unreachable!("supernodes are forced"),
+    /// The view of a lower triangle holding its own values (`source` the identity).
+    fn own_values<'a>(
+        col_ptr: &'a [usize],
+        row_idx: &'a [usize],
+        source: &'a [usize],
+        values: &'a [f64],
+    ) -> LowerView<'a> {
+        LowerView {
+            col_ptr,
+            row_idx,
+            source,
+            values,
         }
     }
 
@@ -487,18 +495,13 @@ mod tests {
     #[test]
     fn partial_ldlt_matches_the_whole_factorization() {
         let (n, col_ptr, row_idx, values, symbolic) = system();
-        let sn = supernodes(&symbolic);
+        let sn = supernodal(&symbolic);
         let a = SparseColMatRef::new(
             SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, &row_idx),
             &values,
         );
         let source: Vec<usize> = (0..values.len()).collect();
-        let view = LowerView {
-            col_ptr: &col_ptr,
-            row_idx: &row_idx,
-            source: &source,
-            values: &values,
-        };
+        let view = own_values(&col_ptr, &row_idx, &source, &values);
         // The boundary: one column into the last supernode of at least three columns that
         // starts past the middle.
         let straddled = (0..sn.n_supernodes())
@@ -602,18 +605,13 @@ mod tests {
     #[test]
     fn partial_ldlt_reports_a_zero_pivot() {
         let (n, col_ptr, row_idx, mut values, symbolic) = system();
-        let sn = supernodes(&symbolic);
+        let sn = supernodal(&symbolic);
         // Column 0 zeroed: its pivot is exactly zero.
         for v in &mut values[col_ptr[0]..col_ptr[1]] {
             *v = 0.0;
         }
         let source: Vec<usize> = (0..values.len()).collect();
-        let view = LowerView {
-            col_ptr: &col_ptr,
-            row_idx: &row_idx,
-            source: &source,
-            values: &values,
-        };
+        let view = own_values(&col_ptr, &row_idx, &source, &values);
         let mut l_values = vec![0.0; symbolic.len_val()];
         let err = PartialLdlt::new(sn)
             .factorize(sn, &mut l_values, view, n / 2)
