@@ -335,8 +335,14 @@ impl Half {
         let n_interior = self.n_interior;
         let s = n - n_interior;
         let symbolic = supernodal(&self.symbolic);
+        let eqs = &self.eqs;
         self.partial
-            .factorize(symbolic, &mut self.l_values, a, n_interior)?;
+            .factorize(symbolic, &mut self.l_values, a, n_interior)
+            .map_err(|e| match e {
+                // A local column: its equation.
+                LinearSolveError::Singular(i) => LinearSolveError::Singular(eqs[i]),
+                other => other,
+            })?;
         // The interior pivots, and the separator's columns: Ŝ's lower triangle.
         self.schur.fill(0.0);
         let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
@@ -1088,6 +1094,25 @@ mod tests {
                 "NaN at ({r}, {c}) not reported"
             );
         }
+    }
+
+    /// A zero pivot in a half is reported with the tangent's equation (not the half's local
+    /// column).
+    #[test]
+    fn split_ldlt_names_the_equation_of_a_zero_pivot() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let (pattern, split, mut values, _) = grid_system(0.0, false, &mut rng);
+        // The first column of the second half is eliminated first: its pivot is its diagonal.
+        let q = split.interiors[1][0];
+        values[pattern.position(q, q).unwrap()] = 0.0;
+        let err = SplitLdlt::new(&pattern, &split)
+            .unwrap()
+            .factorize(&values)
+            .unwrap_err();
+        assert!(
+            matches!(err, LinearSolveError::Singular(e) if e == q),
+            "{err} (expected equation {q})"
+        );
     }
 
     #[test]
