@@ -443,7 +443,7 @@ fn draw_field(
                 )))
                 .map_err(de)?;
             if !o.label.is_empty() && !p.is_empty() {
-                draw_overlay_label(root, &chart, &p, &o.label, &lay, s)?;
+                draw_overlay_label(root, &chart, &p, o.closed, &o.label, &lay, s)?;
             }
         }
 
@@ -571,12 +571,17 @@ fn rasterise(
     Ok(())
 }
 
-/// Writes an overlay's label centred above it, or right of it when there is no room above,
-/// or else below it.
+/// Writes an overlay's label. An open line (a rigid plate, which reaches past the body on both
+/// sides) has it at an end, clear of the body and of the reference outline the plate has
+/// pressed into: a line across the picture just above its right end (or below it when there is
+/// no room above), right-aligned; a line along it beside its top end, on the side away from
+/// the picture's centre. A closed one (an indenter) has it centred above it. Either falls back
+/// to right of the overlay, level with its top, or else below it.
 fn draw_overlay_label(
     root: &DrawingArea<BitMapBackend<'_>, Shift>,
     chart: &Chart<'_, '_>,
     p: &[(f64, f64)],
+    closed: bool,
     label: &str,
     lay: &FieldLayout,
     s: Sizes,
@@ -592,11 +597,43 @@ fn draw_overlay_label(
         .map_err(de)?;
     let (w, h) = (w as i32, h as i32);
     let (left, right) = (lay.left as i32, (lay.left + lay.pw) as i32);
-    let (x, y, hp, vp) = if y0 - gap - h >= lay.top as i32 {
+    let (top, bottom) = (lay.top as i32, (lay.top + lay.ph) as i32);
+    // An open line: across the picture (wider than tall on screen) or along it.
+    let open = !closed && px.len() >= 2;
+    let across = x1 - x0 >= y1 - y0;
+    // Across: the right end, the label above it (or below), right-aligned along the line.
+    let right_end = px
+        .iter()
+        .copied()
+        .max_by_key(|q| (q.0, -q.1))
+        .filter(|&(ex, _)| open && across && ex.min(right) - w >= left);
+    // Along: the top end, the label beside it on the side away from the picture's centre.
+    let outward = x0 > (left + right) / 2;
+    let top_end = px.iter().copied().min_by_key(|q| q.1).filter(|&(ex, _)| {
+        open && !across
+            && if outward {
+                ex + gap + w <= right
+            } else {
+                ex - gap - w >= left
+            }
+    });
+    let (x, y, hp, vp) = if let Some((ex, ey)) = right_end.filter(|&(_, ey)| ey - gap - h >= top) {
+        (ex.min(right), ey - gap, HPos::Right, VPos::Bottom)
+    } else if let Some((ex, ey)) = right_end.filter(|&(_, ey)| ey + gap + h <= bottom) {
+        (ex.min(right), ey + gap, HPos::Right, VPos::Top)
+    } else if let Some((ex, ey)) = top_end {
+        if outward {
+            (ex + gap, ey, HPos::Left, VPos::Top)
+        } else {
+            (ex - gap, ey, HPos::Right, VPos::Top)
+        }
+    } else if y0 - gap - h >= top {
         let x = ((x0 + x1) / 2).clamp(left + w / 2, right - w / 2);
         (x, y0 - gap, HPos::Center, VPos::Bottom)
     } else if x1 + gap + w <= right {
-        (x1 + gap, (y0 + y1) / 2, HPos::Left, VPos::Center)
+        // Level with the overlay's top: an indenter's top is outside the body, its middle at
+        // the skin (and the reference outline) it presses into.
+        (x1 + gap, y0, HPos::Left, VPos::Top)
     } else {
         let x = ((x0 + x1) / 2).clamp(left + w / 2, right - w / 2);
         (x, y1 + gap, HPos::Center, VPos::Top)

@@ -64,6 +64,7 @@ fn mesh_field_is_written_at_the_default_size() {
         region_of_element: Some(&region),
         overlays: vec![
             Overlay::polyline(vec![[-60.0, 60.0], [60.0, 60.0]], "plate"),
+            Overlay::polyline(vec![[64.0, -50.0], [64.0, 50.0]], "side plate"),
             Overlay::circle([0.0, 0.0], 5.0, ""),
         ],
         show_reference_outline: true,
