@@ -229,8 +229,6 @@ struct Half {
     l_values: Vec<f64>,
     /// 1 / D of the interior pivots.
     inv_d: Vec<f64>,
-    /// Supernodes holding interior columns (they come first).
-    interior_supernodes: usize,
     /// The interior's factorization, stopped at the separator.
     partial: PartialLdlt,
     /// `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (s x s column-major, lower triangle).
@@ -294,9 +292,6 @@ impl Half {
                 "expected a supernodal factorization".into(),
             ));
         };
-        let interior_supernodes = (0..supernodal.n_supernodes())
-            .filter(|&s| supernodal.supernode_begin()[s] < n_interior)
-            .count();
         let max_pattern = (0..supernodal.n_supernodes())
             .map(|s| supernodal.nnz_per_super()[s])
             .max()
@@ -315,7 +310,6 @@ impl Half {
             source,
             symbolic,
             inv_d: vec![0.0; n_interior],
-            interior_supernodes,
             partial,
             schur: vec![0.0; s * s],
             work: vec![0.0; n * MAX_RHS],
@@ -399,16 +393,11 @@ impl Half {
             self.forward_one();
             return;
         }
-        let symbolic = supernodal(&self.symbolic);
-        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
         let work = &mut self.work[..n * k];
-        for sn in 0..self.interior_supernodes {
-            let node = factor.supernode(sn);
-            let start = node.start();
-            let ls = node.val();
-            let size = ls.ncols();
-            // Interior columns of this supernode (all but possibly the last one).
-            let m = size.min(n_interior - start);
+        for block in interior_blocks(&self.symbolic, &self.l_values, n_interior) {
+            let (start, size, m) = (block.start, block.size, block.interior);
+            let pattern = block.pattern;
+            let ls = MatRef::from_column_major_slice(block.values, size + pattern.len(), size);
             solve_unit_lower_triangular_in_place(
                 ls.subrows(0, m).subcols(0, m),
                 MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
@@ -417,7 +406,6 @@ impl Half {
             // The rows below the interior columns, stored one after the other: the rest of the
             // diagonal block (rows start + m .. start + size), then the pattern.
             let rest = size - m;
-            let pattern = node.pattern();
             let rows = rest + pattern.len();
             if rows == 0 {
                 continue;
@@ -459,17 +447,12 @@ impl Half {
             self.backward_one();
             return;
         }
-        let symbolic = supernodal(&self.symbolic);
-        let factor = SupernodalLdltRef::new(symbolic, &self.l_values);
         let work = &mut self.work[..n * k];
-        for sn in (0..self.interior_supernodes).rev() {
-            let node = factor.supernode(sn);
-            let start = node.start();
-            let ls = node.val();
-            let size = ls.ncols();
-            let m = size.min(n_interior - start);
+        for block in interior_blocks(&self.symbolic, &self.l_values, n_interior).rev() {
+            let (start, size, m) = (block.start, block.size, block.interior);
+            let pattern = block.pattern;
+            let ls = MatRef::from_column_major_slice(block.values, size + pattern.len(), size);
             let rest = size - m;
-            let pattern = node.pattern();
             let rows = rest + pattern.len();
             if rows > 0 {
                 let tmp = &mut self.tmp[..rows * k];
