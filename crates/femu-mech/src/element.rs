@@ -13,7 +13,7 @@
 //! `femu-mesh` crate documentation.
 
 use crate::material::{
-    cof2, det2, Hyperelastic, NeoHookeanRate, NonPositiveJacobian, Tensor2, DCOF,
+    cof2, det2, Hyperelastic, InvariantDerivatives, NeoHookeanRate, NonPositiveJacobian, Tensor2,
 };
 use femu_mesh::ElementKind;
 
@@ -239,44 +239,121 @@ pub fn formulation(kind: ElementKind) -> &'static dyn SolidElement {
     }
 }
 
-/// Adds `w P:∇N` to the force and `w ∇N A ∇N` to the stiffness.
+/// Adds `w P:∇N` to the force (`P` the first Piola–Kirchhoff stress).
 #[inline]
-fn add_gauss_contribution(
+fn add_stress_divergence(
     n: usize,
     dn: &[[f64; 2]; MAX_NODES],
     w: f64,
     pk1: &Tensor2,
-    tangent: Option<&[[f64; 4]; 4]>,
     force: &mut [f64],
-    stiffness: Option<&mut [f64]>,
 ) {
     for a in 0..n {
         force[2 * a] += w * (pk1[0] * dn[a][0] + pk1[1] * dn[a][1]);
         force[2 * a + 1] += w * (pk1[2] * dn[a][0] + pk1[3] * dn[a][1]);
     }
-    if let (Some(k), Some(at)) = (stiffness, tangent) {
-        // Two-stage contraction: T[b][k][iJ] = Σ_L A[iJ][kL] ∂N_b/∂X_L, then
-        // K[(a,i),(b,k)] += w Σ_J ∂N_a/∂X_J T[b][k][iJ].
-        let nd = 2 * n;
-        let mut t = [[[0.0; 4]; 2]; MAX_NODES];
-        for b in 0..n {
-            for kk in 0..2 {
-                for ij in 0..4 {
-                    t[b][kk][ij] = at[ij][2 * kk] * dn[b][0] + at[ij][2 * kk + 1] * dn[b][1];
+}
+
+/// Adds one Gauss point's internal force and (if asked) stiffness for an element of `N` nodes,
+/// from the invariant derivatives `d` of the energy at F (weight `w`).
+///
+/// With `g_a = F ∇N_a` and `h_a = cof(F) ∇N_a` (2-vectors), `P = 2 W_I F + W_J cof F` gives
+/// `f_ai = w (2 W_I g_ai + W_J h_ai)`, and contracting the tangent of the material module,
+/// `A = 4 W_II F⊗F + 2 W_IJ (F⊗cof + cof⊗F) + W_JJ cof⊗cof + W_J dcof/dF + 2 W_I 𝕀`, with
+/// `∇N_a` and `∇N_b` gives
+///
+/// ```text
+/// K_(ai)(bk) = w [ g_ai (4 W_II g_bk + 2 W_IJ h_bk) + h_ai (2 W_IJ g_bk + W_JJ h_bk)
+///                  + δ_ik 2 W_I ∇N_a·∇N_b + ε_ik W_J (∇N_a × ∇N_b) ]
+/// ```
+///
+/// (`ε_12 = 1`, `ε_21 = -1`, `ε_ii = 0`; the last term is `dcof/dF`, constant in 2D). This is
+/// a third of the arithmetic of forming A and contracting it; K is symmetric, so the blocks
+/// `b ≥ a` are computed and mirrored. `stiffness` is row-major `2N x 2N`.
+#[inline(always)]
+fn add_gauss_contribution<const N: usize>(
+    dn: &[[f64; 2]; MAX_NODES],
+    w: f64,
+    f: &Tensor2,
+    d: &InvariantDerivatives,
+    force: &mut [f64],
+    stiffness: Option<&mut [f64]>,
+) {
+    let c = cof2(f);
+    let mut g = [[0.0; 2]; N];
+    let mut h = [[0.0; 2]; N];
+    for a in 0..N {
+        let [d0, d1] = dn[a];
+        g[a] = [f[0] * d0 + f[1] * d1, f[2] * d0 + f[3] * d1];
+        h[a] = [c[0] * d0 + c[1] * d1, c[2] * d0 + c[3] * d1];
+    }
+    let (s_i, s_j) = (2.0 * w * d.w_i, w * d.w_j);
+    for a in 0..N {
+        force[2 * a] += s_i * g[a][0] + s_j * h[a][0];
+        force[2 * a + 1] += s_i * g[a][1] + s_j * h[a][1];
+    }
+    let Some(k) = stiffness else {
+        return;
+    };
+    let (k_ii, k_ij, k_jj) = (4.0 * w * d.w_ii, 2.0 * w * d.w_ij, w * d.w_jj);
+    // K_(ai)(bk) = g_ai p_bk + h_ai q_bk + (geometric and dcof terms)
+    let mut p = [[0.0; 2]; N];
+    let mut q = [[0.0; 2]; N];
+    for b in 0..N {
+        for kk in 0..2 {
+            p[b][kk] = k_ii * g[b][kk] + k_ij * h[b][kk];
+            q[b][kk] = k_ij * g[b][kk] + k_jj * h[b][kk];
+        }
+    }
+    let nd = 2 * N;
+    for a in 0..N {
+        let [da0, da1] = dn[a];
+        for b in a..N {
+            let [db0, db1] = dn[b];
+            let geometric = s_i * (da0 * db0 + da1 * db1);
+            let cross = s_j * (da0 * db1 - da1 * db0);
+            let mut block = [[0.0; 2]; 2];
+            for i in 0..2 {
+                for kk in 0..2 {
+                    block[i][kk] = g[a][i] * p[b][kk] + h[a][i] * q[b][kk];
                 }
             }
-        }
-        for a in 0..n {
+            block[0][0] += geometric;
+            block[1][1] += geometric;
+            block[0][1] += cross;
+            block[1][0] -= cross;
             for i in 0..2 {
-                let row = &mut k[(2 * a + i) * nd..(2 * a + i + 1) * nd];
-                for b in 0..n {
+                for kk in 0..2 {
+                    k[(2 * a + i) * nd + 2 * b + kk] += block[i][kk];
+                }
+            }
+            if b != a {
+                for i in 0..2 {
                     for kk in 0..2 {
-                        row[2 * b + kk] +=
-                            w * (dn[a][0] * t[b][kk][2 * i] + dn[a][1] * t[b][kk][2 * i + 1]);
+                        k[(2 * b + kk) * nd + 2 * a + i] += block[i][kk];
                     }
                 }
             }
         }
+    }
+}
+
+/// One Gauss point of an element with `n` nodes (3 or 4), dispatched to the kernel of that
+/// node count.
+#[inline]
+fn add_gauss_point(
+    n: usize,
+    dn: &[[f64; 2]; MAX_NODES],
+    w: f64,
+    f: &Tensor2,
+    d: &InvariantDerivatives,
+    force: &mut [f64],
+    stiffness: Option<&mut [f64]>,
+) {
+    match n {
+        4 => add_gauss_contribution::<4>(dn, w, f, d, force, stiffness),
+        3 => add_gauss_contribution::<3>(dn, w, f, d, force, stiffness),
+        _ => unreachable!("elements have 3 or 4 nodes"),
     }
 }
 
@@ -291,21 +368,20 @@ impl SolidElement for DisplacementElement {
         let n = geo.n_nodes;
         out.energy = 0.0;
         out.force[..2 * n].fill(0.0);
-        let want_k = out.stiffness.is_some();
         if let Some(k) = out.stiffness.as_deref_mut() {
             k[..4 * n * n].fill(0.0);
         }
         for g in 0..geo.n_gauss {
             let f = geo.deformation_gradient(g, u);
-            let r = mat.response(&f, want_k)?;
+            let d = mat.derivatives(&f)?;
             let gp = &geo.gauss[g];
-            out.energy += gp.weight * r.energy;
-            add_gauss_contribution(
+            out.energy += gp.weight * d.w;
+            add_gauss_point(
                 n,
                 &gp.dn_dx,
                 gp.weight,
-                &r.pk1,
-                want_k.then_some(&r.tangent),
+                &f,
+                &d,
                 out.force,
                 out.stiffness.as_deref_mut(),
             );
@@ -330,10 +406,10 @@ impl SolidElement for DisplacementElement {
             let gp = &geo.gauss[g];
             let f = geo.deformation_gradient(g, u);
             let r = iso.response_isochoric(&f, false)?;
-            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &r.pk1, None, f_c10, None);
+            add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, f_c10);
             let p = vol.volumetric(det2(&f))[1];
             let pk1 = cof2(&f).map(|c| p * c);
-            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &pk1, None, f_inv_d, None);
+            add_stress_divergence(n, &gp.dn_dx, gp.weight, &pk1, f_inv_d);
         }
         Ok(())
     }
@@ -377,7 +453,6 @@ impl SolidElement for MeanDilatationElement {
         let n = geo.n_nodes;
         let nd = 2 * n;
         out.force[..nd].fill(0.0);
-        let want_k = out.stiffness.is_some();
         if let Some(k) = out.stiffness.as_deref_mut() {
             k[..nd * nd].fill(0.0);
         }
@@ -389,31 +464,21 @@ impl SolidElement for MeanDilatationElement {
         for g in 0..geo.n_gauss {
             let gp = &geo.gauss[g];
             let f = geo.deformation_gradient(g, u);
-            let r = mat.response_isochoric(&f, want_k)?;
-            out.energy += gp.weight * r.energy;
-            let c = cof2(&f);
-            // Pressure part of the stress, P_vol = p cof(F); tangent p dcof/dF.
-            let mut pk1 = r.pk1;
-            for k in 0..4 {
-                pk1[k] += p * c[k];
-            }
-            let mut at = r.tangent;
-            if want_k {
-                for (a, row) in at.iter_mut().enumerate() {
-                    for (b, v) in row.iter_mut().enumerate() {
-                        *v += p * DCOF[a][b];
-                    }
-                }
-            }
-            add_gauss_contribution(
+            let mut d = mat.derivatives_isochoric(&f)?;
+            out.energy += gp.weight * d.w;
+            // The pressure adds P_vol = p cof(F) and the tangent p dcof/dF: both are carried
+            // by W_J, while W_JJ stays isochoric (the volumetric stiffness is U''(θ) g ⊗ g).
+            d.w_j += p;
+            add_gauss_point(
                 n,
                 &gp.dn_dx,
                 gp.weight,
-                &pk1,
-                want_k.then_some(&at),
+                &f,
+                &d,
                 out.force,
                 out.stiffness.as_deref_mut(),
             );
+            let c = cof2(&f);
             for a in 0..n {
                 let d = gp.dn_dx[a];
                 gvec[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
@@ -451,7 +516,7 @@ impl SolidElement for MeanDilatationElement {
             let f = geo.deformation_gradient(g, u);
             let r = unit.response_isochoric(&f, false)?;
             volume += gp.weight * det2(&f);
-            add_gauss_contribution(n, &gp.dn_dx, gp.weight, &r.pk1, None, f_c10, None);
+            add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, f_c10);
             let c = cof2(&f);
             for a in 0..n {
                 let d = gp.dn_dx[a];

@@ -73,19 +73,38 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
     /// Volumetric part `(U, U', U'')` at J.
     fn volumetric(&self, j: f64) -> [f64; 3];
 
-    /// Full energy, stress and (if `tangent`) consistent tangent at F.
-    fn response(&self, f: &Tensor2, tangent: bool) -> Result<StressResponse, NonPositiveJacobian> {
+    /// Derivatives of the whole energy `W_iso + U` with respect to `(I1, J)` at F. The
+    /// elements build their forces and tangents from these directly (see
+    /// [`crate::element`]), without forming P and A.
+    #[inline]
+    fn derivatives(&self, f: &Tensor2) -> Result<InvariantDerivatives, NonPositiveJacobian> {
+        let mut d = self.derivatives_isochoric(f)?;
+        let [u, du, ddu] = self.volumetric(det2(f));
+        d.w += u;
+        d.w_j += du;
+        d.w_jj += ddu;
+        Ok(d)
+    }
+
+    /// Derivatives of the isochoric part only, at F (the hybrid element adds the volumetric
+    /// part of its mean dilatation).
+    #[inline]
+    fn derivatives_isochoric(
+        &self,
+        f: &Tensor2,
+    ) -> Result<InvariantDerivatives, NonPositiveJacobian> {
         let j = det2(f);
         if !(j > 0.0) {
             return Err(NonPositiveJacobian(j));
         }
-        let i1 = f.iter().map(|v| v * v).sum::<f64>() + 1.0;
-        let mut d = self.isochoric(i1, j);
-        let [u, du, ddu] = self.volumetric(j);
-        d.w += u;
-        d.w_j += du;
-        d.w_jj += ddu;
-        Ok(assemble_response(f, j, &d, tangent))
+        let i1 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3] + 1.0;
+        Ok(self.isochoric(i1, j))
+    }
+
+    /// Full energy, stress and (if `tangent`) consistent tangent at F.
+    fn response(&self, f: &Tensor2, tangent: bool) -> Result<StressResponse, NonPositiveJacobian> {
+        let d = self.derivatives(f)?;
+        Ok(assemble_response(f, det2(f), &d, tangent))
     }
 
     /// Isochoric energy, stress and tangent only (the hybrid element adds the volumetric part).
@@ -94,13 +113,8 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
         f: &Tensor2,
         tangent: bool,
     ) -> Result<StressResponse, NonPositiveJacobian> {
-        let j = det2(f);
-        if !(j > 0.0) {
-            return Err(NonPositiveJacobian(j));
-        }
-        let i1 = f.iter().map(|v| v * v).sum::<f64>() + 1.0;
-        let d = self.isochoric(i1, j);
-        Ok(assemble_response(f, j, &d, tangent))
+        let d = self.derivatives_isochoric(f)?;
+        Ok(assemble_response(f, det2(f), &d, tangent))
     }
 }
 
