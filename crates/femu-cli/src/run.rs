@@ -153,7 +153,11 @@ pub fn solve_model(
     let t0 = Instant::now();
     std::fs::create_dir_all(out)
         .with_context(|| format!("cannot create output folder {}", out.display()))?;
-    let options = SolverOptions::default();
+    // Nothing reads the tangent at the solution here (no sensitivities): not assembled.
+    let options = SolverOptions {
+        final_tangent: false,
+        ..SolverOptions::default()
+    };
     let mut solver = StaticSolver::new(model, options)?;
     let setup_s = t0.elapsed().as_secs_f64();
     if !quiet {

@@ -55,6 +55,13 @@ pub struct SolverOptions {
     /// tangent factorized by halves in parallel ([`crate::split::SplitLdlt`]); smaller ones
     /// whole. Both are exact direct solves.
     pub split_min_equations: usize,
+    /// Whether the last iteration of the last increment assembles the tangent at the
+    /// converged state too. [`crate::DirectSensitivity`] reuses that tangent (it assembles it
+    /// itself when it is not there); a solve whose tangent nobody reads (`femu solve`) saves
+    /// one tangent assembly with `false`. Either way the state is the same: the tangent of an
+    /// iteration is left out only when the iteration's correction already passes the energy
+    /// test, and if its residual then fails, the tangent is assembled before the next one.
+    pub final_tangent: bool,
 }
 
 impl Default for SolverOptions {
@@ -68,6 +75,7 @@ impl Default for SolverOptions {
             growth: 2.0,
             cutback: 0.25,
             split_min_equations: 10_000,
+            final_tangent: true,
         }
     }
 }
@@ -1118,9 +1126,15 @@ impl StaticSolver {
         let mut first_residual = f64::INFINITY;
         // Active sets of the states the accepted steps started from (cycle detection).
         let mut set_history: Vec<(usize, u64)> = Vec::new();
+        // Whether `self.values` holds the tangent at `u` (see `SolverOptions::final_tangent`).
+        let mut tangent_at_u = true;
         for it in 0..opt.max_iterations {
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(floor) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
+            }
+            if !tangent_at_u {
+                self.assemble(model, u, lambda, true)?;
+                tangent_at_u = true;
             }
             let t_fact = Instant::now();
             let kind = self
@@ -1174,7 +1188,14 @@ impl StaticSolver {
             for _ in 0..8 {
                 let mut trial = std::mem::take(&mut self.u_trial);
                 self.add_free(u, alpha, &mut trial);
-                let res = self.assemble(model, &trial, lambda, true);
+                // A step that passes the energy test ends the increment if its residual passes
+                // too: its tangent is then only needed at the end of the last increment, and
+                // only if asked for.
+                let may_end = it > 0 && energy * alpha <= opt.energy_tolerance * energy0;
+                let last_increment = lambda >= 1.0 - 1e-12;
+                let with_tangent = !may_end || (last_increment && opt.final_tangent);
+                let res = self.assemble(model, &trial, lambda, with_tangent);
+                tangent_at_u = with_tangent;
                 self.u_trial = trial;
                 match res {
                     Err(AttemptFailure::Inverted { .. }) if opt.line_search => {
@@ -1720,6 +1741,59 @@ mod tests {
         let again = solver.solve(&model).unwrap().u;
         assert_eq!(first, again);
         assert_eq!(solver.element_scratch().len(), taken.len());
+    }
+
+    /// `final_tangent: false` leaves out the tangent of the converged state and nothing else:
+    /// the same Newton path and state to the bit, the tangent not claimed to be at the
+    /// solution, and the sensitivities (which then assemble it themselves) unchanged.
+    #[test]
+    fn final_tangent_left_out_changes_nothing_else() {
+        let g = generate::rectangle(2.0, 1.0, 8, 4, ElementKind::Cpe4);
+        let deck = DeckBuilder::new(g)
+            .material_everywhere(0.01, 1.0)
+            .fix("BOTTOM")
+            .displacement("TOP", 1, -0.2)
+            .build();
+        let model = Model::from_deck(deck).unwrap();
+        let params = crate::sensitivity::all_parameters(&model);
+        let run = |final_tangent: bool| {
+            let options = SolverOptions {
+                final_tangent,
+                ..SolverOptions::default()
+            };
+            let mut solver = StaticSolver::new(&model, options).unwrap();
+            let sol = solver.solve(&model).unwrap();
+            let at_solution = solver.tangent_is_at(&sol.state);
+            let mut du = Vec::new();
+            crate::sensitivity::DirectSensitivity::new()
+                .compute(&mut solver, &model, &sol.state, &params, &mut du)
+                .unwrap();
+            (sol, at_solution, du)
+        };
+        let (with, with_at, du_with) = run(true);
+        let (without, without_at, du_without) = run(false);
+        assert!(with_at, "the default keeps the tangent at the solution");
+        assert!(
+            !without_at,
+            "the tangent at the solution was assembled anyway"
+        );
+        assert_eq!(with.state, without.state);
+        assert_eq!(
+            with.report.newton_iterations,
+            without.report.newton_iterations
+        );
+        // Both refine against the same factors to the same tolerance (1e-8 of the right-hand
+        // sides): they agree to far better than that.
+        let scale = du_with.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = du_with
+            .iter()
+            .flatten()
+            .zip(du_without.iter().flatten())
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            diff <= 1e-10 * scale,
+            "sensitivities differ by {diff:e} of {scale:e}"
+        );
     }
 
     /// [`TangentGather`] sums each tangent value in element order, as a serial scatter of the
