@@ -13,7 +13,8 @@
 //! `femu-mesh` crate documentation.
 
 use crate::material::{
-    cof2, det2, Hyperelastic, InvariantDerivatives, NeoHookeanRate, NonPositiveJacobian, Tensor2,
+    cauchy_from_derivatives, cof2, det2, log_strain, Hyperelastic, InvariantDerivatives,
+    NeoHookeanRate, NonPositiveJacobian, Tensor2,
 };
 use femu_mesh::ElementKind;
 
@@ -131,23 +132,6 @@ impl ElementGeometry {
         Ok(geo)
     }
 
-    /// Area-weighted average over the Gauss points of a quantity of the deformation gradient.
-    pub fn gauss_average<E>(
-        &self,
-        u: &[[f64; 2]],
-        quantity: impl Fn(&Tensor2) -> Result<[f64; 4], E>,
-    ) -> Result<[f64; 4], E> {
-        let mut s = [0.0; 4];
-        for g in 0..self.n_gauss {
-            let q = quantity(&self.deformation_gradient(g, u))?;
-            let w = self.gauss[g].weight / self.area;
-            for k in 0..4 {
-                s[k] += w * q[k];
-            }
-        }
-        Ok(s)
-    }
-
     /// Deformation gradient `[F11, F12, F21, F22]` at Gauss point g for local displacements u.
     #[inline]
     pub fn deformation_gradient(&self, g: usize, u: &[[f64; 2]]) -> Tensor2 {
@@ -211,13 +195,48 @@ pub trait SolidElement: Sync {
         Ok(())
     }
 
+    /// Element averages (area-weighted over the Gauss points) of the output fields at local
+    /// displacements `u`, in one pass.
+    fn averages(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+    ) -> Result<ElementAverages, NonPositiveJacobian>;
+
     /// Element-average Cauchy stress `[σxx, σyy, σzz, σxy]` at local displacements `u`.
     fn cauchy_stress(
         &self,
         geo: &ElementGeometry,
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
-    ) -> Result<[f64; 4], NonPositiveJacobian>;
+    ) -> Result<[f64; 4], NonPositiveJacobian> {
+        Ok(self.averages(geo, mat, u)?.cauchy_stress)
+    }
+}
+
+/// Element averages of the output fields (see [`SolidElement::averages`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ElementAverages {
+    /// Logarithmic strain `[LExx, LEyy, LEzz, LExy]` (Abaqus' LE, the seed's Fig. 3).
+    pub log_strain: [f64; 4],
+    /// Cauchy stress `[σxx, σyy, σzz, σxy]` (MPa).
+    pub cauchy_stress: [f64; 4],
+    /// Volume ratio J = det F (for CPE4H, the mean dilatation θ).
+    pub volume_ratio: f64,
+}
+
+impl ElementAverages {
+    /// Adds a Gauss point of area fraction `w`, deformation gradient `f` and Cauchy stress `s`.
+    #[inline]
+    fn add(&mut self, w: f64, f: &Tensor2, s: &[f64; 4]) {
+        let le = log_strain(f);
+        for k in 0..4 {
+            self.log_strain[k] += w * le[k];
+            self.cauchy_stress[k] += w * s[k];
+        }
+        self.volume_ratio += w * det2(f);
+    }
 }
 
 /// CPE4 and CPE3: displacement-only, every Gauss point evaluates the full material.
@@ -414,16 +433,19 @@ impl SolidElement for DisplacementElement {
         Ok(())
     }
 
-    fn cauchy_stress(
+    fn averages(
         &self,
         geo: &ElementGeometry,
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
-    ) -> Result<[f64; 4], NonPositiveJacobian> {
-        geo.gauss_average(u, |f| {
-            let r = mat.response(f, false)?;
-            Ok(crate::material::cauchy_from_pk1(f, &r.pk1, r.tau33))
-        })
+    ) -> Result<ElementAverages, NonPositiveJacobian> {
+        let mut avg = ElementAverages::default();
+        for g in 0..geo.n_gauss {
+            let f = geo.deformation_gradient(g, u);
+            let s = cauchy_from_derivatives(&f, &mat.derivatives(&f)?);
+            avg.add(geo.gauss[g].weight / geo.area, &f, &s);
+        }
+        Ok(avg)
     }
 }
 
@@ -532,32 +554,25 @@ impl SolidElement for MeanDilatationElement {
         Ok(())
     }
 
-    fn cauchy_stress(
+    /// The isochoric stress averaged over the Gauss points plus the element's pressure
+    /// `p = U'(θ)` (θ = the averaged J) on the diagonal.
+    fn averages(
         &self,
         geo: &ElementGeometry,
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
-    ) -> Result<[f64; 4], NonPositiveJacobian> {
-        let theta = Self::mean_dilatation(geo, u)?;
-        let p = mat.volumetric(theta)[1];
-        let mut s = geo.gauss_average(u, |f| {
-            let r = mat.response_isochoric(f, false)?;
-            Ok(crate::material::cauchy_from_pk1(f, &r.pk1, r.tau33))
-        })?;
-        for k in 0..3 {
-            s[k] += p;
+    ) -> Result<ElementAverages, NonPositiveJacobian> {
+        let mut avg = ElementAverages::default();
+        for g in 0..geo.n_gauss {
+            let f = geo.deformation_gradient(g, u);
+            let s = cauchy_from_derivatives(&f, &mat.derivatives_isochoric(&f)?);
+            avg.add(geo.gauss[g].weight / geo.area, &f, &s);
         }
-        Ok(s)
-    }
-}
-
-/// Element-average logarithmic strain `[LExx, LEyy, LEzz, LExy]`.
-pub fn element_log_strain(geo: &ElementGeometry, u: &[[f64; 2]]) -> [f64; 4] {
-    match geo.gauss_average(u, |f| {
-        Ok::<_, std::convert::Infallible>(crate::material::log_strain(f))
-    }) {
-        Ok(s) => s,
-        Err(never) => match never {},
+        let p = mat.volumetric(avg.volume_ratio)[1];
+        for k in 0..3 {
+            avg.cauchy_stress[k] += p;
+        }
+        Ok(avg)
     }
 }
 

@@ -118,6 +118,22 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
     }
 }
 
+/// `P = 2 W_I F + W_J cof F` and `τ33` from the invariant derivatives at F (J = det F).
+#[inline]
+fn stress(f: &Tensor2, j: f64, d: &InvariantDerivatives) -> (Tensor2, f64) {
+    let c = cof2(f);
+    let pk1 = std::array::from_fn(|a| 2.0 * d.w_i * f[a] + d.w_j * c[a]);
+    // τ33 = F33 ∂W/∂F33 with F33 = 1: ∂I1/∂F33 = 2 F33, ∂J3/∂F33 = J2 (J3 = J2 F33).
+    (pk1, 2.0 * d.w_i + d.w_j * j)
+}
+
+/// Cauchy stress `[σxx, σyy, σzz, σxy]` at F from the invariant derivatives `d` of the energy
+/// there.
+pub fn cauchy_from_derivatives(f: &Tensor2, d: &InvariantDerivatives) -> [f64; 4] {
+    let (pk1, tau33) = stress(f, det2(f), d);
+    cauchy_from_pk1(f, &pk1, tau33)
+}
+
 /// Builds P, τ33 and A from the invariant derivatives (see the module documentation).
 fn assemble_response(
     f: &Tensor2,
@@ -126,12 +142,7 @@ fn assemble_response(
     tangent: bool,
 ) -> StressResponse {
     let c = cof2(f);
-    let mut pk1 = [0.0; 4];
-    for a in 0..4 {
-        pk1[a] = 2.0 * d.w_i * f[a] + d.w_j * c[a];
-    }
-    // τ33 = F33 ∂W/∂F33 with F33 = 1: ∂I1/∂F33 = 2 F33, ∂J3/∂F33 = J2 (J3 = J2 F33).
-    let tau33 = 2.0 * d.w_i + d.w_j * j;
+    let (pk1, tau33) = stress(f, j, d);
     let mut a4 = [[0.0; 4]; 4];
     if tangent {
         for a in 0..4 {

@@ -1,9 +1,10 @@
 //! Result files of a solve (conventions.md): `displacements.csv`, `result.vtu` and the
 //! element fields they carry (logarithmic strain LE as in the seed's Fig. 3, Cauchy stress).
 
-use crate::element::{element_log_strain, formulation};
+use crate::element::{formulation, ElementAverages};
 use crate::model::Model;
 use crate::solver::Solution;
+use femu_mesh::decimal::push_f64;
 use femu_mesh::{write_vtu_with_int_cells, VtuField, VtuIntField};
 use rayon::prelude::*;
 use std::io::{self, Write};
@@ -21,38 +22,34 @@ pub struct ElementFields {
 }
 
 /// Computes LE, Cauchy stress and J for every element (in parallel). An element inverted in
-/// `u` gets NaN stress entries (never the case for a converged state).
+/// `u` gets NaN entries (never the case for a converged state).
 pub fn element_fields(model: &Model, u: &[f64]) -> ElementFields {
-    let rows: Vec<([f64; 4], [f64; 4], f64)> = (0..model.mesh.elements.len())
+    let rows: Vec<ElementAverages> = (0..model.mesh.elements.len())
         .into_par_iter()
         .map(|e| {
             let geo = &model.geometry[e];
             let ue = model.gather(e, u);
-            let ue = &ue[..geo.n_nodes];
             let mat = &model.materials[model.element_material[e]].law;
-            let le = element_log_strain(geo, ue);
-            let s = formulation(geo.kind)
-                .cauchy_stress(geo, mat, ue)
-                .unwrap_or([f64::NAN; 4]);
-            let j = (0..geo.n_gauss)
-                .map(|g| {
-                    let f = geo.deformation_gradient(g, ue);
-                    geo.gauss[g].weight * (f[0] * f[3] - f[1] * f[2])
+            formulation(geo.kind)
+                .averages(geo, mat, &ue[..geo.n_nodes])
+                .unwrap_or(ElementAverages {
+                    log_strain: [f64::NAN; 4],
+                    cauchy_stress: [f64::NAN; 4],
+                    volume_ratio: f64::NAN,
                 })
-                .sum::<f64>()
-                / geo.area;
-            (le, s, j)
         })
         .collect();
     ElementFields {
-        log_strain: rows.iter().map(|r| r.0).collect(),
-        cauchy_stress: rows.iter().map(|r| r.1).collect(),
-        volume_ratio: rows.iter().map(|r| r.2).collect(),
+        log_strain: rows.iter().map(|r| r.log_strain).collect(),
+        cauchy_stress: rows.iter().map(|r| r.cauchy_stress).collect(),
+        volume_ratio: rows.iter().map(|r| r.volume_ratio).collect(),
     }
 }
 
-/// Writes `node,x,y,ux,uy` with the deck's node labels, full double precision. The rows are
-/// formatted in parallel blocks of 2048, eight blocks at a time, and written in order.
+/// Writes `node,x,y,ux,uy` with the deck's node labels, at full double precision: each value
+/// as the shortest decimal that reads back to it ([`femu_mesh::decimal::push_f64`], Rust's
+/// `{:?}` notation). The rows are formatted in parallel blocks of 2048, eight blocks at a
+/// time, and written in order.
 pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Result<()> {
     const ROWS_PER_TASK: usize = 2048;
     const BLOCKS_PER_WAVE: usize = 8;
@@ -65,19 +62,16 @@ pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Res
             .into_par_iter()
             .map(|b| {
                 let rows = b * ROWS_PER_TASK..((b + 1) * ROWS_PER_TASK).min(n_nodes);
-                let mut buf = Vec::with_capacity(rows.len() * 84);
+                let mut buf = Vec::with_capacity(rows.len() * 96);
+                let (mut label, mut ryu) = (itoa::Buffer::new(), ryu::Buffer::new());
                 for n in rows {
                     let x = model.mesh.nodes[n];
-                    writeln!(
-                        buf,
-                        "{},{:.12e},{:.12e},{:.12e},{:.12e}",
-                        model.mesh.node_labels[n],
-                        x[0],
-                        x[1],
-                        u[2 * n],
-                        u[2 * n + 1]
-                    )
-                    .expect("writing to a Vec cannot fail");
+                    buf.extend_from_slice(label.format(model.mesh.node_labels[n]).as_bytes());
+                    for v in [x[0], x[1], u[2 * n], u[2 * n + 1]] {
+                        buf.push(b',');
+                        push_f64(&mut buf, v, &mut ryu);
+                    }
+                    buf.push(b'\n');
                 }
                 buf
             })

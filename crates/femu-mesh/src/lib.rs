@@ -20,6 +20,7 @@
 /// 1 mmHg in MPa (the unit of the seed's contention pressure, 20 mmHg).
 pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 
+pub mod decimal;
 pub mod deck;
 pub mod generate;
 pub mod inp;
