@@ -178,16 +178,24 @@ fn lex<'a>(text: &'a str, file: &str) -> Result<Vec<Block<'a>>> {
                 message: "data line before the first keyword".to_string(),
             });
         };
-        let mut fields: Fields<'a> = t
-            .split(',')
-            .map(|s| Field {
-                text: s.trim(),
+        let mut fields = Fields::new();
+        let mut start = 0;
+        for (i, &c) in t.as_bytes().iter().enumerate() {
+            if c == b',' {
+                fields.push(Field {
+                    text: t[start..i].trim(),
+                    line,
+                });
+                start = i + 1;
+            }
+        }
+        // A trailing comma continues the record on the next data line.
+        let ends_with_comma = start == t.len();
+        if !ends_with_comma {
+            fields.push(Field {
+                text: t[start..].trim(),
                 line,
-            })
-            .collect();
-        let ends_with_comma = t.ends_with(',');
-        if ends_with_comma {
-            fields.pop();
+            });
         }
         match (continued, block.data.last_mut()) {
             (true, Some(rec)) => rec.fields.extend(fields),
@@ -271,10 +279,10 @@ struct Parser<'f> {
     file: &'f str,
     nodes: Vec<[f64; 2]>,
     node_labels: Vec<i64>,
-    node_map: HashMap<i64, usize>,
+    node_map: LabelMap,
     elements: Vec<RawElement>,
     element_labels: Vec<i64>,
-    element_map: HashMap<i64, usize>,
+    element_map: LabelMap,
     nsets: Vec<SetDef>,
     nset_map: HashMap<String, usize>,
     elsets: Vec<SetDef>,
@@ -368,10 +376,10 @@ impl<'f> Parser<'f> {
             file,
             nodes: Vec::new(),
             node_labels: Vec::new(),
-            node_map: HashMap::new(),
+            node_map: LabelMap::default(),
             elements: Vec::new(),
             element_labels: Vec::new(),
-            element_map: HashMap::new(),
+            element_map: LabelMap::default(),
             nsets: Vec::new(),
             nset_map: HashMap::new(),
             elsets: Vec::new(),
@@ -655,7 +663,7 @@ impl<'f> Parser<'f> {
             let x = self.num(&r.fields[1])?;
             let y = self.num(&r.fields[2])?;
             self.opt_num(&r.fields, 3)?;
-            if self.node_map.insert(label, self.nodes.len()).is_some() {
+            if !self.node_map.insert(label, self.nodes.len()) {
                 return Err(self.err(r.line, format!("node {label} is defined twice")));
             }
             self.nodes.push([x, y]);
@@ -699,11 +707,7 @@ impl<'f> Parser<'f> {
             for (k, f) in r.fields[1..].iter().enumerate() {
                 nodes[k] = self.int(f, "a node label")?;
             }
-            if self
-                .element_map
-                .insert(label, self.elements.len())
-                .is_some()
-            {
+            if !self.element_map.insert(label, self.elements.len()) {
                 return Err(self.err(r.line, format!("element {label} is defined twice")));
             }
             self.elements.push(RawElement {
@@ -1174,16 +1178,11 @@ impl<'f> Parser<'f> {
 
     // --- resolution ----------------------------------------------------------------------------
 
-    fn resolve_set(
-        &self,
-        set: &SetDef,
-        map: &HashMap<i64, usize>,
-        what: &str,
-    ) -> Result<Vec<usize>> {
+    fn resolve_set(&self, set: &SetDef, map: &LabelMap, what: &str) -> Result<Vec<usize>> {
         let mut out = Vec::with_capacity(set.members.len());
         for &(label, line) in &set.members {
-            match map.get(&label) {
-                Some(&i) => out.push(i),
+            match map.get(label) {
+                Some(i) => out.push(i),
                 None => {
                     return Err(self.err(
                         line,
@@ -1227,7 +1226,7 @@ impl<'f> Parser<'f> {
             let mut conn = [usize::MAX; 4];
             let n = raw.kind.node_count();
             for (slot, label) in conn.iter_mut().zip(&raw.nodes[..n]) {
-                *slot = *self.node_map.get(label).ok_or_else(|| {
+                *slot = self.node_map.get(*label).ok_or_else(|| {
                     self.err(
                         raw.line,
                         format!(
@@ -1261,8 +1260,8 @@ impl<'f> Parser<'f> {
                 }
                 _ => None,
             };
-            match label.and_then(|l| self.element_map.get(&l)) {
-                Some(&i) => self.err(self.elements[i].line, e.to_string()),
+            match label.and_then(|l| self.element_map.get(l)) {
+                Some(i) => self.err(self.elements[i].line, e.to_string()),
                 None => InpError::Deck {
                     file: self.file.to_string(),
                     message: e.to_string(),
@@ -1332,8 +1331,8 @@ impl<'f> Parser<'f> {
             match t {
                 Target::Label(l) => self
                     .node_map
-                    .get(l)
-                    .map(|&i| vec![i])
+                    .get(*l)
+                    .map(|i| vec![i])
                     .ok_or_else(|| self.err(line, format!("{kw}: node {l} is not defined"))),
                 Target::Name(n) => nsets
                     .get(&n.to_ascii_uppercase())
@@ -1383,8 +1382,8 @@ impl<'f> Parser<'f> {
             match t {
                 Target::Label(l) => self
                     .element_map
-                    .get(l)
-                    .map(|&i| vec![i])
+                    .get(*l)
+                    .map(|i| vec![i])
                     .ok_or_else(|| self.err(line, format!("{kw}: element {l} is not defined"))),
                 Target::Name(n) => elsets.get(&n.to_ascii_uppercase()).cloned().ok_or_else(|| {
                     self.err(line, format!("{kw}: element set '{n}' is not defined"))
@@ -1919,6 +1918,9 @@ fn fortran_float(s: &str) -> Option<f64> {
     let pos = s.rfind(['+', '-']).filter(|&p| p > 0)?;
     format!("{}E{}", &s[..pos], &s[pos..]).parse().ok()
 }
+
+mod labels;
+use labels::LabelMap;
 
 #[cfg(test)]
 mod tests;

@@ -295,6 +295,10 @@ fn errors_name_file_line_and_problem() {
             "model.inp:11: node 5 is defined twice",
         ),
         (
+            GOOD.replace("2, 2, 3,\n6, 5", "1, 2, 3,\n6, 5"),
+            "model.inp:16: element 1 is defined twice",
+        ),
+        (
             GOOD.replace(
                 "*Elset, Elset=All, GENERATE",
                 "*Elset, Elset=Fat\n2\n*Elset, Elset=All, GENERATE",
