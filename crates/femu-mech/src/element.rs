@@ -273,7 +273,7 @@ fn add_stress_divergence(
     }
 }
 
-/// Adds one Gauss point's internal force and (if asked) stiffness for an element of `N` nodes,
+/// One Gauss point's terms of the internal force and stiffness of an element of `N` nodes,
 /// from the invariant derivatives `d` of the energy at F (weight `w`).
 ///
 /// With `g_a = F ∇N_a` and `h_a = cof(F) ∇N_a` (2-vectors), `P = 2 W_I F + W_J cof F` gives
@@ -286,55 +286,88 @@ fn add_stress_divergence(
 ///                  + δ_ik 2 W_I ∇N_a·∇N_b + ε_ik W_J (∇N_a × ∇N_b) ]
 /// ```
 ///
-/// (`ε_12 = 1`, `ε_21 = -1`, `ε_ii = 0`; the last term is `dcof/dF`, constant in 2D). This is
-/// a third of the arithmetic of forming A and contracting it; K is symmetric, so the blocks
-/// `b ≥ a` are computed and mirrored. `stiffness` is row-major `2N x 2N`.
-#[inline(always)]
-fn add_gauss_contribution<const N: usize>(
-    dn: &[[f64; 2]; MAX_NODES],
+/// (`ε_12 = 1`, `ε_21 = -1`, `ε_ii = 0`; the last term is `dcof/dF`, constant in 2D): a third
+/// of the arithmetic of forming A and contracting it.
+#[derive(Clone, Copy)]
+struct PointTerms<const N: usize> {
     w: f64,
-    f: &Tensor2,
-    d: &InvariantDerivatives,
-    force: &mut [f64],
-    stiffness: Option<&mut [f64]>,
-) {
-    let c = cof2(f);
-    let mut g = [[0.0; 2]; N];
-    let mut h = [[0.0; 2]; N];
-    for a in 0..N {
-        let [d0, d1] = dn[a];
-        g[a] = [f[0] * d0 + f[1] * d1, f[2] * d0 + f[3] * d1];
-        h[a] = [c[0] * d0 + c[1] * d1, c[2] * d0 + c[3] * d1];
+    dn: [[f64; 2]; N],
+    g: [[f64; 2]; N],
+    h: [[f64; 2]; N],
+    /// `4 w W_II g_b + 2 w W_IJ h_b` and `2 w W_IJ g_b + w W_JJ h_b` (for the stiffness).
+    p: [[f64; 2]; N],
+    q: [[f64; 2]; N],
+    /// `2 w W_I` and `w W_J`.
+    s_i: f64,
+    s_j: f64,
+}
+
+impl<const N: usize> PointTerms<N> {
+    #[inline(always)]
+    fn new(
+        dn: &[[f64; 2]; MAX_NODES],
+        w: f64,
+        f: &Tensor2,
+        d: &InvariantDerivatives,
+        stiffness: bool,
+    ) -> Self {
+        let c = cof2(f);
+        let mut t = PointTerms {
+            w,
+            dn: std::array::from_fn(|a| dn[a]),
+            g: [[0.0; 2]; N],
+            h: [[0.0; 2]; N],
+            p: [[0.0; 2]; N],
+            q: [[0.0; 2]; N],
+            s_i: 2.0 * w * d.w_i,
+            s_j: w * d.w_j,
+        };
+        for a in 0..N {
+            let [d0, d1] = dn[a];
+            t.g[a] = [f[0] * d0 + f[1] * d1, f[2] * d0 + f[3] * d1];
+            t.h[a] = [c[0] * d0 + c[1] * d1, c[2] * d0 + c[3] * d1];
+        }
+        if stiffness {
+            let (k_ii, k_ij, k_jj) = (4.0 * w * d.w_ii, 2.0 * w * d.w_ij, w * d.w_jj);
+            for b in 0..N {
+                for k in 0..2 {
+                    t.p[b][k] = k_ii * t.g[b][k] + k_ij * t.h[b][k];
+                    t.q[b][k] = k_ij * t.g[b][k] + k_jj * t.h[b][k];
+                }
+            }
+        }
+        t
     }
-    let (s_i, s_j) = (2.0 * w * d.w_i, w * d.w_j);
-    for a in 0..N {
-        force[2 * a] += s_i * g[a][0] + s_j * h[a][0];
-        force[2 * a + 1] += s_i * g[a][1] + s_j * h[a][1];
-    }
-    let Some(k) = stiffness else {
-        return;
-    };
-    let (k_ii, k_ij, k_jj) = (4.0 * w * d.w_ii, 2.0 * w * d.w_ij, w * d.w_jj);
-    // K_(ai)(bk) = g_ai p_bk + h_ai q_bk + (geometric and dcof terms)
-    let mut p = [[0.0; 2]; N];
-    let mut q = [[0.0; 2]; N];
-    for b in 0..N {
-        for kk in 0..2 {
-            p[b][kk] = k_ii * g[b][kk] + k_ij * h[b][kk];
-            q[b][kk] = k_ij * g[b][kk] + k_jj * h[b][kk];
+
+    #[inline(always)]
+    fn add_force(&self, force: &mut [f64]) {
+        for a in 0..N {
+            for i in 0..2 {
+                force[2 * a + i] += self.s_i * self.g[a][i] + self.s_j * self.h[a][i];
+            }
         }
     }
+}
+
+/// Writes the element stiffness (row-major `2N x 2N`) as the sum of its points' terms (see
+/// [`PointTerms`]): each 2x2 block summed over the points in registers and stored once; K is
+/// symmetric, so the blocks `b ≥ a` are computed and mirrored.
+#[inline(always)]
+fn element_stiffness<const N: usize>(points: &[PointTerms<N>], k: &mut [f64]) {
     let nd = 2 * N;
+    let k = &mut k[..nd * nd];
     for a in 0..N {
-        let [da0, da1] = dn[a];
         for b in a..N {
-            let [db0, db1] = dn[b];
-            let geometric = s_i * (da0 * db0 + da1 * db1);
-            let cross = s_j * (da0 * db1 - da1 * db0);
             let mut block = [[0.0; 2]; 2];
-            for i in 0..2 {
-                for kk in 0..2 {
-                    block[i][kk] = g[a][i] * p[b][kk] + h[a][i] * q[b][kk];
+            let (mut geometric, mut cross) = (0.0, 0.0);
+            for t in points {
+                let ([da0, da1], [db0, db1]) = (t.dn[a], t.dn[b]);
+                geometric += t.s_i * (da0 * db0 + da1 * db1);
+                cross += t.s_j * (da0 * db1 - da1 * db0);
+                for i in 0..2 {
+                    for kk in 0..2 {
+                        block[i][kk] += t.g[a][i] * t.p[b][kk] + t.h[a][i] * t.q[b][kk];
+                    }
                 }
             }
             block[0][0] += geometric;
@@ -343,37 +376,58 @@ fn add_gauss_contribution<const N: usize>(
             block[1][0] -= cross;
             for i in 0..2 {
                 for kk in 0..2 {
-                    k[(2 * a + i) * nd + 2 * b + kk] += block[i][kk];
-                }
-            }
-            if b != a {
-                for i in 0..2 {
-                    for kk in 0..2 {
-                        k[(2 * b + kk) * nd + 2 * a + i] += block[i][kk];
-                    }
+                    k[(2 * a + i) * nd + 2 * b + kk] = block[i][kk];
+                    k[(2 * b + kk) * nd + 2 * a + i] = block[i][kk];
                 }
             }
         }
     }
 }
 
-/// One Gauss point of an element with `n` nodes (3 or 4), dispatched to the kernel of that
-/// node count.
-#[inline]
-fn add_gauss_point(
-    n: usize,
-    dn: &[[f64; 2]; MAX_NODES],
-    w: f64,
-    f: &Tensor2,
-    d: &InvariantDerivatives,
-    force: &mut [f64],
-    stiffness: Option<&mut [f64]>,
-) {
-    match n {
-        4 => add_gauss_contribution::<4>(dn, w, f, d, force, stiffness),
-        3 => add_gauss_contribution::<3>(dn, w, f, d, force, stiffness),
-        _ => unreachable!("elements have 3 or 4 nodes"),
+/// The Gauss-point loop of an element of `N` nodes for the energy density whose invariant
+/// derivatives `derivatives` gives at F (the whole W for CPE4 and CPE3; W_iso with the
+/// element's pressure for CPE4H): sets the energy, the force and (if asked) the stiffness, and
+/// returns `Σ_g w_g cof(F_g) ∇N_a` per node (`V_e ∂θ/∂u_a`, the mean dilatation's gradient).
+#[inline(always)]
+fn integrate<const N: usize>(
+    geo: &ElementGeometry,
+    u: &[[f64; 2]],
+    out: &mut ElementResult,
+    derivatives: impl Fn(&Tensor2) -> Result<InvariantDerivatives, NonPositiveJacobian>,
+) -> Result<[[f64; 2]; MAX_NODES], NonPositiveJacobian> {
+    let want_k = out.stiffness.is_some();
+    let empty = PointTerms {
+        w: 0.0,
+        dn: [[0.0; 2]; N],
+        g: [[0.0; 2]; N],
+        h: [[0.0; 2]; N],
+        p: [[0.0; 2]; N],
+        q: [[0.0; 2]; N],
+        s_i: 0.0,
+        s_j: 0.0,
+    };
+    let mut points = [empty; 4];
+    out.energy = 0.0;
+    out.force[..2 * N].fill(0.0);
+    let mut volume_gradient = [[0.0; 2]; MAX_NODES];
+    for g in 0..geo.n_gauss {
+        let f = geo.deformation_gradient(g, u);
+        let d = derivatives(&f)?;
+        let gp = &geo.gauss[g];
+        out.energy += gp.weight * d.w;
+        let t = PointTerms::<N>::new(&gp.dn_dx, gp.weight, &f, &d, want_k);
+        t.add_force(out.force);
+        for a in 0..N {
+            for i in 0..2 {
+                volume_gradient[a][i] += t.w * t.h[a][i];
+            }
+        }
+        points[g] = t;
     }
+    if let Some(k) = out.stiffness.as_deref_mut() {
+        element_stiffness(&points[..geo.n_gauss], k);
+    }
+    Ok(volume_gradient)
 }
 
 impl SolidElement for DisplacementElement {
@@ -384,27 +438,12 @@ impl SolidElement for DisplacementElement {
         u: &[[f64; 2]],
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian> {
-        let n = geo.n_nodes;
-        out.energy = 0.0;
-        out.force[..2 * n].fill(0.0);
-        if let Some(k) = out.stiffness.as_deref_mut() {
-            k[..4 * n * n].fill(0.0);
-        }
-        for g in 0..geo.n_gauss {
-            let f = geo.deformation_gradient(g, u);
-            let d = mat.derivatives(&f)?;
-            let gp = &geo.gauss[g];
-            out.energy += gp.weight * d.w;
-            add_gauss_point(
-                n,
-                &gp.dn_dx,
-                gp.weight,
-                &f,
-                &d,
-                out.force,
-                out.stiffness.as_deref_mut(),
-            );
-        }
+        let derivatives = |f: &Tensor2| mat.derivatives(f);
+        match geo.n_nodes {
+            4 => integrate::<4>(geo, u, out, derivatives)?,
+            3 => integrate::<3>(geo, u, out, derivatives)?,
+            n => unreachable!("elements have 3 or 4 nodes, not {n}"),
+        };
         Ok(())
     }
 
@@ -472,43 +511,26 @@ impl SolidElement for MeanDilatationElement {
         u: &[[f64; 2]],
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian> {
-        let n = geo.n_nodes;
-        let nd = 2 * n;
-        out.force[..nd].fill(0.0);
-        if let Some(k) = out.stiffness.as_deref_mut() {
-            k[..nd * nd].fill(0.0);
-        }
+        let nd = 2 * geo.n_nodes;
         let theta = Self::mean_dilatation(geo, u)?;
         let [uvol, p, dp] = mat.volumetric(theta);
-        out.energy = geo.area * uvol;
-        // g_ai = Σ_g w_g ∂J_g/∂u_ai = V_e ∂θ/∂u_ai
-        let mut gvec = [0.0; MAX_DOFS];
-        for g in 0..geo.n_gauss {
-            let gp = &geo.gauss[g];
-            let f = geo.deformation_gradient(g, u);
-            let mut d = mat.derivatives_isochoric(&f)?;
-            out.energy += gp.weight * d.w;
-            // The pressure adds P_vol = p cof(F) and the tangent p dcof/dF: both are carried
-            // by W_J, while W_JJ stays isochoric (the volumetric stiffness is U''(θ) g ⊗ g).
+        // The pressure adds P_vol = p cof(F) and the tangent p dcof/dF: both are carried by
+        // W_J, while W_JJ stays isochoric (the volumetric stiffness is U''(θ) g ⊗ g below).
+        let derivatives = |f: &Tensor2| {
+            let mut d = mat.derivatives_isochoric(f)?;
             d.w_j += p;
-            add_gauss_point(
-                n,
-                &gp.dn_dx,
-                gp.weight,
-                &f,
-                &d,
-                out.force,
-                out.stiffness.as_deref_mut(),
-            );
-            let c = cof2(&f);
-            for a in 0..n {
-                let d = gp.dn_dx[a];
-                gvec[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
-                gvec[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
-            }
-        }
+            Ok(d)
+        };
+        // g_ai = Σ_g w_g ∂J_g/∂u_ai = V_e ∂θ/∂u_ai
+        let g = match geo.n_nodes {
+            4 => integrate::<4>(geo, u, out, derivatives)?,
+            3 => integrate::<3>(geo, u, out, derivatives)?,
+            n => unreachable!("elements have 3 or 4 nodes, not {n}"),
+        };
+        out.energy += geo.area * uvol;
         if let Some(k) = out.stiffness.as_deref_mut() {
             let s = dp / geo.area;
+            let gvec: [f64; MAX_DOFS] = std::array::from_fn(|r| g[r / 2][r % 2]);
             for r in 0..nd {
                 for c in 0..nd {
                     k[r * nd + c] += s * gvec[r] * gvec[c];
