@@ -1,19 +1,23 @@
 //! The global allocator: the system's, with every large block (at least [`MIN_ADVISED`]) marked
 //! for transparent huge pages (`madvise(MADV_HUGEPAGE)`), as glibc's `glibc.malloc.hugetlb=1`
-//! tunable would do for the whole heap; and [`configure_heap`], called first thing in `main`,
-//! which sets glibc's heap up so that freed blocks are reused instead of unmapped, by every
-//! thread, on huge pages.
+//! tunable would do for the whole heap.
 //!
 //! A paper-scale solve touches about 130 MB in a few large arrays (element matrices, factors,
 //! gather indices) read in scattered order: with 2 MiB pages it takes fewer TLB misses and page
 //! faults, and the kernel frees it faster at exit. Measured side by side on the contention
 //! deck (14 interleaved runs, a slow phase of the host): `femu solve` 0.471 → 0.414 s best,
 //! 0.534 → 0.461 s median; assembly 0.082 → 0.071 s median; peak memory 126 → 131 MB (the
-//! glibc tunable: 0.412 s best, 0.492 s median). With [`configure_heap`] as well (2026-11-24,
-//! `perf stat -r 12`, interleaved): page faults 19 000 → 2 000, CPU time 0.41–0.48 → 0.36–0.39
-//! s, reading the deck 27 → 19 ms; peak memory 129 → 136 MB. Where the kernel has transparent
-//! huge pages off (`never`) or refuses the advice, the blocks stay on normal pages: it is only
-//! an advice.
+//! glibc tunable: 0.412 s best, 0.492 s median). Where the kernel has transparent huge pages
+//! off (`never`) or refuses the advice, the blocks stay on normal pages: it is only an advice.
+//!
+//! Tried and not kept (2026-11-24): advising the whole heap (256 MiB grown at start, one arena,
+//! blocks up to 32 MiB from the heap, no trimming; `glibc.malloc.hugetlb=1` in effect). In runs
+//! back to back it was the fastest (page faults 19 000 → 2 000, median 0.229 s against 0.243 s
+//! for the advice of large blocks only), but right after another process had freed a lot of
+//! memory (ccx, 0.9 GB, as in `femu bench`) it was the slowest: median 0.329 s against 0.258 s,
+//! with the setup phase at 0.16–0.30 s instead of 0.04 s. This machine's host takes back the
+//! guest's free 2 MiB blocks, and every huge-page fault then waits for the host to back its
+//! block again. The heap options without the whole-heap advice gained nothing measurable.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 
@@ -78,89 +82,9 @@ unsafe impl GlobalAlloc for HugePageAlloc {
     }
 }
 
-/// Largest block glibc's `malloc` serves from its heap rather than from a mapping of its own
-/// (glibc caps `M_MMAP_THRESHOLD` at 32 MiB on 64-bit targets).
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-const HEAP_BLOCK_MAX: usize = 32 << 20;
-
-/// Heap grown (virtually) and advised for huge pages at start.
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-const HEAP_RESERVE: usize = 256 << 20;
-
-/// Sets up glibc's heap for femu's allocation pattern, before anything is allocated: one arena
-/// for all threads, blocks up to 32 MiB from the heap instead of fresh mappings, nothing
-/// returned to the kernel, and the first [`HEAP_RESERVE`] of the heap advised for huge pages
-/// (as `GLIBC_TUNABLES=glibc.malloc.hugetlb=1:glibc.malloc.arena_max=1:...` would).
-///
-/// A solve allocates and frees many short-lived buffers of 0.1–30 MB (the deck's lines, the
-/// node graph, the symbolic analyses, the output's rows), each of which glibc would otherwise
-/// map fresh and unmap, so that every one costs page faults and the kernel's zeroing of its
-/// pages again; and rayon's worker threads would each get an arena of their own, on small pages.
-/// Here a freed block's pages are reused as they are. Returns whether the heap was set up
-/// (`false` off glibc, or if an option was refused).
-pub fn configure_heap() -> bool {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        // SAFETY: mallopt only changes glibc's allocation parameters; the blocks below are
-        // allocated, advised and freed here, and nothing else holds them.
-        unsafe {
-            let options = [
-                (libc::M_ARENA_MAX, 1),
-                (libc::M_MMAP_THRESHOLD, HEAP_BLOCK_MAX as libc::c_int),
-                (libc::M_TRIM_THRESHOLD, libc::c_int::MAX),
-            ];
-            if options.iter().any(|&(k, v)| libc::mallopt(k, v) != 1) {
-                return false;
-            }
-            // Grow the heap by blocks just under the mapping threshold, advise the whole span
-            // (they are contiguous), and free them: the heap keeps the span, and later blocks
-            // are carved from it.
-            const BLOCK: usize = HEAP_BLOCK_MAX - (1 << 20);
-            let mut blocks = [std::ptr::null_mut::<libc::c_void>(); HEAP_RESERVE / BLOCK];
-            for b in blocks.iter_mut() {
-                *b = libc::malloc(BLOCK);
-            }
-            let (lo, hi) = blocks
-                .iter()
-                .filter(|b| !b.is_null())
-                .fold((usize::MAX, 0usize), |(lo, hi), &b| {
-                    (lo.min(b as usize), hi.max(b as usize + BLOCK))
-                });
-            if lo < hi {
-                advise(lo as *mut u8, hi - lo);
-            }
-            for &b in blocks.iter().rev() {
-                libc::free(b);
-            }
-        }
-        true
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    {
-        false
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// glibc accepts the heap options (on Linux with glibc), and blocks up to the mapping
-    /// threshold then come from the heap and hold what is written into them.
-    #[test]
-    fn heap_is_configured() {
-        let configured = configure_heap();
-        assert_eq!(
-            configured,
-            cfg!(all(target_os = "linux", target_env = "gnu")),
-            "mallopt refused an option"
-        );
-        let mut v = vec![0u64; (24 << 20) / 8];
-        for (k, w) in v.iter_mut().enumerate() {
-            *w = k as u64;
-        }
-        assert!(v.iter().enumerate().all(|(k, &w)| w == k as u64));
-    }
 
     /// Large blocks are advised (on Linux) and hold what is written into them, through
     /// allocation, zeroed allocation and growth; small ones are left alone.

@@ -271,7 +271,6 @@ fn demo_tests(names: &[String]) -> anyhow::Result<Vec<femu_mech::loading::Loadin
 }
 
 fn main() -> ExitCode {
-    huge_pages::configure_heap();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo {
