@@ -226,17 +226,26 @@ pub struct ElementAverages {
     pub volume_ratio: f64,
 }
 
-impl ElementAverages {
-    /// Adds a Gauss point of area fraction `w`, deformation gradient `f` and Cauchy stress `s`.
-    #[inline]
-    fn add(&mut self, w: f64, f: &Tensor2, s: &[f64; 4]) {
-        let le = log_strain(f);
+/// The Gauss-point averages of LE, J and the Cauchy stress of the energy density whose
+/// invariant derivatives `derivatives` gives at F (as in [`integrate`]).
+fn average_fields(
+    geo: &ElementGeometry,
+    u: &[[f64; 2]],
+    derivatives: impl Fn(&Tensor2) -> Result<InvariantDerivatives, NonPositiveJacobian>,
+) -> Result<ElementAverages, NonPositiveJacobian> {
+    let mut avg = ElementAverages::default();
+    for g in 0..geo.n_gauss {
+        let f = geo.deformation_gradient(g, u);
+        let s = cauchy_from_derivatives(&f, &derivatives(&f)?);
+        let le = log_strain(&f);
+        let w = geo.gauss[g].weight / geo.area;
         for k in 0..4 {
-            self.log_strain[k] += w * le[k];
-            self.cauchy_stress[k] += w * s[k];
+            avg.log_strain[k] += w * le[k];
+            avg.cauchy_stress[k] += w * s[k];
         }
-        self.volume_ratio += w * det2(f);
+        avg.volume_ratio += w * det2(&f);
     }
+    Ok(avg)
 }
 
 /// CPE4 and CPE3: displacement-only, every Gauss point evaluates the full material.
@@ -478,13 +487,7 @@ impl SolidElement for DisplacementElement {
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
     ) -> Result<ElementAverages, NonPositiveJacobian> {
-        let mut avg = ElementAverages::default();
-        for g in 0..geo.n_gauss {
-            let f = geo.deformation_gradient(g, u);
-            let s = cauchy_from_derivatives(&f, &mat.derivatives(&f)?);
-            avg.add(geo.gauss[g].weight / geo.area, &f, &s);
-        }
-        Ok(avg)
+        average_fields(geo, u, |f| mat.derivatives(f))
     }
 }
 
@@ -584,12 +587,7 @@ impl SolidElement for MeanDilatationElement {
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
     ) -> Result<ElementAverages, NonPositiveJacobian> {
-        let mut avg = ElementAverages::default();
-        for g in 0..geo.n_gauss {
-            let f = geo.deformation_gradient(g, u);
-            let s = cauchy_from_derivatives(&f, &mat.derivatives_isochoric(&f)?);
-            avg.add(geo.gauss[g].weight / geo.area, &f, &s);
-        }
+        let mut avg = average_fields(geo, u, |f| mat.derivatives_isochoric(f))?;
         let p = mat.volumetric(avg.volume_ratio)[1];
         for k in 0..3 {
             avg.cauchy_stress[k] += p;

@@ -184,37 +184,20 @@ trait Binary: Copy + Sync {
     fn put(self, out: &mut Vec<u8>);
 }
 
-impl Binary for f64 {
-    const VTK_TYPE: &'static str = "Float64";
-    #[inline]
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
+/// `Binary` for number types whose little-endian bytes are their stored form.
+macro_rules! binary_le {
+    ($($t:ty => $name:literal),*) => {$(
+        impl Binary for $t {
+            const VTK_TYPE: &'static str = $name;
+            #[inline]
+            fn put(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    )*};
 }
 
-impl Binary for i64 {
-    const VTK_TYPE: &'static str = "Int64";
-    #[inline]
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
-}
-
-impl Binary for i32 {
-    const VTK_TYPE: &'static str = "Int32";
-    #[inline]
-    fn put(self, out: &mut Vec<u8>) {
-        out.extend_from_slice(&self.to_le_bytes());
-    }
-}
-
-impl Binary for u8 {
-    const VTK_TYPE: &'static str = "UInt8";
-    #[inline]
-    fn put(self, out: &mut Vec<u8>) {
-        out.push(self);
-    }
-}
+binary_le!(f64 => "Float64", i64 => "Int64", i32 => "Int32", u8 => "UInt8");
 
 /// Input bytes per parallel base64 block (a multiple of 3, so that the blocks' texts join into
 /// the text of the whole stream).
