@@ -368,6 +368,26 @@ mod tests {
         std::env::temp_dir().join(format!("femu-mesh-{}-{name}", std::process::id()))
     }
 
+    /// Runs the Python `script` on the file at `path` (its output printed); `what` is skipped
+    /// with a message when python3 is not installed.
+    fn python_check(script: &str, path: &std::path::Path, what: &str) {
+        match std::process::Command::new("python3")
+            .args(["-c", script])
+            .arg(path)
+            .output()
+        {
+            Ok(out) => {
+                assert!(
+                    out.status.success(),
+                    "{what} failed: {}",
+                    String::from_utf8_lossy(&out.stderr)
+                );
+                print!("{}", String::from_utf8_lossy(&out.stdout));
+            }
+            Err(_) => println!("python3 not found: {what} skipped"),
+        }
+    }
+
     /// The decoded bytes of the data array named `name` in `text`: its base64 text decoded,
     /// the `UInt64` byte count at its head checked against what follows.
     fn array_bytes(text: &str, name: &str) -> (String, Vec<u8>) {
@@ -484,18 +504,7 @@ assert values('offsets') == (4, 7)
 assert values('connectivity') == (0, 1, 2, 3, 1, 4, 2)
 print('ok')
 "#;
-        match std::process::Command::new("python3")
-            .args(["-c", script])
-            .arg(&path)
-            .output()
-        {
-            Ok(out) => assert!(
-                out.status.success(),
-                "python check failed: {}",
-                String::from_utf8_lossy(&out.stderr)
-            ),
-            Err(_) => println!("python3 not found: XML check skipped"),
-        }
+        python_check(script, &path, "XML check");
         // ParaView's own reader (VTK's vtkXMLUnstructuredGridReader, from the `vtk` Python
         // wheel that .ci/run installs), when it is there.
         let script = r#"
@@ -517,21 +526,7 @@ assert [g.GetCellType(c) for c in range(2)] == [9, 5]
 assert [g.GetCell(1).GetPointId(k) for k in range(3)] == [1, 4, 2]
 print('ok')
 "#;
-        match std::process::Command::new("python3")
-            .args(["-c", script])
-            .arg(&path)
-            .output()
-        {
-            Ok(out) => {
-                assert!(
-                    out.status.success(),
-                    "VTK's reader failed: {}",
-                    String::from_utf8_lossy(&out.stderr)
-                );
-                print!("{}", String::from_utf8_lossy(&out.stdout));
-            }
-            Err(_) => println!("python3 not found: VTK check skipped"),
-        }
+        python_check(script, &path, "VTK reader check");
         let _ = fs::remove_file(&path);
     }
 
