@@ -6,30 +6,21 @@
 //! cargo run --release -p femu-mech --example assembly_cost -- [elements] [repeat] [cpe4|cpe4h]
 //! ```
 
+mod common;
+
+use common::{cost_args, print_model, thigh_deck, CostArgs};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::ElementKind;
 use std::time::Instant;
 
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let elements: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(25_000);
-    let repeat: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(50);
-    let kind = match args.next().as_deref() {
-        Some("cpe4h") => ElementKind::Cpe4h,
-        _ => ElementKind::Cpe4,
-    };
-    let params = femu_geometry::ThighParams {
-        target_elements: Some(elements),
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, kind).expect("thigh");
-    let deck = femu_geometry::contention_deck(
-        &thigh,
-        &femu_geometry::Material::table1(),
-        femu_geometry::CONTENTION_MPA,
-    )
-    .expect("deck");
-    let model = Model::from_deck(deck).expect("model");
+    let CostArgs {
+        elements,
+        repeat,
+        kind,
+    } = cost_args(50, ElementKind::Cpe4);
+    let model = Model::from_deck(thigh_deck(elements, kind).0).expect("model");
+    print_model(&model, kind);
     let mut solver = StaticSolver::new(&model, SolverOptions::default()).expect("setup");
     let state = solver.solve(&model).expect("solve").state;
     let mut times = Vec::with_capacity(repeat);
@@ -40,9 +31,7 @@ fn main() {
     }
     times.sort_by(f64::total_cmp);
     println!(
-        "{} {kind:?} elements, {} threads: assembly with tangent best {:.2} ms, median {:.2} ms ({repeat} runs)",
-        model.mesh.elements.len(),
-        rayon::current_num_threads(),
+        "assembly with tangent best {:.2} ms, median {:.2} ms ({repeat} runs)",
         times[0] * 1e3,
         times[repeat / 2] * 1e3
     );

@@ -10,6 +10,9 @@
 //! analysis), the whole Newton solve, one assembly + factorization at the solution, one solve
 //! with ten right-hand sides; and the largest difference between the two solutions.
 
+mod common;
+
+use common::{cost_args, print_model, thigh_deck, CostArgs};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::ElementKind;
 use std::time::Instant;
@@ -21,32 +24,13 @@ fn stats(v: &[f64]) -> String {
 }
 
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let elements: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(25_000);
-    let repeat: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(5);
-    let kind = match args.next().as_deref() {
-        Some("cpe4h") => ElementKind::Cpe4h,
-        _ => ElementKind::Cpe4,
-    };
-    let params = femu_geometry::ThighParams {
-        target_elements: Some(elements),
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, kind).expect("thigh");
-    let deck = femu_geometry::contention_deck(
-        &thigh,
-        &femu_geometry::Material::table1(),
-        femu_geometry::CONTENTION_MPA,
-    )
-    .expect("deck");
-    let model = Model::from_deck(deck).expect("model");
-    println!(
-        "built-in thigh: {} {:?} elements, {} nodes, {} threads",
-        model.mesh.elements.len(),
+    let CostArgs {
+        elements,
+        repeat,
         kind,
-        model.node_count(),
-        rayon::current_num_threads()
-    );
+    } = cost_args(5, ElementKind::Cpe4);
+    let model = Model::from_deck(thigh_deck(elements, kind).0).expect("model");
+    print_model(&model, kind);
     let variants = [
         (
             "whole ",

@@ -11,6 +11,9 @@
 //! and the median of the per-repeat ratios are printed, with the sensitivity report (solves,
 //! refactorization, residual).
 
+mod common;
+
+use common::{cost_args, print_model, thigh_deck, CostArgs};
 use femu_mech::loading::{apply_loading, Loading};
 use femu_mech::sensitivity::{all_parameters, DirectSensitivity};
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -18,34 +21,15 @@ use femu_mesh::ElementKind;
 use std::time::Instant;
 
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let elements: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(25_000);
-    let repeat: usize = args.next().and_then(|a| a.parse().ok()).unwrap_or(3);
-    let kind = match args.next().as_deref() {
-        Some("cpe4") => ElementKind::Cpe4,
-        _ => ElementKind::Cpe4h,
-    };
-    let params = femu_geometry::ThighParams {
-        target_elements: Some(elements),
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, kind).expect("thigh");
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    let mut deck = femu_geometry::contention_deck(
-        &thigh,
-        &femu_geometry::Material::table1(),
-        femu_geometry::CONTENTION_MPA,
-    )
-    .expect("deck");
+    let CostArgs {
+        elements,
+        repeat,
+        kind,
+    } = cost_args(3, ElementKind::Cpe4h);
+    let (mut deck, skin) = thigh_deck(elements, kind);
     deck.pressures.clear();
     let base = Model::from_deck(deck).expect("model");
-    println!(
-        "built-in thigh: {} {:?} elements, {} nodes, {} threads",
-        base.mesh.elements.len(),
-        kind,
-        base.node_count(),
-        rayon::current_num_threads()
-    );
+    print_model(&base, kind);
     let tests = [Loading::SEED_CONTENTION, Loading::SEED_COMPRESSION];
     let mut models = Vec::new();
     for loading in &tests {

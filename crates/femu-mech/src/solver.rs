@@ -1119,6 +1119,7 @@ impl StaticSolver {
         record: &mut IncrementRecord,
     ) -> Result<(), AttemptFailure> {
         let opt = self.options;
+        let last_increment = lambda >= 1.0 - 1e-12;
         self.assemble(model, u, lambda, true)?;
         let (mut rnorm, mut fref) = self.norms();
         let floor = 1e-300;
@@ -1192,7 +1193,6 @@ impl StaticSolver {
                 // too: its tangent is then only needed at the end of the last increment, and
                 // only if asked for.
                 let may_end = it > 0 && energy * alpha <= opt.energy_tolerance * energy0;
-                let last_increment = lambda >= 1.0 - 1e-12;
                 let with_tangent = !may_end || (last_increment && opt.final_tangent);
                 let res = self.assemble(model, &trial, lambda, with_tangent);
                 tangent_at_u = with_tangent;
@@ -1273,7 +1273,7 @@ impl StaticSolver {
             // multipliers together, instead of converging the state, updating, and converging
             // again (two iterations fewer per update). `newton_augmented` still checks the
             // penetration of the converged state.
-            if lambda >= 1.0 - 1e-12
+            if last_increment
                 && !res_ok
                 && rnorm <= EARLY_AUGMENTATION * fref.max(floor)
                 && self.augment(model, u)
@@ -1286,7 +1286,7 @@ impl StaticSolver {
                 continue;
             }
             let energy_ok = energy * alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
-            let intermediate_ok = lambda < 1.0 - 1e-12
+            let intermediate_ok = !last_increment
                 && rnorm
                     <= opt.intermediate_tolerance.max(opt.residual_tolerance) * fref.max(floor);
             let stagnated =

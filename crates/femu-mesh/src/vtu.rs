@@ -208,14 +208,16 @@ const ENCODE_BLOCK: usize = 3 << 16;
 fn write_array<T: Binary>(
     w: &mut impl Write,
     attributes: &str,
-    values: impl ExactSizeIterator<Item = T>,
+    values: impl Iterator<Item = T>,
 ) -> io::Result<()> {
-    let n_bytes = values.len() * std::mem::size_of::<T>();
-    let mut raw = Vec::with_capacity(8 + n_bytes);
-    raw.extend_from_slice(&(n_bytes as u64).to_le_bytes());
+    // The byte count goes in front of the values once they are all there.
+    let mut raw = Vec::with_capacity(8 + values.size_hint().0 * std::mem::size_of::<T>());
+    raw.extend_from_slice(&[0; 8]);
     for v in values {
         v.put(&mut raw);
     }
+    let n_bytes = (raw.len() - 8) as u64;
+    raw[..8].copy_from_slice(&n_bytes.to_le_bytes());
     let mut text = vec![0u8; raw.len().div_ceil(3) * 4];
     text.par_chunks_mut(ENCODE_BLOCK / 3 * 4)
         .zip(raw.par_chunks(ENCODE_BLOCK))
@@ -313,30 +315,21 @@ fn write_to(
     write_array(
         w,
         r#" Name="Points" NumberOfComponents="3""#,
-        mesh.nodes
-            .iter()
-            .flat_map(|p| [p[0], p[1], 0.0])
-            .collect::<Vec<_>>()
-            .into_iter(),
+        mesh.nodes.iter().flat_map(|p| [p[0], p[1], 0.0]),
     )?;
     writeln!(w, "      </Points>")?;
 
     writeln!(w, "      <Cells>")?;
-    let connectivity: Vec<i64> = mesh
+    let connectivity = mesh
         .elements
         .iter()
-        .flat_map(|el| el.nodes().iter().map(|&n| n as i64))
-        .collect();
-    write_array(w, r#" Name="connectivity""#, connectivity.into_iter())?;
+        .flat_map(|el| el.nodes().iter().map(|&n| n as i64));
+    write_array(w, r#" Name="connectivity""#, connectivity)?;
     let offsets = mesh.elements.iter().scan(0i64, |offset, el| {
         *offset += el.kind.node_count() as i64;
         Some(*offset)
     });
-    write_array(
-        w,
-        r#" Name="offsets""#,
-        offsets.collect::<Vec<_>>().into_iter(),
-    )?;
+    write_array(w, r#" Name="offsets""#, offsets)?;
     write_array(
         w,
         r#" Name="types""#,
