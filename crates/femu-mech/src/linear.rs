@@ -55,9 +55,10 @@ impl CscPattern {
     /// This pattern bordered by extra rows and columns: border `(q, rows)` is the equation `q`
     /// (numbered after every equation of `self`, in increasing order) coupled with the sorted
     /// equations `rows` of `self`; the result is `n_total x n_total` and structurally symmetric.
-    pub fn bordered(&self, n_total: usize, borders: &[(usize, Vec<usize>)]) -> CscPattern {
+    /// Without borders `self` is returned as it is (no copy).
+    pub fn bordered(self, n_total: usize, borders: &[(usize, Vec<usize>)]) -> CscPattern {
         if borders.is_empty() && n_total == self.n {
-            return self.clone();
+            return self;
         }
         let mut extra: Vec<Vec<usize>> = vec![Vec::new(); self.n];
         for (q, rows) in borders {
@@ -484,18 +485,18 @@ impl SparseLdlt {
 /// the entries `(r, c)` of row `r` come in increasing `c`, which is exactly the order of the
 /// rows of column `r`; so the transposed entry of the k-th visited entry of row `r` is the k-th
 /// entry of column `r`, and checking that its row is `c` verifies the symmetry.
-fn transpose_positions(pattern: &CscPattern) -> Option<Vec<usize>> {
+fn transpose_positions(pattern: &CscPattern) -> Option<Vec<u32>> {
+    debug_assert!(pattern.nnz() <= u32::MAX as usize, "checked by the caller");
     let mut next: Vec<usize> = pattern.col_ptr[..pattern.n].to_vec();
-    let mut transpose = vec![usize::MAX; pattern.nnz()];
+    let mut transpose = Vec::with_capacity(pattern.nnz());
     for c in 0..pattern.n {
-        for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
-            let r = pattern.row_idx[k];
+        for &r in &pattern.row_idx[pattern.col_ptr[c]..pattern.col_ptr[c + 1]] {
             let t = next[r];
             if t >= pattern.col_ptr[r + 1] || pattern.row_idx[t] != c {
                 return None;
             }
             next[r] += 1;
-            transpose[k] = t;
+            transpose.push(t as u32);
         }
     }
     Some(transpose)
@@ -519,8 +520,9 @@ enum SymmetricFactor {
 /// Factorizes Newton tangents on one pattern, choosing LDLᵀ for symmetric values and LU
 /// otherwise; both symbolic analyses are made at most once.
 pub struct TangentSolver {
-    /// Position of the transposed entry of each stored entry.
-    transpose: Vec<usize>,
+    /// Position of the transposed entry of each stored entry (32 bits: half the memory
+    /// traffic of the asymmetry check before every factorization).
+    transpose: Vec<u32>,
     ldlt: SymmetricFactor,
     lu: Option<SparseLu>,
     last: Option<Factorization>,
@@ -559,6 +561,12 @@ impl TangentSolver {
         pattern: &CscPattern,
         factor: impl FnOnce() -> Result<SymmetricFactor, LinearSolveError> + Send,
     ) -> Result<Self, LinearSolveError> {
+        if pattern.nnz() > u32::MAX as usize {
+            return Err(LinearSolveError::Other(format!(
+                "the tangent has {} entries, more than this solver addresses (2^32)",
+                pattern.nnz()
+            )));
+        }
         let (transpose, ldlt) = rayon::join(|| transpose_positions(pattern), factor);
         let transpose = transpose.ok_or_else(|| {
             LinearSolveError::Other("pattern is not structurally symmetric".into())
@@ -581,7 +589,7 @@ impl TangentSolver {
             .par_iter()
             .with_min_len(1 << 14)
             .enumerate()
-            .map(|(k, &t)| (values[k].abs(), (values[k] - values[t]).abs()))
+            .map(|(k, &t)| (values[k].abs(), (values[k] - values[t as usize]).abs()))
             .reduce(|| (0.0f64, 0.0f64), |a, b| (a.0.max(b.0), a.1.max(b.1)));
         if amax > 0.0 {
             dmax / amax
@@ -675,7 +683,7 @@ impl TangentSolver {
         /// bounds checks in the inner loop).
         fn rows<const C: usize>(
             pattern: &CscPattern,
-            transpose: &[usize],
+            transpose: &[u32],
             values: &[f64],
             x: &[f64],
             y: &mut [f64],
@@ -687,7 +695,7 @@ impl TangentSolver {
                 .for_each(|(r, yr)| {
                     let mut acc = [0.0; C];
                     for k in pattern.col_ptr[r]..pattern.col_ptr[r + 1] {
-                        let a = values[transpose[k]];
+                        let a = values[transpose[k] as usize];
                         let c = pattern.row_idx[k];
                         let xr: &[f64; C] = x[c * C..(c + 1) * C].try_into().expect("C values");
                         for j in 0..C {
@@ -745,7 +753,7 @@ mod tests {
         let t = transpose_positions(&p).unwrap();
         for c in 0..p.n {
             for k in p.col_ptr[c]..p.col_ptr[c + 1] {
-                assert_eq!(Some(t[k]), p.position(c, p.row_idx[k]));
+                assert_eq!(Some(t[k] as usize), p.position(c, p.row_idx[k]));
             }
         }
         let mut pairs = vec![(0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (1, 2)];

@@ -251,9 +251,17 @@ impl Half {
         for (i, &q) in eqs.iter().enumerate() {
             local[q] = i;
         }
+        // The pattern is structurally symmetric: the lower triangle of the half holds at most
+        // (entries of its columns + n) / 2 (no growth, no copies of these 2 MB vectors).
+        let capacity = (eqs
+            .iter()
+            .map(|&q| pattern.col_ptr[q + 1] - pattern.col_ptr[q])
+            .sum::<usize>()
+            + n)
+            / 2;
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
-        let mut source = Vec::new();
+        let mut row_idx = Vec::with_capacity(capacity);
+        let mut source = Vec::with_capacity(capacity);
         let mut column: Vec<(usize, usize)> = Vec::new();
         col_ptr.push(0);
         for (j, &q) in eqs.iter().enumerate() {
