@@ -14,7 +14,7 @@
 
 use crate::material::{
     cauchy_from_derivatives, cof2, det2, log_strain, Hyperelastic, InvariantDerivatives,
-    NeoHookeanRate, NonPositiveJacobian, Tensor2,
+    NeoHookean, NeoHookeanRate, NonPositiveJacobian, Tensor2,
 };
 use femu_mesh::ElementKind;
 
@@ -133,7 +133,7 @@ impl ElementGeometry {
     }
 
     /// Deformation gradient `[F11, F12, F21, F22]` at Gauss point g for local displacements u.
-    #[inline]
+    #[inline(always)]
     pub fn deformation_gradient(&self, g: usize, u: &[[f64; 2]]) -> Tensor2 {
         let gp = &self.gauss[g];
         let mut f = [1.0, 0.0, 0.0, 1.0];
@@ -258,6 +258,58 @@ pub struct DisplacementElement;
 /// the pressure `p = U'(θ)` is condensed out, so only displacements remain.
 #[derive(Debug, Clone, Copy)]
 pub struct MeanDilatationElement;
+
+/// [`SolidElement::evaluate`] of `geo`'s element type for the Neo-Hookean law `law`: the
+/// static solver's hot loop. The material is called directly, so its invariant derivatives
+/// inline into the Gauss-point loop, and on x86-64 CPUs with AVX2 the loop runs a copy of
+/// itself compiled for AVX2 (detected at run time; the binary stays portable). The copy does
+/// the same IEEE operations in the same order (the compiler neither reassociates nor fuses
+/// them), so both give the same results to the bit (unit test); the AVX2 copy takes less than
+/// half the time (`examples/assembly_cost`).
+pub fn evaluate_neo_hookean(
+    geo: &ElementGeometry,
+    law: &NeoHookean,
+    u: &[[f64; 2]],
+    out: &mut ElementResult,
+) -> Result<(), NonPositiveJacobian> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { evaluate_neo_hookean_avx2(geo, law, u, out) };
+    }
+    evaluate_neo_hookean_portable(geo, law, u, out)
+}
+
+/// [`evaluate_neo_hookean`] compiled for the target's baseline instruction set.
+#[inline(always)]
+fn evaluate_neo_hookean_portable(
+    geo: &ElementGeometry,
+    law: &NeoHookean,
+    u: &[[f64; 2]],
+    out: &mut ElementResult,
+) -> Result<(), NonPositiveJacobian> {
+    match geo.kind {
+        ElementKind::Cpe4 | ElementKind::Cpe3 => {
+            DisplacementElement::evaluate_with(geo, law, u, out)
+        }
+        ElementKind::Cpe4h => MeanDilatationElement::evaluate_with(geo, law, u, out),
+    }
+}
+
+/// [`evaluate_neo_hookean_portable`] compiled with AVX2 (everything it calls is inlined).
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn evaluate_neo_hookean_avx2(
+    geo: &ElementGeometry,
+    law: &NeoHookean,
+    u: &[[f64; 2]],
+    out: &mut ElementResult,
+) -> Result<(), NonPositiveJacobian> {
+    evaluate_neo_hookean_portable(geo, law, u, out)
+}
 
 /// The formulation of a deck element type.
 pub fn formulation(kind: ElementKind) -> &'static dyn SolidElement {
@@ -439,11 +491,13 @@ fn integrate<const N: usize>(
     Ok(volume_gradient)
 }
 
-impl SolidElement for DisplacementElement {
-    fn evaluate(
-        &self,
+impl DisplacementElement {
+    /// [`SolidElement::evaluate`] for any material type (`dyn Hyperelastic` through the trait,
+    /// a concrete law in [`evaluate_neo_hookean`]).
+    #[inline(always)]
+    fn evaluate_with<M: Hyperelastic + ?Sized>(
         geo: &ElementGeometry,
-        mat: &dyn Hyperelastic,
+        mat: &M,
         u: &[[f64; 2]],
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian> {
@@ -454,6 +508,18 @@ impl SolidElement for DisplacementElement {
             n => unreachable!("elements have 3 or 4 nodes, not {n}"),
         };
         Ok(())
+    }
+}
+
+impl SolidElement for DisplacementElement {
+    fn evaluate(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+        out: &mut ElementResult,
+    ) -> Result<(), NonPositiveJacobian> {
+        Self::evaluate_with(geo, mat, u, out)
     }
 
     /// One pass: at each Gauss point the isochoric unit stress and the volumetric one,
@@ -506,11 +572,13 @@ impl MeanDilatationElement {
     }
 }
 
-impl SolidElement for MeanDilatationElement {
-    fn evaluate(
-        &self,
+impl MeanDilatationElement {
+    /// [`SolidElement::evaluate`] for any material type (as
+    /// [`DisplacementElement::evaluate_with`]).
+    #[inline(always)]
+    fn evaluate_with<M: Hyperelastic + ?Sized>(
         geo: &ElementGeometry,
-        mat: &dyn Hyperelastic,
+        mat: &M,
         u: &[[f64; 2]],
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian> {
@@ -541,6 +609,18 @@ impl SolidElement for MeanDilatationElement {
             }
         }
         Ok(())
+    }
+}
+
+impl SolidElement for MeanDilatationElement {
+    fn evaluate(
+        &self,
+        geo: &ElementGeometry,
+        mat: &dyn Hyperelastic,
+        u: &[[f64; 2]],
+        out: &mut ElementResult,
+    ) -> Result<(), NonPositiveJacobian> {
+        Self::evaluate_with(geo, mat, u, out)
     }
 
     /// One pass: the isochoric unit force at each Gauss point, and `U'(θ) g` with
@@ -656,6 +736,68 @@ mod tests {
             for (g, w) in got.iter().zip(want.iter()) {
                 assert!((g - w).abs() <= 1e-14 * scale, "{g} vs {w}");
             }
+        }
+    }
+
+    /// The solver's Neo-Hookean path (static material, AVX2 copy where the CPU has it) gives
+    /// the trait's results (dynamic material, baseline instructions) to the bit: energy,
+    /// force, stiffness, and the same error for an inverted element, for every element type.
+    #[test]
+    fn neo_hookean_path_matches_the_trait_to_the_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let law = NeoHookean::new(0.0123, 0.456).unwrap();
+        let quad = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
+        let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
+        let evaluate = |path: u8, geo: &ElementGeometry, u: &[[f64; 2]]| {
+            let (mut force, mut stiffness) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS * MAX_DOFS]);
+            let mut out = ElementResult {
+                energy: 0.0,
+                force: &mut force,
+                stiffness: Some(&mut stiffness),
+            };
+            let status = match path {
+                0 => formulation(geo.kind).evaluate(geo, &law as &dyn Hyperelastic, u, &mut out),
+                1 => evaluate_neo_hookean_portable(geo, &law, u, &mut out),
+                _ => evaluate_neo_hookean(geo, &law, u, &mut out),
+            };
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+            let energy = out.energy.to_bits();
+            (
+                status.map_err(|e| e.0.to_bits()),
+                energy,
+                bits(&force),
+                bits(&stiffness),
+            )
+        };
+        for (kind, x) in [
+            (ElementKind::Cpe4, quad),
+            (ElementKind::Cpe4h, quad),
+            (ElementKind::Cpe3, tri),
+        ] {
+            let geo = ElementGeometry::new(kind, &x).unwrap();
+            let n = geo.n_nodes;
+            let mut inverted = 0;
+            for trial in 0..200 {
+                // Up to 1.5 times the element size: the larger ones invert it.
+                let scale = 1.5 * f64::from(trial) / 200.0;
+                let u: Vec<[f64; 2]> = (0..n)
+                    .map(|_| {
+                        [
+                            scale * rng.gen_range(-1.0..1.0),
+                            scale * rng.gen_range(-1.0..1.0),
+                        ]
+                    })
+                    .collect();
+                let reference = evaluate(0, &geo, &u);
+                inverted += usize::from(reference.0.is_err());
+                assert_eq!(evaluate(1, &geo, &u), reference, "{kind:?}, trial {trial}");
+                assert_eq!(evaluate(2, &geo, &u), reference, "{kind:?}, trial {trial}");
+            }
+            assert!(
+                (1..100).contains(&inverted),
+                "{kind:?}: {inverted} inverted"
+            );
         }
     }
 

@@ -204,7 +204,7 @@ impl NeoHookean {
 /// cubically convergent `y ← y (1 + r/3 + 2r²/9)`, `r = 1 - J y³` (the series of
 /// `(1 - r)^(-1/3)`; relative error 3 % → 1e-4 → 1e-13 → round-off). Values outside
 /// `[1e-30, 1e30]` (never a deformation) go through `cbrt`.
-#[inline]
+#[inline(always)]
 pub fn inv_cbrt(j: f64) -> f64 {
     if !(1e-30..=1e30).contains(&j) {
         return 1.0 / j.cbrt();
@@ -220,6 +220,7 @@ pub fn inv_cbrt(j: f64) -> f64 {
 }
 
 /// `c10 (J^(-2/3) I1 - 3)` and its invariant derivatives.
+#[inline(always)]
 fn neo_hookean_isochoric(c10: f64, i1: f64, j: f64) -> InvariantDerivatives {
     // The powers of J from J^(-1/3) by products (no cube root, no division).
     let y = inv_cbrt(j);
@@ -238,16 +239,19 @@ fn neo_hookean_isochoric(c10: f64, i1: f64, j: f64) -> InvariantDerivatives {
 }
 
 /// `inv_d (J - 1)^2` and its first two derivatives.
+#[inline(always)]
 fn neo_hookean_volumetric(inv_d: f64, j: f64) -> [f64; 3] {
     let jm1 = j - 1.0;
     [jm1 * jm1 * inv_d, 2.0 * jm1 * inv_d, 2.0 * inv_d]
 }
 
 impl Hyperelastic for NeoHookean {
+    #[inline]
     fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
         neo_hookean_isochoric(self.c10, i1, j)
     }
 
+    #[inline]
     fn volumetric(&self, j: f64) -> [f64; 3] {
         neo_hookean_volumetric(1.0 / self.d, j)
     }
