@@ -262,53 +262,25 @@ pub struct MeanDilatationElement;
 /// [`SolidElement::evaluate`] of `geo`'s element type for the Neo-Hookean law `law`: the
 /// static solver's hot loop. The material is called directly, so its invariant derivatives
 /// inline into the Gauss-point loop, and on x86-64 CPUs with AVX2 the loop runs a copy of
-/// itself compiled for AVX2 (detected at run time; the binary stays portable). The copy does
-/// the same IEEE operations in the same order (the compiler neither reassociates nor fuses
-/// them), so both give the same results to the bit (unit test); the AVX2 copy takes less than
-/// half the time (`examples/assembly_cost`).
+/// itself compiled for AVX2 ([`crate::simd::with_avx2`]; detected at run time, the binary stays
+/// portable). The copy does the same IEEE operations in the same order (the compiler neither
+/// reassociates nor fuses them), so both give the same results to the bit (unit test); the
+/// AVX2 copy takes less than half the time (`examples/assembly_cost`).
 pub fn evaluate_neo_hookean(
     geo: &ElementGeometry,
     law: &NeoHookean,
     u: &[[f64; 2]],
     out: &mut ElementResult,
 ) -> Result<(), NonPositiveJacobian> {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { evaluate_neo_hookean_avx2(geo, law, u, out) };
-    }
-    evaluate_neo_hookean_portable(geo, law, u, out)
-}
-
-/// [`evaluate_neo_hookean`] compiled for the target's baseline instruction set.
-#[inline(always)]
-fn evaluate_neo_hookean_portable(
-    geo: &ElementGeometry,
-    law: &NeoHookean,
-    u: &[[f64; 2]],
-    out: &mut ElementResult,
-) -> Result<(), NonPositiveJacobian> {
-    match geo.kind {
-        ElementKind::Cpe4 | ElementKind::Cpe3 => {
-            DisplacementElement::evaluate_with(geo, law, u, out)
-        }
-        ElementKind::Cpe4h => MeanDilatationElement::evaluate_with(geo, law, u, out),
-    }
-}
-
-/// [`evaluate_neo_hookean_portable`] compiled with AVX2 (everything it calls is inlined).
-///
-/// # Safety
-/// The CPU must support AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn evaluate_neo_hookean_avx2(
-    geo: &ElementGeometry,
-    law: &NeoHookean,
-    u: &[[f64; 2]],
-    out: &mut ElementResult,
-) -> Result<(), NonPositiveJacobian> {
-    evaluate_neo_hookean_portable(geo, law, u, out)
+    crate::simd::with_avx2(
+        #[inline(always)]
+        || match geo.kind {
+            ElementKind::Cpe4 | ElementKind::Cpe3 => {
+                DisplacementElement::evaluate_with(geo, law, u, out)
+            }
+            ElementKind::Cpe4h => MeanDilatationElement::evaluate_with(geo, law, u, out),
+        },
+    )
 }
 
 /// The formulation of a deck element type.
@@ -758,7 +730,12 @@ mod tests {
             };
             let status = match path {
                 0 => formulation(geo.kind).evaluate(geo, &law as &dyn Hyperelastic, u, &mut out),
-                1 => evaluate_neo_hookean_portable(geo, &law, u, &mut out),
+                1 => match geo.kind {
+                    ElementKind::Cpe4h => {
+                        MeanDilatationElement::evaluate_with(geo, &law, u, &mut out)
+                    }
+                    _ => DisplacementElement::evaluate_with(geo, &law, u, &mut out),
+                },
                 _ => evaluate_neo_hookean(geo, &law, u, &mut out),
             };
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();

@@ -21,6 +21,7 @@ pub mod model;
 pub mod output;
 pub mod reference;
 pub mod sensitivity;
+pub(crate) mod simd;
 pub mod solver;
 pub mod split;
 pub mod supernodal;

@@ -491,8 +491,16 @@ impl Half {
     /// `work`), in plain loops: most supernodes are 2–8 columns wide, where a call to a dense
     /// kernel per supernode costs more than its arithmetic (each Newton correction is one such
     /// solve). The updates of a supernode's pattern rows are summed in a contiguous
-    /// buffer and scattered once.
+    /// buffer and scattered once. Compiled for AVX2 when the CPU has it ([`crate::simd`]).
     fn forward_one(&mut self) {
+        crate::simd::with_avx2(
+            #[inline(always)]
+            || self.forward_one_loops(),
+        )
+    }
+
+    #[inline(always)]
+    fn forward_one_loops(&mut self) {
         let x = &mut self.work[..self.eqs.len()];
         for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior) {
             let (start, size, m) = (block.start, block.size, block.interior);
@@ -522,6 +530,14 @@ impl Half {
     /// by `D⁻¹`, separator rows set), as dot products in plain loops against the supernode's
     /// pattern rows gathered once into a contiguous buffer (see [`Self::forward_one`]).
     fn backward_one(&mut self) {
+        crate::simd::with_avx2(
+            #[inline(always)]
+            || self.backward_one_loops(),
+        )
+    }
+
+    #[inline(always)]
+    fn backward_one_loops(&mut self) {
         let x = &mut self.work[..self.eqs.len()];
         for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior).rev() {
             let (start, size, m) = (block.start, block.size, block.interior);
@@ -841,6 +857,7 @@ fn interior_blocks<'a>(
 
 /// `a · b` with four partial sums (one chain of dependent additions would wait on the
 /// floating-point latency at every entry).
+#[inline(always)]
 fn dot4(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0; 4];
     let (a4, a_rest) = a.split_at(a.len() / 4 * 4);
@@ -1038,6 +1055,30 @@ mod tests {
                 diff < 1e-12 * scale,
                 "one column vs {k}: {diff} (scale {scale})"
             );
+        }
+        // The single-column substitutions run an AVX2 copy where the CPU has it: the same
+        // results to the bit as the baseline loops.
+        for half in &mut split_ldlt.halves {
+            let loaded: Vec<f64> = (0..half.eqs.len())
+                .map(|_| rng.gen_range(-1.0..1.0))
+                .collect();
+            let mut results = Vec::new();
+            for dispatched in [false, true] {
+                half.work[..loaded.len()].copy_from_slice(&loaded);
+                if dispatched {
+                    half.forward_one();
+                    half.backward_one();
+                } else {
+                    half.forward_one_loops();
+                    half.backward_one_loops();
+                }
+                let bits: Vec<u64> = half.work[..loaded.len()]
+                    .iter()
+                    .map(|x| x.to_bits())
+                    .collect();
+                results.push(bits);
+            }
+            assert_eq!(results[0], results[1]);
         }
     }
 
