@@ -28,10 +28,6 @@
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
 use crate::supernodal::{LowerView, PartialLdlt};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
-use faer::linalg::matmul::matmul;
-use faer::linalg::triangular_solve::{
-    solve_unit_lower_triangular_in_place, solve_unit_upper_triangular_in_place,
-};
 use faer::reborrow::ReborrowMut;
 use faer::sparse::linalg::cholesky::supernodal::{SupernodalLdltRef, SymbolicSupernodalCholesky};
 use faer::sparse::linalg::cholesky::{
@@ -40,7 +36,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::SymbolicSparseColMatRef;
-use faer::{Accum, MatMut, MatRef, Par, Side};
+use faer::{MatMut, MatRef, Par, Side};
 
 const NONE: usize = usize::MAX;
 
@@ -381,61 +377,34 @@ impl Half {
         Ok(())
     }
 
-    /// Loads the interior rows of `rhs` (`k` columns of length `n_total`, column-major) and runs
-    /// the forward substitution through the interior: afterwards the interior rows hold
-    /// `L_AA⁻¹ b_A` and the separator rows `-L_SA L_AA⁻¹ b_A`.
+    /// Loads the interior rows of `rhs` (`k` columns of length `n_total`, column-major) into
+    /// `work`, interleaved (`work[i * k + j]` is row `i` of column `j`), and runs the forward
+    /// substitution through the interior: afterwards the interior rows hold `L_AA⁻¹ b_A` and
+    /// the separator rows `-L_SA L_AA⁻¹ b_A`.
     fn forward(&mut self, rhs: &[f64], n_total: usize, k: usize) {
         let n = self.eqs.len();
         let n_interior = self.n_interior;
-        for j in 0..k {
-            let (col, b) = (
-                &mut self.work[j * n..(j + 1) * n],
-                &rhs[j * n_total..(j + 1) * n_total],
-            );
-            for (x, &q) in col[..n_interior].iter_mut().zip(&self.eqs) {
-                *x = b[q];
+        let x = &mut self.work[..n * k];
+        // Column by column: the rows of one column are read in elimination order, scattered
+        // over a block that stays in cache (all the columns at once would miss at every read).
+        for (j, b) in rhs.chunks_exact(n_total).take(k).enumerate() {
+            for (i, &q) in self.eqs[..n_interior].iter().enumerate() {
+                x[i * k + j] = b[q];
             }
-            col[n_interior..].fill(0.0);
         }
-        if k == 1 {
-            self.forward_one();
-            return;
-        }
-        let work = &mut self.work[..n * k];
-        for block in interior_blocks(&self.symbolic, &self.l_values, n_interior) {
-            let (start, size, m) = (block.start, block.size, block.interior);
-            let pattern = block.pattern;
-            let ls = MatRef::from_column_major_slice(block.values, size + pattern.len(), size);
-            solve_unit_lower_triangular_in_place(
-                ls.subrows(0, m).subcols(0, m),
-                MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
-                Par::Seq,
-            );
-            // The rows below the interior columns, stored one after the other: the rest of the
-            // diagonal block (rows start + m .. start + size), then the pattern.
-            let rest = size - m;
-            let rows = rest + pattern.len();
-            if rows == 0 {
-                continue;
-            }
-            let tmp = &mut self.tmp[..rows * k];
-            matmul(
-                MatMut::from_column_major_slice_mut(&mut *tmp, rows, k),
-                Accum::Replace,
-                ls.subrows(m, rows).subcols(0, m),
-                MatRef::from_column_major_slice(&*work, n, k).subrows(start, m),
-                1.0,
-                Par::Seq,
-            );
-            for (xc, tc) in work.chunks_exact_mut(n).zip(tmp.chunks_exact(rows)) {
-                for (x, t) in xc[start + m..start + size].iter_mut().zip(&tc[..rest]) {
-                    *x -= t;
+        x[n_interior * k..].fill(0.0);
+        macro_rules! columns {
+            ($($k:literal)*) => {
+                match k {
+                    $($k => crate::simd::with_avx2(
+                        #[inline(always)]
+                        || self.forward_interleaved::<$k>(),
+                    ),)*
+                    _ => unreachable!("at most MAX_RHS columns"),
                 }
-                for (&r, t) in pattern.iter().zip(&tc[rest..]) {
-                    xc[r] -= t;
-                }
-            }
+            };
         }
+        columns!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
     }
 
     /// With the separator's solution `x_s` (`s` x `k`, column-major), scales the interior by
@@ -444,135 +413,156 @@ impl Half {
         let n = self.eqs.len();
         let n_interior = self.n_interior;
         let s = n - n_interior;
-        for j in 0..k {
-            let col = &mut self.work[j * n..(j + 1) * n];
-            for (x, d) in col[..n_interior].iter_mut().zip(&self.inv_d) {
-                *x *= d;
+        let x = &mut self.work[..n * k];
+        let (interior, separator) = x.split_at_mut(n_interior * k);
+        for (row, d) in interior.chunks_exact_mut(k).zip(&self.inv_d) {
+            for v in row {
+                *v *= d;
             }
-            col[n_interior..].copy_from_slice(&x_s[j * s..(j + 1) * s]);
         }
-        if k == 1 {
-            self.backward_one();
-            return;
+        for (i, row) in separator.chunks_exact_mut(k).enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = x_s[j * s + i];
+            }
         }
-        let work = &mut self.work[..n * k];
-        for block in interior_blocks(&self.symbolic, &self.l_values, n_interior).rev() {
-            let (start, size, m) = (block.start, block.size, block.interior);
-            let pattern = block.pattern;
-            let ls = MatRef::from_column_major_slice(block.values, size + pattern.len(), size);
-            let rest = size - m;
-            let rows = rest + pattern.len();
-            if rows > 0 {
-                let tmp = &mut self.tmp[..rows * k];
-                for (xc, tc) in work.chunks_exact(n).zip(tmp.chunks_exact_mut(rows)) {
-                    tc[..rest].copy_from_slice(&xc[start + m..start + size]);
-                    for (t, &r) in tc[rest..].iter_mut().zip(pattern) {
-                        *t = xc[r];
-                    }
+        macro_rules! columns {
+            ($($k:literal)*) => {
+                match k {
+                    $($k => crate::simd::with_avx2(
+                        #[inline(always)]
+                        || self.backward_interleaved::<$k>(),
+                    ),)*
+                    _ => unreachable!("at most MAX_RHS columns"),
                 }
-                matmul(
-                    MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
-                    Accum::Add,
-                    ls.subrows(m, rows).subcols(0, m).transpose(),
-                    MatRef::from_column_major_slice(&*tmp, rows, k),
-                    -1.0,
-                    Par::Seq,
-                );
-            }
-            solve_unit_upper_triangular_in_place(
-                ls.subrows(0, m).subcols(0, m).transpose(),
-                MatMut::from_column_major_slice_mut(&mut *work, n, k).subrows_mut(start, m),
-                Par::Seq,
-            );
+            };
         }
+        columns!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
     }
 
-    /// The forward substitution of [`Self::forward`] for one right-hand side (loaded in
-    /// `work`), in plain loops: most supernodes are 2–8 columns wide, where a call to a dense
-    /// kernel per supernode costs more than its arithmetic (each Newton correction is one such
-    /// solve). The updates of a supernode's pattern rows are summed in a contiguous
-    /// buffer and scattered once. Compiled for AVX2 when the CPU has it ([`crate::simd`]).
-    fn forward_one(&mut self) {
-        crate::simd::with_avx2(
-            #[inline(always)]
-            || self.forward_one_loops(),
-        )
-    }
-
+    /// The forward substitution of [`Self::forward`] for `K` right-hand sides interleaved in
+    /// `work`, in plain loops over the supernodes' columns, each step done for the `K` columns
+    /// at once (a short vector the compiler keeps in registers): most supernodes are 2–8
+    /// columns wide, where a call to a dense kernel per supernode costs more than its
+    /// arithmetic. The updates of a supernode's pattern rows are summed in a contiguous buffer
+    /// and scattered once. Every right-hand side sees the same operations in the same order
+    /// whatever `K`, so solving columns together or one by one gives the same bits (unit
+    /// test); compiled for AVX2 when the CPU has it ([`crate::simd`]).
     #[inline(always)]
-    fn forward_one_loops(&mut self) {
-        let x = &mut self.work[..self.eqs.len()];
+    fn forward_interleaved<const K: usize>(&mut self) {
+        let x = &mut self.work[..self.eqs.len() * K];
         for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior) {
             let (start, size, m) = (block.start, block.size, block.interior);
             let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
-            let update = &mut self.tmp[..pattern.len()];
-            update.fill(0.0);
+            // Each pattern row's update is summed over the supernode's interior columns in
+            // column order from zero, then subtracted once (pattern rows come after the
+            // supernode). One or two right-hand sides: column by column into a buffer, in the
+            // pass that updates the diagonal block; more: row by row in registers, once the
+            // diagonal block is solved (no buffer traffic).
+            if K <= 2 {
+                let update = &mut self.tmp[..pattern.len() * K];
+                update.fill(0.0);
+                for (j, column) in values.chunks_exact(rows).take(m).enumerate() {
+                    let xj: [f64; K] = std::array::from_fn(|c| x[(start + j) * K + c]);
+                    for (xi, l) in x[(start + j + 1) * K..(start + size) * K]
+                        .chunks_exact_mut(K)
+                        .zip(&column[j + 1..size])
+                    {
+                        for c in 0..K {
+                            xi[c] -= l * xj[c];
+                        }
+                    }
+                    for (t, l) in update.chunks_exact_mut(K).zip(&column[size..]) {
+                        for c in 0..K {
+                            t[c] += l * xj[c];
+                        }
+                    }
+                }
+                for (&r, t) in pattern.iter().zip(update.chunks_exact(K)) {
+                    let xr = &mut x[r * K..(r + 1) * K];
+                    for c in 0..K {
+                        xr[c] -= t[c];
+                    }
+                }
+                continue;
+            }
             for (j, column) in values.chunks_exact(rows).take(m).enumerate() {
-                let xj = x[start + j];
-                for (xi, l) in x[start + j + 1..start + size]
-                    .iter_mut()
+                let xj: [f64; K] = std::array::from_fn(|c| x[(start + j) * K + c]);
+                for (xi, l) in x[(start + j + 1) * K..(start + size) * K]
+                    .chunks_exact_mut(K)
                     .zip(&column[j + 1..size])
                 {
-                    *xi -= l * xj;
-                }
-                for (t, l) in update.iter_mut().zip(&column[size..]) {
-                    *t += l * xj;
+                    for c in 0..K {
+                        xi[c] -= l * xj[c];
+                    }
                 }
             }
-            for (&r, t) in pattern.iter().zip(update.iter()) {
-                x[r] -= t;
+            let (head, tail) = x.split_at_mut((start + m) * K);
+            let solved = &head[start * K..];
+            for (p, &r) in pattern.iter().enumerate() {
+                let mut acc = [0.0; K];
+                for (j, xj) in solved.chunks_exact(K).enumerate() {
+                    let l = values[j * rows + size + p];
+                    for c in 0..K {
+                        acc[c] += l * xj[c];
+                    }
+                }
+                let xr = &mut tail[(r - start - m) * K..(r - start - m + 1) * K];
+                for c in 0..K {
+                    xr[c] -= acc[c];
+                }
             }
         }
     }
 
-    /// The back substitution of [`Self::backward`] for one right-hand side (in `work`, scaled
-    /// by `D⁻¹`, separator rows set), as dot products in plain loops against the supernode's
-    /// pattern rows gathered once into a contiguous buffer (see [`Self::forward_one`]).
-    fn backward_one(&mut self) {
-        crate::simd::with_avx2(
-            #[inline(always)]
-            || self.backward_one_loops(),
-        )
-    }
-
+    /// The back substitution of [`Self::backward`] for `K` right-hand sides interleaved in
+    /// `work` (scaled by `D⁻¹`, separator rows set), as dot products in plain loops against the
+    /// supernode's pattern rows gathered once into a contiguous buffer (see
+    /// [`Self::forward_interleaved`]).
     #[inline(always)]
-    fn backward_one_loops(&mut self) {
-        let x = &mut self.work[..self.eqs.len()];
+    fn backward_interleaved<const K: usize>(&mut self) {
+        let x = &mut self.work[..self.eqs.len() * K];
         for block in interior_blocks(&self.symbolic, &self.l_values, self.n_interior).rev() {
             let (start, size, m) = (block.start, block.size, block.interior);
             let (pattern, values) = (block.pattern, block.values);
             let rows = size + pattern.len();
-            let below = &mut self.tmp[..pattern.len()];
-            for (b, &r) in below.iter_mut().zip(pattern) {
-                *b = x[r];
+            let below = &mut self.tmp[..pattern.len() * K];
+            for (b, &r) in below.chunks_exact_mut(K).zip(pattern) {
+                b.copy_from_slice(&x[r * K..(r + 1) * K]);
             }
             for j in (0..m).rev() {
                 let column = &values[j * rows..(j + 1) * rows];
-                let mut sum = 0.0;
-                for (xi, l) in x[start + j + 1..start + size]
-                    .iter()
+                let mut sum = [0.0; K];
+                for (xi, l) in x[(start + j + 1) * K..(start + size) * K]
+                    .chunks_exact(K)
                     .zip(&column[j + 1..size])
                 {
-                    sum += l * xi;
+                    for c in 0..K {
+                        sum[c] += l * xi[c];
+                    }
                 }
-                x[start + j] -= sum + dot4(&column[size..], below);
+                let dot = dot4::<K>(&column[size..], below);
+                let xj = &mut x[(start + j) * K..(start + j + 1) * K];
+                for c in 0..K {
+                    xj[c] -= sum[c] + dot[c];
+                }
             }
         }
     }
 
     /// Writes the interior's solution into `out` (`k` columns of length `n_total`).
     fn write_interior(&self, out: &mut [f64], n_total: usize, k: usize) {
-        let n = self.eqs.len();
-        for j in 0..k {
-            let (col, o) = (
-                &self.work[j * n..(j + 1) * n],
-                &mut out[j * n_total..(j + 1) * n_total],
-            );
-            for (&v, &q) in col[..self.n_interior].iter().zip(&self.eqs) {
-                o[q] = v;
+        // Column by column, as the load in [`Self::forward`].
+        for (j, o) in out.chunks_exact_mut(n_total).take(k).enumerate() {
+            for (i, &q) in self.eqs[..self.n_interior].iter().enumerate() {
+                o[q] = self.work[i * k + j];
             }
         }
+    }
+
+    /// Row `i` of the separator in column `j` of `k` after [`Self::forward`].
+    fn separator_value(&self, i: usize, j: usize, k: usize) -> f64 {
+        self.work[(self.n_interior + i) * k + j]
     }
 }
 
@@ -779,11 +769,9 @@ impl SplitLdlt {
         }
         let [a, b] = &self.halves;
         for j in 0..k {
-            let (na, nb) = (a.eqs.len(), b.eqs.len());
-            let fa = &a.work[j * na + a.n_interior..(j + 1) * na];
-            let fb = &b.work[j * nb + b.n_interior..(j + 1) * nb];
             for (i, &q) in self.separator.iter().enumerate() {
-                self.separator_rhs[j * s + i] = rhs[j * n + q] + fa[i] + fb[i];
+                self.separator_rhs[j * s + i] =
+                    rhs[j * n + q] + a.separator_value(i, j, k) + b.separator_value(i, j, k);
             }
         }
         if s > 0 && self.dense_cholesky {
@@ -855,19 +843,27 @@ fn interior_blocks<'a>(
     })
 }
 
-/// `a · b` with four partial sums (one chain of dependent additions would wait on the
-/// floating-point latency at every entry).
+/// `a · B` for the `K` interleaved columns of `b` (`b[i * K + c]`), each with four partial
+/// sums (one chain of dependent additions would wait on the floating-point latency at every
+/// entry).
 #[inline(always)]
-fn dot4(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0; 4];
-    let (a4, a_rest) = a.split_at(a.len() / 4 * 4);
-    for (x, y) in a4.chunks_exact(4).zip(b.chunks_exact(4)) {
+fn dot4<const K: usize>(a: &[f64], b: &[f64]) -> [f64; K] {
+    let mut acc = [[0.0; K]; 4];
+    let full = a.len() / 4 * 4;
+    for (a4, b4) in a[..full].chunks_exact(4).zip(b.chunks_exact(4 * K)) {
         for q in 0..4 {
-            acc[q] += x[q] * y[q];
+            for c in 0..K {
+                acc[q][c] += a4[q] * b4[q * K + c];
+            }
         }
     }
-    let tail: f64 = a_rest.iter().zip(&b[a4.len()..]).map(|(x, y)| x * y).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+    let mut tail = [0.0; K];
+    for (ai, bi) in a[full..].iter().zip(b[full * K..].chunks_exact(K)) {
+        for c in 0..K {
+            tail[c] += ai * bi[c];
+        }
+    }
+    std::array::from_fn(|c| (acc[0][c] + acc[1][c]) + (acc[2][c] + acc[3][c]) + tail[c])
 }
 
 /// The dense separator LU runs after both halves, when both cores are free.
@@ -1056,29 +1052,37 @@ mod tests {
                 "one column vs {k}: {diff} (scale {scale})"
             );
         }
-        // The single-column substitutions run an AVX2 copy where the CPU has it: the same
-        // results to the bit as the baseline loops.
+        // The substitutions through a half's interior: ten interleaved columns at once in the
+        // AVX2 copy (where the CPU has it), in the baseline copy, and each column alone give
+        // the same bits.
         for half in &mut split_ldlt.halves {
-            let loaded: Vec<f64> = (0..half.eqs.len())
-                .map(|_| rng.gen_range(-1.0..1.0))
-                .collect();
-            let mut results = Vec::new();
-            for dispatched in [false, true] {
-                half.work[..loaded.len()].copy_from_slice(&loaded);
-                if dispatched {
-                    half.forward_one();
-                    half.backward_one();
-                } else {
-                    half.forward_one_loops();
-                    half.backward_one_loops();
+            const K: usize = 10;
+            let n = half.eqs.len();
+            let loaded: Vec<f64> = (0..n * K).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
+            half.work[..n * K].copy_from_slice(&loaded);
+            crate::simd::with_avx2(
+                #[inline(always)]
+                || {
+                    half.forward_interleaved::<K>();
+                    half.backward_interleaved::<K>();
+                },
+            );
+            let dispatched = bits(&half.work[..n * K]);
+            half.work[..n * K].copy_from_slice(&loaded);
+            half.forward_interleaved::<K>();
+            half.backward_interleaved::<K>();
+            assert_eq!(dispatched, bits(&half.work[..n * K]), "AVX2 vs baseline");
+            for j in 0..K {
+                for i in 0..n {
+                    half.work[i] = loaded[i * K + j];
                 }
-                let bits: Vec<u64> = half.work[..loaded.len()]
-                    .iter()
-                    .map(|x| x.to_bits())
-                    .collect();
-                results.push(bits);
+                half.forward_interleaved::<1>();
+                half.backward_interleaved::<1>();
+                let alone = bits(&half.work[..n]);
+                let together: Vec<u64> = (0..n).map(|i| dispatched[i * K + j]).collect();
+                assert_eq!(alone, together, "column {j} alone vs with {K}");
             }
-            assert_eq!(results[0], results[1]);
         }
     }
 
