@@ -443,8 +443,8 @@ impl Half {
     /// `work`, in plain loops over the supernodes' columns, each step done for the `K` columns
     /// at once (a short vector the compiler keeps in registers): most supernodes are 2–8
     /// columns wide, where a call to a dense kernel per supernode costs more than its
-    /// arithmetic. The updates of a supernode's pattern rows are summed in a contiguous buffer
-    /// and scattered once. Every right-hand side sees the same operations in the same order
+    /// arithmetic. The update of each of a supernode's pattern rows is summed apart, then
+    /// subtracted once. Every right-hand side sees the same operations in the same order
     /// whatever `K`, so solving columns together or one by one gives the same bits (unit
     /// test); compiled for AVX2 when the CPU has it ([`crate::simd`]).
     #[inline(always)]
