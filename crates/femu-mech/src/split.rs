@@ -211,6 +211,24 @@ impl NodeGraph {
     }
 }
 
+/// Runs `$half.$method::<K>()` for the run-time column count `$k` (1 ..= [`MAX_RHS`]), compiled
+/// for AVX2 where the CPU has it ([`crate::simd`]).
+macro_rules! with_columns {
+    ($half:ident, $k:expr, $method:ident) => {
+        with_columns!(@ $half, $k, $method; 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+    };
+    (@ $half:ident, $k:expr, $method:ident; $($n:literal)*) => {{
+        const _: () = assert!(MAX_RHS == 16, "one arm per column count");
+        match $k {
+            $($n => crate::simd::with_avx2(
+                #[inline(always)]
+                || $half.$method::<$n>(),
+            ),)*
+            _ => unreachable!("at most MAX_RHS columns"),
+        }
+    }};
+}
+
 /// One half: the interior's equations then the separator's, factorized up to the separator.
 struct Half {
     /// Equation of each local row, in elimination order: `n_interior` interior ones, then the
@@ -229,7 +247,8 @@ struct Half {
     partial: PartialLdlt,
     /// `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (s x s column-major, lower triangle).
     schur: Vec<f64>,
-    /// Local right-hand sides (local rows x MAX_RHS, column-major) and a product buffer.
+    /// Local right-hand sides, interleaved (`work[i * k + j]`: local row `i` of column `j` of
+    /// `k` ≤ MAX_RHS), and the rows of one supernode's pattern (gathered or updated) for them.
     work: Vec<f64>,
     tmp: Vec<f64>,
 }
@@ -300,10 +319,6 @@ impl Half {
             .map(|s| supernodal.nnz_per_super()[s])
             .max()
             .unwrap_or(0);
-        let max_cols = (0..supernodal.n_supernodes())
-            .map(|s| supernodal.supernode_end()[s] - supernodal.supernode_begin()[s])
-            .max()
-            .unwrap_or(0);
         let s = separator.len();
         let partial = PartialLdlt::new(supernodal);
         Ok(Half {
@@ -317,7 +332,7 @@ impl Half {
             partial,
             schur: vec![0.0; s * s],
             work: vec![0.0; n * MAX_RHS],
-            tmp: vec![0.0; (max_pattern + max_cols) * MAX_RHS],
+            tmp: vec![0.0; max_pattern * MAX_RHS],
         })
     }
 
@@ -393,18 +408,7 @@ impl Half {
             }
         }
         x[n_interior * k..].fill(0.0);
-        macro_rules! columns {
-            ($($k:literal)*) => {
-                match k {
-                    $($k => crate::simd::with_avx2(
-                        #[inline(always)]
-                        || self.forward_interleaved::<$k>(),
-                    ),)*
-                    _ => unreachable!("at most MAX_RHS columns"),
-                }
-            };
-        }
-        columns!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        with_columns!(self, k, forward_interleaved)
     }
 
     /// With the separator's solution `x_s` (`s` x `k`, column-major), scales the interior by
@@ -425,18 +429,7 @@ impl Half {
                 *v = x_s[j * s + i];
             }
         }
-        macro_rules! columns {
-            ($($k:literal)*) => {
-                match k {
-                    $($k => crate::simd::with_avx2(
-                        #[inline(always)]
-                        || self.backward_interleaved::<$k>(),
-                    ),)*
-                    _ => unreachable!("at most MAX_RHS columns"),
-                }
-            };
-        }
-        columns!(1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16)
+        with_columns!(self, k, backward_interleaved)
     }
 
     /// The forward substitution of [`Self::forward`] for `K` right-hand sides interleaved in
@@ -459,33 +452,8 @@ impl Half {
             // supernode). One or two right-hand sides: column by column into a buffer, in the
             // pass that updates the diagonal block; more: row by row in registers, once the
             // diagonal block is solved (no buffer traffic).
-            if K <= 2 {
-                let update = &mut self.tmp[..pattern.len() * K];
-                update.fill(0.0);
-                for (j, column) in values.chunks_exact(rows).take(m).enumerate() {
-                    let xj: [f64; K] = std::array::from_fn(|c| x[(start + j) * K + c]);
-                    for (xi, l) in x[(start + j + 1) * K..(start + size) * K]
-                        .chunks_exact_mut(K)
-                        .zip(&column[j + 1..size])
-                    {
-                        for c in 0..K {
-                            xi[c] -= l * xj[c];
-                        }
-                    }
-                    for (t, l) in update.chunks_exact_mut(K).zip(&column[size..]) {
-                        for c in 0..K {
-                            t[c] += l * xj[c];
-                        }
-                    }
-                }
-                for (&r, t) in pattern.iter().zip(update.chunks_exact(K)) {
-                    let xr = &mut x[r * K..(r + 1) * K];
-                    for c in 0..K {
-                        xr[c] -= t[c];
-                    }
-                }
-                continue;
-            }
+            let update = &mut self.tmp[..if K <= 2 { pattern.len() * K } else { 0 }];
+            update.fill(0.0);
             for (j, column) in values.chunks_exact(rows).take(m).enumerate() {
                 let xj: [f64; K] = std::array::from_fn(|c| x[(start + j) * K + c]);
                 for (xi, l) in x[(start + j + 1) * K..(start + size) * K]
@@ -496,18 +464,28 @@ impl Half {
                         xi[c] -= l * xj[c];
                     }
                 }
+                for (t, l) in update.chunks_exact_mut(K).zip(&column[size..]) {
+                    for c in 0..K {
+                        t[c] += l * xj[c];
+                    }
+                }
             }
             let (head, tail) = x.split_at_mut((start + m) * K);
             let solved = &head[start * K..];
             for (p, &r) in pattern.iter().enumerate() {
-                let mut acc = [0.0; K];
-                for (j, xj) in solved.chunks_exact(K).enumerate() {
-                    let l = values[j * rows + size + p];
-                    for c in 0..K {
-                        acc[c] += l * xj[c];
-                    }
-                }
                 let xr = &mut tail[(r - start - m) * K..(r - start - m + 1) * K];
+                let acc: [f64; K] = if K <= 2 {
+                    std::array::from_fn(|c| update[p * K + c])
+                } else {
+                    let mut acc = [0.0; K];
+                    for (j, xj) in solved.chunks_exact(K).enumerate() {
+                        let l = values[j * rows + size + p];
+                        for c in 0..K {
+                            acc[c] += l * xj[c];
+                        }
+                    }
+                    acc
+                };
                 for c in 0..K {
                     xr[c] -= acc[c];
                 }
