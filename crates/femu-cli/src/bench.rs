@@ -40,7 +40,7 @@ struct BenchSummary {
 
 /// Solves the compression test in process; returns (setup + solve time, increments, iterations).
 fn run_compression(elements: usize) -> Result<(f64, usize, usize)> {
-    let (mut model, skin) = crate::run::thigh_model(elements, femu_mesh::ElementKind::Cpe4)?;
+    let (mut model, skin) = femu_study::model::thigh_model(elements, femu_mesh::ElementKind::Cpe4)?;
     femu_mech::loading::apply_loading(
         &mut model,
         &skin,
@@ -130,7 +130,7 @@ pub fn run(
     }
 
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let (deck, _) = crate::run::thigh_deck(target_elements, femu_mesh::ElementKind::Cpe4)?;
+    let (deck, _) = femu_study::model::thigh_deck(target_elements, femu_mesh::ElementKind::Cpe4)?;
     let (elements, nodes) = (deck.mesh.elements.len(), deck.mesh.nodes.len());
     let deck_path = out.join("model.inp");
     femu_mesh::write_inp_file(&deck, &deck_path)?;

@@ -1,6 +1,6 @@
 //! `femu convergence [STUDY.toml] --out DIR`: the mesh and element validation study of the seed
-//! (§2.1.2.1) on the built-in thigh. Parses, calls `femu_convergence`, prints the table and
-//! the recommendation; the numbers are computed in the library.
+//! (§2.1.2.1) on the built-in thigh. Reads the study's convergence view, calls
+//! `femu_convergence`, prints the table and the recommendation.
 
 use anyhow::{Context, Result};
 use femu_convergence::{report, run_study, ConvergenceStudy};
@@ -9,7 +9,9 @@ use std::path::Path;
 /// Runs the study in `study_file` (the defaults without one) and writes `out`.
 pub fn run(study_file: Option<&Path>, out: &Path, quiet: bool) -> Result<()> {
     let study = match study_file {
-        Some(p) => ConvergenceStudy::read(p)?,
+        Some(p) => femu_study::read(p)?
+            .convergence_study()
+            .map_err(|e| e.in_file(p))?,
         None => ConvergenceStudy::default(),
     };
     if !quiet {

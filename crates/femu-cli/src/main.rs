@@ -6,21 +6,14 @@
 mod bench;
 mod convergence_cmd;
 mod dic_cmd;
-mod figures;
 mod huge_pages;
-mod identify_cmd;
 mod mesh_cmd;
-mod pipeline;
-mod plan;
 mod progress;
-mod report;
-mod run;
-mod sensitivity_cmd;
-mod study;
-mod study_model;
 mod us_cmd;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use femu_study::steps::{identify, run, sensitivity, solve};
+use progress::Terminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -50,11 +43,11 @@ pub enum QuadElement {
     Cpe4h,
 }
 
-impl QuadElement {
-    pub fn kind(self) -> femu_mesh::ElementKind {
-        match self {
-            QuadElement::Cpe4 => femu_mesh::ElementKind::Cpe4,
-            QuadElement::Cpe4h => femu_mesh::ElementKind::Cpe4h,
+impl From<QuadElement> for femu_study::schema::QuadElement {
+    fn from(e: QuadElement) -> Self {
+        match e {
+            QuadElement::Cpe4 => femu_study::schema::QuadElement::Cpe4,
+            QuadElement::Cpe4h => femu_study::schema::QuadElement::Cpe4h,
         }
     }
 }
@@ -270,18 +263,67 @@ fn demo_tests(names: &[String]) -> anyhow::Result<Vec<femu_mech::loading::Loadin
         .collect()
 }
 
+/// `femu init PATH`: the commented example study.
+fn init(path: &std::path::Path, force: bool, quiet: bool) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if path.exists() && !force {
+        anyhow::bail!(
+            "{} exists: choose another name or pass --force to overwrite it",
+            path.display()
+        );
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    std::fs::write(path, femu_study::schema::EXAMPLE_STUDY)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    if !quiet {
+        eprintln!(
+            "wrote {} (the seed's numerical example, every key with its default); run it with: femu run {} --out out/study",
+            path.display(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// The study of a command (the file, or the defaults) with the command-line overrides.
+fn study_with(
+    study: Option<&std::path::Path>,
+    elements: Option<usize>,
+    repeat: Option<usize>,
+    starts: Option<usize>,
+) -> anyhow::Result<femu_study::Study> {
+    let mut s = femu_study::load(study, elements)?;
+    if let Some(r) = repeat {
+        if !(1..=1000).contains(&r) {
+            anyhow::bail!("--repeat must be in [1, 1000], got {r}");
+        }
+        s.identification.repeat = r;
+    }
+    if let Some(n) = starts {
+        if !(1..=64).contains(&n) {
+            anyhow::bail!("--starts must be in [1, 64], got {n}");
+        }
+        s.identification.starts = n;
+    }
+    Ok(s)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    let quiet = cli.quiet;
+    let progress = Terminal { quiet };
     let result = match cli.command {
         Command::Demo {
             out,
             full,
             elements,
-        } => pipeline::demo(&out, full, elements, cli.quiet),
-        Command::Run { study, out } => pipeline::run(&study, &out, cli.quiet),
-        Command::Init { path, force } => pipeline::init(&path, force, cli.quiet),
-        Command::Report { dir } => report::write(&dir).map(|p| {
-            if !cli.quiet {
+        } => run::demo(&out, full, elements, &progress).map(|_| ()),
+        Command::Run { study, out } => run::run(&study, &out, &progress).map(|_| ()),
+        Command::Init { path, force } => init(&path, force, quiet),
+        Command::Report { dir } => femu_study::report::write(&dir).map(|p| {
+            if !quiet {
                 eprintln!("wrote {}", p.display());
             }
         }),
@@ -290,43 +332,37 @@ fn main() -> ExitCode {
             element,
             elements,
             tests,
-        } => demo_tests(&tests).and_then(|t| run::forward(&out, element, elements, &t, cli.quiet)),
+        } => demo_tests(&tests).and_then(|t| {
+            let kind = femu_study::schema::QuadElement::from(element).kind();
+            solve::forward(&out, kind, elements, &t, &progress)
+        }),
         Command::Solve {
             input,
             study,
             out,
             newton_table,
             no_figures,
-        } => run::solve(
+        } => solve::solve_file(
             &input,
             study.as_deref(),
             &out,
             newton_table,
             !no_figures,
-            cli.quiet,
+            &progress,
         ),
         Command::Bench {
             out,
             elements,
             repeat,
             no_ccx,
-        } => bench::run(&out, elements, repeat, !no_ccx, cli.quiet),
-        Command::Mesh { what } => mesh_cmd::run(what, cli.quiet),
+        } => bench::run(&out, elements, repeat, !no_ccx, quiet),
+        Command::Mesh { what } => mesh_cmd::run(what, quiet),
         Command::Synth {
             study,
             out,
             elements,
-        } => identify_cmd::synth(
-            &identify_cmd::IdentifyArgs {
-                study,
-                out,
-                measured: None,
-                elements,
-                repeat: None,
-                starts: None,
-            },
-            cli.quiet,
-        ),
+        } => study_with(study.as_deref(), elements, None, None)
+            .and_then(|s| identify::synth(&s, &out, &progress)),
         Command::Identify {
             study,
             out,
@@ -334,17 +370,8 @@ fn main() -> ExitCode {
             elements,
             repeat,
             starts,
-        } => identify_cmd::identify(
-            &identify_cmd::IdentifyArgs {
-                study,
-                out,
-                measured,
-                elements,
-                repeat,
-                starts,
-            },
-            cli.quiet,
-        ),
+        } => study_with(study.as_deref(), elements, repeat, starts)
+            .and_then(|s| identify::identify(&s, measured.as_deref(), &out, &progress).map(|_| ())),
         Command::Sensitivity {
             study,
             out,
@@ -352,26 +379,22 @@ fn main() -> ExitCode {
             fd_check,
             fd_step,
             no_figures,
-        } => sensitivity_cmd::run(
-            &sensitivity_cmd::SensitivityArgs {
-                study,
+        } => study_with(study.as_deref(), elements, None, None).and_then(|s| {
+            let options = sensitivity::SensitivityOptions {
                 out,
-                elements,
                 fd_check,
                 fd_step,
-                no_figures,
-            },
-            cli.quiet,
-        ),
-        Command::Convergence { study, out } => {
-            convergence_cmd::run(study.as_deref(), &out, cli.quiet)
-        }
-        Command::Dic(args) => dic_cmd::run(&args, cli.quiet),
-        Command::DicNoise(args) => dic_cmd::run_noise(&args, cli.quiet),
-        Command::UsSim(args) => us_cmd::sim(&args, cli.quiet),
-        Command::UsScan(args) => us_cmd::scan(&args, cli.quiet),
-        Command::UsSettings(args) => us_cmd::run_settings(&args, cli.quiet),
-        Command::UsNoise(args) => us_cmd::run_noise(&args, cli.quiet),
+                figures: !no_figures,
+            };
+            sensitivity::run(&s, &options, &progress).map(|_| ())
+        }),
+        Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
+        Command::Dic(args) => dic_cmd::run(&args, quiet),
+        Command::DicNoise(args) => dic_cmd::run_noise(&args, quiet),
+        Command::UsSim(args) => us_cmd::sim(&args, quiet),
+        Command::UsScan(args) => us_cmd::scan(&args, quiet),
+        Command::UsSettings(args) => us_cmd::run_settings(&args, quiet),
+        Command::UsNoise(args) => us_cmd::run_noise(&args, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,146 +1,19 @@
 //! `femu us-sim`, `us-scan`, `us-settings`, `us-noise`: the ultrasound commands (seed §2.2,
-//! §3.1, Figs. 4–7, and the virtual experiment with images). Thin glue: the study's
-//! `[probe]` and `[ultrasound]` tables are read here, everything numerical lives in
-//! `femu-ultrasound`.
-//!
-//! Study file additions (every key optional, unknown keys are errors):
-//!
-//! ```toml
-//! [probe]
-//! side = "anterior"      # anterior, posterior, lateral, medial, or degrees
-//! width_mm = 40
-//! depth_mm = 40
-//! px_per_mm = 10
-//! [ultrasound]
-//! frequency_mhz = 9      # also cycles, f_number
-//! gain_db = 34           # also dynamic_db, black_level_db, tgc_db_per_cm_mhz, tgc_max_db, noise_db
-//! dynamic_db = 42
-//! seed = 1
-//! ```
+//! §3.1, Figs. 4–7, and the virtual experiment with images). Thin glue: the study's `[probe]`
+//! and `[ultrasound]` tables are read by femu-study, the experiment runs in
+//! `femu_study::steps::ultrasound`, everything numerical lives in `femu-ultrasound`.
 
-use crate::plan;
+use crate::progress::Terminal;
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use femu_dic::{Brightness, DicOptions};
-use femu_mech::loading::{apply_loading, Side};
-use femu_mech::{SolverOptions, StaticSolver};
+use femu_dic::DicOptions;
+use femu_study::steps::ultrasound::{self, ScanOptions, SimOptions};
 use femu_ultrasound::manifest::{fmt_num, Manifest};
+use femu_ultrasound::noise;
 use femu_ultrasound::settings::{self, Region, SettingsOptions};
-use femu_ultrasound::{experiment, noise, probe, Acoustics, Phantom, Probe, Scanner, Transducer};
-use serde::{Deserialize, Serialize};
-use std::path::{Path, PathBuf};
+use serde::Serialize;
+use std::path::PathBuf;
 use std::time::Instant;
-
-/// `[probe]`: the linear probe on the skin.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ProbeSection {
-    side: String,
-    width_mm: f64,
-    depth_mm: f64,
-    px_per_mm: f64,
-}
-
-impl Default for ProbeSection {
-    fn default() -> Self {
-        ProbeSection {
-            side: "anterior".into(),
-            width_mm: 40.0,
-            depth_mm: 40.0,
-            px_per_mm: 10.0,
-        }
-    }
-}
-
-/// `[ultrasound]`: the transducer and the scanner's knobs.
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct UltrasoundSection {
-    frequency_mhz: f64,
-    cycles: f64,
-    f_number: f64,
-    gain_db: f64,
-    dynamic_db: f64,
-    black_level_db: f64,
-    tgc_db_per_cm_mhz: f64,
-    tgc_max_db: f64,
-    noise_db: Option<f64>,
-    seed: u64,
-}
-
-impl Default for UltrasoundSection {
-    fn default() -> Self {
-        let (t, s) = (Transducer::default(), Scanner::default());
-        UltrasoundSection {
-            frequency_mhz: t.frequency_mhz,
-            cycles: t.cycles,
-            f_number: t.f_number,
-            gain_db: s.gain_db,
-            dynamic_db: s.dynamic_db,
-            black_level_db: s.black_level_db,
-            tgc_db_per_cm_mhz: s.tgc_db_per_cm_mhz,
-            tgc_max_db: s.tgc_max_db,
-            noise_db: s.noise_db,
-            seed: 1,
-        }
-    }
-}
-
-impl UltrasoundSection {
-    fn transducer(&self) -> Transducer {
-        Transducer {
-            frequency_mhz: self.frequency_mhz,
-            cycles: self.cycles,
-            f_number: self.f_number,
-        }
-    }
-    fn scanner(&self) -> Scanner {
-        Scanner {
-            gain_db: self.gain_db,
-            dynamic_db: self.dynamic_db,
-            black_level_db: self.black_level_db,
-            tgc_db_per_cm_mhz: self.tgc_db_per_cm_mhz,
-            tgc_max_db: self.tgc_max_db,
-            noise_db: self.noise_db,
-        }
-    }
-}
-
-/// The study and its ultrasound tables (`[probe]`, `[ultrasound]`, checked with the rest of the
-/// study by `plan`).
-fn read_study(
-    study: Option<&Path>,
-    elements: Option<usize>,
-) -> Result<(plan::Plan, ProbeSection, UltrasoundSection)> {
-    let p = plan::load(study, elements)?;
-    let (probe, us) = (p.probe.clone(), p.ultrasound.clone());
-    Ok((p, probe, us))
-}
-
-fn place_probe(
-    mesh: &femu_mesh::Mesh,
-    skin: &[(usize, usize)],
-    section: &ProbeSection,
-) -> Result<Probe> {
-    let side = Side::parse(&section.side).map_err(|e| anyhow::anyhow!("[probe] side: {e}"))?;
-    Ok(probe::probe_on_skin(
-        mesh,
-        skin,
-        side.direction(),
-        section.width_mm,
-        section.depth_mm,
-        section.px_per_mm,
-    )?)
-}
-
-/// Bone faces: the mesh outline minus the skin.
-fn bone_faces(mesh: &femu_mesh::Mesh, skin: &[(usize, usize)]) -> Vec<(usize, usize)> {
-    let skin: std::collections::HashSet<_> = skin.iter().copied().collect();
-    mesh.boundary_faces()
-        .into_iter()
-        .filter(|f| !skin.contains(f))
-        .collect()
-}
 
 /// `femu us-sim`.
 #[derive(Debug, Args)]
@@ -170,272 +43,6 @@ pub struct UsSimArgs {
     /// unloaded to the loaded image.
     #[arg(long, default_value_t = 4)]
     pub steps: usize,
-}
-
-/// The loading scaled by `s` (intermediate states of the incremental DIC).
-fn scaled(test: femu_mech::loading::Loading, s: f64) -> femu_mech::loading::Loading {
-    use femu_mech::loading::Loading;
-    match test {
-        Loading::Contention { pressure } => Loading::Contention {
-            pressure: pressure * s,
-        },
-        Loading::Compression { side, force } => Loading::Compression {
-            side,
-            force: force * s,
-        },
-        Loading::Indentation {
-            site,
-            radius,
-            force,
-        } => Loading::Indentation {
-            site,
-            radius,
-            force: force * s,
-        },
-    }
-}
-
-#[derive(Serialize)]
-struct SimSummary {
-    command: &'static str,
-    version: &'static str,
-    test: String,
-    elements: usize,
-    probe: Probe,
-    transducer: Transducer,
-    psf: femu_ultrasound::Psf,
-    scanner: Scanner,
-    acoustics: Acoustics,
-    scatterers: usize,
-    image_px: (usize, usize),
-    roi_pixels: usize,
-    dic_steps: usize,
-    dic_elements: usize,
-    dic_converged: bool,
-    dic_iterations: usize,
-    dic_residual_rms: f64,
-    error: experiment::FieldError,
-    max_fe_displacement_mm: f64,
-    timings_s: Timings,
-}
-
-#[derive(Serialize, Default)]
-struct Timings {
-    mesh_and_solve: f64,
-    phantom: f64,
-    render_reference: f64,
-    render_deformed: f64,
-    dic: f64,
-    total: f64,
-}
-
-/// `femu us-sim`: the virtual experiment with images.
-pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
-    let t0 = Instant::now();
-    let (plan, probe_s, us) = read_study(args.study.as_deref(), args.elements)?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
-    if args.steps == 0 || args.steps > 20 {
-        bail!("--steps {} must be in [1, 20]", args.steps);
-    }
-    let test = plan.tests[plan.identification.test];
-    // The loaded state and `steps - 1` intermediate loads (incremental DIC).
-    let mut stages: Vec<Vec<f64>> = Vec::new();
-    let mut model = None;
-    let mut skin = Vec::new();
-    for k in 1..=args.steps {
-        let (mut m, sk) = crate::sensitivity_cmd::thigh_model(&plan)?;
-        let load = scaled(test, k as f64 / args.steps as f64);
-        apply_loading(&mut m, &sk, &load).with_context(|| format!("test {}", test.name()))?;
-        let mut solver = StaticSolver::new(&m, SolverOptions::default())?;
-        let sol = solver
-            .solve_with(&m, stages.last().map(|v| v.as_slice()), &mut |_| {})
-            .map_err(|e| {
-                anyhow::anyhow!(
-                    "test {} at {k}/{} of the load: {e}",
-                    test.name(),
-                    args.steps
-                )
-            })?;
-        stages.push(sol.u[..2 * m.node_count()].to_vec());
-        skin = sk;
-        model = Some(m);
-    }
-    let model = model.context("no load step")?;
-    let u = stages.last().context("no load step")?;
-    let umax = u.chunks(2).map(|c| c[0].hypot(c[1])).fold(0.0, f64::max);
-    let mut timings = Timings {
-        mesh_and_solve: t0.elapsed().as_secs_f64(),
-        ..Default::default()
-    };
-    if !quiet {
-        eprintln!(
-            "{}: {} elements solved in {:.2} s, largest displacement {:.3} mm",
-            test.name(),
-            model.mesh.elements.len(),
-            timings.mesh_and_solve,
-            umax
-        );
-    }
-    let probe = place_probe(&model.mesh, &skin, &probe_s)?;
-    let t = Instant::now();
-    let acoustics = Acoustics::default();
-    let bone = bone_faces(&model.mesh, &skin);
-    let phantom = Phantom::generate(&model.mesh, &bone, &acoustics, &probe, 3.0 + umax, us.seed)?;
-    timings.phantom = t.elapsed().as_secs_f64();
-    let opts = experiment::ExperimentOptions {
-        transducer: us.transducer(),
-        scanner: us.scanner(),
-        dic: DicOptions {
-            element_size: args.element,
-            regularization_length: args.regularization,
-            brightness: Brightness::Global,
-            pyramid_levels: Some(args.levels),
-            ..Default::default()
-        },
-        grid_step_px: args.grid_step,
-        noise_seed: us.seed,
-        ..Default::default()
-    };
-    let exp = experiment::run_incremental(&phantom, &stages, &probe, &opts)?;
-    timings.render_reference = exp.reference.seconds;
-    timings.render_deformed = exp.deformed.seconds;
-    timings.dic = exp.dic.timings.total_s;
-    let out = &args.out;
-    let save = |img: &femu_dic::GreyImage, name: &str| -> Result<()> {
-        img.save_png(&out.join(name))
-            .with_context(|| format!("cannot write {}", out.join(name).display()))
-    };
-    save(&exp.reference.image, "ref.png")?;
-    save(&exp.deformed.image, "def.png")?;
-    let comments = vec![
-        format!(
-            "femu us-sim {}: DIC of simulated B-mode images, {} test, {} MHz, gain {} dB, dynamic {} dB",
-            env!("CARGO_PKG_VERSION"),
-            test.name(),
-            fmt_num(us.frequency_mhz),
-            fmt_num(us.gain_db),
-            fmt_num(us.dynamic_db)
-        ),
-        format!(
-            "model frame (mm); probe centre {:?} mm, beam {:?}, {} px/mm",
-            probe.centre_mm, probe.direction, probe.px_per_mm
-        ),
-    ];
-    experiment::write_field_csv(&out.join("measured.csv"), &exp.points, false, &comments)?;
-    experiment::write_field_csv(
-        &out.join("true_field.csv"),
-        &exp.points,
-        true,
-        &["FE displacement at the DIC grid points (mm, model frame)".into()],
-    )?;
-    // Maps over the reference image.
-    let maps = experiment::pixel_maps(&exp, &phantom, u, &probe, args.grid_step);
-    let (w, h) = (exp.reference.width, exp.reference.height);
-    let grey = &exp.reference.image.data;
-    let err: [Vec<f64>; 2] = [0, 1].map(|c| {
-        maps[c]
-            .iter()
-            .zip(&maps[c + 2])
-            .map(|(d, t)| d - t)
-            .collect()
-    });
-    let plots: [(&str, &str, &Vec<f64>, bool); 6] = [
-        (
-            "ux_true.png",
-            "FE displacement ux (lateral)",
-            &maps[2],
-            true,
-        ),
-        (
-            "uy_true.png",
-            "FE displacement uy (depth, down)",
-            &maps[3],
-            true,
-        ),
-        (
-            "ux_dic.png",
-            "DIC displacement ux (lateral)",
-            &maps[0],
-            true,
-        ),
-        (
-            "uy_dic.png",
-            "DIC displacement uy (depth, down)",
-            &maps[1],
-            true,
-        ),
-        ("error_ux.png", "DIC - FE, ux", &err[0], true),
-        ("error_uy.png", "DIC - FE, uy", &err[1], true),
-    ];
-    for (name, title, values, diverging) in plots {
-        let p = out.join(name);
-        femu_plot::image_field_png(
-            &p,
-            grey,
-            w,
-            h,
-            values,
-            &femu_plot::ImageField {
-                title: format!("{title} over the reference image"),
-                value_label: if name.starts_with("error") {
-                    "DIC - FE (px)".into()
-                } else {
-                    "displacement (px)".into()
-                },
-                diverging,
-                ..Default::default()
-            },
-        )
-        .with_context(|| format!("cannot write {}", p.display()))?;
-    }
-    timings.total = t0.elapsed().as_secs_f64();
-    let e = exp.error;
-    let summary = SimSummary {
-        command: "us-sim",
-        version: env!("CARGO_PKG_VERSION"),
-        test: test.name(),
-        elements: model.mesh.elements.len(),
-        probe,
-        transducer: opts.transducer,
-        psf: opts.transducer.psf(),
-        scanner: opts.scanner,
-        acoustics,
-        scatterers: exp.phantom_scatterers,
-        image_px: (w, h),
-        roi_pixels: exp.roi.iter().filter(|&&b| b).count(),
-        dic_steps: exp.steps,
-        dic_elements: exp.dic.mesh.n_elements(),
-        dic_converged: exp.dic.converged,
-        dic_iterations: exp.dic.iterations,
-        dic_residual_rms: exp.dic.residual_rms,
-        error: e,
-        max_fe_displacement_mm: umax,
-        timings_s: timings,
-    };
-    settings::write_json(&out.join("summary.json"), &summary)?;
-    if !quiet {
-        eprintln!(
-            "images {w} x {h} px ({} scatterers) rendered in {:.2} + {:.2} s; DIC {} elements in {:.2} s; \
-             error over {} points in tissue: RMS ({:.3}, {:.3}) px = ({:.4}, {:.4}) mm, max ({:.2}, {:.2}) px \
-             for displacements up to {:.1} px -> {}",
-            exp.phantom_scatterers,
-            exp.reference.seconds,
-            exp.deformed.seconds,
-            exp.dic.mesh.n_elements(),
-            exp.dic.timings.total_s,
-            e.points,
-            e.rms_px[0],
-            e.rms_px[1],
-            e.rms_mm[0],
-            e.rms_mm[1],
-            e.max_abs_px[0],
-            e.max_abs_px[1],
-            e.max_true_px,
-            out.join("measured.csv").display()
-        );
-    }
-    Ok(())
 }
 
 /// `femu us-scan`.
@@ -468,112 +75,32 @@ pub struct UsScanArgs {
     pub elements: usize,
 }
 
+/// `femu us-sim`: the virtual experiment with images.
+pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
+    let study = femu_study::load(args.study.as_deref(), args.elements)?;
+    let options = SimOptions {
+        element: args.element,
+        regularization: args.regularization,
+        grid_step: args.grid_step,
+        levels: args.levels,
+        steps: args.steps,
+    };
+    ultrasound::sim(&study, &options, &args.out, &Terminal { quiet }).map(|_| ())
+}
+
 /// `femu us-scan`: images of the unloaded built-in thigh over a grid of settings, with the
 /// manifest that `us-settings` and `us-noise` read.
 pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
-    let t0 = Instant::now();
-    if args.repeats == 0 || args.subjects == 0 {
-        bail!("--repeats and --subjects must be at least 1");
-    }
-    let n = args.frequencies.len()
-        * args.gains.len()
-        * args.dynamics.len()
-        * args.repeats
-        * args.subjects;
-    if n > 2000 {
-        bail!("{n} images requested: at most 2000");
-    }
-    let (plan, probe_s, us) = read_study(args.study.as_deref(), Some(args.elements))?;
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
-    let (model, skin) = crate::sensitivity_cmd::thigh_model(&plan)?;
-    let probe = place_probe(&model.mesh, &skin, &probe_s)?;
-    let bone = bone_faces(&model.mesh, &skin);
-    let mut manifest = String::from("file,frequency_mhz,gain_db,dynamic_db,subject\n");
-    for s in 0..args.subjects {
-        let base = Phantom::generate(
-            &model.mesh,
-            &bone,
-            &Acoustics::default(),
-            &probe,
-            3.0,
-            us.seed.wrapping_add(1000 * s as u64),
-        )?;
-        let state = base.reference();
-        // One phantom per acquisition, shared by every setting (the same frames re-displayed
-        // with each setting would hide the setting's effect on the decorrelation; the seed
-        // acquired each setting separately, so each setting gets its own frames).
-        for &f in &args.frequencies {
-            for &g in &args
-                .dynamics
-                .iter()
-                .flat_map(|&d| args.gains.iter().map(move |&g| (g, d)))
-                .collect::<Vec<_>>()
-            {
-                let (gain, dynamic) = g;
-                let mut ph = base.clone();
-                for r in 0..args.repeats {
-                    if r > 0 {
-                        ph = ph.decorrelated(
-                            args.correlation,
-                            us.seed
-                                ^ (((s * 7919 + r) as u64) << 20)
-                                ^ ((gain * 1e3) as u64)
-                                ^ ((dynamic * 1e6) as u64),
-                        )?;
-                    }
-                    let scanner = Scanner {
-                        gain_db: gain,
-                        dynamic_db: dynamic,
-                        ..us.scanner()
-                    };
-                    let transducer = Transducer {
-                        frequency_mhz: f,
-                        ..us.transducer()
-                    };
-                    let frame = femu_ultrasound::render(
-                        &ph,
-                        &state,
-                        &probe,
-                        &transducer,
-                        &scanner,
-                        us.seed + (r as u64) * 31 + s as u64 * 7,
-                    )?;
-                    let name = format!(
-                        "s{}_f{}_g{}_d{}_{:02}.png",
-                        s + 1,
-                        fmt_num(f),
-                        fmt_num(gain),
-                        fmt_num(dynamic),
-                        r + 1
-                    );
-                    frame
-                        .image
-                        .save_png(&args.out.join(&name))
-                        .with_context(|| {
-                            format!("cannot write {}", args.out.join(&name).display())
-                        })?;
-                    manifest += &format!(
-                        "{name},{},{},{},s{}\n",
-                        fmt_num(f),
-                        fmt_num(gain),
-                        fmt_num(dynamic),
-                        s + 1
-                    );
-                }
-            }
-        }
-    }
-    let mp = args.out.join("manifest.csv");
-    std::fs::write(&mp, manifest).with_context(|| format!("cannot write {}", mp.display()))?;
-    if !quiet {
-        eprintln!(
-            "{n} images in {:.1} s -> {}",
-            t0.elapsed().as_secs_f64(),
-            mp.display()
-        );
-    }
-    Ok(())
+    let study = femu_study::load(args.study.as_deref(), Some(args.elements))?;
+    let options = ScanOptions {
+        frequencies: args.frequencies.clone(),
+        gains: args.gains.clone(),
+        dynamics: args.dynamics.clone(),
+        repeats: args.repeats,
+        correlation: args.correlation,
+        subjects: args.subjects,
+    };
+    ultrasound::scan(&study, &options, &args.out, &Terminal { quiet })
 }
 
 /// Region options shared by us-settings and us-noise.

@@ -82,7 +82,7 @@ fn bad_studies_are_named() {
     let dir = scratch("bad");
     let cases = [
         ("[model]\nelemnts = 800\n", "elemnts"),
-        ("[materials.bone]\nc10_kpa = 1.0\n", "BONE"),
+        ("[materials.bone]\nc10_kpa = 1.0\n", "[materials.bone]"),
         ("[parameters]\ngroups = [[\"D_FEMUR\"]]\n", "D_FEMUR"),
         ("[grid]\norigin_mm = [1000.0, 1000.0]\nspacing_mm = 1.0\ncounts = [4, 4]\n[model]\nelements = 300\n[[test]]\nkind = \"contention\"\n", "no grid point"),
     ];

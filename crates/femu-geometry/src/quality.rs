@@ -24,7 +24,7 @@ use serde::Serialize;
 pub const DEGENERATE_SCALED_JACOBIAN: f64 = 1e-6;
 
 /// Quality figures of one region (or of the whole mesh, region `ALL`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RegionQuality {
     pub region: String,
     pub elements: usize,
@@ -41,7 +41,7 @@ pub struct RegionQuality {
 }
 
 /// The quality report: one row per region, then `ALL`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct QualityReport {
     pub regions: Vec<RegionQuality>,
     pub total: RegionQuality,

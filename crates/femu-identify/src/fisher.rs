@@ -34,7 +34,7 @@ pub enum FisherError {
 }
 
 /// Free parameters after tying: each is a set of original parameters moving together.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Tied {
     /// Names of the free parameters (`"D_ISCHIO+D_SARTORIUS+D_GRACILIS"` for a group).
     pub names: Vec<String>,
@@ -156,7 +156,7 @@ pub fn information(
 }
 
 /// What the information says about each free parameter.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct Identifiability {
     pub names: Vec<String>,
     /// Predicted relative standard deviation of each free parameter (`sd(log θ)`, Cramér–Rao);

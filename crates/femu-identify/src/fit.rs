@@ -19,14 +19,14 @@ use femu_mech::sensitivity::{DirectSensitivity, Parameter};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::{PointLocation, PointLocator};
 use rand::{Rng, SeedableRng};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 /// Jacobian columns, one per free parameter.
 pub type Columns = Vec<Vec<f64>>;
 
 /// A free parameter: the model parameters it moves together, and its bounds (model units).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FreeParameter {
     pub name: String,
     pub members: Vec<Parameter>,
@@ -298,7 +298,7 @@ impl Problem {
 }
 
 /// Options of [`levenberg_marquardt`].
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct LmOptions {
     pub max_iterations: usize,
     /// Stop when the largest log-parameter step is below this (relative parameter change).
@@ -322,7 +322,7 @@ impl Default for LmOptions {
 }
 
 /// One accepted or rejected step.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct LmStep {
     pub iteration: usize,
     pub cost: f64,
@@ -334,7 +334,7 @@ pub struct LmStep {
 }
 
 /// The result of one minimization.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct FitResult {
     /// Identified free parameters (model units).
     pub theta: Vec<f64>,

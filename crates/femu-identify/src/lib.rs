@@ -7,7 +7,10 @@
 //! - [`measured`]: the measured-field CSV of conventions.md.
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
+//! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
+//!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
+pub mod campaign;
 pub mod fisher;
 pub mod fit;
 pub mod measured;

@@ -351,7 +351,7 @@ impl RigidContact {
 }
 
 /// Contact results of one body at a converged state.
-#[derive(Debug, Clone, Default, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize, serde::Deserialize)]
 pub struct BodyState {
     pub name: String,
     /// Travel beyond first contact (mm).

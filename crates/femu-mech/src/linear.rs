@@ -503,7 +503,7 @@ fn transpose_positions(pattern: &CscPattern) -> Option<Vec<u32>> {
 }
 
 /// Which factorization the last [`TangentSolver::factorize`] used.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Factorization {
     Ldlt,
     /// LDLᵀ of the two halves of a bisected mesh at once ([`crate::split::SplitLdlt`]).

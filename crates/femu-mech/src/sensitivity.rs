@@ -38,7 +38,7 @@ use serde::Serialize;
 use std::time::Instant;
 
 /// Which Neo-Hookean parameter.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 pub enum ParameterKind {
     /// C10 (MPa).
     C10,
@@ -47,7 +47,7 @@ pub enum ParameterKind {
 }
 
 /// One material parameter of a model: C10 or D of material `material`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
 pub struct Parameter {
     pub material: usize,
     pub kind: ParameterKind,
@@ -123,7 +123,7 @@ pub enum SensitivityError {
 }
 
 /// How the sensitivities were obtained.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
 pub struct SensitivityReport {
     pub parameters: usize,
     /// Active contact nodes held on their rigid body.

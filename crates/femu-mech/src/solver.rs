@@ -14,14 +14,14 @@ use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, Tang
 use crate::model::Model;
 use crate::split::DofSplit;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 const NONE: usize = usize::MAX;
 const KE: usize = MAX_DOFS * MAX_DOFS;
 
 /// Newton and increment settings.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct SolverOptions {
     /// Relative force-residual tolerance.
     pub residual_tolerance: f64,
@@ -81,7 +81,7 @@ impl Default for SolverOptions {
 }
 
 /// One Newton iteration, as printed in the Newton table.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct IterationRecord {
     pub iteration: usize,
     /// ‖R‖₂ on the free dofs after the iteration's update (N).
@@ -97,7 +97,7 @@ pub struct IterationRecord {
 }
 
 /// One attempted increment.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct IncrementRecord {
     pub increment: usize,
     /// Load factor at the end of the increment (if converged).
@@ -113,7 +113,7 @@ pub struct IncrementRecord {
 }
 
 /// Diagnostics of a solve.
-#[derive(Debug, Clone, Serialize, Default)]
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
 pub struct SolveReport {
     pub increments: Vec<IncrementRecord>,
     pub converged_increments: usize,

@@ -58,7 +58,7 @@ pub struct ComparedPoint {
 }
 
 /// DIC-vs-truth error statistics over the unflagged grid points in tissue.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, serde::Deserialize)]
 pub struct FieldError {
     pub points: usize,
     /// Mean (bias), standard deviation, RMS and largest magnitude of the error per component

@@ -37,7 +37,7 @@ pub const SOUND_SPEED_MM_PER_US: f64 = 1.540;
 pub const FWHM_PER_SIGMA: f64 = 2.354_820_045_030_949;
 
 /// A linear probe on the skin (see the module documentation).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Probe {
     /// Centre of the probe face in the model frame (mm).
     pub centre_mm: [f64; 2],
@@ -232,7 +232,7 @@ impl Transducer {
 }
 
 /// Gaussian pulse-echo point-spread function (standard deviations, carrier wavenumber).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Psf {
     pub sigma_axial_mm: f64,
     pub sigma_lateral_mm: f64,

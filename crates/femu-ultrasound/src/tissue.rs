@@ -43,7 +43,7 @@ impl Tissue {
 }
 
 /// The acoustic model of a mesh: a tissue per region, interfaces and bone.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Acoustics {
     pub tissues: Vec<Tissue>,
     /// The tissue of elements in none of the named regions.

@@ -3,7 +3,7 @@
 //! of every finished step. Built from the files the steps wrote, so it can be rewritten at any
 //! time (`femu report DIR`), also for a run that stopped midway.
 
-use crate::pipeline::RunRecord;
+use crate::steps::run::RunRecord;
 use anyhow::{Context, Result};
 use base64::Engine;
 use femu_plot::{bar_chart_png, BarChart};

@@ -9,7 +9,7 @@ use std::path::Path;
 
 /// Writes `deformed_le11.png` into `out`, and `contact_pressure.png` and
 /// `force_displacement.png` into each rigid body's folder (`body_dirs`, in body order).
-pub fn write_solve_figures(
+pub(crate) fn write_solve_figures(
     out: &Path,
     body_dirs: &[std::path::PathBuf],
     title: &str,

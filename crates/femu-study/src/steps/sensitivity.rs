@@ -1,8 +1,11 @@
-//! `femu sensitivity [STUDY] --out DIR`: exact sensitivities of the displacement field to the
-//! ten Neo-Hookean parameters for each loading test (seed §2.3, Eq. 3, Fig. 8), and the
-//! identifiability of the parameters from the measurement grid (Fisher information).
+//! The sensitivity step (`femu sensitivity [STUDY] --out DIR`): exact sensitivities of the
+//! displacement field to every material parameter for each loading test (seed §2.3, Eq. 3,
+//! Fig. 8), and the identifiability of the parameters from the measurement grid (Fisher
+//! information).
 
-use crate::plan::{self, Plan};
+use crate::output::{create_dir, write_json};
+use crate::progress::Progress;
+use crate::schema::Study;
 use anyhow::{bail, Context, Result};
 use femu_identify::fisher::{self, Identifiability, Tied};
 use femu_mech::loading::apply_loading;
@@ -10,26 +13,21 @@ use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity,
 use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
 use femu_plot::{bar_chart_png, node_field_png, tile_png, BarChart, FieldPlot};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// Options of the command.
+/// Options of the step.
 #[derive(Debug, Clone)]
-pub struct SensitivityArgs {
-    pub study: Option<PathBuf>,
+pub struct SensitivityOptions {
     pub out: PathBuf,
-    pub elements: Option<usize>,
+    /// Also compute central finite differences and report their difference from the direct
+    /// differentiation.
     pub fd_check: bool,
+    /// Relative parameter step of the finite differences (the seed's 5e-2 %).
     pub fd_step: f64,
-    pub no_figures: bool,
-}
-
-/// The study's model (femu_cli::study_model) and its skin faces.
-pub fn thigh_model(plan: &Plan) -> Result<(Model, Vec<(usize, usize)>)> {
-    let m = crate::study_model::study_model(plan)?;
-    Ok((m.model, m.skin))
+    pub figures: bool,
 }
 
 /// Sensitivities of one test.
@@ -48,94 +46,106 @@ struct TestResult {
     fd_max_rel_diff: Option<Vec<f64>>,
 }
 
-#[derive(Serialize)]
-struct TestSummary {
-    test: String,
-    solve_time_s: f64,
-    sensitivity_time_s: f64,
-    sensitivity_over_solve: f64,
-    newton_iterations: usize,
-    max_displacement_mm: f64,
-    sensitivity_index: Vec<(String, f64)>,
-    direct_differentiation: femu_mech::sensitivity::SensitivityReport,
-    finite_difference_max_relative_difference: Option<Vec<(String, f64)>>,
+/// The sensitivities of one test, as the summary gives them.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TestSummary {
+    pub test: String,
+    pub solve_time_s: f64,
+    pub sensitivity_time_s: f64,
+    pub sensitivity_over_solve: f64,
+    pub newton_iterations: usize,
+    pub max_displacement_mm: f64,
+    /// Eq. 3 per parameter.
+    pub sensitivity_index: Vec<(String, f64)>,
+    pub direct_differentiation: femu_mech::sensitivity::SensitivityReport,
+    pub finite_difference_max_relative_difference: Option<Vec<(String, f64)>>,
 }
 
-#[derive(Serialize)]
-struct Ranking {
-    measurement: String,
-    grouping: String,
-    worst_c10_relative_sd: f64,
-    worst_d_relative_sd: f64,
-    condition: f64,
-    identifiability: Identifiability,
+/// The predicted identifiability of one measurement (a test, or all tests together).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Ranking {
+    pub measurement: String,
+    pub grouping: String,
+    pub worst_c10_relative_sd: f64,
+    pub worst_d_relative_sd: f64,
+    pub condition: f64,
+    pub identifiability: Identifiability,
 }
 
-#[derive(Serialize)]
-struct Summary {
-    command: &'static str,
-    version: &'static str,
-    elements: usize,
-    nodes: usize,
-    element: String,
-    parameters: Vec<(String, f64)>,
-    tests: Vec<TestSummary>,
-    grid_points: usize,
-    grid_points_in_tissue: usize,
-    grid_spacing_mm: f64,
-    noise_sigma_mm: f64,
-    ranking: Vec<Ranking>,
-    finding: Vec<String>,
-    wall_time_s: f64,
+/// `summary.json` of the sensitivity step.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SensitivitySummary {
+    pub command: String,
+    pub version: String,
+    pub elements: usize,
+    pub nodes: usize,
+    pub element: String,
+    pub parameters: Vec<(String, f64)>,
+    pub tests: Vec<TestSummary>,
+    pub grid_points: usize,
+    pub grid_points_in_tissue: usize,
+    pub grid_spacing_mm: f64,
+    pub noise_sigma_mm: f64,
+    /// Best first, per grouping.
+    pub ranking: Vec<Ranking>,
+    pub finding: Vec<String>,
+    pub wall_time_s: f64,
 }
 
-/// Runs the command.
-pub fn run(args: &SensitivityArgs, quiet: bool) -> Result<()> {
-    let plan = plan::load(args.study.as_deref(), args.elements)?;
-    let (base, skin) = thigh_model(&plan)?;
-    run_plan(&plan, &base, &skin, args, quiet, &mut |_, _, _, _| Ok(()))
+/// `femu sensitivity`: the study's model built, every test solved and differentiated.
+pub fn run(
+    study: &Study,
+    options: &SensitivityOptions,
+    progress: &dyn Progress,
+) -> Result<SensitivitySummary> {
+    let built = crate::model::build(&study.model)?;
+    run_on(
+        study,
+        &built.model,
+        &built.skin,
+        options,
+        progress,
+        &mut |_, _, _, _| Ok(()),
+    )
 }
 
 /// Called after each test is solved: `(test name, loaded model, solution, solve time s)`.
 pub type OnSolved<'a> = dyn FnMut(&str, &Model, &Solution, f64) -> Result<()> + 'a;
 
-/// The sensitivities of `plan`'s tests on `base` (the study's model, unloaded); `on_solved`
+/// The sensitivities of `study`'s tests on `base` (the study's model, unloaded); `on_solved`
 /// sees each test's solution (`femu run` writes the forward results from it).
-pub fn run_plan(
-    plan: &Plan,
+pub fn run_on(
+    study: &Study,
     base: &Model,
     skin: &[(usize, usize)],
-    args: &SensitivityArgs,
-    quiet: bool,
+    args: &SensitivityOptions,
+    progress: &dyn Progress,
     on_solved: &mut OnSolved,
-) -> Result<()> {
+) -> Result<SensitivitySummary> {
     let t0 = Instant::now();
     if !(args.fd_step > 0.0 && args.fd_step < 0.1) {
         bail!("--fd-step must be in (0, 0.1), got {}", args.fd_step);
     }
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
+    create_dir(&args.out)?;
     let params = all_parameters(base);
     let names: Vec<String> = params.iter().map(|p| p.name(base)).collect();
-    if !quiet {
-        eprintln!(
-            "sensitivity: {} elements, {} nodes; {} tests, {} parameters",
-            base.mesh.elements.len(),
-            base.node_count(),
-            plan.tests.len(),
-            params.len()
-        );
-    }
+    progress.note(&format!(
+        "sensitivity: {} elements, {} nodes; {} tests, {} parameters",
+        base.mesh.elements.len(),
+        base.node_count(),
+        study.tests.len(),
+        params.len()
+    ));
     // Checked before any solve: the groups and the grid.
     let groupings = [
         ("ungrouped".to_string(), Tied::none(&names)),
         (
             "grouped".to_string(),
-            Tied::new(&names, &plan.groups).context("[parameters] groups")?,
+            Tied::new(&names, &study.groups).context("[parameters] groups")?,
         ),
     ];
     let (lo, hi) = base.mesh.bounding_box();
-    let points = plan.grid.points(lo, hi);
+    let points = study.measurement.grid.points(lo, hi);
     let spacing = if points.len() > 1 {
         points[1][0] - points[0][0]
     } else {
@@ -147,16 +157,17 @@ pub fn run_plan(
         bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
     }
     let mut results = Vec::new();
-    let bar = crate::progress::bar(plan.tests.len(), "solving the tests", quiet);
-    for loading in &plan.tests {
-        bar.set_message(format!("{}: solve and sensitivities", loading.name()));
-        let r = run_test(base, skin, loading, &params, args, quiet)?;
+    let bar = progress.task("solving the tests", Some(study.tests.len()));
+    for test in &study.tests {
+        let loading = &test.loading;
+        bar.message(&format!("{}: solve and sensitivities", loading.name()));
+        let r = run_test(base, skin, loading, &params, args, progress)?;
         on_solved(&r.name, &r.model, &r.solution, r.solve_s)?;
         write_test_outputs(&args.out.join(&r.name), &r, &names)?;
         results.push(r);
         bar.inc(1);
     }
-    bar.finish_and_clear();
+    drop(bar);
 
     let thetas: Vec<f64> = params.iter().map(|p| p.value(base)).collect();
     let columns_of = |r: &TestResult| -> Vec<Vec<f64>> {
@@ -179,7 +190,7 @@ pub fn run_plan(
     for (gname, tied) in &groupings {
         let mut total: Option<Vec<Vec<f64>>> = None;
         for r in &results {
-            let f = fisher::information(&columns_of(r), plan.sigma_mm, tied)?;
+            let f = fisher::information(&columns_of(r), study.measurement.sigma_mm, tied)?;
             ranking.push(rank(&r.name, gname, &f, tied));
             match &mut total {
                 None => total = Some(f),
@@ -209,15 +220,15 @@ pub fn run_plan(
     write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
 
     let finding = findings(&results, &names);
-    if !args.no_figures {
-        write_figures(&args.out, &results, &names, quiet)?;
+    if args.figures {
+        write_figures(&args.out, &results, &names, progress)?;
     }
-    let summary = Summary {
-        command: "sensitivity",
-        version: env!("CARGO_PKG_VERSION"),
+    let summary = SensitivitySummary {
+        command: "sensitivity".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
         elements: base.mesh.elements.len(),
         nodes: base.node_count(),
-        element: format!("{:?}", plan.element).to_uppercase(),
+        element: format!("{:?}", study.model.element).to_uppercase(),
         parameters: names.iter().cloned().zip(thetas.iter().cloned()).collect(),
         tests: results
             .iter()
@@ -243,28 +254,24 @@ pub fn run_plan(
         grid_points: points.len(),
         grid_points_in_tissue: located.len(),
         grid_spacing_mm: spacing,
-        noise_sigma_mm: plan.sigma_mm,
+        noise_sigma_mm: study.measurement.sigma_mm,
         ranking,
         finding: finding.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
-    let path = args.out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    if !quiet {
-        for line in &finding {
-            eprintln!("{line}");
-        }
-        eprintln!("best measurements (predicted relative sd, worst C10 / worst D):");
-        for r in summary.ranking.iter().take(6) {
-            eprintln!(
-                "  {:<40} {:<9} {:>9.2e} / {:>9.2e}",
-                r.measurement, r.grouping, r.worst_c10_relative_sd, r.worst_d_relative_sd
-            );
-        }
-        eprintln!("wrote {}", args.out.display());
+    write_json(&args.out.join("summary.json"), &summary)?;
+    for line in &finding {
+        progress.note(line);
     }
-    Ok(())
+    progress.note("best measurements (predicted relative sd, worst C10 / worst D):");
+    for r in summary.ranking.iter().take(6) {
+        progress.note(&format!(
+            "  {:<40} {:<9} {:>9.2e} / {:>9.2e}",
+            r.measurement, r.grouping, r.worst_c10_relative_sd, r.worst_d_relative_sd
+        ));
+    }
+    progress.note(&format!("wrote {}", args.out.display()));
+    Ok(summary)
 }
 
 fn max_norm(u: &[f64]) -> f64 {
@@ -298,8 +305,8 @@ fn run_test(
     skin: &[(usize, usize)],
     loading: &femu_mech::loading::Loading,
     params: &[Parameter],
-    args: &SensitivityArgs,
-    quiet: bool,
+    args: &SensitivityOptions,
+    progress: &dyn Progress,
 ) -> Result<TestResult> {
     let name = loading.name();
     let mut model = base.clone();
@@ -340,13 +347,12 @@ fn run_test(
         global.push(s);
         maps.push(map);
     }
-    if !quiet {
-        eprintln!(
-            "{name}: solved in {solve_s:.2} s ({} Newton iterations), 10 sensitivities in {sensitivity_s:.3} s ({:.0} % of the solve)",
-            solution.report.newton_iterations,
-            100.0 * sensitivity_s / solve_s
-        );
-    }
+    progress.note(&format!(
+        "{name}: solved in {solve_s:.2} s ({} Newton iterations), {} sensitivities in {sensitivity_s:.3} s ({:.0} % of the solve)",
+        solution.report.newton_iterations,
+        params.len(),
+        100.0 * sensitivity_s / solve_s
+    ));
     let fd_max_rel_diff = if args.fd_check {
         let mut diffs = Vec::new();
         for (k, p) in params.iter().enumerate() {
@@ -370,13 +376,11 @@ fn run_test(
             }
             diffs.push(if smax > 0.0 { dmax / smax } else { dmax });
         }
-        if !quiet {
-            eprintln!(
-                "{name}: direct differentiation vs central finite differences (step {:.0e}): worst relative difference {:.2e}",
-                args.fd_step,
-                diffs.iter().cloned().fold(0.0, f64::max)
-            );
-        }
+        progress.note(&format!(
+            "{name}: direct differentiation vs central finite differences (step {:.0e}): worst relative difference {:.2e}",
+            args.fd_step,
+            diffs.iter().cloned().fold(0.0, f64::max)
+        ));
         Some(diffs)
     } else {
         None
@@ -510,7 +514,12 @@ fn findings(results: &[TestResult], names: &[String]) -> Vec<String> {
 /// `sensitivity_maps.png` (one panel per parameter and test, rows sharing a colour scale, the
 /// seed's Fig. 8 for every tissue), `sensitivity_quadriceps.png` (the seed's Fig. 8 itself) and
 /// `sensitivity_index.png` (Eq. 3 per parameter and test).
-fn write_figures(out: &Path, results: &[TestResult], names: &[String], quiet: bool) -> Result<()> {
+fn write_figures(
+    out: &Path,
+    results: &[TestResult],
+    names: &[String],
+    progress: &dyn Progress,
+) -> Result<()> {
     let panel_dir = out.join("panels");
     std::fs::create_dir_all(&panel_dir)?;
     let mut panels: Vec<Vec<PathBuf>> = Vec::new();
@@ -572,10 +581,7 @@ fn write_figures(out: &Path, results: &[TestResult], names: &[String], quiet: bo
             ..Default::default()
         },
     )?;
-    if !quiet {
-        eprintln!(
-            "figures: sensitivity_maps.png, sensitivity_quadriceps.png, sensitivity_index.png"
-        );
-    }
+    progress
+        .note("figures: sensitivity_maps.png, sensitivity_quadriceps.png, sensitivity_index.png");
     Ok(())
 }

@@ -1,0 +1,265 @@
+//! The model of a study: the geometry of `[thigh]`, `[labels]` or `[model] deck` meshed, its
+//! materials (Table 1 or the deck's, with the study's `[materials]`), the femur fixed, no load
+//! yet; and the skin faces the loading tests act on.
+
+use crate::schema::{
+    Geometry, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
+    DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
+};
+use anyhow::{bail, Context, Result};
+use femu_geometry::{Material, MeshOptions, ThighModel};
+use femu_mech::loading::apply_loading;
+use femu_mech::Model;
+use femu_mesh::{Deck, ElementKind};
+use std::path::Path;
+
+/// A study's model before any loading.
+pub struct StudyModel {
+    pub model: Model,
+    /// Skin faces `(element, face)`.
+    pub skin: Vec<(usize, usize)>,
+    /// The meshed thigh (built-in or label image); `None` for a deck.
+    pub thigh: Option<ThighModel>,
+    /// "parametric thigh", "label image IMAGE" or "deck FILE".
+    pub source: String,
+}
+
+impl StudyModel {
+    /// A copy of the model with `test` applied on the skin.
+    pub fn loaded(&self, test: &femu_mech::loading::Loading) -> Result<Model> {
+        let mut model = self.model.clone();
+        apply_loading(&mut model, &self.skin, test)
+            .with_context(|| format!("test {}", test.name()))?;
+        Ok(model)
+    }
+}
+
+/// Table 1 with the study's `[materials]` values (regions checked against `regions`).
+fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<Material>> {
+    let mut materials = Material::table1();
+    for spec in specs {
+        let region = &spec.region;
+        if !regions.iter().any(|r| r.eq_ignore_ascii_case(region)) {
+            bail!(
+                "[materials.{region}]: no such region in the model ({})",
+                regions.join(", ")
+            );
+        }
+        let m = materials
+            .iter_mut()
+            .find(|m| m.region.eq_ignore_ascii_case(region))
+            .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
+        if let Some(c) = spec.value("C10") {
+            m.c10_mpa = c;
+        }
+        if let Some(d) = spec.value("D") {
+            m.d_per_mpa = d;
+        }
+    }
+    for r in regions {
+        if !materials.iter().any(|m| m.region.eq_ignore_ascii_case(r)) {
+            bail!(
+                "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
+            );
+        }
+    }
+    Ok(materials)
+}
+
+/// The built-in thigh of `spec`'s dimensions meshed at `resolution`.
+fn mesh_thigh(
+    dims: &femu_geometry::ThighParams,
+    resolution: Resolution,
+    kind: ElementKind,
+) -> Result<ThighModel> {
+    let (target_elements, element_size_mm) = match resolution {
+        Resolution::Elements(n) => (Some(n), None),
+        Resolution::SizeMm(h) => (None, Some(h)),
+        Resolution::Default => (Some(DEFAULT_ELEMENTS), None),
+    };
+    let params = femu_geometry::ThighParams {
+        target_elements,
+        element_size_mm,
+        ..dims.clone()
+    };
+    femu_geometry::parametric_thigh(&params, kind).context("meshing the parametric thigh")
+}
+
+/// Builds the model a study describes.
+pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
+    let kind = spec.element.kind();
+    let (thigh, source) = match &spec.geometry {
+        Geometry::Thigh(dims) => (
+            mesh_thigh(dims, spec.resolution, kind)?,
+            "parametric thigh".to_string(),
+        ),
+        Geometry::Labels(l) => {
+            let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
+                .context("[labels] map/bone/background")?;
+            let img = femu_geometry::read_label_image(&l.image, l.slice)
+                .with_context(|| format!("[labels] image {}", l.image.display()))?;
+            let options = MeshOptions {
+                element_size_mm: match spec.resolution {
+                    Resolution::SizeMm(h) => h,
+                    _ => DEFAULT_LABEL_SIZE_MM,
+                },
+                kind,
+                min_island_mm2: l.min_island_mm2,
+                ..MeshOptions::default()
+            };
+            (
+                femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
+                    .with_context(|| format!("meshing {}", l.image.display()))?,
+                format!("label image {}", l.image.display()),
+            )
+        }
+        Geometry::Deck(path) => return deck_model(&spec.materials, path),
+    };
+    let materials = materials(&spec.materials, &thigh.regions)?;
+    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
+    if skin.is_empty() {
+        bail!("the model has no skin surface");
+    }
+    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0)?;
+    deck.pressures.clear();
+    Ok(StudyModel {
+        model: Model::from_deck(deck)?,
+        skin,
+        thigh: Some(thigh),
+        source,
+    })
+}
+
+/// A deck: its materials (overridden by `[materials.NAME]`, NAME a material or a region), its
+/// boundary conditions; the skin is the set of faces its `*DLOAD` loads, then removed.
+fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
+    let mut deck = femu_mesh::read_inp(path)?;
+    if deck.pressures.is_empty() {
+        bail!(
+            "{}: the deck has no *DLOAD: its pressure faces define the skin the tests load (write a contention deck, e.g. with femu mesh)",
+            path.display()
+        );
+    }
+    let skin: Vec<(usize, usize)> = deck.pressures.iter().map(|p| (p.element, p.face)).collect();
+    deck.pressures.clear();
+    for spec in specs {
+        let name = &spec.region;
+        let by_material = deck
+            .materials
+            .iter()
+            .position(|m| m.name.eq_ignore_ascii_case(name));
+        let by_region = deck
+            .region_names
+            .iter()
+            .position(|r| r.eq_ignore_ascii_case(name))
+            .and_then(|r| {
+                deck.element_region
+                    .iter()
+                    .position(|&e| e == r)
+                    .map(|e| deck.element_material[e])
+            });
+        let m = by_material.or(by_region).with_context(|| {
+            format!(
+                "[materials.{name}]: the deck {} has no such material or region",
+                path.display()
+            )
+        })?;
+        if let Some(c) = spec.value("C10") {
+            deck.materials[m].c10 = c;
+        }
+        if let Some(d) = spec.value("D") {
+            deck.materials[m].d1 = d;
+        }
+    }
+    Ok(StudyModel {
+        model: Model::from_deck(deck)?,
+        skin,
+        thigh: None,
+        source: format!("deck {}", path.display()),
+    })
+}
+
+/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a
+/// contention deck: Table 1 materials, femur fixed, 20 mmHg on the skin; and its skin faces.
+pub fn thigh_deck(elements: usize, kind: ElementKind) -> Result<(Deck, Vec<(usize, usize)>)> {
+    if !ELEMENTS_RANGE.contains(&elements) {
+        bail!("the number of elements must be in [100, 500000], got {elements}");
+    }
+    let params = femu_geometry::ThighParams {
+        target_elements: Some(elements),
+        ..Default::default()
+    };
+    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
+    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
+    let deck =
+        femu_geometry::contention_deck(&thigh, &Material::table1(), femu_geometry::CONTENTION_MPA)?;
+    Ok((deck, skin))
+}
+
+/// A Gmsh mesh set up by the study's Gmsh view (`[materials]` per physical surface, `[[fixed]]`,
+/// `[[pressure]]`, `[step]`, at most one rigid `[[test]]` on its `curve`).
+pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
+    use femu_mech::build::{curve_faces, deck_from_msh, MshSetup, RegionMaterial};
+    let name = mesh.display().to_string();
+    let mut regions = Vec::new();
+    for m in &study.model.materials {
+        let (Some(c10), Some(d)) = (m.value("C10"), m.value("D")) else {
+            return Err(study
+                .key_error(
+                    &format!("materials.{}", m.region),
+                    "",
+                    "a Gmsh region needs both C10 (c10_kpa or c10_mpa) and D (d_per_mpa)".into(),
+                )
+                .into());
+        };
+        regions.push(RegionMaterial {
+            region: m.region.clone(),
+            c10,
+            d,
+        });
+    }
+    // The seed's default tests (no [[test]] given) do not apply to a Gmsh mesh.
+    let rigid: Vec<_> = if study.tests_given() {
+        study.tests.iter().collect()
+    } else {
+        Vec::new()
+    };
+    if rigid.len() > 1 || rigid.iter().any(|t| t.curve.is_none()) {
+        return Err(StudyError::Study(
+            "a Gmsh study takes at most one rigid [[test]] (compression or indentation) with the curve it presses on (curve = \"...\")"
+                .into(),
+        )
+        .into());
+    }
+    let setup = MshSetup {
+        quad_kind: study.model.element.kind(),
+        materials: regions,
+        displacements: study.boundary.fixed.clone(),
+        pressures: study.boundary.pressures.clone(),
+        step: study.boundary.step,
+    };
+    let msh = femu_mesh::read_msh(mesh)?;
+    let context = || format!("setting up {name} with the study");
+    let faces = match rigid.first() {
+        Some(t) => {
+            Some(curve_faces(&msh, t.curve.as_deref().expect("a curve")).with_context(context)?)
+        }
+        None => None,
+    };
+    let deck = deck_from_msh(msh, &setup).with_context(context)?;
+    let mut model = Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?;
+    if let (Some(t), Some(faces)) = (rigid.first(), faces) {
+        if matches!(t.loading, femu_mech::loading::Loading::Contention { .. }) {
+            bail!("a contention on a Gmsh mesh is a [[pressure]] on the skin curve");
+        }
+        apply_loading(&mut model, &faces, &t.loading).with_context(context)?;
+    }
+    Ok(model)
+}
+
+/// The built-in thigh as a model without loads (femur fixed), and its skin faces.
+pub fn thigh_model(elements: usize, kind: ElementKind) -> Result<(Model, Vec<(usize, usize)>)> {
+    let (mut deck, skin) = thigh_deck(elements, kind)?;
+    deck.pressures.clear();
+    Ok((Model::from_deck(deck)?, skin))
+}

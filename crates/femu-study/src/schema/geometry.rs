@@ -1,0 +1,206 @@
+//! `[model]`, `[thigh]`, `[labels]`: where the model's mesh comes from, and its size.
+
+use super::lines::{resolve, KeyLines};
+use super::raw::{LabelsEntry, ModelEntry};
+use super::StudyError;
+use femu_geometry::ThighParams;
+use femu_mesh::ElementKind;
+use std::path::{Path, PathBuf};
+
+/// Where the model comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Geometry {
+    /// The built-in parametric thigh with these dimensions (`[thigh]`).
+    Thigh(Box<ThighParams>),
+    /// A segmented image (`[labels]`).
+    Labels(LabelsSpec),
+    /// An Abaqus/CalculiX deck (`[model] deck`): its materials and boundary conditions; the
+    /// skin is the set of faces its `*DLOAD` loads (a contention deck, as `femu mesh` writes).
+    Deck(PathBuf),
+}
+
+/// A label image to mesh (`[labels]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelsSpec {
+    pub image: PathBuf,
+    /// `1=fat,2=quadriceps,...`
+    pub map: String,
+    pub bone: Vec<u32>,
+    pub background: Vec<u32>,
+    pub slice: Option<usize>,
+    pub pixel_size_mm: Option<f64>,
+    pub min_island_mm2: f64,
+}
+
+/// The element formulation of the generated quads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum QuadElement {
+    /// Fully integrated 4-node quad (2x2 Gauss).
+    Cpe4,
+    /// 4-node quad, hybrid with constant pressure (mean dilatation; the seed's CPE4H).
+    Cpe4h,
+}
+
+impl QuadElement {
+    /// The mesh's element kind.
+    pub fn kind(self) -> ElementKind {
+        match self {
+            QuadElement::Cpe4 => ElementKind::Cpe4,
+            QuadElement::Cpe4h => ElementKind::Cpe4h,
+        }
+    }
+}
+
+/// The mesh size of a generated model: a target element count or an element size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Resolution {
+    /// About this many quads (the built-in thigh).
+    Elements(usize),
+    /// Elements of about this size (mm).
+    SizeMm(f64),
+    /// The study gives none: the geometry's default (6 000 quads for the thigh, 1 mm for a
+    /// label image; a deck brings its own mesh).
+    Default,
+}
+
+/// Target element count of the built-in thigh when the study gives none.
+pub const DEFAULT_ELEMENTS: usize = 6000;
+/// Element size of a meshed label image when the study gives none (mm).
+pub const DEFAULT_LABEL_SIZE_MM: f64 = 1.0;
+
+/// The accepted target element counts of the built-in thigh.
+pub const ELEMENTS_RANGE: std::ops::RangeInclusive<usize> = 100..=500_000;
+
+/// Checks `[model]` and the geometry tables.
+pub(crate) fn parse(
+    model: ModelEntry,
+    thigh: Option<ThighParams>,
+    labels: Option<LabelsEntry>,
+    lines: &KeyLines,
+    base: &Path,
+) -> Result<(Geometry, Resolution, QuadElement), StudyError> {
+    if model.elements.is_some() && model.size_mm.is_some() {
+        return Err(lines.err(
+            "model",
+            0,
+            "size_mm",
+            "give elements or size_mm, not both".into(),
+        ));
+    }
+    if let Some(h) = model.size_mm {
+        lines.positive("model", 0, "size_mm", h)?;
+    }
+    if let Some(n) = model.elements {
+        if !ELEMENTS_RANGE.contains(&n) {
+            return Err(lines.err(
+                "model",
+                0,
+                "elements",
+                format!("must be in [100, 500000], got {n}"),
+            ));
+        }
+    }
+    let element = match model
+        .element
+        .as_deref()
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        None | Some("cpe4h") => QuadElement::Cpe4h,
+        Some("cpe4") => QuadElement::Cpe4,
+        Some(other) => {
+            return Err(lines.err(
+                "model",
+                0,
+                "element",
+                format!("unknown element type '{other}' (cpe4, cpe4h)"),
+            ))
+        }
+    };
+    let resolution = match (model.elements, model.size_mm) {
+        (Some(n), _) => Resolution::Elements(n),
+        (None, Some(h)) => Resolution::SizeMm(h),
+        (None, None) => Resolution::Default,
+    };
+    let geometry = match (model.deck, thigh, labels) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) | (None, Some(_), Some(_)) => {
+            return Err(StudyError::Study(
+                "give one geometry: [thigh] (the built-in thigh), [labels] (a label image) or [model] deck"
+                    .into(),
+            ))
+        }
+        (Some(deck), None, None) => {
+            if resolution != Resolution::Default {
+                return Err(lines.err(
+                    "model",
+                    0,
+                    "deck",
+                    "a deck brings its own mesh; elements and size_mm do not apply".into(),
+                ));
+            }
+            Geometry::Deck(resolve(base, &deck))
+        }
+        (None, thigh, None) => Geometry::Thigh(Box::new(check_thigh(thigh, lines)?)),
+        (None, None, Some(l)) => {
+            if model.elements.is_some() {
+                return Err(lines.err(
+                    "model",
+                    0,
+                    "elements",
+                    "a label image is meshed by element size; give [model] size_mm".into(),
+                ));
+            }
+            Geometry::Labels(check_labels(l, lines, base)?)
+        }
+    };
+    Ok((geometry, resolution, element))
+}
+
+/// `[thigh]`: the dimensions of the built-in thigh, without its mesh-size keys.
+pub(crate) fn check_thigh(
+    thigh: Option<ThighParams>,
+    lines: &KeyLines,
+) -> Result<ThighParams, StudyError> {
+    let t = thigh.unwrap_or_default();
+    if t.element_size_mm.is_some() || t.target_elements.is_some() {
+        return Err(lines.err(
+            "thigh",
+            0,
+            "",
+            "give the mesh size in [model] (elements or size_mm)".into(),
+        ));
+    }
+    let mut check = t.clone();
+    check.target_elements = Some(1000);
+    check
+        .validate()
+        .map_err(|e| lines.err("thigh", 0, "", e.to_string()))?;
+    Ok(t)
+}
+
+fn check_labels(l: LabelsEntry, lines: &KeyLines, base: &Path) -> Result<LabelsSpec, StudyError> {
+    if let Some(s) = l.pixel_size_mm {
+        lines.positive("labels", 0, "pixel_size_mm", s)?;
+    }
+    let min_island = l.min_island_mm2.unwrap_or(5.0);
+    if !(min_island >= 0.0 && min_island.is_finite()) {
+        return Err(lines.err(
+            "labels",
+            0,
+            "min_island_mm2",
+            format!("must be a finite area >= 0, got {min_island}"),
+        ));
+    }
+    femu_geometry::LabelSpec::new(&l.map, &l.bone, l.background.as_deref().unwrap_or(&[0]))
+        .map_err(|e| lines.err("labels", 0, "map", e.to_string()))?;
+    Ok(LabelsSpec {
+        image: resolve(base, &l.image),
+        map: l.map,
+        bone: l.bone,
+        background: l.background.unwrap_or_else(|| vec![0]),
+        slice: l.slice,
+        pixel_size_mm: l.pixel_size_mm,
+        min_island_mm2: min_island,
+    })
+}

@@ -1,0 +1,183 @@
+//! `[parameters]`, `[identification]`, `[run]`: what is identified, how, and which steps run.
+
+use super::geometry::{Geometry, ELEMENTS_RANGE};
+use super::lines::KeyLines;
+use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
+use super::tests::TestSpec;
+use super::StudyError;
+use femu_identify::campaign::Optimizer;
+use femu_mech::loading::Loading;
+
+/// Which groupings `femu run` identifies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Grouping {
+    /// Every parameter free.
+    Ungrouped,
+    /// `[parameters] groups` tied.
+    Grouped,
+    /// Both, one after the other (the seed's Fig. 9).
+    Both,
+}
+
+/// The identification settings (`[identification]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct IdentificationSpec {
+    /// Index into [`super::Study::tests`] of the test whose field is measured.
+    pub test: usize,
+    /// Parameters held at their reference value (`C10_FAT`, ...).
+    pub fixed: Vec<String>,
+    /// Bounds: reference / factor .. reference x factor.
+    pub bounds_factor: f64,
+    pub starts: usize,
+    pub seed: u64,
+    /// Noise realizations (Monte Carlo).
+    pub repeat: usize,
+    pub grouping: Grouping,
+    pub optimizer: Optimizer,
+    /// Multilevel: run the starts on the built-in thigh with this many elements and refine the
+    /// best on the study's mesh.
+    pub coarse_elements: Option<usize>,
+}
+
+impl IdentificationSpec {
+    /// Whether `[parameters] groups` are tied in a single identification (`femu identify`:
+    /// the grouped one when `grouped = "both"`).
+    pub fn grouped(&self) -> bool {
+        self.grouping != Grouping::Ungrouped
+    }
+}
+
+/// The steps of `femu run` (`[run]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Steps {
+    pub forward: bool,
+    pub sensitivity: bool,
+    pub identification: bool,
+}
+
+/// Checks `[identification]`.
+pub(crate) fn parse(
+    e: Option<IdentificationEntry>,
+    tests: &[TestSpec],
+    geometry: &Geometry,
+    lines: &KeyLines,
+) -> Result<IdentificationSpec, StudyError> {
+    let e = e.unwrap_or_default();
+    let err = |key: &str, message: String| lines.err("identification", 0, key, message);
+    let test = match &e.test {
+        None => tests
+            .iter()
+            .position(|t| matches!(t.loading, Loading::Compression { .. }))
+            .unwrap_or(0),
+        Some(name) => tests
+            .iter()
+            .position(|t| {
+                let n = t.loading.name();
+                n.eq_ignore_ascii_case(name)
+                    || n.split('-')
+                        .next()
+                        .is_some_and(|k| k.eq_ignore_ascii_case(name))
+            })
+            .ok_or_else(|| {
+                err(
+                    "test",
+                    format!(
+                        "no test '{name}' (tests: {})",
+                        tests
+                            .iter()
+                            .map(|t| t.loading.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                )
+            })?,
+    };
+    let bounds_factor = e.bounds_factor.unwrap_or(4.0);
+    if !(bounds_factor > 1.0 && bounds_factor.is_finite()) {
+        return Err(err(
+            "bounds_factor",
+            format!("must be above 1, got {bounds_factor}"),
+        ));
+    }
+    let starts = e.starts.unwrap_or(5);
+    if !(1..=64).contains(&starts) {
+        return Err(err("starts", format!("must be in [1, 64], got {starts}")));
+    }
+    let repeat = e.repeat.unwrap_or(1);
+    if !(1..=1000).contains(&repeat) {
+        return Err(err("repeat", format!("must be in [1, 1000], got {repeat}")));
+    }
+    let grouping = match e.grouped {
+        None => Grouping::Both,
+        Some(GroupedEntry::Flag(true)) => Grouping::Grouped,
+        Some(GroupedEntry::Flag(false)) => Grouping::Ungrouped,
+        Some(GroupedEntry::Word(w)) if w.eq_ignore_ascii_case("both") => Grouping::Both,
+        Some(GroupedEntry::Word(w)) => {
+            return Err(err(
+                "grouped",
+                format!("'{w}' is not true, false or \"both\""),
+            ))
+        }
+    };
+    let optimizer = match e
+        .optimizer
+        .as_deref()
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        None | Some("lm") => Optimizer::LevenbergMarquardt,
+        Some("bfgs") => Optimizer::Bfgs,
+        Some("bfgs-fd") => Optimizer::BfgsFiniteDifference,
+        Some(other) => {
+            return Err(err(
+                "optimizer",
+                format!("unknown optimizer '{other}' (lm, bfgs, bfgs-fd)"),
+            ))
+        }
+    };
+    let coarse_elements = match e.coarse_elements {
+        None => None,
+        Some(n) => {
+            if !matches!(geometry, Geometry::Thigh(_)) {
+                return Err(err(
+                    "coarse_elements",
+                    "multilevel identification needs the built-in thigh ([thigh])".into(),
+                ));
+            }
+            if !ELEMENTS_RANGE.contains(&n) {
+                return Err(err(
+                    "coarse_elements",
+                    format!("must be in [100, 500000], got {n}"),
+                ));
+            }
+            Some(n)
+        }
+    };
+    Ok(IdentificationSpec {
+        test,
+        fixed: e.fixed,
+        bounds_factor,
+        starts,
+        seed: e.seed.unwrap_or(1),
+        repeat,
+        grouping,
+        optimizer,
+        coarse_elements,
+    })
+}
+
+/// Checks `[run]`.
+pub(crate) fn parse_steps(r: Option<RunEntry>) -> Steps {
+    match r {
+        None => Steps {
+            forward: true,
+            sensitivity: true,
+            identification: true,
+        },
+        Some(r) => Steps {
+            forward: r.forward.unwrap_or(true),
+            sensitivity: r.sensitivity.unwrap_or(true),
+            identification: r.identification.unwrap_or(true),
+        },
+    }
+}

@@ -1,0 +1,300 @@
+//! `[grid]`, `[noise]`, `[measurement]`: what is measured, where, and how well.
+
+use super::lines::{resolve, KeyLines};
+use super::raw::{GridEntry, MeasurementEntry, NoiseEntry};
+use super::StudyError;
+use std::path::{Path, PathBuf};
+
+/// The seed's measurement noise: 1.5 px = 1.76e-2 mm (§3.1.3).
+pub const SEED_SIGMA_MM: f64 = 1.76e-2;
+
+/// The measurement of the study.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementSpec {
+    /// The DIC grid of a virtual experiment (and of the identifiability).
+    pub grid: GridSpec,
+    /// Standard deviation of the measured displacement (mm).
+    pub sigma_mm: f64,
+    pub source: MeasurementSource,
+    /// The actuator term: the travel of the force-controlled body.
+    pub travel: Option<Travel>,
+}
+
+/// The measured field of the identification (`[measurement] source`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum MeasurementSource {
+    /// The virtual experiment (seed §2.4.1): the FE field of the reference parameters on the
+    /// grid plus the study's noise.
+    Virtual,
+    /// A measured-field CSV (conventions.md) in its own frame, mapped to the model's.
+    File { path: PathBuf, frame: Frame },
+    /// The virtual experiment with images (`femu us-sim`): B-mode images of the unloaded and
+    /// loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by the DIC; the
+    /// identification fits the DIC field.
+    Ultrasound,
+}
+
+/// The measured travel of the force-controlled plate or indenter (`None` for a virtual
+/// experiment, which synthesizes it) and its standard deviation (mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Travel {
+    pub measured_mm: Option<f64>,
+    pub sigma_mm: f64,
+}
+
+/// The map from a measured field's frame (image pixels or mm) to the model frame (mm):
+/// `X = origin + s (x e_x + y e_y)`, `U = s (u_x e_x + u_y e_y)`; `e_x`, `e_y` orthonormal.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Frame {
+    /// mm per unit of the file (the pixel size for a field in px; 1 for mm).
+    pub scale: f64,
+    pub origin: [f64; 2],
+    pub x_axis: [f64; 2],
+    pub y_axis: [f64; 2],
+}
+
+/// The measurement grid: `counts` points `spacing` apart from `origin` (mm); `None` fields are
+/// fitted to the model's skin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridSpec {
+    pub counts: [usize; 2],
+    pub origin: Option<[f64; 2]>,
+    pub spacing: Option<f64>,
+}
+
+impl Default for GridSpec {
+    /// The seed's 64 x 64 points over the whole section.
+    fn default() -> Self {
+        GridSpec {
+            counts: [64, 64],
+            origin: None,
+            spacing: None,
+        }
+    }
+}
+
+impl GridSpec {
+    /// The grid points (row by row, x fastest) for a model whose reference bounding box is
+    /// `lo..hi`.
+    pub fn points(&self, lo: [f64; 2], hi: [f64; 2]) -> Vec<[f64; 2]> {
+        let [nx, ny] = self.counts;
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let spacing = self
+            .spacing
+            .unwrap_or(extent / (nx.max(ny).max(2) - 1) as f64);
+        let origin = self.origin.unwrap_or([
+            0.5 * (lo[0] + hi[0]) - 0.5 * spacing * (nx - 1) as f64,
+            0.5 * (lo[1] + hi[1]) - 0.5 * spacing * (ny - 1) as f64,
+        ]);
+        (0..ny)
+            .flat_map(|j| {
+                (0..nx).map(move |i| {
+                    [
+                        origin[0] + i as f64 * spacing,
+                        origin[1] + j as f64 * spacing,
+                    ]
+                })
+            })
+            .collect()
+    }
+}
+
+/// Checks `[grid]`, `[noise]` and `[measurement]`.
+pub(crate) fn parse(
+    grid: Option<GridEntry>,
+    noise: Option<NoiseEntry>,
+    measurement: Option<MeasurementEntry>,
+    lines: &KeyLines,
+    base: &Path,
+) -> Result<MeasurementSpec, StudyError> {
+    let grid = match grid {
+        None => GridSpec::default(),
+        Some(g) => check_grid(g, lines)?,
+    };
+    let sigma_mm = match noise {
+        None => SEED_SIGMA_MM,
+        Some(n) => lines.positive("noise", 0, "sigma_mm", n.sigma_mm)?,
+    };
+    let (source, travel) =
+        match measurement {
+            None => (MeasurementSource::Virtual, None),
+            Some(mut m) => {
+                let travel = check_travel(m.travel_mm.take(), m.travel_sigma_mm.take(), lines)?;
+                let source = check_source(m, lines, base)?;
+                match (&source, travel) {
+                    (
+                        MeasurementSource::File { .. },
+                        Some(Travel {
+                            measured_mm: None, ..
+                        }),
+                    ) => {
+                        return Err(lines.err(
+                            "measurement",
+                            0,
+                            "travel_sigma_mm",
+                            "a measured field needs its measured travel_mm".into(),
+                        ))
+                    }
+                    (
+                        MeasurementSource::Virtual,
+                        Some(Travel {
+                            measured_mm: Some(_),
+                            ..
+                        }),
+                    ) => return Err(lines.err(
+                        "measurement",
+                        0,
+                        "travel_mm",
+                        "the virtual experiment synthesizes the travel; give only travel_sigma_mm"
+                            .into(),
+                    )),
+                    _ => {}
+                }
+                (source, travel)
+            }
+        };
+    Ok(MeasurementSpec {
+        grid,
+        sigma_mm,
+        source,
+        travel,
+    })
+}
+
+fn check_grid(g: GridEntry, lines: &KeyLines) -> Result<GridSpec, StudyError> {
+    let counts = g.counts.unwrap_or([64, 64]);
+    if counts[0] < 2 || counts[1] < 2 || counts[0] * counts[1] > 4_000_000 {
+        return Err(lines.err(
+            "grid",
+            0,
+            "counts",
+            format!("must be at least 2 x 2 and at most 4e6 points, got {counts:?}"),
+        ));
+    }
+    if let Some(s) = g.spacing_mm {
+        lines.positive("grid", 0, "spacing_mm", s)?;
+    }
+    if let Some(o) = g.origin_mm {
+        if !(o[0].is_finite() && o[1].is_finite()) {
+            return Err(lines.err("grid", 0, "origin_mm", format!("must be finite, got {o:?}")));
+        }
+    }
+    Ok(GridSpec {
+        counts,
+        origin: g.origin_mm,
+        spacing: g.spacing_mm,
+    })
+}
+
+fn check_travel(
+    travel: Option<f64>,
+    sigma: Option<f64>,
+    lines: &KeyLines,
+) -> Result<Option<Travel>, StudyError> {
+    match (travel, sigma) {
+        (None, None) => Ok(None),
+        (t, Some(sigma)) => {
+            lines.positive("measurement", 0, "travel_sigma_mm", sigma)?;
+            if let Some(t) = t {
+                if !t.is_finite() {
+                    return Err(lines.err("measurement", 0, "travel_mm", "must be finite".into()));
+                }
+            }
+            Ok(Some(Travel {
+                measured_mm: t,
+                sigma_mm: sigma,
+            }))
+        }
+        (Some(_), None) => Err(lines.err(
+            "measurement",
+            0,
+            "travel_mm",
+            "give travel_sigma_mm too".into(),
+        )),
+    }
+}
+
+/// Checks the source of `[measurement]` and, for a file, its frame.
+fn check_source(
+    m: MeasurementEntry,
+    lines: &KeyLines,
+    base: &Path,
+) -> Result<MeasurementSource, StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", 0, key, message.into());
+    let source = m
+        .source
+        .as_deref()
+        .unwrap_or(if m.file.is_some() { "file" } else { "virtual" })
+        .to_ascii_lowercase();
+    match source.as_str() {
+        "ultrasound" => {
+            if m.file.is_some() || m.units.is_some() || m.origin_mm.is_some() {
+                return Err(err(
+                    "source",
+                    "the ultrasound experiment writes its own field in the model frame",
+                ));
+            }
+            Ok(MeasurementSource::Ultrasound)
+        }
+        "virtual" => {
+            if m.file.is_some() {
+                return Err(err("file", "a virtual measurement reads no file"));
+            }
+            Ok(MeasurementSource::Virtual)
+        }
+        "file" => {
+            let file = m
+                .file
+                .as_deref()
+                .ok_or_else(|| err("source", "source = \"file\" needs file"))?;
+            let scale = match m.units.as_deref().unwrap_or("mm") {
+                "mm" => match m.pixel_size_mm {
+                    Some(_) => return Err(err("pixel_size_mm", "a field in mm has no pixel size")),
+                    None => 1.0,
+                },
+                "px" => lines.positive(
+                    "measurement",
+                    0,
+                    "pixel_size_mm",
+                    m.pixel_size_mm
+                        .ok_or_else(|| err("units", "units = \"px\" needs pixel_size_mm"))?,
+                )?,
+                other => {
+                    return Err(err("units", &format!("unknown units '{other}' (mm, px)")));
+                }
+            };
+            let unit = |v: [f64; 2], key: &str| -> Result<[f64; 2], StudyError> {
+                let n = v[0].hypot(v[1]);
+                if !((n - 1.0).abs() < 1e-6) {
+                    return Err(err(key, &format!("must be a unit vector, got {v:?}")));
+                }
+                Ok(v)
+            };
+            let x_axis = unit(m.x_axis.unwrap_or([1.0, 0.0]), "x_axis")?;
+            let y_axis = unit(m.y_axis.unwrap_or([0.0, 1.0]), "y_axis")?;
+            if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
+                return Err(err(
+                    "y_axis",
+                    &format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
+                ));
+            }
+            let origin = m.origin_mm.unwrap_or([0.0, 0.0]);
+            if !(origin[0].is_finite() && origin[1].is_finite()) {
+                return Err(err("origin_mm", "must be finite"));
+            }
+            Ok(MeasurementSource::File {
+                path: resolve(base, file),
+                frame: Frame {
+                    scale,
+                    origin,
+                    x_axis,
+                    y_axis,
+                },
+            })
+        }
+        other => Err(err(
+            "source",
+            &format!("unknown source '{other}' (virtual, file, ultrasound)"),
+        )),
+    }
+}

@@ -1,0 +1,177 @@
+//! The study file as TOML gives it (serde), before any check: every table of the one schema.
+//! Unknown keys are rejected here by the parser, which names them with their line.
+
+use super::ultrasound::{ProbeSection, UltrasoundSection};
+use femu_geometry::ThighParams;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct StudyFile {
+    pub model: Option<ModelEntry>,
+    pub thigh: Option<ThighParams>,
+    pub labels: Option<LabelsEntry>,
+    /// `[materials.REGION]`: a law and its parameters with unit suffixes, checked against the
+    /// law's declared parameters (so any key may appear here).
+    #[serde(default)]
+    pub materials: BTreeMap<String, BTreeMap<String, toml::Value>>,
+    /// `None`: no `[[test]]` (the seed's three); `Some([])`: `test = []`, an error.
+    pub test: Option<Vec<TestEntry>>,
+    pub grid: Option<GridEntry>,
+    pub noise: Option<NoiseEntry>,
+    pub measurement: Option<MeasurementEntry>,
+    pub parameters: Option<ParametersEntry>,
+    pub identification: Option<IdentificationEntry>,
+    pub run: Option<RunEntry>,
+    pub probe: Option<ProbeSection>,
+    pub ultrasound: Option<UltrasoundSection>,
+    /// `[[fixed]]`, `[[pressure]]`, `[step]`: the boundary conditions of a Gmsh mesh.
+    #[serde(default)]
+    pub fixed: Vec<FixedEntry>,
+    #[serde(default)]
+    pub pressure: Vec<PressureEntry>,
+    pub step: Option<StepEntry>,
+    pub convergence: Option<ConvergenceEntry>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ModelEntry {
+    pub elements: Option<usize>,
+    pub size_mm: Option<f64>,
+    pub element: Option<String>,
+    pub deck: Option<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct LabelsEntry {
+    pub image: String,
+    pub map: String,
+    pub bone: Vec<u32>,
+    pub background: Option<Vec<u32>>,
+    pub slice: Option<usize>,
+    pub pixel_size_mm: Option<f64>,
+    pub min_island_mm2: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct TestEntry {
+    pub kind: String,
+    pub pressure_mmhg: Option<f64>,
+    pub pressure_mpa: Option<f64>,
+    pub side: Option<String>,
+    pub force_n_per_mm: Option<f64>,
+    pub radius_mm: Option<f64>,
+    /// The physical curve of a Gmsh mesh the test acts on.
+    pub curve: Option<String>,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct GridEntry {
+    pub counts: Option<[usize; 2]>,
+    pub origin_mm: Option<[f64; 2]>,
+    pub spacing_mm: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct NoiseEntry {
+    pub sigma_mm: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct MeasurementEntry {
+    pub source: Option<String>,
+    pub file: Option<String>,
+    pub units: Option<String>,
+    pub pixel_size_mm: Option<f64>,
+    pub origin_mm: Option<[f64; 2]>,
+    pub x_axis: Option<[f64; 2]>,
+    pub y_axis: Option<[f64; 2]>,
+    pub travel_mm: Option<f64>,
+    pub travel_sigma_mm: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ParametersEntry {
+    #[serde(default)]
+    pub groups: Vec<Vec<String>>,
+}
+
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct IdentificationEntry {
+    pub test: Option<String>,
+    #[serde(default)]
+    pub fixed: Vec<String>,
+    pub bounds_factor: Option<f64>,
+    pub starts: Option<usize>,
+    pub seed: Option<u64>,
+    pub repeat: Option<usize>,
+    pub grouped: Option<GroupedEntry>,
+    pub optimizer: Option<String>,
+    pub coarse_elements: Option<usize>,
+}
+
+/// `grouped = true | false | "both"`.
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+pub(crate) enum GroupedEntry {
+    Flag(bool),
+    Word(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RunEntry {
+    pub forward: Option<bool>,
+    pub sensitivity: Option<bool>,
+    pub identification: Option<bool>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct FixedEntry {
+    pub curve: String,
+    pub dofs: Option<Vec<usize>>,
+    #[serde(default)]
+    pub value_mm: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct PressureEntry {
+    pub curve: String,
+    pub mmhg: Option<f64>,
+    pub mpa: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct StepEntry {
+    pub initial_increment: Option<f64>,
+    pub min_increment: Option<f64>,
+    pub max_increment: Option<f64>,
+    pub max_increments: Option<usize>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct ConvergenceEntry {
+    pub element_types: Option<Vec<String>>,
+    pub target_elements: Option<Vec<usize>>,
+    pub element_size_mm: Option<Vec<f64>>,
+    pub tolerance_mm: Option<f64>,
+    pub locking: Option<bool>,
+    pub d_scale: Option<f64>,
+    pub locking_meshes: Option<usize>,
+    pub raster_mm: Option<f64>,
+    /// The `[[test]]` of the study run on every mesh (by name or kind); the first by default.
+    pub test: Option<String>,
+}

@@ -1,0 +1,220 @@
+//! The schema's checks: defaults, every kind of mistake named with its key and line, the
+//! views, the older layouts.
+
+use super::*;
+use femu_mech::loading::{Loading, Side};
+use std::path::PathBuf;
+
+fn err(text: &str) -> String {
+    format!("{}", parse(text, Path::new("/data")).unwrap_err())
+}
+
+#[test]
+fn defaults_are_the_seed() {
+    let p = Study::default();
+    assert_eq!(p.tests.len(), 3);
+    assert_eq!(p.measurement.grid.counts, [64, 64]);
+    assert_eq!(p.measurement.sigma_mm, SEED_SIGMA_MM);
+    let pts = p.measurement.grid.points([-70.0, -60.0], [70.0, 60.0]);
+    assert_eq!(pts.len(), 64 * 64);
+    assert!((pts[0][0] + 70.0).abs() < 1e-12 && (pts[63][0] - 70.0).abs() < 1e-12);
+    assert_eq!(p.groups, seed_groups());
+    assert_eq!(p.identification.grouping, Grouping::Both);
+}
+
+#[test]
+fn reads_keys_and_names_bad_ones() {
+    let p = parse(
+        "[model]\nelements = 800\nelement = \"cpe4\"\n[materials.fat]\nc10_kpa = 1.0\n\
+         [[test]]\nkind = \"compression\"\nside = \"lateral\"\nforce_n_per_mm = 0.2\n\
+         [noise]\nsigma_mm = 0.01\n[parameters]\ngroups = [[\"D_ISCHIO\", \"D_GRACILIS\"]]\n",
+        Path::new("."),
+    )
+    .unwrap();
+    assert_eq!(p.model.resolution, Resolution::Elements(800));
+    assert_eq!(p.model.element, QuadElement::Cpe4);
+    assert_eq!(
+        p.model.materials,
+        vec![MaterialSpec {
+            region: "fat".into(),
+            values: vec![("C10".into(), 1e-3)]
+        }]
+    );
+    assert_eq!(p.tests.len(), 1);
+    assert_eq!(p.groups.len(), 1);
+    let e = err("[model]\nelemnts = 3\n");
+    assert!(e.contains("elemnts") && e.contains("line 2"), "{e}");
+    assert!(err("[[test]]\nkind = \"stretch\"\n").contains("stretch"));
+    assert!(err("[[test]]\nkind = \"compression\"\n").contains("force_n_per_mm"));
+    assert!(err("[noise]\nsigma_mm = -1\n").contains("sigma_mm"));
+    assert!(err("[materials.fat]\nc10_kpa = 1\nc10_mpa = 1\n").contains("not both"));
+    assert!(err("[[test]]\nkind = \"contention\"\nforce_n_per_mm = 1\n").contains("another kind"));
+    let e = err("[materials.fat]\nc10_kpa = 0.8\nd = 30.8\n");
+    assert!(
+        e.contains("unknown field `d`") && e.contains("line 3"),
+        "{e}"
+    );
+    let e = err("[materials.fat]\nc10_kpa = \"soft\"\n");
+    assert!(e.contains("must be a number"), "{e}");
+}
+
+/// The example of `femu init` is valid and spells out the defaults.
+#[test]
+fn the_example_study_is_the_default() {
+    let e = parse(EXAMPLE_STUDY, Path::new(".")).unwrap();
+    let d = Study::default();
+    assert_eq!(e.model.geometry, d.model.geometry);
+    assert_eq!(e.tests, d.tests);
+    assert_eq!(e.measurement, d.measurement);
+    assert_eq!(e.identification, d.identification);
+    assert_eq!(e.steps, d.steps);
+    assert_eq!(e.groups, seed_groups());
+    assert_eq!(e.model.resolution, Resolution::Elements(6000));
+    // Every Table 1 value restated.
+    for m in &e.model.materials {
+        let t = femu_geometry::TABLE1
+            .iter()
+            .find(|t| t.0.eq_ignore_ascii_case(&m.region))
+            .expect("a Table 1 region");
+        assert_eq!(
+            (m.value("C10").unwrap(), m.value("D").unwrap()),
+            (t.1 * 1e-3, t.2),
+            "{}",
+            m.region
+        );
+    }
+}
+
+/// Each kind of mistake names the key and its line.
+#[test]
+fn mistakes_name_the_key_and_line() {
+    // Out of range, with the line.
+    let e = err("[noise]\n\nsigma_mm = -1\n");
+    assert!(e.contains("[noise] sigma_mm (line 3)"), "{e}");
+    let e = err(
+        "[[test]]\nkind = \"contention\"\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0\n",
+    );
+    assert!(e.contains("[[test]] 2 force_n_per_mm (line 5)"), "{e}");
+    // Wrong unit: an unknown unit suffix is an unknown key.
+    let e = err("[[test]]\nkind = \"contention\"\npressure_kpa = 2.6\n");
+    assert!(e.contains("pressure_kpa") && e.contains("line 3"), "{e}");
+    let e = err("[measurement]\nsource = \"file\"\nfile = \"f.csv\"\nunits = \"inch\"\n");
+    assert!(e.contains("[measurement] units (line 4)"), "{e}");
+    // Missing value.
+    let e = err("[measurement]\nsource = \"file\"\nunits = \"px\"\n");
+    assert!(e.contains("needs file"), "{e}");
+    let e = err("[measurement]\nfile = \"f.csv\"\nunits = \"px\"\n");
+    assert!(e.contains("needs pixel_size_mm"), "{e}");
+    let e = err("[labels]\nimage = \"a.png\"\nbone = [7]\n");
+    assert!(e.contains("map"), "{e}");
+    // Geometry conflicts and dimensions.
+    assert!(err("[model]\ndeck = \"a.inp\"\n[thigh]\n").contains("one geometry"));
+    let e = err("[thigh]\nfat_thickness_mm = 100\n");
+    assert!(e.contains("[thigh]") && e.contains("fat_thickness"), "{e}");
+    let e = err("[identification]\ngrouped = \"maybe\"\n");
+    assert!(e.contains("[identification] grouped (line 2)"), "{e}");
+    let e = err("[identification]\noptimizer = \"nelder\"\n");
+    assert!(e.contains("optimizer") && e.contains("lm, bfgs"), "{e}");
+    let e = err("[model]\nelements = 5\n");
+    assert!(e.contains("[model] elements (line 2)"), "{e}");
+    // An empty test list is not the default list.
+    assert!(err("test = []\n").contains("at least one"));
+    // Boundary tables.
+    let e = err("[[fixed]]\ncurve = \"femur\"\ndofs = [3]\n");
+    assert!(e.contains("[[fixed]] 1 dofs (line 3)"), "{e}");
+    let e = err("[step]\ninitial_increment = 2\n");
+    assert!(e.contains("[step] initial_increment (line 2)"), "{e}");
+}
+
+#[test]
+fn measurement_frame_and_files_are_relative_to_the_study() {
+    let p = parse(
+        "[measurement]\nfile = \"dic/field.csv\"\nunits = \"px\"\npixel_size_mm = 0.1\n\
+         origin_mm = [-20, 60]\ny_axis = [0, -1]\n[labels]\nimage = \"l.png\"\n\
+         map = \"1=fat,2=quadriceps\"\nbone = [7]\n[model]\nsize_mm = 2.0\n",
+        Path::new("/data/s"),
+    )
+    .unwrap();
+    let MeasurementSource::File { path, frame } = &p.measurement.source else {
+        panic!("a file measurement");
+    };
+    assert_eq!(path, &PathBuf::from("/data/s/dic/field.csv"));
+    assert_eq!(frame.scale, 0.1);
+    assert_eq!(frame.origin, [-20.0, 60.0]);
+    assert_eq!(frame.y_axis, [0.0, -1.0]);
+    let Geometry::Labels(l) = &p.model.geometry else {
+        panic!("labels");
+    };
+    assert_eq!(l.image, PathBuf::from("/data/s/l.png"));
+    assert_eq!(l.background, vec![0]);
+}
+
+/// The Gmsh study's older layout (top-level `element`, `[compression]`) reads as the schema's
+/// `[model] element` and a `[[test]]` with its curve; its mistakes keep their line.
+#[test]
+fn the_gmsh_layout_is_a_view_of_the_schema() {
+    let s = parse(
+        "element = \"CPE4\"\n[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[[fixed]]\ncurve = \"femur\"\n[[pressure]]\ncurve = \"skin\"\nmmhg = 20\n",
+        Path::new("."),
+    )
+    .unwrap();
+    assert_eq!(s.model.element, QuadElement::Cpe4);
+    assert_eq!(s.model.materials[0].value("C10"), Some(0.8e-3));
+    assert!((s.boundary.pressures[0].pressure - 2.666e-3).abs() < 1e-6);
+    assert_eq!(s.boundary.fixed[0].dofs, vec![0, 1]);
+    let s = parse(
+        "[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[compression]\ncurve = \"skin\"\nside = \"medial\"\nforce_n_per_mm = 0.1\n",
+        Path::new("."),
+    )
+    .unwrap();
+    assert_eq!(s.tests.len(), 1);
+    assert_eq!(s.tests[0].curve.as_deref(), Some("skin"));
+    assert!(matches!(
+        s.tests[0].loading,
+        Loading::Compression {
+            side: Side::Medial,
+            ..
+        }
+    ));
+    let e = err("[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[indentation]\ncurve = \"skin\"\nside = \"up\"\nforce_n_per_mm = 0.1\nradius_mm = 5\n");
+    assert!(e.contains("side (line 6)") && e.contains("'up'"), "{e}");
+    let e = err("element = \"CPE8\"\n[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n");
+    assert!(
+        e.contains("[model] element (line 1)") && e.contains("cpe8"),
+        "{e}"
+    );
+}
+
+/// The convergence study's older layout (top-level keys, `[contention]`) reads as
+/// `[convergence]` and a `[[test]]`; its ranges are checked with their lines.
+#[test]
+fn the_convergence_layout_is_a_view_of_the_schema() {
+    let s = parse(
+        "elements = [\"CPE4\"]\ntarget_elements = [500, 1000, 2000]\nlocking = false\n[contention]\nmmhg = 10.0\n[materials.quadriceps]\nc10_kpa = 2.0\n",
+        Path::new("."),
+    )
+    .unwrap();
+    let c = s.convergence_study().unwrap();
+    assert_eq!(c.elements, vec![femu_mesh::ElementKind::Cpe4]);
+    assert!(!c.locking);
+    assert!(
+        matches!(c.loading, Loading::Contention { pressure } if (pressure - 10.0 * femu_mesh::MMHG_IN_MPA).abs() < 1e-15)
+    );
+    let q = c
+        .materials
+        .iter()
+        .find(|m| m.region == "QUADRICEPS")
+        .unwrap();
+    assert_eq!(q.c10_mpa, 2e-3);
+    let e = err("target_elements = [500, 1000]\n");
+    assert!(
+        e.contains("target_elements (line 1)") && e.contains("at least 3"),
+        "{e}"
+    );
+    let e = err("[convergence]\nd_scale = 2.0\n");
+    assert!(e.contains("[convergence] d_scale (line 2)"), "{e}");
+    let e = err("[convergence]\n[grid]\ncounts = [8, 8]\n");
+    assert!(e.contains("origin_mm and spacing_mm"), "{e}");
+    let e = err("[convergence]\nelement_types = [\"CPE9\"]\n");
+    assert!(e.contains("CPE9"), "{e}");
+}

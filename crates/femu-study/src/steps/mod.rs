@@ -1,0 +1,18 @@
+//! The pipeline's steps as library functions, each writing its own output folder and returning
+//! its typed summary (the same struct its `summary.json` holds, read back by the report):
+//!
+//! | step | function | folder |
+//! |---|---|---|
+//! | model | [`model::write_study_model`], [`model::mesh_thigh`], [`model::mesh_labels`] | `model/` |
+//! | forward | [`solve::solve_model`], [`solve::solve_file`], [`solve::forward`] | `forward/TEST/` |
+//! | sensitivity | [`sensitivity::run`] | `sensitivity/` |
+//! | measurement | [`identify::synth`], [`ultrasound::sim`] | `measurement/` |
+//! | identification | [`identify::identify`] | `identify/GROUPING/` |
+//! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
+
+pub mod identify;
+pub mod model;
+pub mod run;
+pub mod sensitivity;
+pub mod solve;
+pub mod ultrasound;

@@ -1,0 +1,391 @@
+//! `femu run STUDY` and `femu demo`: the whole study from one file — model → forward tests →
+//! sensitivity and test ranking → measurement → identification → report.
+//!
+//! Each step writes its own sub-folder of the output folder as soon as it finishes, and
+//! `steps.json` records every step's status and time after each one, so a run that stops (an
+//! error, Ctrl-C) keeps what it finished; the report is written at the end, also after a failed
+//! step, and `femu report DIR` rewrites it from whatever the folder holds.
+//!
+//! ```text
+//! DIR/study.toml          the study as run
+//! DIR/model/              mesh.inp, mesh.vtu, regions.png, quality.csv, summary.json
+//! DIR/forward/TEST/       displacements.csv, result.vtu, deformed_le11.png, summary.json, ...
+//! DIR/sensitivity/        sensitivity maps (Fig. 8), identifiability.csv (test ranking), ...
+//! DIR/measurement/        measured.csv (the field the identification fits, model frame)
+//! DIR/identify/GROUPING/  parameters.csv, errors.png, fields.png, summary.json (Fig. 9)
+//! DIR/steps.json, DIR/summary.json, DIR/report.html
+//! ```
+
+use super::identify::{self, Measured};
+use super::sensitivity::{self, SensitivityOptions};
+use super::solve::{write_solved, SolveContext};
+use crate::model::{build, StudyModel};
+use crate::output::{create_dir, write_json, write_text};
+use crate::progress::Progress;
+use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
+use anyhow::{bail, Result};
+use femu_mech::{Model, SolverOptions, StaticSolver};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Elements of the demo's built-in thigh: the whole demo runs in about 12 s on two cores.
+pub const DEMO_ELEMENTS: usize = 4000;
+/// `femu demo --full`: the seed's scale.
+pub const FULL_ELEMENTS: usize = 25_000;
+
+/// One step of a run, as recorded in `steps.json`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct StepRecord {
+    pub name: String,
+    /// `done`, `failed` or `skipped`.
+    pub status: String,
+    pub folder: Option<String>,
+    pub seconds: f64,
+    pub error: Option<String>,
+}
+
+/// The record of a run (`steps.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RunRecord {
+    pub femu_version: String,
+    pub command: String,
+    pub study: String,
+    pub started_unix_s: u64,
+    pub threads: usize,
+    pub os: String,
+    pub steps: Vec<StepRecord>,
+    pub total_seconds: f64,
+}
+
+impl RunRecord {
+    fn save(&self, out: &Path) -> Result<()> {
+        write_json(&out.join("steps.json"), self)
+    }
+}
+
+/// The demo's study: the example study on `elements` quads; above 6 000 the identification is
+/// multilevel (starts on 2 000 elements, the best refined on the study's mesh).
+pub fn demo_study(elements: usize) -> String {
+    let text = EXAMPLE_STUDY.replace(
+        "elements = 6000                  #",
+        &format!("elements = {elements:<17}#"),
+    );
+    if elements > 6000 {
+        text.replace("# coarse_elements = 2000 ", "coarse_elements = 2000   ")
+    } else {
+        text
+    }
+}
+
+/// `femu demo [--full] [--elements N]`.
+pub fn demo(
+    out: &Path,
+    full: bool,
+    elements: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<RunRecord> {
+    let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
+    let text = demo_study(n);
+    let study = schema::parse(&text, out).map_err(|e| anyhow::anyhow!("the demo study: {e}"))?;
+    if study.model.resolution != schema::Resolution::Elements(n)
+        || (n > 6000) != study.identification.coarse_elements.is_some()
+    {
+        bail!("internal: the demo study did not take --elements {n}");
+    }
+    progress.note(&format!(
+        "femu demo: the seed's numerical example on the built-in thigh ({n} elements): sensitivity of the three tests, compression measured on a 64 x 64 grid with sigma = {} mm, identification ungrouped and grouped from 5 starts -> {}",
+        study.measurement.sigma_mm,
+        out.display()
+    ));
+    run_study(&study, &text, "demo", out, progress)
+}
+
+/// `femu run STUDY --out DIR`.
+pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<RunRecord> {
+    // Checked in full before anything is computed or written.
+    let study = schema::read(study_file)?;
+    let text = std::fs::read_to_string(study_file)?;
+    run_study(
+        &study,
+        &text,
+        &format!("run {}", study_file.display()),
+        out,
+        progress,
+    )
+}
+
+/// Runs the steps of `study` (whose file text is `text`, copied to `out/study.toml`) into `out`,
+/// then writes the report.
+pub fn run_study(
+    study: &Study,
+    text: &str,
+    command: &str,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<RunRecord> {
+    let t0 = Instant::now();
+    create_dir(out)?;
+    let copy = out.join("study.toml");
+    if std::fs::read_to_string(&copy).ok().as_deref() != Some(text) {
+        write_text(&copy, text)?;
+    }
+    let mut record = RunRecord {
+        femu_version: env!("CARGO_PKG_VERSION").into(),
+        command: command.into(),
+        study: "study.toml".into(),
+        started_unix_s: std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_secs()),
+        threads: rayon::current_num_threads(),
+        os: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
+        steps: Vec::new(),
+        total_seconds: 0.0,
+    };
+    let result = steps(study, out, progress, &mut record);
+    if let Err(e) = &result {
+        // The failed step is the last one recorded as running; name it.
+        if let Some(last) = record.steps.last_mut() {
+            if last.status == "running" {
+                last.status = "failed".into();
+                last.error = Some(format!("{e:#}"));
+            }
+        }
+    }
+    record.total_seconds = t0.elapsed().as_secs_f64();
+    record.save(out)?;
+    let report = crate::report::write(out);
+    match (&result, &report) {
+        (Ok(()), Ok(path)) => progress.note(&format!(
+            "done in {:.1} s: {} (and summary.json)",
+            record.total_seconds,
+            path.display()
+        )),
+        (Err(_), Ok(path)) => progress.note(&format!(
+            "stopped after {:.1} s; the finished steps are in {} and {}",
+            record.total_seconds,
+            out.display(),
+            path.display()
+        )),
+        _ => {}
+    }
+    result?;
+    report.map(|_| record)
+}
+
+/// Starts a step: records it as running.
+fn begin(record: &mut RunRecord, out: &Path, name: &str, folder: Option<&str>) -> Result<Instant> {
+    record.steps.push(StepRecord {
+        name: name.into(),
+        status: "running".into(),
+        folder: folder.map(Into::into),
+        seconds: 0.0,
+        error: None,
+    });
+    record.save(out)?;
+    Ok(Instant::now())
+}
+
+fn finish(record: &mut RunRecord, out: &Path, t: Instant) -> Result<()> {
+    let last = record.steps.last_mut().expect("a step was begun");
+    last.status = "done".into();
+    last.seconds = t.elapsed().as_secs_f64();
+    record.save(out)
+}
+
+fn skip(record: &mut RunRecord, out: &Path, name: &str, why: &str) -> Result<()> {
+    record.steps.push(StepRecord {
+        name: name.into(),
+        status: "skipped".into(),
+        folder: None,
+        seconds: 0.0,
+        error: Some(why.into()),
+    });
+    record.save(out)
+}
+
+fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
+    // 1. The model.
+    let t = begin(record, out, "model", Some("model"))?;
+    let spin = progress.task("meshing the model", None);
+    let built = build(&study.model)?;
+    drop(spin);
+    super::model::write_study_model(
+        &built,
+        &study.model.geometry,
+        study.model.element.kind(),
+        &out.join("model"),
+        t.elapsed().as_secs_f64(),
+        progress,
+    )?;
+    finish(record, out, t)?;
+
+    // 2–3. The forward tests and their sensitivities (one solve per test serves both).
+    forward_and_sensitivity(study, &built, out, progress, record)?;
+
+    // 4–5. The measurement and the identification.
+    if !study.steps.identification {
+        skip(record, out, "measurement", "[run] identification = false")?;
+        skip(
+            record,
+            out,
+            "identification",
+            "[run] identification = false",
+        )?;
+        return Ok(());
+    }
+    let test = study.identification_test().loading;
+    let measured_model = built.loaded(&test)?;
+    let t = begin(record, out, "measurement", Some("measurement"))?;
+    let measured = write_measurement(study, &measured_model, &out.join("measurement"), progress)?;
+    finish(record, out, t)?;
+
+    let groupings: Vec<(bool, &str)> = match study.identification.grouping {
+        Grouping::Both => vec![(false, "ungrouped"), (true, "grouped")],
+        Grouping::Grouped => vec![(true, "grouped")],
+        Grouping::Ungrouped => vec![(false, "ungrouped")],
+    };
+    for (grouped, name) in groupings {
+        let folder = format!("identify/{name}");
+        let t = begin(
+            record,
+            out,
+            &format!("identification ({name})"),
+            Some(&folder),
+        )?;
+        identify::identify_on(
+            study,
+            grouped,
+            &measured_model,
+            &test.name(),
+            measured.as_ref(),
+            &out.join(&folder),
+            progress,
+        )?;
+        finish(record, out, t)?;
+    }
+    Ok(())
+}
+
+/// Steps 2–3: each test solved (its forward folder written) and, unless `[run] sensitivity =
+/// false`, differentiated.
+fn forward_and_sensitivity(
+    study: &Study,
+    built: &StudyModel,
+    out: &Path,
+    progress: &dyn Progress,
+    record: &mut RunRecord,
+) -> Result<()> {
+    let forward_dir = out.join("forward");
+    let mut on_solved = |name: &str, model: &Model, solution: &femu_mech::Solution, solve_s| {
+        write_solved(
+            model,
+            solution,
+            None,
+            &SolveContext {
+                input: &format!("{}, {name}", built.source),
+                command: "run",
+                out: &forward_dir.join(name),
+                figures: true,
+                options: SolverOptions::default(),
+                read_s: 0.0,
+                setup_s: 0.0,
+                solve_s,
+            },
+            &crate::progress::Quiet,
+        )
+    };
+    if study.steps.sensitivity {
+        let t = begin(record, out, "forward and sensitivity", Some("sensitivity"))?;
+        let options = SensitivityOptions {
+            out: out.join("sensitivity"),
+            fd_check: false,
+            fd_step: 5e-4,
+            figures: true,
+        };
+        sensitivity::run_on(
+            study,
+            &built.model,
+            &built.skin,
+            &options,
+            progress,
+            &mut on_solved,
+        )?;
+        finish(record, out, t)?;
+    } else if study.steps.forward {
+        let t = begin(record, out, "forward", Some("forward"))?;
+        let bar = progress.task("forward tests", Some(study.tests.len()));
+        for test in &study.tests {
+            let loading = &test.loading;
+            let model = built.loaded(loading)?;
+            let mut solver = StaticSolver::new(&model, SolverOptions::default())?;
+            let ts = Instant::now();
+            let solution = solver
+                .solve(&model)
+                .map_err(|e| anyhow::anyhow!("test {}: {e}", loading.name()))?;
+            on_solved(
+                &loading.name(),
+                &model,
+                &solution,
+                ts.elapsed().as_secs_f64(),
+            )?;
+            bar.inc(1);
+        }
+        drop(bar);
+        finish(record, out, t)?;
+    } else {
+        skip(record, out, "forward", "[run] forward = false")?;
+    }
+    if !study.steps.sensitivity {
+        skip(record, out, "sensitivity", "[run] sensitivity = false")?;
+    }
+    Ok(())
+}
+
+/// The measurement folder: `measured.csv` in the model frame — the virtual experiment's first
+/// noise realization, the DIC of simulated images, or the study's file mapped to the model
+/// frame. Returns the field the identification fits (`None`: the virtual experiment, drawn per
+/// noise realization).
+fn write_measurement(
+    study: &Study,
+    model: &Model,
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<Option<Measured>> {
+    create_dir(dir)?;
+    let path: PathBuf = dir.join("measured.csv");
+    match &study.measurement.source {
+        MeasurementSource::Virtual => {
+            let test = study.identification_test().loading.name();
+            identify::write_virtual_measurement(study, model, &test, &path, progress)?;
+            Ok(None)
+        }
+        MeasurementSource::Ultrasound => {
+            super::ultrasound::sim(
+                study,
+                &super::ultrasound::SimOptions::default(),
+                dir,
+                progress,
+            )?;
+            let field = femu_identify::measured::MeasuredField::read(&path)?;
+            Ok(Some(Measured {
+                field,
+                source: "DIC of simulated B-mode images (femu us-sim)".to_string(),
+                reference_known: true,
+            }))
+        }
+        MeasurementSource::File { .. } => {
+            let m = identify::study_measurement(study)?.expect("a file measurement");
+            m.field
+                .write(&path, None)
+                .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
+            progress.note(&format!(
+                "measurement: {} points from {}, mapped to the model frame -> {}",
+                m.field.points.len(),
+                m.source,
+                path.display()
+            ));
+            Ok(Some(m))
+        }
+    }
+}
