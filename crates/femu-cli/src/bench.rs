@@ -44,7 +44,7 @@ fn run_compression(elements: usize) -> Result<(f64, usize, usize)> {
     femu_mech::loading::apply_loading(
         &mut model,
         &skin,
-        &femu_mech::loading::Loading::SEED_COMPRESSION,
+        &femu_mech::loading::Loading::seed_compression(),
     )?;
     let t = Instant::now();
     let mut solver = femu_mech::StaticSolver::new(&model, femu_mech::SolverOptions::default())?;

@@ -245,17 +245,13 @@ enum Command {
 
 /// The named demo tests.
 fn demo_tests(names: &[String]) -> anyhow::Result<Vec<femu_mech::loading::Loading>> {
-    use femu_mech::loading::{Loading, Side};
+    use femu_mech::loading::Loading;
     names
         .iter()
         .map(|n| match n.trim() {
-            "contention" => Ok(Loading::SEED_CONTENTION),
-            "compression" => Ok(Loading::SEED_COMPRESSION),
-            "indentation" => Ok(Loading::Indentation {
-                site: Side::Anterior,
-                radius: 10.0,
-                force: 0.1,
-            }),
+            "contention" => Ok(Loading::seed_contention()),
+            "compression" => Ok(Loading::seed_compression()),
+            "indentation" => Ok(Loading::anterior_indentation(0.1)),
             other => anyhow::bail!(
                 "--tests: unknown test '{other}' (contention, compression, indentation)"
             ),

@@ -231,30 +231,23 @@ fn solve_run(
         k + 1,
         thigh.mesh.mesh.elements.len()
     );
-    let pressure = match *loading {
-        Loading::Contention { pressure } => pressure,
-        _ => 0.0,
-    };
-    let mut deck = femu_geometry::contention_deck(&thigh, &materials, pressure).map_err(|e| {
+    // The femur fixed, no load; then the test on the skin.
+    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0).map_err(|e| {
         ConvergenceError::Model {
             what: what.clone(),
             message: e.to_string(),
         }
     })?;
-    if !matches!(loading, Loading::Contention { .. }) {
-        deck.pressures.clear();
-    }
+    deck.pressures.clear();
     let mut model = Model::from_deck(deck).map_err(|e| ConvergenceError::Model {
         what: what.clone(),
         message: e.to_string(),
     })?;
-    if !matches!(loading, Loading::Contention { .. }) {
-        let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-        apply_loading(&mut model, &skin, loading).map_err(|e| ConvergenceError::Model {
-            what: what.clone(),
-            message: e.to_string(),
-        })?;
-    }
+    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
+    apply_loading(&mut model, &skin, loading).map_err(|e| ConvergenceError::Model {
+        what: what.clone(),
+        message: e.to_string(),
+    })?;
     let mut run = MeshRun {
         test: loading.name(),
         element: kind.deck_name().to_string(),
@@ -372,11 +365,11 @@ pub fn run_study(
         let mut jobs: Vec<(Loading, ElementKind, f64)> = study
             .elements
             .iter()
-            .map(|&e| (study.loading, e, 1.0))
+            .map(|&e| (study.loading.clone(), e, 1.0))
             .collect();
         if k < study.locking_meshes {
             for &d in &lock_scales {
-                jobs.extend(lock_kinds.iter().map(|&e| (lock_loading, e, d)));
+                jobs.extend(lock_kinds.iter().map(|&e| (lock_loading.clone(), e, d)));
             }
         }
         for (loading, kind, d_scale) in jobs {
@@ -541,9 +534,10 @@ pub fn run_study(
 /// a plate forces the shape change (the tissue flows sideways) that CPE4 cannot represent at
 /// J = 1 on every Gauss point.
 pub fn locking_loading(study: &ConvergenceStudy) -> Loading {
-    match study.loading {
-        Loading::Contention { .. } => Loading::SEED_COMPRESSION,
-        other => other,
+    if study.loading.has_rigid_body() {
+        study.loading.clone()
+    } else {
+        Loading::seed_compression()
     }
 }
 

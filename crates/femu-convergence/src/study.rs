@@ -127,7 +127,7 @@ impl Default for ConvergenceStudy {
         ConvergenceStudy {
             thigh: ThighParams::default(),
             materials: Material::table1(),
-            loading: Loading::SEED_CONTENTION,
+            loading: Loading::seed_contention(),
             elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
             meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),
             tolerance_mm: 1e-4,

@@ -25,7 +25,7 @@ fn compression_thigh(elements: usize) -> Model {
     let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
     deck.pressures.clear();
     let mut model = Model::from_deck(deck).unwrap();
-    apply_loading(&mut model, &skin, &Loading::SEED_COMPRESSION).unwrap();
+    apply_loading(&mut model, &skin, &Loading::seed_compression()).unwrap();
     model
 }
 

@@ -48,7 +48,7 @@ fn main() {
     let mut deck = contention_deck(&thigh, &Material::table1(), 0.0).expect("deck");
     deck.pressures.clear();
     let mut model = Model::from_deck(deck).expect("model");
-    apply_loading(&mut model, &skin, &Loading::SEED_COMPRESSION).expect("compression");
+    apply_loading(&mut model, &skin, &Loading::seed_compression()).expect("compression");
     model.contacts[0].penalty_factor = arg(5, model.contacts[0].penalty_factor);
     model.step.initial_increment = arg(6, model.step.initial_increment);
     println!(

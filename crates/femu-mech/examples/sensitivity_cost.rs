@@ -30,7 +30,7 @@ fn main() {
     deck.pressures.clear();
     let base = Model::from_deck(deck).expect("model");
     print_model(&base, kind);
-    let tests = [Loading::SEED_CONTENTION, Loading::SEED_COMPRESSION];
+    let tests = [Loading::seed_contention(), Loading::seed_compression()];
     let mut models = Vec::new();
     for loading in &tests {
         let mut model = base.clone();

@@ -37,14 +37,10 @@ fn main() {
         .nth(2)
         .and_then(|a| a.parse().ok())
         .unwrap_or(3.0);
-    let indentation = Loading::Indentation {
-        site: femu_mech::loading::Side::Anterior,
-        radius: 10.0,
-        force,
-    };
+    let indentation = Loading::anterior_indentation(force);
     for loading in [
-        Loading::SEED_CONTENTION,
-        Loading::SEED_COMPRESSION,
+        Loading::seed_contention(),
+        Loading::seed_compression(),
         indentation,
     ] {
         let mut model = base.clone();

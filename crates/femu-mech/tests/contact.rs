@@ -514,10 +514,10 @@ fn thigh_indentation_model(elements: usize) -> Model {
     common::thigh_model(
         elements,
         ElementKind::Cpe4h,
-        &Loading::Indentation {
+        &Loading::new(femu_mech::loading::Indentation {
             site: Side::Anterior,
             radius: 10.0,
             force: 0.1,
-        },
+        }),
     )
 }

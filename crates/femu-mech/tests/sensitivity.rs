@@ -119,7 +119,7 @@ fn central_difference(
 fn contention_cpe4_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4,
-        Loading::SEED_CONTENTION,
+        Loading::seed_contention(),
         500,
         "contention CPE4",
     );
@@ -129,7 +129,7 @@ fn contention_cpe4_matches_finite_differences() {
 fn contention_cpe4h_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4h,
-        Loading::SEED_CONTENTION,
+        Loading::seed_contention(),
         500,
         "contention CPE4H",
     );
@@ -139,7 +139,7 @@ fn contention_cpe4h_matches_finite_differences() {
 fn compression_cpe4_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4,
-        Loading::SEED_COMPRESSION,
+        Loading::seed_compression(),
         500,
         "compression CPE4",
     );
@@ -149,7 +149,7 @@ fn compression_cpe4_matches_finite_differences() {
 fn compression_cpe4h_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4h,
-        Loading::SEED_COMPRESSION,
+        Loading::seed_compression(),
         500,
         "compression CPE4H",
     );
@@ -160,11 +160,11 @@ fn compression_cpe4h_matches_finite_differences() {
 /// about 3 mm at the skin) than for the other tests so that the 10 mm indenter touches several
 /// nodes.
 fn indentation() -> Loading {
-    Loading::Indentation {
+    Loading::new(femu_mech::loading::Indentation {
         site: Side::Anterior,
         radius: 10.0,
         force: 0.05,
-    }
+    })
 }
 
 #[test]

@@ -50,12 +50,16 @@ fn compare(model: &Model) {
 
 #[test]
 fn halves_equal_whole_under_contention() {
-    compare(&thigh(3000, ElementKind::Cpe4, &Loading::SEED_CONTENTION));
+    compare(&thigh(3000, ElementKind::Cpe4, &Loading::seed_contention()));
 }
 
 #[test]
 fn halves_equal_whole_under_force_controlled_compression() {
-    compare(&thigh(2000, ElementKind::Cpe4h, &Loading::SEED_COMPRESSION));
+    compare(&thigh(
+        2000,
+        ElementKind::Cpe4h,
+        &Loading::seed_compression(),
+    ));
 }
 
 #[test]
@@ -63,10 +67,10 @@ fn halves_equal_whole_under_indentation() {
     compare(&thigh(
         2000,
         ElementKind::Cpe4h,
-        &Loading::Indentation {
+        &Loading::new(femu_mech::loading::Indentation {
             site: femu_mech::loading::Side::Lateral,
             radius: 10.0,
             force: 0.02,
-        },
+        }),
     ));
 }

@@ -18,6 +18,7 @@
 #![forbid(unsafe_code)]
 
 pub(crate) mod figures;
+pub mod json;
 pub mod model;
 pub mod output;
 pub mod progress;

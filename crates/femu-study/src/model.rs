@@ -249,7 +249,7 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
     let deck = deck_from_msh(msh, &setup).with_context(context)?;
     let mut model = Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?;
     if let (Some(t), Some(faces)) = (rigid.first(), faces) {
-        if matches!(t.loading, femu_mech::loading::Loading::Contention { .. }) {
+        if !t.loading.has_rigid_body() {
             bail!("a contention on a Gmsh mesh is a [[pressure]] on the skin curve");
         }
         apply_loading(&mut model, &faces, &t.loading).with_context(context)?;

@@ -19,9 +19,10 @@ pub fn write_json<T: serde::Serialize + ?Sized>(path: &Path, value: &T) -> Resul
     write_text(path, &serde_json::to_string_pretty(value)?)
 }
 
-/// Reads the JSON file `path` as a `T`.
+/// Reads the JSON file `path` as a `T` (a non-finite number, written as `null`, reads back as
+/// NaN: see [`crate::json`]).
 pub fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    serde_json::from_str(&text).with_context(|| format!("{} is not a femu result", path.display()))
+    crate::json::from_str(&text).with_context(|| format!("{} is not a femu result", path.display()))
 }

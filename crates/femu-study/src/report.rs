@@ -3,43 +3,119 @@
 //! of every finished step. Built from the files the steps wrote, so it can be rewritten at any
 //! time (`femu report DIR`), also for a run that stopped midway.
 
+use crate::output::{read_json, write_json, write_text};
+use crate::steps::identify::IdentificationSummary;
+use crate::steps::model::{DeckModelSummary, MeshSummary};
 use crate::steps::run::RunRecord;
-use anyhow::{Context, Result};
+use crate::steps::sensitivity::SensitivitySummary;
+use crate::steps::solve::{RigidBodySummary, SolveSummary};
+use crate::steps::ultrasound::SimSummary;
+use anyhow::Result;
 use base64::Engine;
+use femu_identify::campaign::Estimate;
 use femu_plot::{bar_chart_png, BarChart};
-use serde_json::{json, Value};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+
+/// The model folder's summary: a meshed thigh, or a deck.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ModelSummary {
+    Mesh(Box<MeshSummary>),
+    Deck(Box<DeckModelSummary>),
+}
+
+/// One loading test in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ForwardOverview {
+    pub status: String,
+    pub max_displacement_mm: f64,
+    pub rigid_bodies: Vec<RigidBodySummary>,
+    pub newton_iterations: usize,
+    pub solve_s: f64,
+}
+
+/// One measurement's predicted identifiability in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RankingOverview {
+    pub measurement: String,
+    pub grouping: String,
+    pub worst_c10_relative_sd: f64,
+    pub worst_d_relative_sd: f64,
+}
+
+/// One test's sensitivity indices in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct TestOverview {
+    pub test: String,
+    pub sensitivity_index: Vec<(String, f64)>,
+    pub sensitivity_over_solve: f64,
+}
+
+/// The sensitivity step in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SensitivityOverview {
+    pub finding: Vec<String>,
+    pub ranking: Vec<RankingOverview>,
+    pub tests: Vec<TestOverview>,
+}
+
+/// A simulated ultrasound measurement in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MeasurementOverview {
+    pub dic_error: femu_ultrasound::experiment::FieldError,
+    pub image_px: (usize, usize),
+    pub dic_steps: usize,
+}
+
+/// One identification in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct IdentificationOverview {
+    pub parameters: Vec<Estimate>,
+    pub best_cost: f64,
+    pub forward_solves_per_start: Vec<usize>,
+    pub wall_time_s: f64,
+    pub optimizer: String,
+}
+
+/// `summary.json` of a run folder: the numbers a user quotes, per step.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct RunSummary {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub run: Option<RunRecord>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<ModelSummary>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub forward: Option<BTreeMap<String, ForwardOverview>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensitivity: Option<SensitivityOverview>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub measurement: Option<MeasurementOverview>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identification: Option<BTreeMap<String, IdentificationOverview>>,
+}
 
 /// Writes `DIR/report.html` and `DIR/summary.json`; returns the report's path.
 pub fn write(dir: &Path) -> Result<PathBuf> {
     if !dir.is_dir() {
         anyhow::bail!("{} is not an output folder of femu run", dir.display());
     }
-    let record: Option<RunRecord> =
-        read_json(&dir.join("steps.json")).and_then(|v| serde_json::from_value(v).ok());
+    let record: Option<RunRecord> = read_json(&dir.join("steps.json")).ok();
     let mut html = Html::default();
-    let mut summary = serde_json::Map::new();
     html.head(record.as_ref());
     if let Some(r) = &record {
-        summary.insert("run".into(), serde_json::to_value(r)?);
         html.steps(r);
     }
-    if let Some(v) = model_section(&mut html, &dir.join("model")) {
-        summary.insert("model".into(), v);
-    }
-    if let Some(v) = forward_section(&mut html, &dir.join("forward")) {
-        summary.insert("forward".into(), v);
-    }
-    if let Some(v) = sensitivity_section(&mut html, &dir.join("sensitivity")) {
-        summary.insert("sensitivity".into(), v);
-    }
-    if let Some(v) = measurement_section(&mut html, &dir.join("measurement")) {
-        summary.insert("measurement".into(), v);
-    }
-    if let Some(v) = identification_section(&mut html, dir)? {
-        summary.insert("identification".into(), v);
-    }
+    let summary = RunSummary {
+        run: record.clone(),
+        model: model_section(&mut html, &dir.join("model")),
+        forward: forward_section(&mut html, &dir.join("forward")),
+        sensitivity: sensitivity_section(&mut html, &dir.join("sensitivity")),
+        measurement: measurement_section(&mut html, &dir.join("measurement")),
+        identification: identification_section(&mut html, dir)?,
+    };
     html.convergence(dir);
     if let Ok(text) = std::fs::read_to_string(dir.join("study.toml")) {
         html.h2("Study file");
@@ -48,19 +124,10 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     }
     html.versions(record.as_ref());
     let path = dir.join("report.html");
-    std::fs::write(&path, html.finish())
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    let spath = dir.join("summary.json");
-    std::fs::write(
-        &spath,
-        serde_json::to_string_pretty(&Value::Object(summary))?,
-    )
-    .with_context(|| format!("cannot write {}", spath.display()))?;
+    write_text(&path, &html.finish())?;
+    // Keys sorted at every level (as a JSON object's keys have no order).
+    write_json(&dir.join("summary.json"), &serde_json::to_value(&summary)?)?;
     Ok(path)
-}
-
-fn read_json(path: &Path) -> Option<Value> {
-    serde_json::from_str(&std::fs::read_to_string(path).ok()?).ok()
 }
 
 fn esc(s: &str) -> String {
@@ -68,10 +135,6 @@ fn esc(s: &str) -> String {
         .replace('<', "&lt;")
         .replace('>', "&gt;")
         .replace('"', "&quot;")
-}
-
-fn num(v: &Value) -> Option<f64> {
-    v.as_f64()
 }
 
 /// `x` with 4 significant digits.
@@ -100,6 +163,25 @@ struct Html {
 }
 
 impl Html {
+    /// The summary at `path`: `None` when absent, and when it cannot be read (a note in the
+    /// report says so, rather than leaving its section out without a word).
+    fn read<T: serde::de::DeserializeOwned>(&mut self, path: &Path) -> Option<T> {
+        if !path.exists() {
+            return None;
+        }
+        match read_json(path) {
+            Ok(v) => Some(v),
+            Err(e) => {
+                self.p(&format!(
+                    "<span class=\"bad\">{} could not be read</span>: {}.",
+                    esc(&path.display().to_string()),
+                    esc(&format!("{e:#}"))
+                ));
+                None
+            }
+        }
+    }
+
     fn head(&mut self, r: Option<&RunRecord>) {
         let title = match r {
             Some(r) if r.command == "demo" => {
@@ -203,24 +285,21 @@ impl Html {
 
     fn convergence(&mut self, dir: &Path) {
         let mut rows = Vec::new();
-        for (test, s) in forward_summaries(&dir.join("forward")) {
-            let inc = &s["report"]["increments"];
-            let max_its = inc
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|i| i["iterations"].as_array().map(Vec::len))
-                        .max()
-                        .unwrap_or(0)
-                })
+        for (test, s) in forward_summaries(self, &dir.join("forward")) {
+            let max_its = s
+                .report
+                .increments
+                .iter()
+                .map(|i| i.iterations.len())
+                .max()
                 .unwrap_or(0);
             rows.push(vec![
                 test,
-                s["increments"].to_string(),
-                s["cutbacks"].to_string(),
-                s["newton_iterations"].to_string(),
+                s.increments.to_string(),
+                s.cutbacks.to_string(),
+                s.newton_iterations.to_string(),
                 max_its.to_string(),
-                s["report"]["factorizations"].to_string(),
+                s.report.factorizations.to_string(),
             ]);
         }
         let histories: Vec<PathBuf> = ["ungrouped", "grouped"]
@@ -309,15 +388,15 @@ figcaption{font-size:90%;color:#555}pre{background:#f7f7f7;padding:1em;overflow:
 .bad{color:#b00}";
 
 /// The forward summaries `(test, summary.json)` in test order of the folder.
-fn forward_summaries(dir: &Path) -> Vec<(String, Value)> {
+fn forward_summaries(html: &mut Html, dir: &Path) -> Vec<(String, SolveSummary)> {
     let Ok(entries) = std::fs::read_dir(dir) else {
         return Vec::new();
     };
-    let mut v: Vec<(String, Value)> = entries
+    let mut v: Vec<(String, SolveSummary)> = entries
         .filter_map(|e| e.ok())
         .filter_map(|e| {
             let name = e.file_name().to_string_lossy().to_string();
-            read_json(&e.path().join("summary.json")).map(|s| (name, s))
+            html.read(&e.path().join("summary.json")).map(|s| (name, s))
         })
         .collect();
     v.sort_by_key(|(n, _)| {
@@ -332,40 +411,47 @@ fn forward_summaries(dir: &Path) -> Vec<(String, Value)> {
     v
 }
 
-fn model_section(html: &mut Html, dir: &Path) -> Option<Value> {
-    let s = read_json(&dir.join("summary.json"))?;
+fn model_section(html: &mut Html, dir: &Path) -> Option<ModelSummary> {
+    let path = dir.join("summary.json");
+    let s: ModelSummary = match html.read::<MeshSummary>(&path) {
+        Some(m) => ModelSummary::Mesh(Box::new(m)),
+        None => ModelSummary::Deck(Box::new(html.read(&path)?)),
+    };
     html.h2("Model");
-    let q = &s["quality"]["total"];
+    let (nodes, elements, element, size, q) = match &s {
+        ModelSummary::Mesh(m) => (
+            m.nodes,
+            m.elements,
+            m.element.as_str(),
+            Some(m.element_size_mm),
+            &m.quality.total,
+        ),
+        ModelSummary::Deck(d) => (d.nodes, d.elements, "", None, &d.quality.total),
+    };
     html.p(&format!(
-        "{} nodes, {} {} elements{}; scaled Jacobian {}–{}, corner angles {}–{}°, {} elements \
+        "{} nodes, {} {} elements{}; scaled Jacobian {}–{}, corner angles {:.1}–{:.1}°, {} elements \
          below 0.3. Femur edge fixed. Files: <code>model/mesh.inp</code> (runs in \
          CalculiX/Abaqus), <code>model/mesh.vtu</code> (ParaView).",
-        s["nodes"],
-        s["elements"],
-        esc(s["element"].as_str().unwrap_or("")),
-        num(&s["element_size_mm"])
-            .map(|h| format!(" of about {h:.2} mm"))
+        nodes,
+        elements,
+        esc(element),
+        size.map(|h| format!(" of about {h:.2} mm"))
             .unwrap_or_default(),
-        num(&q["min_scaled_jacobian"]).map(g).unwrap_or_default(),
-        num(&q["max_scaled_jacobian"]).map(g).unwrap_or_default(),
-        num(&q["min_angle_deg"])
-            .map(|a| format!("{a:.1}"))
-            .unwrap_or_default(),
-        num(&q["max_angle_deg"])
-            .map(|a| format!("{a:.1}"))
-            .unwrap_or_default(),
-        q["below_0_3"],
+        g(q.min_scaled_jacobian),
+        g(q.max_scaled_jacobian),
+        q.min_angle_deg,
+        q.max_angle_deg,
+        q.below_0_3,
     ));
-    if let Some(regions) = s["regions"].as_object() {
-        let rows: Vec<Vec<String>> = regions
+    if let ModelSummary::Mesh(m) = &s {
+        let rows: Vec<Vec<String>> = m
+            .regions
             .iter()
             .map(|(name, r)| {
                 vec![
                     name.clone(),
-                    r["elements"].to_string(),
-                    num(&r["area_mm2"])
-                        .map(|a| format!("{a:.1}"))
-                        .unwrap_or_default(),
+                    r.elements.to_string(),
+                    format!("{:.1}", r.area_mm2),
                 ]
             })
             .collect();
@@ -378,8 +464,8 @@ fn model_section(html: &mut Html, dir: &Path) -> Option<Value> {
     Some(s)
 }
 
-fn forward_section(html: &mut Html, dir: &Path) -> Option<Value> {
-    let summaries = forward_summaries(dir);
+fn forward_section(html: &mut Html, dir: &Path) -> Option<BTreeMap<String, ForwardOverview>> {
+    let summaries = forward_summaries(html, dir);
     if summaries.is_empty() {
         return None;
     }
@@ -391,18 +477,18 @@ fn forward_section(html: &mut Html, dir: &Path) -> Option<Value> {
     let rows: Vec<Vec<String>> = summaries
         .iter()
         .map(|(test, s)| {
-            let b = &s["rigid_bodies"][0];
+            let b = s.rigid_bodies.first();
+            let or_dash =
+                |f: fn(&RigidBodySummary) -> f64| b.map(|b| g(f(b))).unwrap_or("-".into());
             vec![
                 test.clone(),
-                s["status"].as_str().unwrap_or("").to_string(),
-                num(&s["max_displacement_mm"]).map(g).unwrap_or_default(),
-                num(&b["travel_mm"]).map(g).unwrap_or("-".into()),
-                num(&b["force_n_per_mm"]).map(g).unwrap_or("-".into()),
-                num(&b["max_penetration_mm"]).map(g).unwrap_or("-".into()),
-                s["newton_iterations"].to_string(),
-                num(&s["timings"]["solve_s"])
-                    .map(|t| format!("{t:.2}"))
-                    .unwrap_or_default(),
+                s.status.clone(),
+                g(s.max_displacement_mm),
+                or_dash(|b| b.travel_mm),
+                or_dash(|b| b.force_n_per_mm),
+                or_dash(|b| b.max_penetration_mm),
+                s.newton_iterations.to_string(),
+                format!("{:.2}", s.timings.solve_s),
             ]
         })
         .collect();
@@ -419,10 +505,10 @@ fn forward_section(html: &mut Html, dir: &Path) -> Option<Value> {
         ],
         &rows,
     );
-    let mut out = serde_json::Map::new();
-    for (test, s) in &summaries {
-        html.h3(test);
-        let d = dir.join(test);
+    let mut out = BTreeMap::new();
+    for (test, s) in summaries {
+        html.h3(&test);
+        let d = dir.join(&test);
         html.figure(
             &d.join("deformed_le11.png"),
             &format!("{test}: deformed shape (true scale) coloured by LE11."),
@@ -436,58 +522,43 @@ fn forward_section(html: &mut Html, dir: &Path) -> Option<Value> {
             &format!("{test}: force–travel curve of the rigid body over the increments."),
         );
         out.insert(
-            test.clone(),
-            json!({
-                "status": s["status"],
-                "max_displacement_mm": s["max_displacement_mm"],
-                "rigid_bodies": s["rigid_bodies"],
-                "newton_iterations": s["newton_iterations"],
-                "solve_s": s["timings"]["solve_s"],
-            }),
+            test,
+            ForwardOverview {
+                status: s.status,
+                max_displacement_mm: s.max_displacement_mm,
+                rigid_bodies: s.rigid_bodies,
+                newton_iterations: s.newton_iterations,
+                solve_s: s.timings.solve_s,
+            },
         );
     }
-    Some(Value::Object(out))
+    Some(out)
 }
 
-fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<Value> {
-    let s = read_json(&dir.join("summary.json"))?;
+fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOverview> {
+    let s: SensitivitySummary = html.read(&dir.join("summary.json"))?;
     html.h2("Sensitivity and test ranking (seed Eq. 3, Fig. 8)");
     html.p(
         "Exact derivatives of the displacement field with respect to each parameter (direct \
          differentiation, one back-substitution per parameter); S = ‖θ ∂U/∂θ‖ / ‖U‖ per test.",
     );
-    if let Some(f) = s["finding"].as_array() {
-        let items: String = f
-            .iter()
-            .filter_map(|l| l.as_str())
-            .map(|l| format!("<li>{}</li>", esc(l)))
-            .collect();
-        let _ = write!(html.body, "<ul>{items}</ul>");
-    }
-    if let Some(tests) = s["tests"].as_array() {
-        let names: Vec<String> = tests[0]["sensitivity_index"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .filter_map(|p| p[0].as_str().map(String::from))
-                    .collect()
-            })
-            .unwrap_or_default();
+    let items: String = s
+        .finding
+        .iter()
+        .map(|l| format!("<li>{}</li>", esc(l)))
+        .collect();
+    let _ = write!(html.body, "<ul>{items}</ul>");
+    if let Some(first) = s.tests.first() {
         let mut header = vec!["test".to_string()];
-        header.extend(names.iter().cloned());
+        header.extend(first.sensitivity_index.iter().map(|p| p.0.clone()));
         header.push("sensitivities / solve".into());
-        let rows: Vec<Vec<String>> = tests
+        let rows: Vec<Vec<String>> = s
+            .tests
             .iter()
             .map(|t| {
-                let mut r = vec![t["test"].as_str().unwrap_or("").to_string()];
-                if let Some(a) = t["sensitivity_index"].as_array() {
-                    r.extend(a.iter().map(|p| num(&p[1]).map(g).unwrap_or_default()));
-                }
-                r.push(
-                    num(&t["sensitivity_over_solve"])
-                        .map(|x| format!("{:.0} %", 100.0 * x))
-                        .unwrap_or_default(),
-                );
+                let mut r = vec![t.test.clone()];
+                r.extend(t.sensitivity_index.iter().map(|p| g(p.1)));
+                r.push(format!("{:.0} %", 100.0 * t.sensitivity_over_solve));
                 r
             })
             .collect();
@@ -507,79 +578,88 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<Value> {
         &dir.join("sensitivity_maps.png"),
         "Sensitivity maps of every parameter (rows) in every test (columns).",
     );
-    if let Some(ranking) = s["ranking"].as_array() {
-        html.h3("Which test to measure: predicted parameter errors (Cramér–Rao)");
-        html.p(&format!(
-            "Fisher information of the {} grid points in the tissue ({} mm apart) with noise \
-             σ = {} mm; the worst predicted relative standard deviation of C10 and of D; best \
-             first within each grouping.",
-            s["grid_points_in_tissue"],
-            num(&s["grid_spacing_mm"]).map(g).unwrap_or_default(),
-            num(&s["noise_sigma_mm"]).map(g).unwrap_or_default()
-        ));
-        let rows: Vec<Vec<String>> = ranking
-            .iter()
-            .map(|r| {
-                vec![
-                    r["measurement"].as_str().unwrap_or("").to_string(),
-                    r["grouping"].as_str().unwrap_or("").to_string(),
-                    num(&r["worst_c10_relative_sd"])
-                        .map(pct)
-                        .unwrap_or_default(),
-                    num(&r["worst_d_relative_sd"]).map(pct).unwrap_or_default(),
-                    num(&r["condition"]).map(g).unwrap_or_default(),
-                ]
+    html.h3("Which test to measure: predicted parameter errors (Cramér–Rao)");
+    html.p(&format!(
+        "Fisher information of the {} grid points in the tissue ({} mm apart) with noise \
+         σ = {} mm; the worst predicted relative standard deviation of C10 and of D; best \
+         first within each grouping.",
+        s.grid_points_in_tissue,
+        g(s.grid_spacing_mm),
+        g(s.noise_sigma_mm)
+    ));
+    let rows: Vec<Vec<String>> = s
+        .ranking
+        .iter()
+        .map(|r| {
+            vec![
+                r.measurement.clone(),
+                r.grouping.clone(),
+                pct(r.worst_c10_relative_sd),
+                pct(r.worst_d_relative_sd),
+                g(r.condition),
+            ]
+        })
+        .collect();
+    html.table(
+        &[
+            "measured test(s)",
+            "grouping",
+            "worst C10 sd",
+            "worst D sd",
+            "condition number",
+        ],
+        &rows,
+    );
+    Some(SensitivityOverview {
+        finding: s.finding,
+        ranking: s
+            .ranking
+            .into_iter()
+            .map(|x| RankingOverview {
+                measurement: x.measurement,
+                grouping: x.grouping,
+                worst_c10_relative_sd: x.worst_c10_relative_sd,
+                worst_d_relative_sd: x.worst_d_relative_sd,
             })
-            .collect();
-        html.table(
-            &[
-                "measured test(s)",
-                "grouping",
-                "worst C10 sd",
-                "worst D sd",
-                "condition number",
-            ],
-            &rows,
-        );
-    }
-    Some(json!({
-        "finding": s["finding"],
-        "ranking": s["ranking"].as_array().map(|r| r.iter().map(|x| json!({
-            "measurement": x["measurement"], "grouping": x["grouping"],
-            "worst_c10_relative_sd": x["worst_c10_relative_sd"],
-            "worst_d_relative_sd": x["worst_d_relative_sd"]})).collect::<Vec<_>>()),
-        "tests": s["tests"].as_array().map(|t| t.iter().map(|x| json!({
-            "test": x["test"], "sensitivity_index": x["sensitivity_index"],
-            "sensitivity_over_solve": x["sensitivity_over_solve"]})).collect::<Vec<_>>()),
-    }))
+            .collect(),
+        tests: s
+            .tests
+            .into_iter()
+            .map(|x| TestOverview {
+                test: x.test,
+                sensitivity_index: x.sensitivity_index,
+                sensitivity_over_solve: x.sensitivity_over_solve,
+            })
+            .collect(),
+    })
 }
 
 /// The images of a simulated ultrasound measurement (`femu us-sim`) and the DIC's error
 /// against the FE field.
-fn measurement_section(html: &mut Html, dir: &Path) -> Option<Value> {
-    let s = read_json(&dir.join("summary.json"))?;
+fn measurement_section(html: &mut Html, dir: &Path) -> Option<MeasurementOverview> {
+    let s: SimSummary = html.read(&dir.join("summary.json"))?;
     html.h2("Measurement: simulated ultrasound and DIC");
-    let e = &s["error"];
+    let e = &s.error;
     html.p(&format!(
         "B-mode images of the unloaded and loaded thigh ({} x {} px, {} scatterers moved by the FE \
          field, {} MHz, gain {} dB, dynamic {} dB) correlated by the global Q4 DIC in {} load \
          steps. DIC against the FE field over {} points in the tissue: RMS ({}, {}) px = ({}, {}) \
          mm, largest ({}, {}) px, for displacements up to {} px.",
-        s["image_px"][0],
-        s["image_px"][1],
-        s["scatterers"],
-        num(&s["transducer"]["frequency_mhz"]).map(g).unwrap_or_default(),
-        num(&s["scanner"]["gain_db"]).map(g).unwrap_or_default(),
-        num(&s["scanner"]["dynamic_db"]).map(g).unwrap_or_default(),
-        s["dic_steps"],
-        e["points"],
-        num(&e["rms_px"][0]).map(g).unwrap_or_default(),
-        num(&e["rms_px"][1]).map(g).unwrap_or_default(),
-        num(&e["rms_mm"][0]).map(g).unwrap_or_default(),
-        num(&e["rms_mm"][1]).map(g).unwrap_or_default(),
-        num(&e["max_abs_px"][0]).map(g).unwrap_or_default(),
-        num(&e["max_abs_px"][1]).map(g).unwrap_or_default(),
-        num(&s["error"]["max_true_px"]).map(g).unwrap_or_default(),
+        s.image_px.0,
+        s.image_px.1,
+        s.scatterers,
+        g(s.transducer.frequency_mhz),
+        g(s.scanner.gain_db),
+        g(s.scanner.dynamic_db),
+        s.dic_steps,
+        e.points,
+        g(e.rms_px[0]),
+        g(e.rms_px[1]),
+        g(e.rms_mm[0]),
+        g(e.rms_mm[1]),
+        g(e.max_abs_px[0]),
+        g(e.max_abs_px[1]),
+        g(e.max_true_px),
     ));
     for (f, caption) in [
         ("ref.png", "Simulated B-mode image, unloaded."),
@@ -596,14 +676,21 @@ fn measurement_section(html: &mut Html, dir: &Path) -> Option<Value> {
     ] {
         html.figure(&dir.join(f), caption);
     }
-    Some(json!({"dic_error": s["error"], "image_px": s["image_px"], "dic_steps": s["dic_steps"]}))
+    Some(MeasurementOverview {
+        dic_error: s.error,
+        image_px: s.image_px,
+        dic_steps: s.dic_steps,
+    })
 }
 
-fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> {
-    let results: Vec<(String, Value)> = ["ungrouped", "grouped"]
+fn identification_section(
+    html: &mut Html,
+    dir: &Path,
+) -> Result<Option<BTreeMap<String, IdentificationOverview>>> {
+    let results: Vec<(String, IdentificationSummary)> = ["ungrouped", "grouped"]
         .iter()
         .filter_map(|g| {
-            read_json(&dir.join("identify").join(g).join("summary.json"))
+            html.read(&dir.join("identify").join(g).join("summary.json"))
                 .map(|s| (g.to_string(), s))
         })
         .collect();
@@ -616,48 +703,42 @@ fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> 
         "Test <b>{}</b> measured at {} grid points in the tissue ({} outside it masked), from {}; noise \
          σ = {} mm. Optimizer {} from {} Latin-hypercube starts; relative error of Eq. 4 when the \
          reference is known; 95 % confidence intervals from the Jacobian at the optimum.",
-        esc(first["test"].as_str().unwrap_or("")),
-        first["points_in_tissue"],
-        first["points_masked"],
-        esc(first["measured"].as_str().unwrap_or("")),
-        num(&first["noise_sigma_mm"]).map(g).unwrap_or_default(),
-        esc(first["optimizer"].as_str().unwrap_or("lm")),
-        first["starts_per_repeat"],
+        esc(&first.test),
+        first.points_in_tissue,
+        first.points_masked,
+        esc(&first.measured),
+        g(first.noise_sigma_mm),
+        esc(&first.optimizer),
+        first.starts_per_repeat,
     ));
-    let mut out = serde_json::Map::new();
+    let mut out = BTreeMap::new();
     for (grouping, s) in &results {
         html.h3(&format!("{grouping} parameters"));
-        let solves: Vec<String> = s["forward_solves_per_start"]
-            .as_array()
-            .map(|a| a.iter().map(|v| v.to_string()).collect())
-            .unwrap_or_default();
+        let solves: Vec<String> = s
+            .forward_solves_per_start
+            .iter()
+            .map(|v| v.to_string())
+            .collect();
         html.p(&format!(
             "Best cost {}; forward solves per start: {}; {:.1} s.",
-            num(&s["best_cost"]).map(g).unwrap_or_default(),
+            g(s.best_cost),
             solves.join(", "),
-            num(&s["wall_time_s"]).unwrap_or(0.0)
+            s.wall_time_s
         ));
-        let rows: Vec<Vec<String>> = s["parameters"]
-            .as_array()
-            .map(|ps| {
-                ps.iter()
-                    .map(|p| {
-                        vec![
-                            p["name"].as_str().unwrap_or("").to_string(),
-                            num(&p["reference"]).map(g).unwrap_or("-".into()),
-                            num(&p["identified"]).map(g).unwrap_or_default(),
-                            num(&p["relative_error"]).map(pct).unwrap_or("-".into()),
-                            format!(
-                                "[{}, {}]",
-                                num(&p["ci95"][0]).map(g).unwrap_or_default(),
-                                num(&p["ci95"][1]).map(g).unwrap_or_default()
-                            ),
-                            num(&p["relative_sd"]).map(pct).unwrap_or_default(),
-                        ]
-                    })
-                    .collect()
+        let rows: Vec<Vec<String>> = s
+            .parameters
+            .iter()
+            .map(|p| {
+                vec![
+                    p.name.clone(),
+                    p.reference.map(g).unwrap_or("-".into()),
+                    g(p.identified),
+                    p.relative_error.map(pct).unwrap_or("-".into()),
+                    format!("[{}, {}]", g(p.ci95[0]), g(p.ci95[1])),
+                    pct(p.relative_sd),
+                ]
             })
-            .unwrap_or_default();
+            .collect();
         html.table(
             &[
                 "parameter (C10 MPa, D 1/MPa)",
@@ -676,13 +757,13 @@ fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> 
         );
         out.insert(
             grouping.clone(),
-            json!({
-                "parameters": s["parameters"],
-                "best_cost": s["best_cost"],
-                "forward_solves_per_start": s["forward_solves_per_start"],
-                "wall_time_s": s["wall_time_s"],
-                "optimizer": s["optimizer"],
-            }),
+            IdentificationOverview {
+                parameters: s.parameters.clone(),
+                best_cost: s.best_cost,
+                forward_solves_per_start: s.forward_solves_per_start.clone(),
+                wall_time_s: s.wall_time_s,
+                optimizer: s.optimizer.clone(),
+            },
         );
     }
     if let Some(path) = fig9(dir, &results)? {
@@ -700,17 +781,17 @@ fn identification_section(html: &mut Html, dir: &Path) -> Result<Option<Value>> 
             );
         }
     }
-    Ok(Some(Value::Object(out)))
+    Ok(Some(out))
 }
 
 /// The Fig. 9 chart of both groupings side by side (`identify/fig9_errors.png`), when the
 /// reference is known.
-fn fig9(dir: &Path, results: &[(String, Value)]) -> Result<Option<PathBuf>> {
+fn fig9(dir: &Path, results: &[(String, IdentificationSummary)]) -> Result<Option<PathBuf>> {
     // The model parameters (from the ungrouped run, else the members of the grouped names).
     let mut names: Vec<String> = Vec::new();
     for (_, s) in results {
-        for p in s["parameters"].as_array().into_iter().flatten() {
-            for n in p["name"].as_str().unwrap_or("").split('+') {
+        for p in &s.parameters {
+            for n in p.name.split('+') {
                 if !names.iter().any(|m| m == n) {
                     names.push(n.to_string());
                 }
@@ -720,23 +801,18 @@ fn fig9(dir: &Path, results: &[(String, Value)]) -> Result<Option<PathBuf>> {
     let mut series = Vec::new();
     let mut bars = Vec::new();
     for (grouping, s) in results {
-        let ps = s["parameters"].as_array().cloned().unwrap_or_default();
         let mut values = Vec::new();
         let mut sds = Vec::new();
         for n in &names {
-            let p = ps.iter().find(|p| {
-                p["name"]
-                    .as_str()
-                    .is_some_and(|m| m.split('+').any(|k| k == n))
-            });
+            let p = s
+                .parameters
+                .iter()
+                .find(|p| p.name.split('+').any(|k| k == n));
             values.push(
-                p.and_then(|p| num(&p["relative_error"]))
+                p.and_then(|p| p.relative_error)
                     .map_or(f64::NAN, |e| 100.0 * e),
             );
-            sds.push(
-                p.and_then(|p| num(&p["relative_sd"]))
-                    .map_or(0.0, |e| 100.0 * e),
-            );
+            sds.push(p.map_or(0.0, |p| 100.0 * p.relative_sd));
         }
         if values.iter().all(|v| v.is_nan()) {
             return Ok(None);

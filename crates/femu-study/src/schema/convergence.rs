@@ -163,7 +163,7 @@ pub(crate) fn view(v: ViewInputs, lines: &KeyLines) -> Result<ConvergenceStudy, 
     }
     study.raster_mm = s.raster_mm;
     study.materials = table1_with(v.materials, lines)?;
-    study.loading = v.tests[s.test].loading;
+    study.loading = v.tests[s.test].loading.clone();
     if let Some(g) = v.grid {
         let (Some(origin_mm), Some(spacing_mm)) = (g.origin, g.spacing) else {
             return Err(lines.err(

@@ -6,7 +6,6 @@ use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
 use super::tests::TestSpec;
 use super::StudyError;
 use femu_identify::campaign::Optimizer;
-use femu_mech::loading::Loading;
 
 /// Which groupings `femu run` identifies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -67,7 +66,7 @@ pub(crate) fn parse(
     let test = match &e.test {
         None => tests
             .iter()
-            .position(|t| matches!(t.loading, Loading::Compression { .. }))
+            .position(|t| t.loading.is(&femu_mech::loading::compression::KIND))
             .unwrap_or(0),
         Some(name) => tests
             .iter()

@@ -56,17 +56,15 @@ pub(crate) struct LabelsEntry {
     pub min_island_mm2: Option<f64>,
 }
 
+/// A `[[test]]`: its kind, the curve of a Gmsh mesh it acts on, and the kind's own keys
+/// (checked against the kind's declared keys, `femu_mech::loading::TEST_KINDS`).
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub(crate) struct TestEntry {
     pub kind: String,
-    pub pressure_mmhg: Option<f64>,
-    pub pressure_mpa: Option<f64>,
-    pub side: Option<String>,
-    pub force_n_per_mm: Option<f64>,
-    pub radius_mm: Option<f64>,
     /// The physical curve of a Gmsh mesh the test acts on.
     pub curve: Option<String>,
+    #[serde(flatten)]
+    pub keys: BTreeMap<String, toml::Value>,
 }
 
 #[derive(Debug, Clone, Deserialize)]

@@ -1,11 +1,11 @@
 //! `[[test]]`: the loading tests of the study (seed §2.1.2.3, Fig. 3), the seed's three by
-//! default.
+//! default. Each `kind` is a registered loading test (`femu_mech::loading::TEST_KINDS`) that
+//! declares and checks its own keys.
 
 use super::lines::KeyLines;
 use super::raw::TestEntry;
 use super::StudyError;
-use femu_mech::loading::{Loading, Side};
-use femu_mesh::MMHG_IN_MPA;
+use femu_mech::loading::{KeyValue, Loading, TestKeys, TestKind, TEST_KINDS};
 
 /// A loading test of the study and, for a Gmsh mesh, the physical curve it acts on (the skin
 /// otherwise).
@@ -19,13 +19,9 @@ pub struct TestSpec {
 /// R = 10 mm, 0.1 N/mm anterior): the tests of a study that names none.
 pub fn seed_tests() -> Vec<TestSpec> {
     [
-        Loading::SEED_CONTENTION,
-        Loading::SEED_COMPRESSION,
-        Loading::Indentation {
-            site: Side::Anterior,
-            radius: 10.0,
-            force: 0.1,
-        },
+        Loading::seed_contention(),
+        Loading::seed_compression(),
+        Loading::anterior_indentation(0.1),
     ]
     .into_iter()
     .map(|loading| TestSpec {
@@ -70,67 +66,41 @@ pub(crate) fn parse(
 }
 
 fn parse_one(k: usize, t: &TestEntry, lines: &KeyLines) -> Result<TestSpec, StudyError> {
+    let kind = TestKind::find(&t.kind).ok_or_else(|| {
+        lines.err(
+            "test",
+            k,
+            "kind",
+            format!(
+                "unknown kind '{}' ({})",
+                t.kind.to_ascii_lowercase(),
+                TEST_KINDS
+                    .iter()
+                    .map(|k| k.name)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        )
+    })?;
     let at = |key: &str| format!("{} ({})", lines.at("test", k, key), t.kind);
-    let err = |key: &str, message: String| StudyError::key(at(key), message);
-    let positive = |key: &str, v: f64| -> Result<f64, StudyError> {
-        if !(v > 0.0 && v.is_finite()) {
-            return Err(err(key, format!("must be positive and finite, got {v}")));
-        }
-        Ok(v)
-    };
-    let side = || -> Result<Side, StudyError> {
-        Side::parse(t.side.as_deref().unwrap_or("anterior")).map_err(|e| err("side", e))
-    };
-    let force = || -> Result<f64, StudyError> {
-        let f = t
-            .force_n_per_mm
-            .ok_or_else(|| err("", "force_n_per_mm is missing".into()))?;
-        positive("force_n_per_mm", f)
-    };
-    let kind = t.kind.to_ascii_lowercase();
-    let loading = match kind.as_str() {
-        "contention" => {
-            let p = match (t.pressure_mmhg, t.pressure_mpa) {
-                (Some(_), Some(_)) => {
-                    return Err(err(
-                        "pressure_mpa",
-                        "give pressure_mmhg or pressure_mpa".into(),
-                    ))
-                }
-                (Some(mmhg), None) => positive("pressure_mmhg", mmhg)? * MMHG_IN_MPA,
-                (None, Some(mpa)) => positive("pressure_mpa", mpa)?,
-                (None, None) => 20.0 * MMHG_IN_MPA,
-            };
-            Loading::Contention { pressure: p }
-        }
-        "compression" => Loading::Compression {
-            side: side()?,
-            force: force()?,
-        },
-        "indentation" => Loading::Indentation {
-            site: side()?,
-            radius: positive("radius_mm", t.radius_mm.unwrap_or(10.0))?,
-            force: force()?,
-        },
-        other => {
-            return Err(lines.err(
-                "test",
-                k,
-                "kind",
-                format!("unknown kind '{other}' (contention, compression, indentation)"),
-            ))
-        }
-    };
-    let extra = match kind.as_str() {
-        "contention" => t.side.is_some() || t.force_n_per_mm.is_some() || t.radius_mm.is_some(),
-        "compression" => {
-            t.pressure_mmhg.is_some() || t.pressure_mpa.is_some() || t.radius_mm.is_some()
-        }
-        _ => t.pressure_mmhg.is_some() || t.pressure_mpa.is_some(),
-    };
-    if extra {
-        return Err(err("", "a key of another kind of test is given".into()));
+    let mut keys = TestKeys::new();
+    for (name, v) in &t.keys {
+        let value = match v {
+            toml::Value::Float(f) => KeyValue::Number(*f),
+            toml::Value::Integer(i) => KeyValue::Number(*i as f64),
+            toml::Value::String(s) => KeyValue::Text(s.clone()),
+            other => {
+                return Err(StudyError::key(
+                    at(name),
+                    format!("must be a number or a text, got {other}"),
+                ))
+            }
+        };
+        keys.insert(name.clone(), value);
     }
+    let loading = kind
+        .parse(&keys)
+        .map_err(|e| StudyError::key(at(&e.key), e.message))?;
     Ok(TestSpec {
         loading,
         curve: t.curve.clone(),

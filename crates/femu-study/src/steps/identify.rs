@@ -66,7 +66,7 @@ pub struct Measured {
 /// The study's model loaded with its identification test, and the test's name.
 pub fn measured_model(study: &Study) -> Result<(Model, String)> {
     let built = crate::model::build(&study.model)?;
-    let test = study.identification_test().loading;
+    let test = study.identification_test().loading.clone();
     Ok((built.loaded(&test)?, test.name()))
 }
 

@@ -234,7 +234,7 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         )?;
         return Ok(());
     }
-    let test = study.identification_test().loading;
+    let test = study.identification_test().loading.clone();
     let measured_model = built.loaded(&test)?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
     let measured = write_measurement(study, &measured_model, &out.join("measurement"), progress)?;

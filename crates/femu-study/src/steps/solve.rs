@@ -404,7 +404,6 @@ pub fn forward(
     tests: &[femu_mech::loading::Loading],
     progress: &dyn Progress,
 ) -> Result<()> {
-    use femu_mech::loading::Loading;
     create_dir(out)?;
     let t0 = Instant::now();
     let (base_deck, skin) = crate::model::thigh_deck(elements, kind)?;
@@ -415,12 +414,12 @@ pub fn forward(
         create_dir(&dir)?;
         let mut deck = base_deck.clone();
         deck.pressures.clear();
-        if let Loading::Contention { pressure } = loading {
+        if let Some(pressure) = loading.skin_pressure() {
             let mut with_pressure = base_deck.clone();
             with_pressure
                 .pressures
                 .iter_mut()
-                .for_each(|p| p.magnitude = *pressure);
+                .for_each(|p| p.magnitude = pressure);
             let deck_path = dir.join("model.inp");
             femu_mesh::write_inp_file(&with_pressure, &deck_path)
                 .with_context(|| format!("cannot write {}", deck_path.display()))?;

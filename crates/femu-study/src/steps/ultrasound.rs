@@ -80,29 +80,6 @@ pub fn bone_faces(mesh: &femu_mesh::Mesh, skin: &[(usize, usize)]) -> Vec<(usize
         .collect()
 }
 
-/// The loading scaled by `s` (intermediate states of the incremental DIC).
-fn scaled(test: femu_mech::loading::Loading, s: f64) -> femu_mech::loading::Loading {
-    use femu_mech::loading::Loading;
-    match test {
-        Loading::Contention { pressure } => Loading::Contention {
-            pressure: pressure * s,
-        },
-        Loading::Compression { side, force } => Loading::Compression {
-            side,
-            force: force * s,
-        },
-        Loading::Indentation {
-            site,
-            radius,
-            force,
-        } => Loading::Indentation {
-            site,
-            radius,
-            force: force * s,
-        },
-    }
-}
-
 /// `summary.json` of `femu us-sim`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SimSummary {
@@ -154,7 +131,7 @@ pub fn sim(
     if args.steps == 0 || args.steps > 20 {
         bail!("--steps {} must be in [1, 20]", args.steps);
     }
-    let test = study.identification_test().loading;
+    let test = study.identification_test().loading.clone();
     let built = crate::model::build(&study.model)?;
     // The loaded state and `steps - 1` intermediate loads (incremental DIC).
     let mut stages: Vec<Vec<f64>> = Vec::new();
@@ -162,7 +139,7 @@ pub fn sim(
     let mut skin = Vec::new();
     for k in 1..=args.steps {
         let (mut m, sk) = (built.model.clone(), built.skin.clone());
-        let load = scaled(test, k as f64 / args.steps as f64);
+        let load = test.scaled(k as f64 / args.steps as f64);
         apply_loading(&mut m, &sk, &load).with_context(|| format!("test {}", test.name()))?;
         let mut solver = StaticSolver::new(&m, SolverOptions::default())?;
         let sol = solver
