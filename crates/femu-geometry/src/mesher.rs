@@ -37,7 +37,7 @@
 //!    around the node.
 
 use crate::labels::{LabelImage, LabelSpec};
-use crate::quality::{aspect_ratio, scaled_jacobian};
+use crate::quality::{aspect_ratio, element_area, scaled_jacobian};
 use crate::GeometryError;
 use femu_mesh::generate::GeneratedMesh;
 use femu_mesh::{Element, ElementKind, Mesh};
@@ -192,17 +192,6 @@ impl ThighModel {
                 .sum()
         })
     }
-}
-
-/// Area of a quad or triangle (shoelace).
-pub(crate) fn element_area(m: &Mesh, e: usize) -> f64 {
-    let (x, n) = m.element_coords(e);
-    (0..n)
-        .map(|k| {
-            let (p, q) = (x[k], x[(k + 1) % n]);
-            0.5 * (p[0] * q[1] - q[0] * p[1])
-        })
-        .sum()
 }
 
 /// Meshes a label image: `pixel_size_mm` overrides the file's pixel size (a NIfTI header); one

@@ -166,7 +166,7 @@ fn stats(mesh: &Mesh, name: &str, set: &[usize]) -> Result<RegionQuality, Geomet
             });
         }
         let ar = aspect_ratio(&x);
-        q.area_mm2 += crate::mesher::element_area(mesh, e);
+        q.area_mm2 += element_area(mesh, e);
         q.min_scaled_jacobian = q.min_scaled_jacobian.min(sj);
         q.max_scaled_jacobian = q.max_scaled_jacobian.max(sj);
         q.mean_scaled_jacobian += sj;
@@ -189,6 +189,17 @@ fn stats(mesh: &Mesh, name: &str, set: &[usize]) -> Result<RegionQuality, Geomet
         q.min_angle_deg = 0.0;
     }
     Ok(q)
+}
+
+/// Area of a quad or triangle (shoelace).
+pub(crate) fn element_area(m: &Mesh, e: usize) -> f64 {
+    let (x, n) = m.element_coords(e);
+    (0..n)
+        .map(|k| {
+            let (p, q) = (x[k], x[(k + 1) % n]);
+            0.5 * (p[0] * q[1] - q[0] * p[1])
+        })
+        .sum()
 }
 
 #[cfg(test)]

@@ -6,7 +6,7 @@
 use crate::output::{read_json, write_json, write_text};
 use crate::steps::identify::IdentificationSummary;
 use crate::steps::model::{DeckModelSummary, MeshSummary};
-use crate::steps::run::RunRecord;
+use crate::steps::record::RunRecord;
 use crate::steps::sensitivity::SensitivitySummary;
 use crate::steps::solve::{RigidBodySummary, SolveSummary};
 use crate::steps::ultrasound::SimSummary;

@@ -12,6 +12,7 @@
 
 pub mod identify;
 pub mod model;
+pub mod record;
 pub mod run;
 pub mod sensitivity;
 pub mod solve;

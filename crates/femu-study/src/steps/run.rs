@@ -17,15 +17,15 @@
 //! ```
 
 use super::identify::{self, Measured};
+use super::record::{begin, finish, skip, RunRecord};
 use super::sensitivity::{self, SensitivityOptions};
 use super::solve::{write_solved, SolveContext};
 use crate::model::{build, StudyModel};
-use crate::output::{create_dir, write_json, write_text};
+use crate::output::{create_dir, write_text};
 use crate::progress::Progress;
 use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
 use anyhow::{bail, Result};
 use femu_mech::{Model, SolverOptions, StaticSolver};
-use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -33,36 +33,6 @@ use std::time::Instant;
 pub const DEMO_ELEMENTS: usize = 4000;
 /// `femu demo --full`: the seed's scale.
 pub const FULL_ELEMENTS: usize = 25_000;
-
-/// One step of a run, as recorded in `steps.json`.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct StepRecord {
-    pub name: String,
-    /// `done`, `failed` or `skipped`.
-    pub status: String,
-    pub folder: Option<String>,
-    pub seconds: f64,
-    pub error: Option<String>,
-}
-
-/// The record of a run (`steps.json`).
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct RunRecord {
-    pub femu_version: String,
-    pub command: String,
-    pub study: String,
-    pub started_unix_s: u64,
-    pub threads: usize,
-    pub os: String,
-    pub steps: Vec<StepRecord>,
-    pub total_seconds: f64,
-}
-
-impl RunRecord {
-    fn save(&self, out: &Path) -> Result<()> {
-        write_json(&out.join("steps.json"), self)
-    }
-}
 
 /// The demo's study: the example study on `elements` quads; above 6 000 the identification is
 /// multilevel (starts on 2 000 elements, the best refined on the study's mesh).
@@ -171,37 +141,6 @@ pub fn run_study(
     }
     result?;
     report.map(|_| record)
-}
-
-/// Starts a step: records it as running.
-fn begin(record: &mut RunRecord, out: &Path, name: &str, folder: Option<&str>) -> Result<Instant> {
-    record.steps.push(StepRecord {
-        name: name.into(),
-        status: "running".into(),
-        folder: folder.map(Into::into),
-        seconds: 0.0,
-        error: None,
-    });
-    record.save(out)?;
-    Ok(Instant::now())
-}
-
-fn finish(record: &mut RunRecord, out: &Path, t: Instant) -> Result<()> {
-    let last = record.steps.last_mut().expect("a step was begun");
-    last.status = "done".into();
-    last.seconds = t.elapsed().as_secs_f64();
-    record.save(out)
-}
-
-fn skip(record: &mut RunRecord, out: &Path, name: &str, why: &str) -> Result<()> {
-    record.steps.push(StepRecord {
-        name: name.into(),
-        status: "skipped".into(),
-        folder: None,
-        seconds: 0.0,
-        error: Some(why.into()),
-    });
-    record.save(out)
 }
 
 fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
