@@ -308,6 +308,7 @@ fn study_with(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    progress::install_stop_handler();
     let quiet = cli.quiet;
     let progress = Terminal { quiet };
     let result = match cli.command {
@@ -382,7 +383,15 @@ fn main() -> ExitCode {
                 fd_step,
                 figures: !no_figures,
             };
-            sensitivity::run(&s, &options, &progress).map(|_| ())
+            let summary = sensitivity::run(&s, &options, &progress)?;
+            match summary.failed_tests.first() {
+                None => Ok(()),
+                Some((test, why)) => anyhow::bail!(
+                    "{} of {} tests could not be solved (the others are written): {test}: {why}",
+                    summary.failed_tests.len(),
+                    summary.failed_tests.len() + summary.tests.len()
+                ),
+            }
         }),
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
         Command::Dic(args) => dic_cmd::run(&args, quiet),
@@ -394,6 +403,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if femu_study::progress::is_interrupted(&e) => {
+            eprintln!("interrupted ({e:#}); what was finished is kept");
+            ExitCode::from(130)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

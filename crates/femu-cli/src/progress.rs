@@ -1,9 +1,33 @@
 //! The terminal's side of a running computation: notes on stderr, progress bars (indicatif)
-//! that draw only when stderr is a terminal, nothing at all with `--quiet`.
+//! that draw only when stderr is a terminal, nothing at all with `--quiet`; and the stop
+//! request: the first Ctrl-C (or SIGTERM) asks the computation to stop at its next check and
+//! keep what it finished, a second one ends the process at once.
 
 use femu_study::progress::{Progress, Task};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
+
+/// Set by the first Ctrl-C / SIGTERM.
+static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+
+/// Installs the Ctrl-C / SIGTERM handler (once per process).
+pub fn install_stop_handler() {
+    let flag = STOP
+        .get_or_init(|| Arc::new(AtomicBool::new(false)))
+        .clone();
+    let installed = ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\nstopped");
+            std::process::exit(130);
+        }
+        eprintln!("\nstopping after the current unit of work (Ctrl-C again to quit at once)");
+    });
+    if let Err(e) = installed {
+        eprintln!("warning: Ctrl-C will not stop cleanly: {e}");
+    }
+}
 
 /// Notes and bars on stderr (or nothing, `quiet`).
 pub struct Terminal {
@@ -32,6 +56,15 @@ impl Progress for Terminal {
         if !self.quiet {
             eprintln!("{line}");
         }
+    }
+
+    fn warn(&self, line: &str) {
+        // Warnings are shown also with --quiet.
+        eprintln!("warning: {line}");
+    }
+
+    fn stop_flag(&self) -> Option<Arc<AtomicBool>> {
+        STOP.get().cloned()
     }
 
     fn task(&self, what: &str, total: Option<usize>) -> Box<dyn Task + '_> {

@@ -19,6 +19,8 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// The optimizer of an identification.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -71,6 +73,12 @@ pub enum CampaignError {
     },
     #[error("refining the coarse optimum on the full model: {0}")]
     Refinement(FitError),
+    /// The user asked to stop; the repeats finished before are kept.
+    #[error("interrupted after {} of {repeats} repeats", finished.best.len())]
+    Interrupted {
+        finished: Box<Campaign>,
+        repeats: usize,
+    },
     #[error(transparent)]
     Fit(#[from] FitError),
 }
@@ -203,7 +211,7 @@ pub struct TravelTerm {
 }
 
 /// How an identification runs.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct CampaignOptions {
     pub optimizer: Optimizer,
     /// Latin-hypercube starts per repeat.
@@ -213,6 +221,9 @@ pub struct CampaignOptions {
     /// Noise realizations of a virtual experiment (a measured field is fitted once).
     pub repeats: usize,
     pub travel: Option<TravelTerm>,
+    /// Set by the user to stop: the starts stop at their next forward solve and the campaign
+    /// returns the repeats it finished ([`CampaignError::Interrupted`]).
+    pub stop: Option<Arc<AtomicBool>>,
 }
 
 /// What happens during an identification, for the caller to show.
@@ -370,7 +381,8 @@ pub fn run(
             _ => None,
         };
         let problem = |m: &Model| -> Result<Problem, FitError> {
-            let p = Problem::new(m.clone(), SolverOptions::default(), &field, free.to_vec())?;
+            let p = Problem::new(m.clone(), SolverOptions::default(), &field, free.to_vec())?
+                .with_stop(options.stop.clone());
             match travel {
                 Some((t, sigma)) => p.with_travel(t, sigma),
                 None => Ok(p),
@@ -397,6 +409,16 @@ pub fn run(
                 r
             })
             .collect();
+        let stopped = options
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
+        if stopped {
+            return Err(CampaignError::Interrupted {
+                finished: Box::new(out),
+                repeats,
+            });
+        }
         out.points_in_tissue = field
             .points
             .iter()
@@ -454,9 +476,18 @@ pub fn run(
         // Multilevel: the best coarse optimum continued on the study's model.
         if coarse.is_some() {
             on_event(Event::Refining { repeat: rep });
-            let mut p = problem(model).map_err(CampaignError::Refinement)?;
-            best = fit_start(options.optimizer, &mut p, &best.theta, false)
-                .map_err(CampaignError::Refinement)?;
+            let refined = problem(model)
+                .and_then(|mut p| fit_start(options.optimizer, &mut p, &best.theta, false));
+            best = match refined {
+                Ok(r) => r,
+                Err(FitError::Interrupted) => {
+                    return Err(CampaignError::Interrupted {
+                        finished: Box::new(out),
+                        repeats,
+                    })
+                }
+                Err(e) => return Err(CampaignError::Refinement(e)),
+            };
             on_event(Event::Refined {
                 repeat: rep,
                 elements: model.mesh.elements.len(),

@@ -20,6 +20,8 @@ use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::{PointLocation, PointLocator};
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Jacobian columns, one per free parameter.
@@ -64,6 +66,9 @@ pub enum FitError {
     Travel(String),
     #[error("the Jacobian is singular: parameter {name} does not change the measured field (column norm {norm:.3e}); fix it or tie it")]
     Unidentifiable { name: String, norm: f64 },
+    /// The user asked to stop (see [`Problem::with_stop`]).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// The model, its solver and the measurement, ready for repeated evaluations.
@@ -82,6 +87,8 @@ pub struct Problem {
     travel: Option<(f64, f64)>,
     warm: Option<Vec<f64>>,
     dstate: Vec<Vec<f64>>,
+    /// Set by the user to stop: checked before every forward solve.
+    stop: Option<Arc<AtomicBool>>,
     /// Forward solves and sensitivity evaluations so far.
     pub forward_solves: usize,
     pub jacobians: usize,
@@ -148,6 +155,7 @@ impl Problem {
             travel: None,
             warm: None,
             dstate: Vec::new(),
+            stop: None,
             forward_solves: 0,
             jacobians: 0,
         })
@@ -176,6 +184,20 @@ impl Problem {
         }
         self.travel = Some((travel_mm, sigma_mm));
         Ok(self)
+    }
+
+    /// Stops at the next forward solve with [`FitError::Interrupted`] once `flag` is set (the
+    /// user's Ctrl-C), so that a long optimization can be interrupted between solves.
+    pub fn with_stop(mut self, flag: Option<Arc<AtomicBool>>) -> Problem {
+        self.stop = flag;
+        self
+    }
+
+    fn check_stop(&self) -> Result<(), FitError> {
+        match &self.stop {
+            Some(f) if f.load(Ordering::Relaxed) => Err(FitError::Interrupted),
+            _ => Ok(()),
+        }
     }
 
     /// The first rigid body's travel (mm) at the last solved state (None without a rigid body
@@ -223,6 +245,7 @@ impl Problem {
         phi: &[f64],
         jacobian: bool,
     ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
+        self.check_stop()?;
         self.set(phi);
         self.forward_solves += 1;
         let sol = self
@@ -284,6 +307,7 @@ impl Problem {
     /// The model field `[ux, uy, ...]` at the located measured points for `theta` (model
     /// units, one per free parameter), and the masked count: a virtual measurement.
     pub fn field_at(&mut self, theta: &[f64]) -> Result<Vec<f64>, FitError> {
+        self.check_stop()?;
         let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
         self.set(&phi);
         let sol = self

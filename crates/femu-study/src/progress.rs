@@ -1,6 +1,21 @@
 //! What a long computation tells its user while it runs: notes (a finished stage's numbers) and
-//! tasks (a bar over known units or a spinner). The command line draws them with indicatif, a
-//! notebook could with tqdm, a test with nothing ([`Quiet`]).
+//! tasks (a bar over known units or a spinner); and how the user stops it (Ctrl-C on a terminal,
+//! an interrupt in a notebook): the steps check [`Progress::cancelled`] between units of work and
+//! stop with [`Interrupted`], keeping what they finished. The command line draws the progress
+//! with indicatif, a notebook could with tqdm, a test with nothing ([`Quiet`]).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// The user asked to stop; what was finished is kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("interrupted")]
+pub struct Interrupted;
+
+/// Whether an error chain ends in an interruption.
+pub fn is_interrupted(e: &anyhow::Error) -> bool {
+    e.chain().any(|c| c.is::<Interrupted>())
+}
 
 /// The user's side of a running computation.
 pub trait Progress: Sync {
@@ -14,7 +29,20 @@ pub trait Progress: Sync {
     fn task(&self, what: &str, total: Option<usize>) -> Box<dyn Task + '_>;
     /// Whether the user asked to stop (checked between units of work).
     fn cancelled(&self) -> bool {
-        false
+        self.stop_flag().is_some_and(|f| f.load(Ordering::Relaxed))
+    }
+    /// The flag a stop request sets, for computations below this crate that check it
+    /// themselves (an optimizer between forward solves).
+    fn stop_flag(&self) -> Option<Arc<AtomicBool>> {
+        None
+    }
+    /// `Err(Interrupted)` if the user asked to stop.
+    fn check(&self) -> Result<(), Interrupted> {
+        if self.cancelled() {
+            Err(Interrupted)
+        } else {
+            Ok(())
+        }
     }
 }
 

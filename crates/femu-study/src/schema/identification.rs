@@ -1,6 +1,6 @@
 //! `[parameters]`, `[identification]`, `[run]`: what is identified, how, and which steps run.
 
-use super::geometry::{Geometry, ELEMENTS_RANGE};
+use super::geometry::{Geometry, Resolution, DEFAULT_ELEMENTS, ELEMENTS_RANGE};
 use super::lines::KeyLines;
 use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
 use super::tests::TestSpec;
@@ -59,6 +59,7 @@ pub(crate) fn parse(
     e: Option<IdentificationEntry>,
     tests: &[TestSpec],
     geometry: &Geometry,
+    resolution: Resolution,
     lines: &KeyLines,
 ) -> Result<IdentificationSpec, StudyError> {
     let e = e.unwrap_or_default();
@@ -147,6 +148,20 @@ pub(crate) fn parse(
                 return Err(err(
                     "coarse_elements",
                     format!("must be in [100, 500000], got {n}"),
+                ));
+            }
+            let fine = match resolution {
+                Resolution::Elements(m) => m,
+                Resolution::Default => DEFAULT_ELEMENTS,
+                Resolution::SizeMm(_) => usize::MAX,
+            };
+            if n >= fine {
+                return Err(err(
+                    "coarse_elements",
+                    format!(
+                        "{n} is not coarser than the model's {fine} elements: the starts run on the coarse mesh and the best is refined on [model]'s; give fewer (e.g. {})",
+                        (fine / 3).max(100)
+                    ),
                 ));
             }
             Some(n)

@@ -170,7 +170,8 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         &lines,
         base,
     )?;
-    let identification = identification::parse(file.identification, &tests, &geometry, &lines)?;
+    let identification =
+        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
     let groups = match file.parameters {

@@ -118,6 +118,12 @@ fn mistakes_name_the_key_and_line() {
     assert!(e.contains("optimizer") && e.contains("lm, bfgs"), "{e}");
     let e = err("[model]\nelements = 5\n");
     assert!(e.contains("[model] elements (line 2)"), "{e}");
+    // A multilevel identification whose coarse mesh is finer than the model's.
+    let e = err("[model]\nelements = 1500\n[identification]\ncoarse_elements = 100000\n");
+    assert!(
+        e.contains("[identification] coarse_elements (line 4)") && e.contains("not coarser"),
+        "{e}"
+    );
     // An empty test list is not the default list.
     assert!(err("test = []\n").contains("at least one"));
     // Boundary tables.

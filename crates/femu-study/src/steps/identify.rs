@@ -52,6 +52,9 @@ pub struct IdentificationSummary {
     pub forward_solves_per_start: Vec<usize>,
     pub starts: Vec<StartRecord>,
     pub wall_time_s: f64,
+    /// Set when the user stopped the run: what was kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub interrupted: Option<String>,
 }
 
 /// The measured field of an identification and where it came from.
@@ -325,6 +328,7 @@ pub fn identify_on(
             measured_mm: t.measured_mm,
             sigma_mm: t.sigma_mm,
         }),
+        stop: progress.stop_flag(),
     };
     let on_event = show_events(progress, repeats);
     let result = campaign::run(
@@ -336,8 +340,16 @@ pub fn identify_on(
         &options,
         &on_event,
     );
-    let c: Campaign = match result {
-        Ok(c) => c,
+    let (c, interrupted): (Campaign, Option<usize>) = match result {
+        Ok(c) => (c, None),
+        Err(campaign::CampaignError::Interrupted { finished, repeats }) => {
+            if finished.best.is_empty() {
+                write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
+                return Err(anyhow::Error::new(crate::progress::Interrupted)
+                    .context("identification: no repeat finished"));
+            }
+            (*finished, Some(repeats))
+        }
         Err(campaign::CampaignError::AllStartsFailed {
             repeat,
             reasons,
@@ -362,6 +374,7 @@ pub fn identify_on(
     write_starts_csv(&out.join("starts.csv"), &free, &c.starts)?;
     let (parameters, id) =
         campaign::estimates(&c, &free, &reference, reference_known, virtual_experiment)?;
+    let repeats = c.best.len();
     let best = &c.best[0];
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
     write_figures(out, &parameters, best, reference_known, repeats)?;
@@ -405,6 +418,8 @@ pub fn identify_on(
             .collect(),
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
+        interrupted: interrupted
+            .map(|n| format!("interrupted: {repeats} of {n} repeats finished and kept")),
     };
     write_json(&out.join("summary.json"), &summary)?;
     progress.note(&format!(
@@ -427,6 +442,10 @@ pub fn identify_on(
         out.display(),
         summary.wall_time_s
     ));
+    if let Some(note) = &summary.interrupted {
+        return Err(anyhow::Error::new(crate::progress::Interrupted)
+            .context(format!("identification: {note} in {}", out.display())));
+    }
     Ok(summary)
 }
 

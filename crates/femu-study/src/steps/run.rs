@@ -68,7 +68,7 @@ pub fn demo(
         study.measurement.sigma_mm,
         out.display()
     ));
-    run_study(&study, &text, "demo", out, progress)
+    run_study(&study, &text, "demo", out, None, progress)
 }
 
 /// `femu run STUDY --out DIR`.
@@ -81,21 +81,74 @@ pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<Run
         &text,
         &format!("run {}", study_file.display()),
         out,
+        Some(study_file),
         progress,
     )
 }
 
-/// Runs the steps of `study` (whose file text is `text`, copied to `out/study.toml`) into `out`,
-/// then writes the report.
+/// What a run writes at the top of its folder; [`own_folder`] clears these before a run.
+const RUN_OUTPUTS: [&str; 9] = [
+    "model",
+    "forward",
+    "sensitivity",
+    "measurement",
+    "identify",
+    "steps.json",
+    "summary.json",
+    "report.html",
+    "study.toml",
+];
+
+/// Makes `out` the run's own folder: created if absent; the outputs of an earlier run in it
+/// removed (so that nothing stale mixes into the new report), leaving everything else — and
+/// `study_file`, when the study file itself lies there — untouched. A folder that is not an
+/// earlier run's (no `steps.json`) but holds one of the run's output names is refused rather
+/// than overwritten.
+fn own_folder(out: &Path, study_file: Option<&Path>) -> Result<()> {
+    if out.exists() && !out.is_dir() {
+        bail!(
+            "--out {}: a file of that name exists; give a folder",
+            out.display()
+        );
+    }
+    create_dir(out)?;
+    let earlier_run = out.join("steps.json").is_file();
+    let input = study_file.and_then(|p| p.canonicalize().ok());
+    for name in RUN_OUTPUTS {
+        let path = out.join(name);
+        if !path.exists() || path.canonicalize().ok() == input {
+            continue;
+        }
+        if !earlier_run {
+            bail!(
+                "--out {}: it already holds {name}, and is not the folder of an earlier femu run (no steps.json): choose an empty or new folder",
+                out.display()
+            );
+        }
+        let removed = if path.is_dir() {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.map_err(|e| {
+            anyhow::anyhow!("cannot clear {} of the earlier run: {e}", path.display())
+        })?;
+    }
+    Ok(())
+}
+
+/// Runs the steps of `study` (whose file text is `text`, copied to `out/study.toml`; read from
+/// `study_file` if any) into `out`, then writes the report.
 pub fn run_study(
     study: &Study,
     text: &str,
     command: &str,
     out: &Path,
+    study_file: Option<&Path>,
     progress: &dyn Progress,
 ) -> Result<RunRecord> {
     let t0 = Instant::now();
-    create_dir(out)?;
+    own_folder(out, study_file)?;
     let copy = out.join("study.toml");
     if std::fs::read_to_string(&copy).ok().as_deref() != Some(text) {
         write_text(&copy, text)?;
@@ -114,12 +167,24 @@ pub fn run_study(
     };
     let result = steps(study, out, progress, &mut record);
     if let Err(e) = &result {
-        // The failed step is the last one recorded as running; name it.
-        if let Some(last) = record.steps.last_mut() {
-            if last.status == "running" {
-                last.status = "failed".into();
+        // The failed (or interrupted) step is the last one recorded as running; name it.
+        let seconds = last_step_seconds(t0, &record.steps);
+        let interrupted = crate::progress::is_interrupted(e);
+        match record.steps.last_mut() {
+            Some(last) if last.status == "running" => {
+                last.status = if interrupted { "interrupted" } else { "failed" }.into();
+                last.seconds = seconds;
                 last.error = Some(format!("{e:#}"));
             }
+            // Stopped between two steps: the record says where.
+            _ if interrupted => record.steps.push(super::record::StepRecord {
+                name: "(between steps)".into(),
+                status: "interrupted".into(),
+                folder: None,
+                seconds: 0.0,
+                error: Some("stopped by the user before the next step began".into()),
+            }),
+            _ => {}
         }
     }
     record.total_seconds = t0.elapsed().as_secs_f64();
@@ -143,6 +208,12 @@ pub fn run_study(
     report.map(|_| record)
 }
 
+/// The time of the last step of `steps` (the others are recorded) since the run began at `t0`.
+fn last_step_seconds(t0: Instant, steps: &[super::record::StepRecord]) -> f64 {
+    let before: f64 = steps.iter().rev().skip(1).map(|s| s.seconds).sum();
+    (t0.elapsed().as_secs_f64() - before).max(0.0)
+}
+
 fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
     // 1. The model.
     let t = begin(record, out, "model", Some("model"))?;
@@ -159,8 +230,10 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     )?;
     finish(record, out, t)?;
 
-    // 2–3. The forward tests and their sensitivities (one solve per test serves both).
-    forward_and_sensitivity(study, &built, out, progress, record)?;
+    // 2–3. The forward tests and their sensitivities (one solve per test serves both); a test
+    // that fails is left out, and only the steps that need it are skipped.
+    progress.check()?;
+    let failed = forward_and_sensitivity(study, &built, out, progress, record)?;
 
     // 4–5. The measurement and the identification.
     if !study.steps.identification {
@@ -174,6 +247,16 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         return Ok(());
     }
     let test = study.identification_test().loading.clone();
+    if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
+        let reason = format!("its test {} could not be solved: {why}", test.name());
+        skip(record, out, "measurement", &reason)?;
+        skip(record, out, "identification", &reason)?;
+        bail!(
+            "the identification needs the test {}, which could not be solved: {why}",
+            test.name()
+        );
+    }
+    progress.check()?;
     let measured_model = built.loaded(&test)?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
     let measured = write_measurement(study, &measured_model, &out.join("measurement"), progress)?;
@@ -185,6 +268,7 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         Grouping::Ungrouped => vec![(false, "ungrouped")],
     };
     for (grouped, name) in groupings {
+        progress.check()?;
         let folder = format!("identify/{name}");
         let t = begin(
             record,
@@ -207,14 +291,16 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
 }
 
 /// Steps 2–3: each test solved (its forward folder written) and, unless `[run] sensitivity =
-/// false`, differentiated.
+/// false`, differentiated. Returns the tests that could not be solved, with the reason (the
+/// step records them as a note).
 fn forward_and_sensitivity(
     study: &Study,
     built: &StudyModel,
     out: &Path,
     progress: &dyn Progress,
     record: &mut RunRecord,
-) -> Result<()> {
+) -> Result<Vec<(String, String)>> {
+    let mut failed = Vec::new();
     let forward_dir = out.join("forward");
     let mut on_solved = |name: &str, model: &Model, solution: &femu_mech::Solution, solve_s| {
         write_solved(
@@ -242,7 +328,7 @@ fn forward_and_sensitivity(
             fd_step: 5e-4,
             figures: true,
         };
-        sensitivity::run_on(
+        let summary = sensitivity::run_on(
             study,
             &built.model,
             &built.skin,
@@ -250,24 +336,32 @@ fn forward_and_sensitivity(
             progress,
             &mut on_solved,
         )?;
+        failed = summary.failed_tests;
         finish(record, out, t)?;
     } else if study.steps.forward {
         let t = begin(record, out, "forward", Some("forward"))?;
         let bar = progress.task("forward tests", Some(study.tests.len()));
         for test in &study.tests {
+            progress.check()?;
             let loading = &test.loading;
             let model = built.loaded(loading)?;
             let mut solver = StaticSolver::new(&model, SolverOptions::default())?;
             let ts = Instant::now();
-            let solution = solver
-                .solve(&model)
-                .map_err(|e| anyhow::anyhow!("test {}: {e}", loading.name()))?;
-            on_solved(
-                &loading.name(),
-                &model,
-                &solution,
-                ts.elapsed().as_secs_f64(),
-            )?;
+            match solver.solve(&model) {
+                Ok(solution) => on_solved(
+                    &loading.name(),
+                    &model,
+                    &solution,
+                    ts.elapsed().as_secs_f64(),
+                )?,
+                Err(e) => {
+                    let why = format!(
+                        "{e} (refine the mesh, [model] elements, or lower the test's load)"
+                    );
+                    progress.warn(&format!("test {} left out: {why}", loading.name()));
+                    failed.push((loading.name(), why));
+                }
+            }
             bar.inc(1);
         }
         drop(bar);
@@ -278,7 +372,20 @@ fn forward_and_sensitivity(
     if !study.steps.sensitivity {
         skip(record, out, "sensitivity", "[run] sensitivity = false")?;
     }
-    Ok(())
+    if !failed.is_empty() {
+        // The step is done for the other tests; its note says which were left out.
+        if let Some(step) = record.steps.iter_mut().rev().find(|s| s.status == "done") {
+            step.error = Some(
+                failed
+                    .iter()
+                    .map(|(t, why)| format!("test {t} left out: {why}"))
+                    .collect::<Vec<_>>()
+                    .join("; "),
+            );
+            record.save(out)?;
+        }
+    }
+    Ok(failed)
 }
 
 /// The measurement folder: `measured.csv` in the model frame — the virtual experiment's first

@@ -90,6 +90,9 @@ pub struct SensitivitySummary {
     pub ranking: Vec<Ranking>,
     pub finding: Vec<String>,
     pub wall_time_s: f64,
+    /// Tests that could not be solved, with the reason: left out of the maps and the ranking.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub failed_tests: Vec<(String, String)>,
 }
 
 /// `femu sensitivity`: the study's model built, every test solved and differentiated.
@@ -157,17 +160,40 @@ pub fn run_on(
         bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
     }
     let mut results = Vec::new();
+    let mut failed_tests = Vec::new();
     let bar = progress.task("solving the tests", Some(study.tests.len()));
     for test in &study.tests {
+        progress.check()?;
         let loading = &test.loading;
         bar.message(&format!("{}: solve and sensitivities", loading.name()));
-        let r = run_test(base, skin, loading, &params, args, progress)?;
+        // A test that cannot be solved is reported and left out; the others go on.
+        let r = match run_test(base, skin, loading, &params, args, progress) {
+            Ok(r) => r,
+            Err(e) => {
+                let why =
+                    format!("{e:#} (refine the mesh, [model] elements, or lower the test's load)");
+                progress.warn(&format!("test {} left out: {why}", loading.name()));
+                failed_tests.push((loading.name(), why));
+                bar.inc(1);
+                continue;
+            }
+        };
         on_solved(&r.name, &r.model, &r.solution, r.solve_s)?;
         write_test_outputs(&args.out.join(&r.name), &r, &names)?;
         results.push(r);
         bar.inc(1);
     }
     drop(bar);
+    if results.is_empty() {
+        bail!(
+            "no test could be solved: {}",
+            failed_tests
+                .iter()
+                .map(|(t, why)| format!("{t}: {why}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+    }
 
     let thetas: Vec<f64> = params.iter().map(|p| p.value(base)).collect();
     let columns_of = |r: &TestResult| -> Vec<Vec<f64>> {
@@ -258,6 +284,7 @@ pub fn run_on(
         ranking,
         finding: finding.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
+        failed_tests,
     };
     write_json(&args.out.join("summary.json"), &summary)?;
     for line in &finding {
