@@ -29,10 +29,10 @@
 //! does not, the exact tangent is factorized.
 
 use crate::element::{formulation, MAX_DOFS};
-use crate::linear::MAX_RHS;
 use crate::material::NeoHookeanRate;
 use crate::model::Model;
 use crate::solver::{ActiveConstraint, StaticSolver};
+use femu_sparse::MAX_RHS;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;

@@ -10,9 +10,9 @@
 
 use crate::contact::{BodyState, TravelControl};
 use crate::element::{evaluate_neo_hookean, ElementResult, MAX_DOFS};
-use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, TangentSolver};
 use crate::model::Model;
-use crate::split::DofSplit;
+use femu_sparse::DofSplit;
+use femu_sparse::{CscPattern, Factorization, LinearSolveError, NodeGraph, SparseSolver};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
@@ -52,7 +52,7 @@ pub struct SolverOptions {
     /// Increment reduction factor on a cut-back (Abaqus uses 0.25).
     pub cutback: f64,
     /// Models with at least this many free node equations are bisected and the symmetric
-    /// tangent factorized by halves in parallel ([`crate::split::SplitLdlt`]); smaller ones
+    /// tangent factorized by halves in parallel ([`femu_sparse::SplitLdlt`]); smaller ones
     /// whole. Both are exact direct solves.
     pub split_min_equations: usize,
     /// Whether the last iteration of the last increment assembles the tangent at the
@@ -315,7 +315,7 @@ pub struct StaticSolver {
     u_trial: Vec<f64>,
     u_conv: Vec<f64>,
     u_prev: Vec<f64>,
-    lu: TangentSolver,
+    lu: SparseSolver,
     setup_time_s: f64,
     last_factorization: Option<Factorization>,
     timers: [f64; 3],
@@ -628,8 +628,8 @@ impl StaticSolver {
             EquationPlan::Split(split) => split.separator.extend(borders.iter().map(|b| b.0)),
         }
         let lu = match &plan {
-            EquationPlan::Whole(ordering) => TangentSolver::new(&pattern, Some(ordering)),
-            EquationPlan::Split(split) => TangentSolver::new_split(&pattern, split),
+            EquationPlan::Whole(ordering) => SparseSolver::new(&pattern, Some(ordering)),
+            EquationPlan::Split(split) => SparseSolver::new_split(&pattern, split),
         };
         let lu = lu?;
         let contact_slots: Vec<Vec<[usize; 8]>> = model
@@ -1603,7 +1603,7 @@ impl StaticSolver {
         self.lu.solve_in_place(rhs);
     }
 
-    /// Solves `K_T X = B` for `columns` (≤ [`crate::linear::MAX_RHS`]) right-hand sides stored
+    /// Solves `K_T X = B` for `columns` (≤ [`femu_sparse::MAX_RHS`]) right-hand sides stored
     /// one after the other, in one pass over the factors.
     pub fn solve_tangent_many(&mut self, rhs: &mut [f64], columns: usize) {
         self.lu.solve_many_in_place(rhs, columns);
