@@ -8,6 +8,8 @@
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
 
+#![forbid(unsafe_code)]
+
 pub mod fisher;
 pub mod fit;
 pub mod measured;

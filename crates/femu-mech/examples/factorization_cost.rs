@@ -52,7 +52,9 @@ fn main() {
             let solution = solver.solve(&model).expect("solve");
             times[v][1].push(t.elapsed().as_secs_f64());
             let t = Instant::now();
-            solver.assemble_at(&model, &solution.state).expect("assembly");
+            solver
+                .assemble_at(&model, &solution.state)
+                .expect("assembly");
             let mut lin = solver.linearize(&model, &solution.state).expect("tangent");
             lin.factorize().expect("factorize");
             times[v][2].push(t.elapsed().as_secs_f64());
