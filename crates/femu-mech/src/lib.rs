@@ -8,7 +8,8 @@
 //! Model and physics:
 //! - [`model`]: a checked model built from a resolved deck; [`build`]: decks and models made
 //!   in code; [`loading`]: the seed's three loading tests (contention, compression,
-//!   indentation) as named loadings; [`reference`]: independent reference solutions for verification.
+//!   indentation) as named loadings; [`reference`](mod@reference): independent reference
+//!   solutions for verification.
 //! - [`material`]: compressible Neo-Hookean (Abaqus form, seed Eq. 1), stress and tangent.
 //! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
 //! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,

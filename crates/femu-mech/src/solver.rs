@@ -9,13 +9,13 @@
 //! `‖R‖₂ ≤ itol · max(...)` (see [`SolverOptions::intermediate_tolerance`]).
 //!
 //! [`StaticSolver`] is made of four parts, one file each:
-//! - [`assembly`]: dof numbering, sparse pattern, element slots and the gathers that sum
+//! - `assembly`: dof numbering, sparse pattern, element slots and the gathers that sum
 //!   element results in element order, point loads and follower pressure;
-//! - [`contact_state`]: the rigid bodies' penalties, multipliers, active sets and step limit;
-//! - [`factor`]: the tangent's factorization ([`femu_sparse::SparseSolver`]) and its timers;
-//! - [`newton`]: the driver (increments, Newton, line search, cut-back) and its reports.
+//! - `contact_state`: the rigid bodies' penalties, multipliers, active sets and step limit;
+//! - `factor`: the tangent's factorization ([`femu_sparse::SparseSolver`]) and its timers;
+//! - `newton`: the driver (increments, Newton, line search, cut-back) and its reports.
 //!
-//! The sensitivities read a converged state through [`Linearization`] ([`linearization`]):
+//! The sensitivities read a converged state through [`Linearization`] (`linearization`):
 //! the state, its tangent, the factors and the active contact constraints.
 
 mod assembly;
@@ -74,11 +74,12 @@ pub struct SolverOptions {
     /// whole. Both are exact direct solves.
     pub split_min_equations: usize,
     /// Whether the last iteration of the last increment assembles the tangent at the
-    /// converged state too. [`crate::DirectSensitivity`] reuses that tangent (it assembles it
-    /// itself when it is not there); a solve whose tangent nobody reads (`femu solve`) saves
-    /// one tangent assembly with `false`. Either way the state is the same: the tangent of an
-    /// iteration is left out only when the iteration's correction already passes the energy
-    /// test, and if its residual then fails, the tangent is assembled before the next one.
+    /// converged state too. [`crate::sensitivity::DirectSensitivity`] reuses that tangent (it
+    /// assembles it itself when it is not there); a solve whose tangent nobody reads (`femu
+    /// solve`) saves one tangent assembly with `false`. Either way the state is the same: the
+    /// tangent of an iteration is left out only when the iteration's correction already passes
+    /// the energy test, and if its residual then fails, the tangent is assembled before the
+    /// next one.
     pub final_tangent: bool,
 }
 
