@@ -422,7 +422,7 @@ impl DirectSensitivity {
 
     /// Solves `K_T X = B` in place (`block` holds the columns of B, `n` rows each, and returns
     /// X) with the tangent at the state, by iterative refinement with the current factors
-    /// factors down to the relative residual `tolerance`, [`MAX_RHS`] columns per pass over
+    /// down to the relative residual `tolerance`, [`MAX_RHS`] columns per pass over
     /// the factors; factorizes `K_T` itself if the refinement does not converge.
     fn solve_block(
         &mut self,
