@@ -172,11 +172,12 @@ impl StaticSolver {
             || Layout::new(model, &graph, &dofs, &borders),
         );
         let plan = plan?.with_borders(&borders);
-        let entries = layout.pattern.nnz();
-        let assembly =
-            Assembly::new(model, dofs, layout).ok_or(SolveError::TooLarge { entries })?;
-        let factor = TangentFactor::new(plan.analyse(&assembly.pattern)?);
-        let contact = ContactState::new(model, &assembly.dofs, &assembly.pattern);
+        let layout = layout.map_err(|entries| SolveError::TooLarge { entries })?;
+        // The symbolic analysis before the assembly's buffers are allocated, as their work
+        // memories are not held at the same time (the peak memory of a solve).
+        let factor = TangentFactor::new(plan.analyse(&layout.pattern)?);
+        let contact = ContactState::new(model, &dofs, &layout.pattern);
+        let assembly = Assembly::new(model, dofs, layout);
         Ok(StaticSolver {
             options,
             work: NewtonWork::new(assembly.dofs.n_eq, model.state_len()),

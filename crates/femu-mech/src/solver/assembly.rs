@@ -210,22 +210,23 @@ pub(crate) struct Assembly {
 }
 
 /// The pattern and the tangent gathers of a model, built on one thread while the ordering is
-/// computed on the other; `gathers` is `None` when the tangent has too many entries for a
-/// [`Slot`].
+/// computed on the other.
 pub(crate) struct Layout {
     pub pattern: CscPattern,
-    gathers: Option<(TangentGather, Vec<[Slot; 16]>)>,
+    gather: TangentGather,
+    face_slots: Vec<[Slot; 16]>,
 }
 
 impl Layout {
     /// The pattern of `model`'s tangent on the node graph `graph`, bordered by `borders`, and
-    /// the element and pressure-face slots in it.
+    /// the element and pressure-face slots in it; `Err(entries)` if the tangent has more entries
+    /// than a [`Slot`] addresses.
     pub fn new(
         model: &Model,
         graph: &NodeGraph,
         dofs: &DofMap,
         borders: &[(usize, Vec<usize>)],
-    ) -> Self {
+    ) -> Result<Self, usize> {
         let n_nodes_dof = 2 * model.node_count();
         let pattern = graph
             .dof_pattern(&dofs.eq[..n_nodes_dof], dofs.n_eq_nodes)
@@ -247,19 +248,25 @@ impl Layout {
         let gather = slots
             .as_deref()
             .and_then(|slots| TangentGather::new(slots, pattern.nnz()));
-        Layout {
-            pattern,
-            gathers: gather.zip(face_slots),
+        match gather.zip(face_slots) {
+            Some((gather, face_slots)) => Ok(Layout {
+                pattern,
+                gather,
+                face_slots,
+            }),
+            None => Err(pattern.nnz()),
         }
     }
 }
 
 impl Assembly {
-    /// The assembly of `model` on `layout`; `None` if the tangent has more entries than a
-    /// [`Slot`] addresses.
-    pub fn new(model: &Model, dofs: DofMap, layout: Layout) -> Option<Self> {
-        let Layout { pattern, gathers } = layout;
-        let (gather, face_slots) = gathers?;
+    /// The assembly of `model` on `layout`, its buffers allocated.
+    pub fn new(model: &Model, dofs: DofMap, layout: Layout) -> Self {
+        let Layout {
+            pattern,
+            gather,
+            face_slots,
+        } = layout;
         let n_dof = model.state_len();
         let n_el = model.mesh.elements.len();
         let mut point_force = vec![0.0; n_dof];
@@ -272,7 +279,7 @@ impl Assembly {
             fext: vec![0.0; n_dof],
             rhs: vec![0.0; dofs.n_eq],
         };
-        Some(Assembly {
+        Assembly {
             nodes: ResidualGather::new(model),
             dofs,
             pattern,
@@ -284,7 +291,7 @@ impl Assembly {
             system,
             tangent_state: Vec::with_capacity(n_dof),
             time_s: 0.0,
-        })
+        }
     }
 
     /// Assembles the residual (always) and the tangent (if `with_tangent`) at `u`, load factor
@@ -619,7 +626,7 @@ mod tests {
             model.node_count(),
             model.mesh.elements.iter().map(|e| e.nodes()),
         );
-        let layout = Layout::new(model, &graph, &dofs, &dofs.borders(model));
+        let layout = Layout::new(model, &graph, &dofs, &dofs.borders(model)).unwrap();
         (dofs, layout.pattern)
     }
 
