@@ -23,6 +23,8 @@
 //! [`run_study`] does the work and returns a [`StudyResult`]; [`report::write_outputs`] writes
 //! the table (CSV, JSON), the figures and `summary.json`.
 
+#![forbid(unsafe_code)]
+
 pub mod rate;
 pub mod report;
 pub mod run;

@@ -14,6 +14,8 @@
 //! - [`lab`]: the virtual lab (speckle images warped by known displacement fields).
 //! - [`noise`]: random error from pairs of images of an unloaded specimen.
 
+#![forbid(unsafe_code)]
+
 pub mod bspline;
 pub mod dicom;
 pub mod error;

@@ -32,6 +32,8 @@
 //! the element size is independent of the pixel size; a label map's pixel areas are kept (the
 //! smoothing is area-neutral to first order, see the tests for measured errors).
 
+#![forbid(unsafe_code)]
+
 pub mod error;
 pub mod export;
 pub mod labels;

@@ -10,6 +10,8 @@
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
+#![forbid(unsafe_code)]
+
 pub mod campaign;
 pub mod fisher;
 pub mod fit;

@@ -52,12 +52,16 @@ fn main() {
             let solution = solver.solve(&model).expect("solve");
             times[v][1].push(t.elapsed().as_secs_f64());
             let t = Instant::now();
-            solver.factorize_at(&model, &solution.u).expect("factorize");
+            solver
+                .assemble_at(&model, &solution.state)
+                .expect("assembly");
+            let mut lin = solver.linearize(&model, &solution.state).expect("tangent");
+            lin.factorize().expect("factorize");
             times[v][2].push(t.elapsed().as_secs_f64());
-            let n = solver.equations();
+            let n = lin.equations();
             let mut rhs: Vec<f64> = (0..10 * n).map(|i| ((i % 97) as f64).sin()).collect();
             let t = Instant::now();
-            solver.solve_tangent_many(&mut rhs, 10);
+            lin.solve_many(&mut rhs, 10);
             times[v][3].push(t.elapsed().as_secs_f64());
             solutions[v] = solution.u;
         }

@@ -1,19 +1,39 @@
-//! Finite-strain plane-strain solid mechanics for `femu`.
+//! Finite-strain plane-strain solid mechanics for `femu`: from a resolved deck to the
+//! equilibrium state, its reactions and contact forces, and the exact parameter sensitivities.
+//! Dependencies point one way: model data → elements and loads → solver → sensitivities and
+//! output; the sparse linear algebra is a separate crate, [`femu_sparse`], which knows nothing
+//! of mechanics. No unsafe code (forbidden here; the AVX2 dispatch of the element loop is
+//! `femu_sparse::with_avx2`, a safe function).
 //!
+//! Model and physics:
+//! - [`model`]: a checked model built from a resolved deck; [`build`]: decks and models made
+//!   in code; [`loading`]: the seed's three loading tests (contention, compression,
+//!   indentation) as named loadings; [`reference`](mod@reference): independent reference
+//!   solutions for verification.
 //! - [`material`]: compressible Neo-Hookean (Abaqus form, seed Eq. 1), stress and tangent.
 //! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
-//! - [`load`]: follower pressure with load stiffness.
-//! - [`model`]: a checked model built from a resolved deck.
-//! - [`solver`]: incremental Newton–Raphson with line search and cut-back, sparse LU reused.
-//! - [`linear`], [`split`] and [`supernodal`]: the sparse factorizations (faer LDLᵀ/LU; large
-//!   models by halves on two cores, each half's LDLᵀ stopped at the separator).
+//! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,
+//!   node-to-surface augmented-Lagrangian contact.
+//!
+//! Solving ([`solver`], one file per part under `solver/`):
+//! - `assembly`: dof numbering, sparse pattern built once, element slots, residual and tangent
+//!   gathered in element order (bitwise equal to a serial scatter), point and pressure loads;
+//! - `contact_state`: penalties, multipliers and their Uzawa updates, active sets, step limit;
+//! - `factor`: the tangent's factorization (LDLᵀ, by halves on two cores for large models, or
+//!   LU; from [`femu_sparse`]), analysed once per model;
+//! - `newton`: increments, Newton–Raphson with line search and cut-back, the solve reports;
+//! - `linearization`: [`solver::Linearization`], the converged state, its tangent, the factors
+//!   and the active contact constraints, which is all the sensitivities read of the solver.
+//!
+//! After the solve:
 //! - [`sensitivity`]: exact parameter sensitivities by direct differentiation (seed §2.3).
 //! - [`output`]: displacements CSV, VTU with LE and Cauchy stress, summary JSON.
+
+#![forbid(unsafe_code)]
 
 pub mod build;
 pub mod contact;
 pub mod element;
-pub mod linear;
 pub mod load;
 pub mod loading;
 pub mod material;
@@ -21,11 +41,13 @@ pub mod model;
 pub mod output;
 pub mod reference;
 pub mod sensitivity;
-pub(crate) mod simd;
 pub mod solver;
-pub mod split;
-pub mod supernodal;
 
+/// The AVX2 dispatch of the element loop, from [`femu_sparse`] (safe to call; its unsafe stays
+/// there).
+pub(crate) use femu_sparse::simd;
+
+pub use femu_sparse::Factorization;
 pub use material::{Hyperelastic, NeoHookean};
 pub use model::{Model, ModelError};
 pub use solver::{Solution, SolveError, SolveReport, SolverOptions, StaticSolver};

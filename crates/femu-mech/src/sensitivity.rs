@@ -26,13 +26,15 @@
 //! iterate, one (tiny) correction away from the converged state. The exact tangent at the
 //! converged state is assembled (no factorization) and the systems are solved by iterative
 //! refinement preconditioned with the stale factors, which converges in one or two steps; if it
-//! does not, the exact tangent is factorized.
+//! does not, the exact tangent is factorized. The solver lends all of this as one
+//! [`Linearization`]: the state, its tangent, the factors and the active contact constraints.
 
 use crate::element::{formulation, MAX_DOFS};
-use crate::linear::MAX_RHS;
 use crate::material::NeoHookeanRate;
 use crate::model::Model;
-use crate::solver::{ActiveConstraint, StaticSolver};
+use crate::solver::{AssemblyError, Linearization, StaticSolver};
+use femu_sparse::LinearSolveError;
+use femu_sparse::MAX_RHS;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
@@ -110,8 +112,10 @@ pub fn all_parameters(model: &Model) -> Vec<Parameter> {
 pub enum SensitivityError {
     #[error("the state cannot be assembled for sensitivities: {0}")]
     Assembly(String),
+    #[error("the tangent at the state cannot be assembled for sensitivities: {0}")]
+    State(#[source] AssemblyError),
     #[error("the tangent cannot be factorized for sensitivities: {0}")]
-    Factorization(String),
+    Factorization(#[source] LinearSolveError),
     #[error("the contact constraints are singular (pivot {pivot:.3e} of {size} active nodes)")]
     SingularContact { pivot: f64, size: usize },
     #[error("parameter {index} refers to material {material}, the model has {count}")]
@@ -212,17 +216,14 @@ impl DirectSensitivity {
             parameters: parameters.len(),
             ..Default::default()
         };
-        // A successful solve ends with the tangent assembled at its solution.
-        if !solver.tangent_is_at(state) {
-            solver
-                .assemble_at(model, state)
-                .map_err(SensitivityError::Assembly)?;
-        }
-        if !solver.has_factorization() {
+        // A successful solve ends with the tangent assembled at its solution (then it is not
+        // assembled again).
+        let mut lin = solver
+            .linearize(model, state)
+            .map_err(SensitivityError::State)?;
+        if !lin.has_factors() {
             let t = Instant::now();
-            solver
-                .refactorize()
-                .map_err(SensitivityError::Factorization)?;
+            lin.factorize().map_err(SensitivityError::Factorization)?;
             report.refactorized = true;
             report.factorization_time_s += t.elapsed().as_secs_f64();
         }
@@ -233,21 +234,21 @@ impl DirectSensitivity {
         let n_state = model.state_len();
         let mut eqs = std::mem::take(&mut self.eqs);
         eqs.clear();
-        eqs.extend((0..n_state).map(|d| solver.equation_of(d)));
+        eqs.extend((0..n_state).map(|d| lin.equation_of(d)));
         // Work blocks: while this has none large enough (a first call), it borrows the
         // solver's element-matrix buffer (13 MB at paper scale, idle until the next assembly,
         // and already in memory: a fresh 12 MB would cost thousands of page faults) and gives
         // it back below, whatever the outcome.
-        let active = solver.active_constraints(model, state);
-        let columns = parameters.len().max(active.len()).clamp(1, MAX_RHS);
-        let need = 3 * columns * solver.equations();
-        let borrowed = self.work.len() < need && solver.element_scratch().len() >= need;
+        let active = lin.active_constraints().len();
+        let columns = parameters.len().max(active).clamp(1, MAX_RHS);
+        let need = 3 * columns * lin.equations();
+        let borrowed = self.work.len() < need && lin.scratch().len() >= need;
         if borrowed {
-            std::mem::swap(&mut self.work, solver.element_scratch());
+            std::mem::swap(&mut self.work, lin.scratch());
         }
-        let result = self.compute_with(solver, model, &active, parameters, out, &eqs, report);
+        let result = self.compute_with(&mut lin, model, parameters, out, &eqs, report);
         if borrowed {
-            std::mem::swap(&mut self.work, solver.element_scratch());
+            std::mem::swap(&mut self.work, lin.scratch());
         }
         self.eqs = eqs;
         let mut report = result?;
@@ -255,27 +256,23 @@ impl DirectSensitivity {
         Ok(report)
     }
 
-    /// [`Self::compute`] once the rate forces are assembled, with `active` the contact
-    /// constraints active at the state and `eqs` the equation of each state dof.
-    #[allow(clippy::too_many_arguments)]
+    /// [`Self::compute`] once the rate forces are assembled, at the linearized state `lin`,
+    /// with `eqs` the equation of each state dof.
     fn compute_with(
         &mut self,
-        solver: &mut StaticSolver,
+        lin: &mut Linearization<'_>,
         model: &Model,
-        active: &[ActiveConstraint],
         parameters: &[Parameter],
         out: &mut Vec<Vec<f64>>,
         eqs: &[Option<usize>],
         mut report: SensitivityReport,
     ) -> Result<SensitivityReport, SensitivityError> {
-        let n_eq = solver.equations();
+        let n_eq = lin.equations();
         let n_state = model.state_len();
-        let tolerance = solver
-            .options
-            .residual_tolerance
-            .min(LOOSEST_REFINEMENT_TOLERANCE);
+        let tolerance = lin.residual_tolerance().min(LOOSEST_REFINEMENT_TOLERANCE);
 
         // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
+        let active = lin.active_constraints();
         report.active_constraints = active.len();
         let base = 2 * model.node_count();
         let g_entries: Vec<Vec<(usize, f64)>> = active
@@ -299,7 +296,7 @@ impl DirectSensitivity {
                 z[i * n_eq + q] = v;
             }
         }
-        self.solve_block(solver, &mut z, n_eq, tolerance, &mut report)?;
+        self.solve_block(lin, &mut z, n_eq, tolerance, &mut report)?;
         let schur = if m > 0 {
             let s = faer::Mat::<f64>::from_fn(m, m, |i, j| {
                 g_entries[i]
@@ -345,7 +342,7 @@ impl DirectSensitivity {
             }
         });
         report.assembly_time_s += t.elapsed().as_secs_f64();
-        let solved = self.solve_block(solver, &mut x, n_eq, tolerance, &mut report);
+        let solved = self.solve_block(lin, &mut x, n_eq, tolerance, &mut report);
         if let Err(e) = solved {
             self.block = x;
             return Err(e);
@@ -424,12 +421,12 @@ impl DirectSensitivity {
     }
 
     /// Solves `K_T X = B` in place (`block` holds the columns of B, `n` rows each, and returns
-    /// X) with the tangent assembled last, by iterative refinement with the solver's current
-    /// factors down to the relative residual `tolerance`, [`MAX_RHS`] columns per pass over
+    /// X) with the tangent at the state, by iterative refinement with the current factors
+    /// down to the relative residual `tolerance`, [`MAX_RHS`] columns per pass over
     /// the factors; factorizes `K_T` itself if the refinement does not converge.
     fn solve_block(
         &mut self,
-        solver: &mut StaticSolver,
+        lin: &mut Linearization<'_>,
         block: &mut [f64],
         n: usize,
         tolerance: f64,
@@ -448,7 +445,7 @@ impl DirectSensitivity {
             self.bnorms.clear();
             self.bnorms.extend(rhs.chunks(n).map(norm));
             let t = Instant::now();
-            solver.solve_tangent_many(chunk, cols);
+            lin.solve_many(chunk, cols);
             report.triangular_solve_time_s += t.elapsed().as_secs_f64();
             report.back_substitutions += cols;
             let mut last = f64::INFINITY;
@@ -456,7 +453,7 @@ impl DirectSensitivity {
                 let t = Instant::now();
                 // R = B - K X (one pass over K for all the columns, interleaved), and the
                 // worst relative residual of the columns.
-                let rel = residual_of(solver, chunk, cols, n, rhs, &self.bnorms, product, residual);
+                let rel = residual_of(lin, chunk, cols, n, rhs, &self.bnorms, product, residual);
                 report.residual_time_s += t.elapsed().as_secs_f64();
                 let converged = rel <= tolerance;
                 let stalled = !(rel < 0.5 * last);
@@ -471,14 +468,12 @@ impl DirectSensitivity {
                     }
                     // The stale factors are too far from K_T: factorize K_T and start again.
                     let t = Instant::now();
-                    solver
-                        .refactorize()
-                        .map_err(SensitivityError::Factorization)?;
+                    lin.factorize().map_err(SensitivityError::Factorization)?;
                     report.refactorized = true;
                     report.factorization_time_s += t.elapsed().as_secs_f64();
                     chunk.copy_from_slice(rhs);
                     let t = Instant::now();
-                    solver.solve_tangent_many(chunk, cols);
+                    lin.solve_many(chunk, cols);
                     report.triangular_solve_time_s += t.elapsed().as_secs_f64();
                     report.back_substitutions += cols;
                     last = f64::INFINITY;
@@ -486,7 +481,7 @@ impl DirectSensitivity {
                 }
                 last = rel;
                 let t = Instant::now();
-                solver.solve_tangent_many(residual, cols);
+                lin.solve_many(residual, cols);
                 report.triangular_solve_time_s += t.elapsed().as_secs_f64();
                 report.back_substitutions += cols;
                 report.refinement_steps += 1;
@@ -505,7 +500,7 @@ impl DirectSensitivity {
 /// holds the interleaved solutions.
 #[allow(clippy::too_many_arguments)]
 fn residual_of(
-    solver: &StaticSolver,
+    lin: &Linearization<'_>,
     x: &[f64],
     cols: usize,
     n: usize,
@@ -524,7 +519,7 @@ fn residual_of(
                 *v = x[j * n + i];
             }
         });
-    solver.tangent_mul_many_interleaved(residual, product, cols);
+    lin.tangent_mul_many_interleaved(residual, product, cols);
     let product = &*product;
     residual
         .par_chunks_mut(n)

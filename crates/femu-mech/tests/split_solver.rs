@@ -4,8 +4,8 @@
 //! indentation, on a built-in thigh small enough for a test, with the split forced.
 
 use common::thigh_model as thigh;
-use femu_mech::linear::Factorization;
 use femu_mech::loading::Loading;
+use femu_mech::Factorization;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::ElementKind;
 

@@ -17,6 +17,8 @@
 //!
 //! Face `Pn` joins local nodes `n` and `n+1` (the last face closes back to node 1).
 
+#![forbid(unsafe_code)]
+
 /// 1 mmHg in MPa (the unit of the seed's contention pressure, 20 mmHg).
 pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 

@@ -21,6 +21,8 @@
 //! Bad input (empty data, mismatched lengths, invalid ranges, non-positive values on a log axis)
 //! is a [`PlotError`], never a panic. NaN values are skipped (cells drawn grey, points left out).
 
+#![forbid(unsafe_code)]
+
 mod axis;
 mod boxplot;
 mod chart;

@@ -17,6 +17,8 @@
 //! - [`experiment`]: the virtual experiment (images of the unloaded and loaded tissue, DIC,
 //!   comparison with the FE field).
 
+#![forbid(unsafe_code)]
+
 pub mod error;
 pub mod experiment;
 pub mod manifest;

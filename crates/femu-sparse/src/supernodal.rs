@@ -284,6 +284,9 @@ struct Update<'a> {
 }
 
 impl Update<'_> {
+    /// Applies the update, with faer's AVX2/FMA kernel when `simd` (the CPU has both; see
+    /// [`has_avx2_fma`]), in plain loops otherwise.
+    #[allow(unsafe_code)] // the one call into `private-gemm-x86`; see the SAFETY note
     fn apply(
         &self,
         c: &mut [f64],
@@ -373,6 +376,8 @@ impl std::fmt::Debug for PartialLdlt {
     }
 }
 
+/// Whether the CPU has AVX2 and FMA, which the `private-gemm-x86` kernel of [`Update::apply`]
+/// is compiled for.
 fn has_avx2_fma() -> bool {
     #[cfg(target_arch = "x86_64")]
     {

@@ -1,11 +1,13 @@
-//! Sparse direct solver: faer's sparse LU, symbolic analysis once per pattern, numeric
-//! factorization per Newton iteration with a workspace allocated once.
+//! Sparse direct solvers on a pattern built once: symbolic analysis once per pattern, numeric
+//! factorization many times (every Newton iteration of femu-mech) with a workspace allocated
+//! once.
 //!
-//! [`TangentSolver`] checks the symmetry of every tangent: a symmetric one (hyperelastic
-//! elements, dead loads, follower pressure on closed outlines, which is conservative, rigid
-//! bodies with their bordered force equation) is factorized by supernodal LDLᵀ with an AMD
-//! ordering, by halves on two cores for large models ([`crate::split::SplitLdlt`]); an
-//! unsymmetric one (pressure on part of an outline) by sparse LU with partial pivoting.
+//! [`SparseSolver`] checks the symmetry of every matrix: a symmetric one (in femu-mech:
+//! hyperelastic elements, dead loads, follower pressure on closed outlines, which is
+//! conservative, rigid bodies with their bordered force equation) is factorized by supernodal
+//! LDLᵀ with an AMD ordering, by halves on two cores for large models
+//! ([`crate::split::SplitLdlt`]); an unsymmetric one (pressure on part of an outline) by sparse
+//! LU with partial pivoting.
 
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::sparse::linalg::cholesky::{
@@ -270,7 +272,8 @@ impl NodeGraph {
     }
 }
 
-/// The linear solve failed (a singular tangent: a mechanism, or a structural instability).
+/// The linear solve failed (in femu-mech, a singular tangent: a mechanism, or a structural
+/// instability). The messages speak of "the tangent", the matrix this crate factorizes for femu.
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum LinearSolveError {
     #[error("the tangent matrix is singular (no pivot at column {0})")]
@@ -372,7 +375,7 @@ impl SparseLu {
     }
 }
 
-/// Sparse LDLᵀ (no pivoting; for symmetric tangents, definite or mildly indefinite).
+/// Sparse LDLᵀ (no pivoting; for symmetric matrices, definite or mildly indefinite).
 pub struct SparseLdlt {
     symbolic: SymbolicCholesky<usize>,
     l_values: Vec<f64>,
@@ -502,7 +505,7 @@ fn transpose_positions(pattern: &CscPattern) -> Option<Vec<u32>> {
     Some(transpose)
 }
 
-/// Which factorization the last [`TangentSolver::factorize`] used.
+/// Which factorization the last [`SparseSolver::factorize`] used.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Factorization {
     Ldlt,
@@ -511,15 +514,15 @@ pub enum Factorization {
     Lu,
 }
 
-/// The factorization tried first for symmetric tangents.
+/// The factorization tried first for symmetric matrices.
 enum SymmetricFactor {
     Whole(Box<SparseLdlt>),
     Split(Box<SplitLdlt>),
 }
 
-/// Factorizes Newton tangents on one pattern, choosing LDLᵀ for symmetric values and LU
-/// otherwise; both symbolic analyses are made at most once.
-pub struct TangentSolver {
+/// Factorizes matrices on one pattern (Newton tangents in femu-mech), choosing LDLᵀ for
+/// symmetric values and LU otherwise; both symbolic analyses are made at most once.
+pub struct SparseSolver {
     /// Position of the transposed entry of each stored entry (32 bits: half the memory
     /// traffic of the asymmetry check before every factorization).
     transpose: Vec<u32>,
@@ -530,15 +533,15 @@ pub struct TangentSolver {
     pub symmetry_tolerance: f64,
 }
 
-impl std::fmt::Debug for TangentSolver {
+impl std::fmt::Debug for SparseSolver {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("TangentSolver")
+        f.debug_struct("SparseSolver")
             .field("last", &self.last)
             .finish()
     }
 }
 
-impl TangentSolver {
+impl SparseSolver {
     /// Symbolic analysis for `pattern` (structurally symmetric), with an optional elimination
     /// order for the LDLᵀ (see [`SparseLdlt::new`]).
     pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
@@ -547,7 +550,7 @@ impl TangentSolver {
         })
     }
 
-    /// As [`Self::new`], with symmetric tangents factorized by halves of `split` in parallel
+    /// As [`Self::new`], with symmetric matrices factorized by halves of `split` in parallel
     /// ([`SplitLdlt`]).
     pub fn new_split(pattern: &CscPattern, split: &DofSplit) -> Result<Self, LinearSolveError> {
         Self::with_symmetric_factor(pattern, || {
@@ -571,7 +574,7 @@ impl TangentSolver {
         let transpose = transpose.ok_or_else(|| {
             LinearSolveError::Other("pattern is not structurally symmetric".into())
         })?;
-        Ok(TangentSolver {
+        Ok(SparseSolver {
             transpose,
             ldlt: ldlt?,
             lu: None,
@@ -817,7 +820,7 @@ mod tests {
                 assert_eq!(y[i * 3 + j], b[i]);
             }
         }
-        let mut ts = TangentSolver::new(&p, None).unwrap();
+        let mut ts = SparseSolver::new(&p, None).unwrap();
         // The parallel row-wise product equals the column-wise one (unsymmetric values).
         let mut y_rows = [0.0; 9];
         ts.mul_many_interleaved(&p, &v, &interleaved, &mut y_rows, 3);

@@ -1,4 +1,5 @@
-//! Run-time selection of AVX2 code paths for the hot loops (element loop, triangular solves).
+//! Run-time selection of AVX2 code paths for the hot loops (triangular solves here, femu-mech's
+//! element loop).
 //!
 //! The release build targets baseline x86-64 (SSE2) so that the binary runs on any x86-64 CPU;
 //! a loop wrapped in [`with_avx2`] is compiled a second time with AVX2 enabled and that copy
@@ -22,7 +23,11 @@ pub fn has_avx2() -> bool {
 
 /// Runs `f`, compiled with AVX2 enabled when the CPU has it. For the AVX2 copy to contain the
 /// loop, `f` must be a closure marked `#[inline(always)]` whose callees inline into it.
+///
+/// Safe to call from any crate: it is generic, so both copies are compiled in the caller's
+/// crate (the closure inlines into each), and the unsafe call is guarded by the feature check.
 #[inline(always)]
+#[allow(unsafe_code)] // the one AVX2 call, guarded; see the SAFETY note
 pub fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]
     if has_avx2() {
@@ -38,6 +43,7 @@ pub fn with_avx2<R>(f: impl FnOnce() -> R) -> R {
 /// The CPU must support AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(unsafe_code)] // `target_feature` functions are unsafe to call before Rust 1.86
 unsafe fn call_avx2<R>(f: impl FnOnce() -> R) -> R {
     f()
 }

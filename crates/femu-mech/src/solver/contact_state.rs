@@ -1,0 +1,334 @@
+//! The state of the rigid bodies' contact during a solve (see [`crate::contact`] for the
+//! augmented-Lagrangian formulation): each body's automatic penalty ε, the multiplier estimates
+//! λ̂ of its candidate nodes and their Uzawa updates, the active set of the last assembly (for
+//! Newton's cycle detection), the contact terms of the residual and tangent, and the step limit
+//! that keeps a Newton step from driving free nodes deep into a body.
+
+use super::assembly::{DofMap, System, NONE};
+use crate::contact::BodyState;
+use crate::contact::TravelControl;
+use crate::model::Model;
+use femu_sparse::CscPattern;
+
+/// A node in contact with a rigid body at a converged state (see
+/// [`crate::solver::Linearization::active_constraints`]): its contact force and the gap
+/// gradient.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActiveConstraint {
+    pub body: usize,
+    pub node: usize,
+    /// Contact force λ (N per mm, > 0).
+    pub force: f64,
+    pub dg_dx: [f64; 2],
+    pub dg_dt: f64,
+}
+
+/// The contact nodes active at an assembly: their count and a fingerprint of which they are
+/// (equal sets give equal fingerprints; Newton compares the sets of successive iterations).
+pub(crate) type ActiveSet = (usize, u64);
+
+/// Contact state of every rigid body of a model.
+#[derive(Debug)]
+pub(crate) struct ContactState {
+    /// Per rigid body and candidate node: positions in the tangent values of
+    /// (xx, xy, yx, yy, xt, yt, tx, ty) (`NONE` for a prescribed row or column).
+    slots: Vec<Vec<[usize; 8]>>,
+    /// Per rigid body: position of (t, t) (`NONE` under displacement control).
+    tt: Vec<usize>,
+    /// Per rigid body: the multiplier estimates λ̂ of its candidate nodes.
+    multipliers: Vec<Vec<f64>>,
+    /// Per rigid body: the penalty ε (set at the start of each solve).
+    penalties: Vec<f64>,
+    /// Per rigid body: Uzawa updates made in this solve.
+    augmentations: Vec<usize>,
+    /// The active set of the last assembly.
+    active_set: ActiveSet,
+}
+
+impl ContactState {
+    /// The tangent positions of every body's contact entries in `pattern`; penalties and
+    /// multipliers zero.
+    pub fn new(model: &Model, dofs: &DofMap, pattern: &CscPattern) -> Self {
+        let eq = &dofs.eq;
+        let n_nodes_dof = 2 * model.node_count();
+        let pos = |r: usize, col: usize| {
+            if r == NONE || col == NONE {
+                NONE
+            } else {
+                pattern.position(r, col).expect("contact entry in pattern")
+            }
+        };
+        let slots = model
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(b, c)| {
+                let qt = eq[n_nodes_dof + b];
+                c.nodes
+                    .iter()
+                    .map(|&n| {
+                        let (qx, qy) = (eq[2 * n], eq[2 * n + 1]);
+                        [
+                            pos(qx, qx),
+                            pos(qx, qy),
+                            pos(qy, qx),
+                            pos(qy, qy),
+                            pos(qx, qt),
+                            pos(qy, qt),
+                            pos(qt, qx),
+                            pos(qt, qy),
+                        ]
+                    })
+                    .collect()
+            })
+            .collect();
+        let tt = (0..model.contacts.len())
+            .map(|b| pos(eq[n_nodes_dof + b], eq[n_nodes_dof + b]))
+            .collect();
+        ContactState {
+            slots,
+            tt,
+            multipliers: model
+                .contacts
+                .iter()
+                .map(|c| vec![0.0; c.nodes.len()])
+                .collect(),
+            penalties: vec![0.0; model.contacts.len()],
+            augmentations: vec![0; model.contacts.len()],
+            active_set: (0, 0),
+        }
+    }
+
+    /// The active set of the last assembly.
+    pub fn active_set(&self) -> ActiveSet {
+        self.active_set
+    }
+
+    /// Whether every body has its penalty (set by a solve), so that a warm start can keep it.
+    pub fn has_penalties(&self) -> bool {
+        self.penalties.iter().all(|&p| p > 0.0)
+    }
+
+    /// The multiplier estimates of every body (to restore them after a failed attempt).
+    pub fn multipliers(&self) -> &[Vec<f64>] {
+        &self.multipliers
+    }
+
+    /// Restores multiplier estimates saved by [`Self::multipliers`].
+    pub fn restore_multipliers(&mut self, saved: Vec<Vec<f64>>) {
+        self.multipliers = saved;
+    }
+
+    /// Zero penalties: the contact terms vanish (for the assembly the penalties are taken from).
+    pub fn clear_penalties(&mut self) {
+        self.penalties.iter_mut().for_each(|p| *p = 0.0);
+    }
+
+    /// Sets each body's penalty from the largest diagonal stiffness of its candidate dofs in
+    /// `values` (the tangent at the undeformed state: the "automatic penalty") and clears the
+    /// multipliers and the augmentation counts.
+    pub fn set_penalties(&mut self, model: &Model, values: &[f64]) {
+        for (b, c) in model.contacts.iter().enumerate() {
+            let mut kmax = 0.0f64;
+            for s in &self.slots[b] {
+                for pos in [s[0], s[3]] {
+                    if pos != NONE {
+                        kmax = kmax.max(values[pos].abs());
+                    }
+                }
+            }
+            self.penalties[b] = c.penalty_factor * kmax.max(1e-12);
+            self.multipliers[b].iter_mut().for_each(|m| *m = 0.0);
+            self.augmentations[b] = 0;
+        }
+    }
+
+    /// Adds the rigid-body contact terms at `u` to `system` (residual, and the tangent if
+    /// `with_tangent`) and, under force control, the applied force `λ F` on the travel
+    /// equation; records the active set.
+    pub fn add_terms(
+        &mut self,
+        model: &Model,
+        u: &[f64],
+        lambda: f64,
+        with_tangent: bool,
+        system: &mut System,
+    ) {
+        let base = 2 * model.node_count();
+        self.active_set = (0, 0);
+        for (b, c) in model.contacts.iter().enumerate() {
+            let tdof = base + b;
+            let t = c.first_contact + u[tdof];
+            if let TravelControl::Force(f) = c.control {
+                system.residual[tdof] -= lambda * f;
+                system.fext[tdof] += lambda * f;
+            }
+            let eps = self.penalties[b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let trial = self.multipliers[b][k] - eps * gap.g;
+                // Touching within round-off counts as active (the first-contact node starts at
+                // g = 0 up to rounding), so that the travel has stiffness from the start.
+                if trial < -eps * 1e-12 * c.element_size {
+                    continue;
+                }
+                let lam = trial.max(0.0);
+                self.active_set.0 += 1;
+                self.active_set.1 = self
+                    .active_set
+                    .1
+                    .wrapping_mul(31)
+                    .wrapping_add(k as u64 + 1);
+                system.residual[2 * n] -= lam * gap.dg_dx[0];
+                system.residual[2 * n + 1] -= lam * gap.dg_dx[1];
+                system.residual[tdof] -= lam * gap.dg_dt;
+                if with_tangent {
+                    let kxx = [
+                        eps * gap.dg_dx[0] * gap.dg_dx[0] - lam * gap.d2g_dxdx[0][0],
+                        eps * gap.dg_dx[0] * gap.dg_dx[1] - lam * gap.d2g_dxdx[0][1],
+                        eps * gap.dg_dx[1] * gap.dg_dx[0] - lam * gap.d2g_dxdx[1][0],
+                        eps * gap.dg_dx[1] * gap.dg_dx[1] - lam * gap.d2g_dxdx[1][1],
+                    ];
+                    let kxt = [
+                        eps * gap.dg_dx[0] * gap.dg_dt - lam * gap.d2g_dxdt[0],
+                        eps * gap.dg_dx[1] * gap.dg_dt - lam * gap.d2g_dxdt[1],
+                    ];
+                    let vals = [
+                        kxx[0], kxx[1], kxx[2], kxx[3], kxt[0], kxt[1], kxt[0], kxt[1],
+                    ];
+                    for (pos, v) in self.slots[b][k].iter().zip(vals) {
+                        if *pos != NONE {
+                            system.values[*pos] += v;
+                        }
+                    }
+                    if self.tt[b] != NONE {
+                        system.values[self.tt[b]] +=
+                            eps * gap.dg_dt * gap.dg_dt - lam * gap.d2g_dtdt;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` for the bodies whose complementarity error (a
+    /// penetration, or an open gap under a contact force) exceeds their limit; returns whether
+    /// any was updated.
+    pub fn augment(&mut self, model: &Model, u: &[f64]) -> bool {
+        let base = 2 * model.node_count();
+        let mut updated = false;
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            let limit = c.penetration_tolerance * c.element_size;
+            let gap = |n: usize| c.body.gap(model.current_position(n, u), t).g;
+            // Complementarity error: a penetration, or a gap at a node that still carries a
+            // contact force (the multiplier overshot).
+            let violation =
+                c.nodes
+                    .iter()
+                    .zip(&self.multipliers[b])
+                    .fold(0.0f64, |m, (&n, &lam)| {
+                        let g = gap(n);
+                        if g < 0.0 {
+                            m.max(-g)
+                        } else if lam - eps * g > 0.0 {
+                            m.max(g)
+                        } else {
+                            m
+                        }
+                    });
+            if violation > limit {
+                for (m, &n) in self.multipliers[b].iter_mut().zip(&c.nodes) {
+                    *m = (*m - eps * gap(n)).max(0.0);
+                }
+                self.augmentations[b] += 1;
+                updated = true;
+            }
+        }
+        updated
+    }
+
+    /// The largest step length in (0, 1] from `u` towards `full` (the state after the full
+    /// correction) for which no contact node that is free at `u` penetrates its body deeper
+    /// than 0.1 element size (gaps taken linear in the step).
+    pub fn step_limit(&self, model: &Model, u: &[f64], full: &[f64]) -> f64 {
+        let base = 2 * model.node_count();
+        let mut cap = 1.0f64;
+        for (b, c) in model.contacts.iter().enumerate() {
+            let depth = 0.1 * c.element_size;
+            let eps = self.penalties[b];
+            let t0 = c.first_contact + u[base + b];
+            let t1 = c.first_contact + full[base + b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let g0 = c.body.gap(model.current_position(n, u), t0).g;
+                if self.multipliers[b][k] - eps * g0 > 0.0 || g0 <= 0.0 {
+                    continue; // in contact already
+                }
+                let g1 = c.body.gap(model.current_position(n, full), t1).g;
+                if g1 < -depth {
+                    cap = cap.min((g0 + depth) / (g0 - g1));
+                }
+            }
+        }
+        cap.clamp(1e-3, 1.0)
+    }
+
+    /// Contact results of every body at state `u`.
+    pub fn body_states(&self, model: &Model, u: &[f64]) -> Vec<BodyState> {
+        let base = 2 * model.node_count();
+        model
+            .contacts
+            .iter()
+            .enumerate()
+            .map(|(b, c)| {
+                let t = c.first_contact + u[base + b];
+                let eps = self.penalties[b];
+                let mut st = BodyState {
+                    name: c.name.clone(),
+                    travel: u[base + b],
+                    penalty: eps,
+                    penetration_limit: c.penetration_tolerance * c.element_size,
+                    augmentations: self.augmentations[b],
+                    ..Default::default()
+                };
+                for (k, &n) in c.nodes.iter().enumerate() {
+                    let gap = c.body.gap(model.current_position(n, u), t);
+                    let lam = (self.multipliers[b][k] - eps * gap.g).max(0.0);
+                    st.force -= lam * gap.dg_dt;
+                    if lam > 0.0 {
+                        st.active_nodes += 1;
+                    }
+                    st.max_penetration = st.max_penetration.max(-gap.g);
+                    st.node_forces.push(lam);
+                    st.node_gaps.push(gap.g);
+                }
+                st
+            })
+            .collect()
+    }
+
+    /// The contact constraints active at the state `u` with the current multipliers: every
+    /// candidate node whose contact force `⟨λ̂ - ε g⟩₊` is positive.
+    pub fn active_constraints(&self, model: &Model, u: &[f64]) -> Vec<ActiveConstraint> {
+        let base = 2 * model.node_count();
+        let mut out = Vec::new();
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let force = self.multipliers[b][k] - eps * gap.g;
+                if force > 0.0 {
+                    out.push(ActiveConstraint {
+                        body: b,
+                        node: n,
+                        force,
+                        dg_dx: gap.dg_dx,
+                        dg_dt: gap.dg_dt,
+                    });
+                }
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,879 @@
+//! The Newton driver: load increments with a linear predictor, Newton–Raphson iterations with
+//! a contact step limit, a backtracking line search and active-set cycle detection, automatic
+//! cut-back and growth of the increments, the augmented-Lagrangian updates of the last
+//! increment, and the reports of all of it ([`SolveReport`]).
+
+use super::assembly::AssemblyError;
+use super::contact_state::ActiveSet;
+use super::{SolveError, StaticSolver};
+use crate::contact::{BodyState, TravelControl};
+use crate::model::Model;
+use femu_mesh::StepDef;
+use femu_sparse::{Factorization, LinearSolveError};
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Relative residual below which the last increment's Newton iterations make the contact
+/// multipliers' Uzawa update (see [`StaticSolver::newton`]): 1e-3 is past the active-set
+/// changes and inside the quadratic regime on the seed's tests, so the gaps the update uses are
+/// those of the converged state to a few digits.
+const EARLY_AUGMENTATION: f64 = 1e-3;
+
+/// Below this fraction of its largest secant stiffness over the step, a force-controlled
+/// body's force–travel curve counts as flattening (a limit point ahead) when the increments
+/// stall. Only a hint in the message of a solve that has already failed; a generous ratio
+/// catches the stall just before the peak (a 600-quad thigh stalls at 20 %).
+const LIMIT_POINT_STIFFNESS_RATIO: f64 = 0.25;
+
+/// The smallest force scale the residual is compared with (N): keeps the relative tests
+/// defined for an unloaded body.
+const FLOOR: f64 = 1e-300;
+
+/// One Newton iteration, as printed in the Newton table.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+pub struct IterationRecord {
+    pub iteration: usize,
+    /// ‖R‖₂ on the free dofs after the iteration's update (N).
+    pub residual_norm: f64,
+    /// The force scale the residual is compared with (N).
+    pub reference_force: f64,
+    /// |δu · R| before the update (N·mm).
+    pub energy_norm: f64,
+    /// Line-search step length α.
+    pub step_length: f64,
+    /// max |δu| (mm).
+    pub max_correction: f64,
+}
+
+/// One attempted increment.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct IncrementRecord {
+    pub increment: usize,
+    /// Load factor at the end of the increment (if converged).
+    pub lambda: f64,
+    pub dlambda: f64,
+    pub converged: bool,
+    /// Why the attempt was cut back, if it was.
+    pub failure: Option<String>,
+    pub iterations: Vec<IterationRecord>,
+    /// Travel (mm) and contact force (N/mm) of each rigid body at the end of a converged
+    /// increment: the force–displacement curve.
+    pub bodies: Vec<[f64; 2]>,
+}
+
+impl IncrementRecord {
+    /// An attempt, not yet made, of increment `increment` to the load factor `lambda`.
+    fn attempt(increment: usize, lambda: f64, dlambda: f64) -> Self {
+        IncrementRecord {
+            increment,
+            lambda,
+            dlambda,
+            converged: false,
+            failure: None,
+            iterations: Vec::new(),
+            bodies: Vec::new(),
+        }
+    }
+}
+
+/// Diagnostics of a solve.
+#[derive(Debug, Clone, Serialize, Deserialize, Default)]
+pub struct SolveReport {
+    pub increments: Vec<IncrementRecord>,
+    pub converged_increments: usize,
+    pub cutbacks: usize,
+    pub newton_iterations: usize,
+    pub factorizations: usize,
+    pub equations: usize,
+    pub matrix_nonzeros: usize,
+    /// Load factor reached (1 when the step completed).
+    pub lambda: f64,
+    /// Sum of reaction forces on the prescribed dofs (N per mm).
+    pub reaction_total: [f64; 2],
+    pub wall_time_s: f64,
+    /// Pattern, dof numbering and symbolic factorization (once per model).
+    pub setup_time_s: f64,
+    /// Time in element loops and scatter.
+    pub assembly_time_s: f64,
+    /// Time in numeric factorizations.
+    pub factorization_time_s: f64,
+    /// Time in triangular solves.
+    pub triangular_solve_time_s: f64,
+    /// Whether the solve started from a given displacement.
+    pub warm_start: bool,
+    /// The factorization of the last Newton iteration (LDLT for symmetric tangents, LU otherwise).
+    pub factorization: Option<Factorization>,
+}
+
+impl SolveReport {
+    /// The force–travel curve of rigid body `body`: `[travel (mm), force (N/mm)]` at the end of
+    /// every converged increment.
+    pub fn force_travel(&self, body: usize) -> Vec<[f64; 2]> {
+        self.increments
+            .iter()
+            .filter(|r| r.converged)
+            .filter_map(|r| r.bodies.get(body).copied())
+            .collect()
+    }
+
+    /// Counts the Newton iterations (one factorization each) of an attempt.
+    fn count(&mut self, record: &IncrementRecord) {
+        self.newton_iterations += record.iterations.len();
+        self.factorizations += record.iterations.len();
+    }
+}
+
+/// A converged (or partially converged, see [`SolveError`]) state.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// Nodal displacements, `[ux0, uy0, ux1, uy1, ...]` (mm).
+    pub u: Vec<f64>,
+    /// The whole state: `u` followed by the travel of each rigid body beyond first contact (mm).
+    pub state: Vec<f64>,
+    /// Contact results per rigid body.
+    pub bodies: Vec<BodyState>,
+    /// Reaction forces at prescribed dofs (zero elsewhere), same layout (N per mm).
+    pub reactions: Vec<f64>,
+    pub report: SolveReport,
+}
+
+/// Why one Newton attempt failed (the increment is cut back). The message goes to
+/// [`IncrementRecord::failure`].
+#[derive(Debug, Clone, thiserror::Error)]
+pub(crate) enum AttemptFailure {
+    #[error(transparent)]
+    Assembly(#[from] AssemblyError),
+    #[error(transparent)]
+    Singular(#[from] LinearSolveError),
+    #[error("non-finite Newton correction")]
+    NonFiniteCorrection,
+    #[error("line search failed at iteration {iteration} (|R| = {residual:.3e})")]
+    LineSearch { iteration: usize, residual: f64 },
+    #[error("crawling after {iterations} iterations (|R|/f = {relative:.3e}, four iterations before {before:.3e})")]
+    Crawling {
+        iterations: usize,
+        relative: f64,
+        before: f64,
+    },
+    #[error("no progress after {iterations} iterations (|R| = {residual:.3e}, first {first:.3e})")]
+    NoProgress {
+        iterations: usize,
+        residual: f64,
+        first: f64,
+    },
+    #[error("residual blew up to {residual:.3e}")]
+    BlewUp { residual: f64 },
+    #[error("{iterations} iterations without convergence (|R| = {residual:.3e}, reference force {reference:.3e})")]
+    IterationLimit {
+        iterations: usize,
+        residual: f64,
+        reference: f64,
+    },
+}
+
+/// The state vectors of the Newton driver, allocated once.
+#[derive(Debug)]
+pub(crate) struct NewtonWork {
+    /// The Newton correction on the equations.
+    du: Vec<f64>,
+    /// The line search's trial state.
+    u_trial: Vec<f64>,
+    /// The converged states of the last two increments (the predictor's).
+    u_conv: Vec<f64>,
+    u_prev: Vec<f64>,
+}
+
+impl NewtonWork {
+    pub fn new(n_eq: usize, n_dof: usize) -> Self {
+        NewtonWork {
+            du: vec![0.0; n_eq],
+            u_trial: vec![0.0; n_dof],
+            u_conv: vec![0.0; n_dof],
+            u_prev: vec![0.0; n_dof],
+        }
+    }
+}
+
+/// The increment sizes over the step: load factor reached, next increment, last converged
+/// increment, and the bounds from the deck's `*STATIC` line.
+struct Stepping {
+    lambda: f64,
+    dlambda: f64,
+    last_dlambda: f64,
+    min: f64,
+    max: f64,
+}
+
+impl Stepping {
+    fn new(step: &StepDef) -> Self {
+        let period = if step.period > 0.0 { step.period } else { 1.0 };
+        let min = (step.min_increment / period).max(1e-12);
+        let max = (step.max_increment / period).clamp(min, 1.0);
+        Stepping {
+            lambda: 0.0,
+            dlambda: (step.initial_increment / period).clamp(min, max),
+            last_dlambda: 0.0,
+            min,
+            max,
+        }
+    }
+
+    /// The load factor of the next increment. An increment that would leave a sliver of the
+    /// load (under a quarter of itself) for a last increment of its own takes the sliver too:
+    /// the last increment is the one converged fully, and a separate tiny one would cost a
+    /// whole Newton solve.
+    fn target(&self) -> f64 {
+        if self.lambda + 1.25 * self.dlambda >= 1.0 {
+            1.0
+        } else {
+            self.lambda + self.dlambda
+        }
+    }
+
+    /// The increment to `target` converged in `iterations`: the next one doubles after ≤ 2
+    /// iterations, grows by `growth` after ≤ 4, stays otherwise.
+    fn converged(&mut self, target: f64, iterations: usize, growth: f64) {
+        let dl = target - self.lambda;
+        self.lambda = target;
+        self.last_dlambda = dl;
+        self.dlambda = if iterations <= 2 {
+            (2.0 * dl).min(self.max)
+        } else if iterations <= 4 {
+            (dl * growth).min(self.max)
+        } else {
+            dl
+        };
+    }
+}
+
+/// The Newton correction of one iteration.
+struct Correction {
+    /// `δu · R` at the start of the iteration (negative for a descent direction).
+    s0: f64,
+    /// `|δu · R|`.
+    energy: f64,
+    /// `max |δu|`.
+    max_du: f64,
+}
+
+/// What the line search needs of the iteration.
+struct LineSearch {
+    iteration: usize,
+    lambda: f64,
+    last_increment: bool,
+    correction: Correction,
+    /// The energy of the increment's first correction.
+    energy0: f64,
+    /// Whether the correction is at round-off level (see [`StaticSolver::newton`]).
+    at_round_off: bool,
+    /// ‖R‖ at the start of the iteration.
+    rnorm: f64,
+}
+
+/// The step the line search accepted.
+struct AcceptedStep {
+    alpha: f64,
+    rnorm: f64,
+    fref: f64,
+    /// Whether the tangent was assembled at the new state.
+    tangent_at_u: bool,
+    /// The active set at the start of the iteration.
+    active_before: ActiveSet,
+}
+
+/// `δu · R(u)` with `rhs = -R` on the equations.
+fn directional(du: &[f64], rhs: &[f64]) -> f64 {
+    -du.iter().zip(rhs).map(|(a, b)| a * b).sum::<f64>()
+}
+
+impl StaticSolver {
+    /// Solves the step of `model` from zero displacement.
+    pub fn solve(&mut self, model: &Model) -> Result<Solution, SolveError> {
+        self.solve_with(model, None, &mut |_| {})
+    }
+
+    /// Solves the step; `initial` (2 per node) is a warm start tried at the full load first
+    /// (the identification calls the solver many times with nearby parameters); `on_increment`
+    /// is called after every attempted increment (progress lines).
+    pub fn solve_with(
+        &mut self,
+        model: &Model,
+        initial: Option<&[f64]>,
+        on_increment: &mut dyn FnMut(&IncrementRecord),
+    ) -> Result<Solution, SolveError> {
+        let t0 = Instant::now();
+        self.assembly.time_s = 0.0;
+        self.factor.reset_timers();
+        let mut report = SolveReport {
+            equations: self.assembly.dofs.n_eq,
+            matrix_nonzeros: self.assembly.pattern.nnz(),
+            setup_time_s: self.setup_time_s,
+            ..Default::default()
+        };
+        let mut u = vec![0.0; model.state_len()];
+        // A warm start keeps the contact penalties and multipliers of the previous solve (the
+        // contact forces of a nearby state), so that few augmentations remain.
+        let keep_contact = initial.is_some() && self.contact.has_penalties();
+        if !keep_contact {
+            self.init_contact(model).map_err(SolveError::Undeformed)?;
+        }
+        if let Some(u0) = initial {
+            if self.warm_start(model, u0, &mut u, &mut report, on_increment) {
+                report.lambda = 1.0;
+                report.wall_time_s = t0.elapsed().as_secs_f64();
+                return Ok(self.solution(model, &u, report));
+            }
+            u.fill(0.0);
+            self.init_contact(model).map_err(SolveError::Undeformed)?;
+        }
+        self.increments(model, &mut u, &mut report, on_increment, t0)?;
+        report.lambda = 1.0;
+        report.wall_time_s = t0.elapsed().as_secs_f64();
+        Ok(self.solution(model, &u, report))
+    }
+
+    /// Newton at the full load from `u0` (2 per node, or the whole state); whether it
+    /// converged (`u` then holds the solution). A failure counts as a cut-back.
+    fn warm_start(
+        &mut self,
+        model: &Model,
+        u0: &[f64],
+        u: &mut Vec<f64>,
+        report: &mut SolveReport,
+        on_increment: &mut dyn FnMut(&IncrementRecord),
+    ) -> bool {
+        report.warm_start = true;
+        let k = u0.len().min(u.len());
+        u[..k].copy_from_slice(&u0[..k]);
+        self.assembly.dofs.set_prescribed(u, 1.0);
+        let mut rec = IncrementRecord::attempt(1, 1.0, 1.0);
+        let outcome = self.newton_augmented(model, u, 1.0, &mut rec);
+        rec.converged = outcome.is_ok();
+        rec.failure = outcome.as_ref().err().map(|e| format!("warm start: {e}"));
+        report.count(&rec);
+        on_increment(&rec);
+        report.increments.push(rec);
+        if outcome.is_ok() {
+            report.converged_increments = 1;
+        } else {
+            report.cutbacks += 1;
+        }
+        outcome.is_ok()
+    }
+
+    /// The load increments from λ = 0 to 1 (`u` zero), cut back on failure; on success `u`
+    /// holds the solution.
+    fn increments(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        report: &mut SolveReport,
+        on_increment: &mut dyn FnMut(&IncrementRecord),
+        t0: Instant,
+    ) -> Result<(), SolveError> {
+        let step = model.step;
+        let mut stepping = Stepping::new(&step);
+        self.work.u_conv.fill(0.0);
+        self.work.u_prev.fill(0.0);
+        let mut increment = 0;
+        let mut attempts = 0;
+        while stepping.lambda < 1.0 - 1e-12 {
+            attempts += 1;
+            let max = step.max_increments.max(1);
+            if report.converged_increments >= max || attempts > 10 * max {
+                report.lambda = stepping.lambda;
+                report.wall_time_s = t0.elapsed().as_secs_f64();
+                let u_conv = self.work.u_conv.clone();
+                let partial = Box::new(self.solution(model, &u_conv, std::mem::take(report)));
+                return Err(SolveError::TooManyIncrements {
+                    max: step.max_increments,
+                    lambda: stepping.lambda,
+                    partial,
+                });
+            }
+            increment += 1;
+            let target = stepping.target();
+            let dl = target - stepping.lambda;
+            self.predict(u, dl, stepping.last_dlambda, target);
+            let mut rec = IncrementRecord::attempt(increment, target, dl);
+            let mut outcome = self.newton_augmented(model, u, target, &mut rec);
+            if outcome.is_err() && stepping.last_dlambda > 0.0 && rec.iterations.is_empty() {
+                // The extrapolated predictor inverted an element: retry from the last state.
+                u.copy_from_slice(&self.work.u_conv);
+                self.assembly.dofs.set_prescribed(u, target);
+                outcome = self.newton_augmented(model, u, target, &mut rec);
+            }
+            report.count(&rec);
+            match outcome {
+                Ok(()) => {
+                    rec.converged = true;
+                    let iterations = rec.iterations.len();
+                    on_increment(&rec);
+                    report.increments.push(rec);
+                    report.converged_increments += 1;
+                    std::mem::swap(&mut self.work.u_prev, &mut self.work.u_conv);
+                    self.work.u_conv.copy_from_slice(u);
+                    stepping.converged(target, iterations, self.options.growth);
+                }
+                Err(failure) => {
+                    rec.failure = Some(failure.to_string());
+                    on_increment(&rec);
+                    report.increments.push(rec);
+                    report.cutbacks += 1;
+                    stepping.dlambda = dl * self.options.cutback;
+                    if stepping.dlambda < stepping.min {
+                        return Err(self.stalled(model, &stepping, failure, report, t0));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The predictor of an increment `dl` to `target`: the last converged state extrapolated
+    /// linearly along the last converged increment `last_dl` (if any), prescribed dofs set.
+    fn predict(&self, u: &mut [f64], dl: f64, last_dl: f64, target: f64) {
+        let work = &self.work;
+        u.copy_from_slice(&work.u_conv);
+        if last_dl > 0.0 {
+            let s = dl / last_dl;
+            for d in 0..u.len() {
+                u[d] += s * (work.u_conv[d] - work.u_prev[d]);
+            }
+        }
+        self.assembly.dofs.set_prescribed(u, target);
+    }
+
+    /// The error of a solve whose increment fell below the minimum: the last converged state
+    /// (re-assembled, so that the reactions are consistent), with a limit-point hint.
+    fn stalled(
+        &mut self,
+        model: &Model,
+        stepping: &Stepping,
+        failure: AttemptFailure,
+        report: &mut SolveReport,
+        t0: Instant,
+    ) -> SolveError {
+        let uc = self.work.u_conv.clone();
+        let _ = self.assemble(model, &uc, stepping.lambda, false);
+        report.lambda = stepping.lambda;
+        report.wall_time_s = t0.elapsed().as_secs_f64();
+        let mut reason = failure.to_string();
+        if let Some(hint) = limit_point_hint(model, report) {
+            reason.push_str("; ");
+            reason.push_str(&hint);
+        }
+        let partial = Box::new(self.solution(model, &uc, std::mem::take(report)));
+        SolveError::NotConverged {
+            reason,
+            lambda: stepping.lambda,
+            dlambda: stepping.dlambda,
+            min: stepping.min,
+            partial,
+        }
+    }
+
+    /// Newton at load factor `lambda`, then (at the end of the step) augmented-Lagrangian
+    /// updates of the contact multipliers and Newton again until every body's penetration is
+    /// within its limit (at most 20 updates). Records the bodies' travel and force on success;
+    /// restores the multipliers on failure.
+    fn newton_augmented(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        lambda: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<(), AttemptFailure> {
+        let saved: Vec<Vec<f64>> = self.contact.multipliers().to_vec();
+        match self.newton_then_augment(model, u, lambda, record) {
+            Ok(()) => {
+                record.bodies = self
+                    .contact
+                    .body_states(model, u)
+                    .iter()
+                    .map(|b| [b.travel, b.force])
+                    .collect();
+                Ok(())
+            }
+            Err(e) => {
+                self.contact.restore_multipliers(saved);
+                Err(e)
+            }
+        }
+    }
+
+    /// See [`Self::newton_augmented`]. The penetration limit is enforced on the final state
+    /// only: intermediate increments carry the penalty's own (small) penetration, which saves
+    /// the Uzawa re-solves there.
+    fn newton_then_augment(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        lambda: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<(), AttemptFailure> {
+        self.newton(model, u, lambda, record)?;
+        if lambda < 1.0 - 1e-12 {
+            return Ok(());
+        }
+        for _ in 0..20 {
+            if !self.contact.augment(model, u) {
+                break;
+            }
+            self.newton(model, u, lambda, record)?;
+        }
+        Ok(())
+    }
+
+    /// Newton iterations at load factor `lambda` starting from `u` (prescribed dofs already
+    /// set).
+    fn newton(
+        &mut self,
+        model: &Model,
+        u: &mut Vec<f64>,
+        lambda: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<(), AttemptFailure> {
+        let opt = self.options;
+        let last_increment = lambda >= 1.0 - 1e-12;
+        self.assemble(model, u, lambda, true)?;
+        let (mut rnorm, mut fref) = self.norms();
+        let mut energy0 = 0.0;
+        let mut first_residual = f64::INFINITY;
+        // Active sets of the states the accepted steps started from (cycle detection).
+        let mut set_history: Vec<ActiveSet> = Vec::new();
+        // Whether the tangent values are at `u` (see `SolverOptions::final_tangent`).
+        let mut tangent_at_u = true;
+        for it in 0..opt.max_iterations {
+            if it == 0 && rnorm <= opt.residual_tolerance * fref.max(FLOOR) * 1e-3 {
+                return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
+            }
+            if !tangent_at_u {
+                self.assemble(model, u, lambda, true)?;
+            }
+            let correction = self.correction(it, fref, record)?;
+            let energy = correction.energy;
+            if it == 0 {
+                energy0 = energy.max(FLOOR);
+            }
+            let max_du = correction.max_du;
+            // A correction whose energy is at round-off level (1e-15 of the first) cannot
+            // improve the state: the residual has reached the floor of floating-point
+            // arithmetic for this problem (e.g. small forces on stiff penalty contact).
+            let at_round_off = it > 0 && energy <= 1e-15 * energy0;
+            let search = LineSearch {
+                iteration: it,
+                lambda,
+                last_increment,
+                correction,
+                energy0,
+                at_round_off,
+                rnorm,
+            };
+            let step = self.line_search(model, u, &search, &set_history)?;
+            (rnorm, fref, tangent_at_u) = (step.rnorm, step.fref, step.tangent_at_u);
+            std::mem::swap(u, &mut self.work.u_trial);
+            set_history.push(step.active_before);
+            let last = record
+                .iterations
+                .last_mut()
+                .expect("pushed by `correction`");
+            last.residual_norm = rnorm;
+            last.reference_force = fref;
+            last.energy_norm = energy;
+            last.step_length = step.alpha;
+            last.max_correction = step.alpha * max_du;
+            let res_ok = rnorm <= opt.residual_tolerance * fref.max(FLOOR);
+            // The last increment's augmented-Lagrangian updates are made inside its Newton
+            // iterations, as soon as the iterate is close to equilibrium (the quadratic regime,
+            // contact set settled): the iterations that follow then converge the state and the
+            // multipliers together, instead of converging the state, updating, and converging
+            // again (two iterations fewer per update). `newton_augmented` still checks the
+            // penetration of the converged state.
+            if last_increment
+                && !res_ok
+                && rnorm <= EARLY_AUGMENTATION * fref.max(FLOOR)
+                && self.contact.augment(model, u)
+            {
+                self.assemble(model, u, lambda, true)?;
+                (rnorm, fref) = self.norms();
+                if it == 0 {
+                    first_residual = rnorm;
+                }
+                continue;
+            }
+            let energy_ok =
+                energy * step.alpha <= opt.energy_tolerance * energy0 || it == 0 && res_ok;
+            let intermediate_ok = !last_increment
+                && rnorm
+                    <= opt.intermediate_tolerance.max(opt.residual_tolerance) * fref.max(FLOOR);
+            let stagnated =
+                rnorm <= 1e-3 * opt.residual_tolerance * fref.max(FLOOR) || at_round_off;
+            if (res_ok && energy_ok) || stagnated || intermediate_ok {
+                return Ok(());
+            }
+            if it == 0 {
+                first_residual = rnorm;
+            }
+            check_progress(it, rnorm, fref, first_residual, record)?;
+        }
+        Err(AttemptFailure::IterationLimit {
+            iterations: opt.max_iterations,
+            residual: rnorm,
+            reference: fref,
+        })
+    }
+
+    /// Factorizes the tangent assembled last and solves for the Newton correction `δu` (into
+    /// the work vector); records the iteration (its results are filled in after the step).
+    fn correction(
+        &mut self,
+        it: usize,
+        fref: f64,
+        record: &mut IncrementRecord,
+    ) -> Result<Correction, AttemptFailure> {
+        let (assembly, work) = (&self.assembly, &mut self.work);
+        self.factor
+            .factorize(&assembly.pattern, &assembly.system.values)?;
+        record.iterations.push(IterationRecord {
+            iteration: it + 1,
+            residual_norm: f64::NAN,
+            reference_force: fref,
+            energy_norm: 0.0,
+            step_length: 1.0,
+            max_correction: 0.0,
+        });
+        work.du.copy_from_slice(&assembly.system.rhs);
+        self.factor.solve_many(&mut work.du, 1);
+        let s0 = directional(&work.du, &assembly.system.rhs);
+        let max_du = work.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        if !max_du.is_finite() {
+            return Err(AttemptFailure::NonFiniteCorrection);
+        }
+        Ok(Correction {
+            s0,
+            energy: s0.abs(),
+            max_du,
+        })
+    }
+
+    /// The step along the correction: from the contact step limit, halved on an inverted
+    /// element or an active-set 2-cycle, and (with [`super::SolverOptions::line_search`])
+    /// shortened until the directional residual has dropped enough (Crisfield's 0.8). The
+    /// accepted state is left in the trial work vector.
+    fn line_search(
+        &mut self,
+        model: &Model,
+        u: &[f64],
+        search: &LineSearch,
+        set_history: &[ActiveSet],
+    ) -> Result<AcceptedStep, AttemptFailure> {
+        let opt = self.options;
+        let correction = &search.correction;
+        // A full step that drives a free skin node deep into a rigid body meets the stiff
+        // penalty there with a huge residual, and the next step swings back (active-set
+        // chattering on coarse meshes). Cap the step so that no node that is free now ends
+        // deeper than a tenth of the element size (gaps linear along the step).
+        let alpha_cap = self.contact_step_limit(model, u);
+        let mut alpha = alpha_cap;
+        let active_before = self.contact.active_set();
+        let mut halved_cycle = false;
+        for _ in 0..8 {
+            let mut trial = std::mem::take(&mut self.work.u_trial);
+            self.assembly
+                .dofs
+                .add_free(u, alpha, &self.work.du, &mut trial);
+            // A step that passes the energy test ends the increment if its residual passes
+            // too: its tangent is then only needed at the end of the last increment, and
+            // only if asked for.
+            let may_end = search.iteration > 0
+                && correction.energy * alpha <= opt.energy_tolerance * search.energy0;
+            let with_tangent = !may_end || (search.last_increment && opt.final_tangent);
+            let res = self.assemble(model, &trial, search.lambda, with_tangent);
+            self.work.u_trial = trial;
+            match res {
+                Err(AssemblyError::Inverted { .. }) if opt.line_search => {
+                    alpha *= 0.5;
+                    continue;
+                }
+                Err(e) => return Err(e.into()),
+                Ok(()) => {}
+            }
+            let (rnorm, fref) = self.norms();
+            let active = self.contact.active_set();
+            let step = AcceptedStep {
+                alpha,
+                rnorm,
+                fref,
+                tangent_at_u: with_tangent,
+                active_before,
+            };
+            // In the first iterations a full step that changes the contact active set is
+            // taken as it is: the residual jump comes from the new contacts, whose stiffness
+            // the next tangent includes (semi-smooth Newton); damping it would creep in tiny
+            // steps. Later, the line search applies again, which breaks active-set cycles.
+            // A full step that returns to the active set of two iterations ago is a
+            // semismooth-Newton 2-cycle (one node toggling between contact and free): take
+            // half the step instead, which lands near the kink the cycle jumps over.
+            let cycling = !halved_cycle
+                && active != active_before
+                && set_history.len() >= 2
+                && set_history[set_history.len() - 2] == active;
+            if cycling {
+                halved_cycle = true;
+                alpha *= 0.5;
+                continue;
+            }
+            let new_contacts =
+                search.iteration < 4 && alpha == alpha_cap && active != active_before;
+            if !opt.line_search
+                || rnorm < search.rnorm
+                || !rnorm.is_finite()
+                || search.at_round_off
+                || new_contacts
+            {
+                if rnorm.is_finite() {
+                    return Ok(step);
+                }
+                break;
+            }
+            // s(α) = δu · R(u + α δu); accept when it dropped enough (Crisfield 0.8).
+            let s = directional(&self.work.du, &self.assembly.system.rhs);
+            if s.abs() <= 0.8 * correction.s0.abs() || alpha < 0.02 {
+                return Ok(step);
+            }
+            let ratio = if (correction.s0 - s).abs() > 0.0 {
+                correction.s0 / (correction.s0 - s)
+            } else {
+                0.5
+            };
+            alpha *= ratio.clamp(0.1, 0.9);
+        }
+        Err(AttemptFailure::LineSearch {
+            iteration: search.iteration + 1,
+            residual: search.rnorm,
+        })
+    }
+
+    /// The largest step length in (0, 1] along the current correction for which no contact
+    /// node that is free at `u` penetrates its body deeper than 0.1 element size; 1 without
+    /// contact. The full step is formed in the trial work vector.
+    fn contact_step_limit(&mut self, model: &Model, u: &[f64]) -> f64 {
+        if model.contacts.is_empty() {
+            return 1.0;
+        }
+        let work = &mut self.work;
+        self.assembly
+            .dofs
+            .add_free(u, 1.0, &work.du, &mut work.u_trial);
+        self.contact.step_limit(model, u, &work.u_trial)
+    }
+
+    /// The solution at `u` with the reactions of the last assembly and the solver's timers.
+    pub(super) fn solution(&self, model: &Model, u: &[f64], report: SolveReport) -> Solution {
+        let n = 2 * model.node_count();
+        let reactions = self.assembly.system.reactions(&self.assembly.dofs);
+        let mut report = report;
+        report.factorization = self.factor.last();
+        report.assembly_time_s = self.assembly.time_s;
+        report.factorization_time_s = self.factor.factorization_time_s;
+        report.triangular_solve_time_s = self.factor.solve_time_s;
+        report.reaction_total = [
+            reactions[..n].iter().step_by(2).sum(),
+            reactions[..n].iter().skip(1).step_by(2).sum(),
+        ];
+        Solution {
+            u: u[..n].to_vec(),
+            state: u.to_vec(),
+            bodies: self.contact.body_states(model, u),
+            reactions: reactions[..n].to_vec(),
+            report,
+        }
+    }
+}
+
+/// Gives up on an iteration that makes no headway: crawling (nine or more iterations and the
+/// relative residual not halved over the last four), no progress over the first residual after
+/// eight, or a residual blowing up.
+///
+/// A Newton that has found its basin converges quadratically; one that crawls (a nearly
+/// singular tangent in a region the load step jumped into, e.g. a fold forming at a plate's
+/// edge under a large increment) rarely recovers in the iterations left, and a cut-back is
+/// cheaper than waiting for the limit.
+fn check_progress(
+    it: usize,
+    rnorm: f64,
+    fref: f64,
+    first_residual: f64,
+    record: &IncrementRecord,
+) -> Result<(), AttemptFailure> {
+    let n_it = record.iterations.len();
+    if it >= 8 && n_it >= 5 {
+        let old = &record.iterations[n_it - 5];
+        let then = old.residual_norm / old.reference_force.max(FLOOR);
+        if rnorm / fref.max(FLOOR) > 0.5 * then {
+            return Err(AttemptFailure::Crawling {
+                iterations: it + 1,
+                relative: rnorm / fref.max(FLOOR),
+                before: then,
+            });
+        }
+    }
+    if it >= 7 && rnorm > first_residual {
+        return Err(AttemptFailure::NoProgress {
+            iterations: it + 1,
+            residual: rnorm,
+            first: first_residual,
+        });
+    }
+    if !rnorm.is_finite() || rnorm > 1e10 * fref.max(1e-12) {
+        return Err(AttemptFailure::BlewUp { residual: rnorm });
+    }
+    Ok(())
+}
+
+/// Explains a stalled force-controlled solve whose force–travel curve has flattened: at a
+/// limit point the body's force cannot grow any further on this mesh (for example a coarse
+/// skin folding around an indenter: the node-to-surface contact lets the facets between
+/// contact nodes sag into the body), so there is no equilibrium at the requested force and
+/// no Newton safeguard can find one. `None` if no force-controlled body's curve is flat.
+///
+/// The secant stiffness `ΔF/Δt` between consecutive converged increments is compared with the
+/// largest over the step; the last one below [`LIMIT_POINT_STIFFNESS_RATIO`] of it is a limit
+/// point.
+fn limit_point_hint(model: &Model, report: &SolveReport) -> Option<String> {
+    for (b, c) in model.contacts.iter().enumerate() {
+        let TravelControl::Force(target) = c.control else {
+            continue;
+        };
+        let curve = report.force_travel(b);
+        let secants: Vec<f64> = curve
+            .windows(2)
+            .filter(|w| (w[1][0] - w[0][0]).abs() > 1e-12)
+            .map(|w| (w[1][1] - w[0][1]) / (w[1][0] - w[0][0]))
+            .collect();
+        let (Some(&last), Some(&[travel, force])) = (secants.last(), curve.last()) else {
+            continue;
+        };
+        let largest = secants.iter().fold(0.0f64, |m, &k| m.max(k));
+        if largest > 0.0 && last < LIMIT_POINT_STIFFNESS_RATIO * largest {
+            let trend = if last <= 0.0 {
+                "turned down".to_string()
+            } else {
+                format!(
+                    "flattened to {:.0} % of its largest stiffness",
+                    100.0 * last / largest
+                )
+            };
+            return Some(format!(
+                "the force–travel curve of rigid body '{}' {trend} at travel {travel:.3} mm, \
+                 force {force:.4} N/mm of the {target} requested: most likely a limit point, \
+                 beyond which this model cannot carry more force (on a coarse mesh the skin \
+                 facets fold around a rigid body); refine the mesh under the body, lower the \
+                 force, or prescribe the travel instead",
+                c.name
+            ));
+        }
+    }
+    None
+}

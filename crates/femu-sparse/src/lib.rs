@@ -1,0 +1,36 @@
+//! Sparse direct solvers for `femu`, knowing nothing of mechanics: a square matrix on a
+//! compressed-sparse-column pattern built once (from the node graph of a mesh with two unknowns
+//! per node, optionally bordered by a few dense equations), factorized many times.
+//!
+//! - [`linear`]: the pattern ([`CscPattern`], [`NodeGraph`]: sparsity, AMD ordering), faer's
+//!   supernodal LDLᵀ and sparse LU with their symbolic analyses and workspaces reused, and
+//!   [`SparseSolver`], which checks the symmetry of each matrix and factorizes it by LDLᵀ when
+//!   symmetric, by LU otherwise.
+//! - [`split`]: the LDLᵀ of a bisected mesh by halves on two cores, coupled through a dense
+//!   Schur complement on the separator ([`SplitLdlt`]; the first level of nested dissection).
+//! - [`supernodal`]: faer's left-looking supernodal LDLᵀ stopped at the separator
+//!   ([`PartialLdlt`]), the only call into `private-gemm-x86` (unsafe, see below).
+//! - [`simd`]: [`with_avx2`], a safe run-time dispatch that runs a hot loop in a copy compiled
+//!   for AVX2 when the CPU has it (used by the triangular solves here and by femu-mech's
+//!   element loop), with the same results to the bit.
+//!
+//! **Unsafe code** is denied in this crate except in two places, each allowed item by item with
+//! a `SAFETY` note on every block: the AVX2 call in [`simd`] (the CPU feature is checked first)
+//! and the supernodal update kernel in [`supernodal`] (bounds asserted before the call). Every
+//! other crate of the workspace that needs none forbids it.
+
+#![deny(unsafe_code)]
+#![deny(clippy::undocumented_unsafe_blocks)]
+
+pub mod linear;
+pub mod simd;
+pub mod split;
+pub mod supernodal;
+
+pub use linear::{
+    CscPattern, Factorization, LinearSolveError, NodeGraph, SparseLdlt, SparseLu, SparseSolver,
+    MAX_RHS,
+};
+pub use simd::{has_avx2, with_avx2};
+pub use split::{DofSplit, SplitLdlt};
+pub use supernodal::{LowerView, PartialLdlt};
