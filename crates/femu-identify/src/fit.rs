@@ -71,6 +71,25 @@ pub enum FitError {
     Interrupted,
 }
 
+/// A weighted least-squares problem in log-parameters `φ = ln θ`: what the optimizers
+/// ([`levenberg_marquardt`], [`bfgs`]) minimize, `½|r(φ)|²`. FEMU on a measured field
+/// ([`Problem`]) is one; any other residual (several measurements at once, grey levels) with an
+/// exact Jacobian can be another.
+pub trait LeastSquares {
+    /// The free parameters: names and bounds (model units).
+    fn free(&self) -> &[FreeParameter];
+    /// The weighted residuals at `phi` and, if asked, the Jacobian columns `∂r/∂φ_k`. A forward
+    /// model that fails at `phi` (Newton diverging at extreme parameters) is a
+    /// [`FitError::Solve`], which the optimizers treat as a rejected step.
+    fn evaluate(
+        &mut self,
+        phi: &[f64],
+        jacobian: bool,
+    ) -> Result<(Vec<f64>, Option<Columns>), FitError>;
+    /// Forward solves and Jacobian evaluations so far.
+    fn counts(&self) -> (usize, usize);
+}
+
 /// The model, its solver and the measurement, ready for repeated evaluations.
 pub struct Problem {
     model: Model,
@@ -212,10 +231,6 @@ impl Problem {
         (self.locations.len(), self.masked)
     }
 
-    pub fn free(&self) -> &[FreeParameter] {
-        &self.free
-    }
-
     pub fn model(&self) -> &Model {
         &self.model
     }
@@ -240,7 +255,7 @@ impl Problem {
 
     /// Weighted residuals `√w (u_model - u_measured)` at `phi` and, if asked, the Jacobian
     /// columns `∂r/∂φ_k`.
-    pub fn evaluate(
+    fn residuals(
         &mut self,
         phi: &[f64],
         jacobian: bool,
@@ -321,6 +336,24 @@ impl Problem {
     }
 }
 
+impl LeastSquares for Problem {
+    fn free(&self) -> &[FreeParameter] {
+        &self.free
+    }
+
+    fn evaluate(
+        &mut self,
+        phi: &[f64],
+        jacobian: bool,
+    ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
+        self.residuals(phi, jacobian)
+    }
+
+    fn counts(&self) -> (usize, usize) {
+        (self.forward_solves, self.jacobians)
+    }
+}
+
 /// Options of [`levenberg_marquardt`].
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct LmOptions {
@@ -383,8 +416,8 @@ impl FitResult {
     /// The fields every optimizer fills the same way: parameters from the log-parameters
     /// `phi`, the start, the forward solves and Jacobians since (`solves0`, `jac0`), the wall
     /// time since `t0`; the rest empty, for the optimizer to set.
-    fn started(
-        problem: &Problem,
+    fn started<P: LeastSquares + ?Sized>(
+        problem: &P,
         start: &[f64],
         phi: &[f64],
         solves0: usize,
@@ -396,8 +429,8 @@ impl FitResult {
             start: start.to_vec(),
             cost: f64::NAN,
             iterations: 0,
-            forward_solves: problem.forward_solves - solves0,
-            jacobians: problem.jacobians - jac0,
+            forward_solves: problem.counts().0 - solves0,
+            jacobians: problem.counts().1 - jac0,
             converged: false,
             reason: String::new(),
             history: Vec::new(),
@@ -413,14 +446,14 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Minimizes the cost of `problem` from `start` (model units, one per free parameter).
-pub fn levenberg_marquardt(
-    problem: &mut Problem,
+pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
+    problem: &mut P,
     start: &[f64],
     opts: &LmOptions,
 ) -> Result<FitResult, FitError> {
     let t0 = Instant::now();
-    let n = problem.free.len();
-    for (f, &s) in problem.free.iter().zip(start) {
+    let n = problem.free().len();
+    for (f, &s) in problem.free().iter().zip(start) {
         if !(s >= f.lower && s <= f.upper) {
             return Err(FitError::StartOutside {
                 name: f.name.clone(),
@@ -430,10 +463,9 @@ pub fn levenberg_marquardt(
             });
         }
     }
-    let lo: Vec<f64> = problem.free.iter().map(|f| f.lower.ln()).collect();
-    let hi: Vec<f64> = problem.free.iter().map(|f| f.upper.ln()).collect();
-    let solves0 = problem.forward_solves;
-    let jac0 = problem.jacobians;
+    let lo: Vec<f64> = problem.free().iter().map(|f| f.lower.ln()).collect();
+    let hi: Vec<f64> = problem.free().iter().map(|f| f.upper.ln()).collect();
+    let (solves0, jac0) = problem.counts();
     let mut phi: Vec<f64> = start.iter().map(|s| s.ln()).collect();
     let (mut r, j) = problem.evaluate(&phi, true)?;
     let mut j = j.expect("asked");
@@ -452,7 +484,7 @@ pub fn levenberg_marquardt(
         let g: Vec<f64> = (0..n).map(|p| dot(&j[p], &r)).collect();
         if let Some(p) = (0..n).find(|&p| !(a[p][p] > 0.0)) {
             return Err(FitError::Unidentifiable {
-                name: problem.free[p].name.clone(),
+                name: problem.free()[p].name.clone(),
                 norm: a[p][p].max(0.0).sqrt(),
             });
         }
@@ -473,7 +505,7 @@ pub fn levenberg_marquardt(
             .fold(0.0f64, f64::max);
         if !max_step.is_finite() {
             return Err(FitError::Unidentifiable {
-                name: problem.free[0].name.clone(),
+                name: problem.free()[0].name.clone(),
                 norm: f64::NAN,
             });
         }
@@ -635,22 +667,21 @@ pub enum Gradient {
 /// BFGS on `½|r|²` in log-parameters with a projected backtracking (Armijo) line search — the
 /// seed's optimizer (§2.1.3), kept to compare with [`levenberg_marquardt`]. Stops when the
 /// largest step is below `opts.step_tolerance` or the cost stalls.
-pub fn bfgs(
-    problem: &mut Problem,
+pub fn bfgs<P: LeastSquares + ?Sized>(
+    problem: &mut P,
     start: &[f64],
     gradient: Gradient,
     opts: &LmOptions,
     max_iterations: usize,
 ) -> Result<FitResult, FitError> {
     let t0 = Instant::now();
-    let n = problem.free.len();
-    let lo: Vec<f64> = problem.free.iter().map(|f| f.lower.ln()).collect();
-    let hi: Vec<f64> = problem.free.iter().map(|f| f.upper.ln()).collect();
-    let solves0 = problem.forward_solves;
-    let jac0 = problem.jacobians;
+    let n = problem.free().len();
+    let lo: Vec<f64> = problem.free().iter().map(|f| f.lower.ln()).collect();
+    let hi: Vec<f64> = problem.free().iter().map(|f| f.upper.ln()).collect();
+    let (solves0, jac0) = problem.counts();
     let mut phi: Vec<f64> = start.iter().map(|s| s.ln()).collect();
     // Cost and gradient at phi.
-    let eval = |p: &mut Problem, phi: &[f64]| -> Result<(f64, Vec<f64>, Vec<f64>), FitError> {
+    let eval = |p: &mut P, phi: &[f64]| -> Result<(f64, Vec<f64>, Vec<f64>), FitError> {
         match gradient {
             Gradient::Exact => {
                 let (r, j) = p.evaluate(phi, true)?;

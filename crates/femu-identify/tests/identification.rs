@@ -4,7 +4,9 @@
 //! Latin-hypercube starts.
 
 use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
-use femu_identify::fit::{latin_hypercube, levenberg_marquardt, FreeParameter, LmOptions, Problem};
+use femu_identify::fit::{
+    latin_hypercube, levenberg_marquardt, FreeParameter, LeastSquares, LmOptions, Problem,
+};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::loading::{apply_loading, Loading};
 use femu_mech::sensitivity::all_parameters;
