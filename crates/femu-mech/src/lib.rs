@@ -1,6 +1,7 @@
 //! Finite-strain plane-strain solid mechanics for `femu`.
 //!
-//! - [`material`]: compressible Neo-Hookean (Abaqus form, seed Eq. 1), stress and tangent.
+//! - [`material`]: the registry of hyperelastic laws (compressible Neo-Hookean, seed Eq. 1;
+//!   Mooney–Rivlin; Yeoh; Abaqus forms), their parameters, stress and tangent.
 //! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
 //! - [`load`]: follower pressure with load stiffness.
 //! - [`model`]: a checked model built from a resolved deck.
@@ -26,6 +27,6 @@ pub mod solver;
 pub mod split;
 pub mod supernodal;
 
-pub use material::{Hyperelastic, NeoHookean};
+pub use material::{Hyperelastic, Material, MaterialLaw, MooneyRivlin, NeoHookean, Yeoh};
 pub use model::{Model, ModelError};
 pub use solver::{Solution, SolveError, SolveReport, SolverOptions, StaticSolver};

@@ -9,7 +9,7 @@
 //! `‖R‖₂ ≤ itol · max(...)` (see [`SolverOptions::intermediate_tolerance`]).
 
 use crate::contact::{BodyState, TravelControl};
-use crate::element::{evaluate_neo_hookean, ElementResult, MAX_DOFS};
+use crate::element::{ElementResult, MAX_DOFS};
 use crate::linear::{CscPattern, Factorization, LinearSolveError, NodeGraph, TangentSolver};
 use crate::model::Model;
 use crate::split::DofSplit;
@@ -778,7 +778,7 @@ impl StaticSolver {
                     force: fe,
                     stiffness: with_tangent.then_some(ke),
                 };
-                if let Err(j) = evaluate_neo_hookean(geo, mat, &ue[..geo.n_nodes], &mut out) {
+                if let Err(j) = mat.evaluate_element(geo, &ue[..geo.n_nodes], &mut out) {
                     return Some((e, j.0));
                 }
                 None
