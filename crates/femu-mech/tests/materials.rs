@@ -179,10 +179,11 @@ fn element_force_and_stiffness_of_every_law_match_finite_differences() {
 /// `∂f_e/∂θ_k` ([`Material::rate_forces`]) against central differences of the element force in
 /// θ_k, for every parameter of every law and every element type. The force is linear in the
 /// C's (no truncation error) and in 1/D: the fourth-order stencil with a step of 1e-2 of the
-/// parameter's size leaves ~1e-8 truncation for D; at the strains of 10-40 % used here the
-/// weakest term (C30) moves the force by more than 1e-3 of itself, so round-off stays ~1e-8
-/// relative, below the 1e-7 asserted. This also checks each parameter's declared energy part, which the CPE4H rate
-/// uses.
+/// parameter's size leaves ~1e-8 truncation for D. The displacements reach half the element's
+/// size (strains up to about 50 %, elements kept uninverted) so that the weakest term (C30,
+/// cubic in I1bar - 3) moves the force well above round-off: with displacements of a quarter
+/// it did not (errors up to 1.3e-7 on a C30 rate of 1e-6). This also checks each parameter's
+/// declared energy part, which the CPE4H rate uses.
 #[test]
 fn parameter_rates_of_every_law_match_finite_differences() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(29);
@@ -191,8 +192,7 @@ fn parameter_rates_of_every_law_match_finite_differences() {
         let count = mat.spec().parameters.len();
         for kind in [ElementKind::Cpe4, ElementKind::Cpe4h, ElementKind::Cpe3] {
             for _ in 0..5 {
-                // Strains of 10-40 %: enough for the cubic Yeoh term to move the force by more
-                // than round-off.
+                // Large enough for the cubic Yeoh term (see above).
                 let (geo, u) = random_element(kind, 0.5, &mut rng);
                 let nd = 2 * geo.n_nodes;
                 let mut rates = vec![f64::NAN; count * MAX_DOFS];
