@@ -16,7 +16,7 @@ use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use femu_geometry::{
     contention_deck, mesh_label_image, parametric_thigh, quality_report, read_label_image,
-    write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec, Material,
+    table1_materials, write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec,
     MeshOptions, QualityReport, ThighModel, ThighParams, CONTENTION_MPA, TABLE1,
 };
 use serde::Serialize;
@@ -191,7 +191,7 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
     let mesh_s = t0.elapsed().as_secs_f64();
     write_model_folder(
         &model,
-        &Material::table1(),
+        &table1_materials(),
         input,
         kind,
         command,
@@ -206,7 +206,7 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
 #[allow(clippy::too_many_arguments)]
 pub fn write_model_folder(
     model: &ThighModel,
-    materials: &[Material],
+    materials: &[femu_mesh::MaterialDef],
     input: serde_json::Value,
     kind: femu_mesh::ElementKind,
     command: &str,

@@ -379,16 +379,8 @@ fn write_model(
     let kind = plan.element.kind();
     match (&built.thigh, &plan.geometry) {
         (Some(thigh), geometry) => {
-            let materials: Vec<femu_geometry::Material> = built
-                .model
-                .materials
-                .iter()
-                .map(|m| femu_geometry::Material {
-                    region: m.name.clone(),
-                    c10_mpa: m.law.c10,
-                    d_per_mpa: m.law.d,
-                })
-                .collect();
+            let materials: Vec<femu_mesh::MaterialDef> =
+                built.model.materials.iter().map(|m| m.to_def()).collect();
             let (input, command) = match geometry {
                 Geometry::Labels(l) => (
                     serde_json::json!({"model": "label image", "image": l.image, "map": l.map}),

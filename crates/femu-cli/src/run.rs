@@ -29,7 +29,7 @@ pub fn thigh_deck(
     let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
     let deck = femu_geometry::contention_deck(
         &thigh,
-        &femu_geometry::Material::table1(),
+        &femu_geometry::table1_materials(),
         femu_geometry::CONTENTION_MPA,
     )?;
     Ok((deck, skin))
@@ -45,11 +45,16 @@ pub fn thigh_model(
     Ok((Model::from_deck(deck)?, skin))
 }
 
+/// The value of the parameter `name` of `law`, if its law has one.
+fn parameter_named(law: &dyn femu_mech::Material, name: &str) -> Option<f64> {
+    law.parameter_index(name).map(|k| law.parameter(k))
+}
+
 #[derive(Serialize)]
 struct MaterialSummary {
     name: String,
-    c10_kpa: f64,
-    d_per_mpa: f64,
+    c10_kpa: Option<f64>,
+    d_per_mpa: Option<f64>,
     elements: usize,
 }
 
@@ -271,8 +276,8 @@ pub fn write_solved(
         .enumerate()
         .map(|(m, nm)| MaterialSummary {
             name: nm.name.clone(),
-            c10_kpa: nm.law.c10 * 1e3,
-            d_per_mpa: nm.law.d,
+            c10_kpa: parameter_named(&*nm.law, "C10").map(|c| c * 1e3),
+            d_per_mpa: parameter_named(&*nm.law, "D"),
             elements: model.element_material.iter().filter(|&&x| x == m).count(),
         })
         .collect();

@@ -135,8 +135,10 @@ fn parse(text: &str) -> Result<Study> {
         }
         materials.push(RegionMaterial {
             region: name.clone(),
-            c10,
-            d: m.d_per_mpa,
+            law: Box::new(femu_mech::NeoHookean {
+                c10,
+                d: m.d_per_mpa,
+            }),
         });
     }
     let mut displacements = Vec::new();
@@ -244,7 +246,7 @@ mod tests {
             "element = \"CPE4\"\n[materials.fat]\nc10_kpa = 0.8\nd_per_mpa = 30.8\n[[fixed]]\ncurve = \"femur\"\n[[pressure]]\ncurve = \"skin\"\nmmhg = 20\n",
         )
         .unwrap();
-        assert_eq!(s.setup.materials[0].c10, 0.8e-3);
+        assert_eq!(s.setup.materials[0].law.parameter(0), 0.8e-3);
         assert!((s.setup.pressures[0].pressure - 2.666e-3).abs() < 1e-6);
         assert_eq!(s.setup.displacements[0].dofs, vec![0, 1]);
         assert!(s.rigid.is_none());

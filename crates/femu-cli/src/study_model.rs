@@ -4,8 +4,10 @@
 
 use crate::plan::{Geometry, Plan};
 use anyhow::{bail, Context, Result};
-use femu_geometry::{Material, MeshOptions, ThighModel};
+use femu_geometry::{table1_materials, MeshOptions, ThighModel};
+use femu_mech::material::{material_def, material_from_def, set_from_keys};
 use femu_mech::Model;
+use femu_mesh::MaterialDef;
 
 /// A study's model before any loading.
 pub struct StudyModel {
@@ -22,8 +24,8 @@ pub struct StudyModel {
 pub const DEFAULT_ELEMENTS: usize = 6000;
 
 /// Table 1 with the study's `[materials]` overrides (regions checked against `regions`).
-fn materials(plan: &Plan, regions: &[String]) -> Result<Vec<Material>> {
-    let mut materials = Material::table1();
+fn materials(plan: &Plan, regions: &[String]) -> Result<Vec<MaterialDef>> {
+    let mut materials = table1_materials();
     for (region, c10, d) in &plan.materials {
         if !regions.iter().any(|r| r.eq_ignore_ascii_case(region)) {
             bail!(
@@ -33,23 +35,27 @@ fn materials(plan: &Plan, regions: &[String]) -> Result<Vec<Material>> {
         }
         let m = materials
             .iter_mut()
-            .find(|m| m.region.eq_ignore_ascii_case(region))
+            .find(|m| m.name.eq_ignore_ascii_case(region))
             .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
-        if let Some(c) = c10 {
-            m.c10_mpa = *c;
-        }
-        if let Some(d) = d {
-            m.d_per_mpa = *d;
-        }
+        override_parameters(m, *c10, *d).with_context(|| format!("[materials.{region}]"))?;
     }
     for r in regions {
-        if !materials.iter().any(|m| m.region.eq_ignore_ascii_case(r)) {
+        if !materials.iter().any(|m| m.name.eq_ignore_ascii_case(r)) {
             bail!(
                 "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
             );
         }
     }
     Ok(materials)
+}
+
+/// Sets C10 and D (MPa, MPa⁻¹) of a deck material through the material registry.
+fn override_parameters(m: &mut MaterialDef, c10: Option<f64>, d: Option<f64>) -> Result<()> {
+    let keys = (c10.map(|c| ("c10_mpa", c)).into_iter()).chain(d.map(|d| ("d_per_mpa", d)));
+    let mut law = material_from_def(m)?;
+    set_from_keys(&mut *law, keys)?;
+    *m = material_def(&m.name, &*law);
+    Ok(())
 }
 
 /// Builds the study's model.
@@ -139,12 +145,8 @@ fn deck_model(plan: &Plan, path: &std::path::Path) -> Result<StudyModel> {
                 path.display()
             )
         })?;
-        if let Some(c) = c10 {
-            deck.materials[m].c10 = *c;
-        }
-        if let Some(d) = d {
-            deck.materials[m].d1 = *d;
-        }
+        override_parameters(&mut deck.materials[m], *c10, *d)
+            .with_context(|| format!("[materials.{name}]"))?;
     }
     Ok(StudyModel {
         model: Model::from_deck(deck)?,

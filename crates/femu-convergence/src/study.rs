@@ -30,8 +30,10 @@
 //! ```
 
 use crate::ConvergenceError;
-use femu_geometry::{Material, ThighParams};
+use femu_geometry::{table1_materials, ThighParams};
 use femu_mech::loading::{Loading, Side};
+use femu_mech::material::{material_def, material_from_def, set_from_keys};
+use femu_mesh::MaterialDef;
 use femu_mesh::{ElementKind, MMHG_IN_MPA};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -125,7 +127,7 @@ pub struct ConvergenceStudy {
     /// The built-in thigh's dimensions (its mesh-size keys unset: the sequence sets them).
     pub thigh: ThighParams,
     /// Materials per region (Table 1 unless overridden).
-    pub materials: Vec<Material>,
+    pub materials: Vec<MaterialDef>,
     /// The loading test.
     pub loading: Loading,
     /// Element types compared, in the order given.
@@ -156,7 +158,7 @@ impl Default for ConvergenceStudy {
     fn default() -> Self {
         ConvergenceStudy {
             thigh: ThighParams::default(),
-            materials: Material::table1(),
+            materials: table1_materials(),
             loading: Loading::SEED_CONTENTION,
             elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
             meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),
@@ -304,31 +306,21 @@ impl ConvergenceStudy {
             let entry = study
                 .materials
                 .iter_mut()
-                .find(|x| x.region.eq_ignore_ascii_case(name))
+                .find(|x| x.name.eq_ignore_ascii_case(name))
                 .ok_or_else(|| {
                     bad(
                         &format!("materials.{name}"),
                         "not a region of the built-in thigh (fat, quadriceps, ischio, gracilis, sartorius)".into(),
                     )
                 })?;
-            if let Some(c) = m.c10_kpa {
-                if !(c > 0.0 && c.is_finite()) {
-                    return Err(bad(
-                        &format!("materials.{name}.c10_kpa"),
-                        format!("must be positive, got {c}"),
-                    ));
-                }
-                entry.c10_mpa = c * 1e-3;
-            }
-            if let Some(d) = m.d_per_mpa {
-                if !(d > 0.0 && d.is_finite()) {
-                    return Err(bad(
-                        &format!("materials.{name}.d_per_mpa"),
-                        format!("must be positive, got {d}"),
-                    ));
-                }
-                entry.d_per_mpa = d;
-            }
+            // The overrides through the material registry (bounds and units are the law's).
+            let keys = (m.c10_kpa.map(|c| ("c10_kpa", c)).into_iter())
+                .chain(m.d_per_mpa.map(|d| ("d_per_mpa", d)));
+            let mut law = material_from_def(entry)
+                .map_err(|e| bad(&format!("materials.{name}"), e.to_string()))?;
+            set_from_keys(&mut *law, keys)
+                .map_err(|e| bad(&format!("materials.{name}"), e.to_string()))?;
+            *entry = material_def(&entry.name, &*law);
         }
         let tests = [
             raw.contention.is_some(),

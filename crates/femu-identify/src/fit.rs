@@ -567,17 +567,14 @@ pub fn latin_hypercube(free: &[FreeParameter], n: usize, seed: u64) -> Vec<Vec<f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use femu_mech::sensitivity::ParameterKind;
+    use femu_mech::material::{MaterialLaw, NeoHookean};
 
     #[test]
     fn latin_hypercube_fills_every_stratum() {
         let free: Vec<FreeParameter> = (0..3)
             .map(|k| FreeParameter {
                 name: format!("P{k}"),
-                members: vec![Parameter {
-                    material: k,
-                    kind: ParameterKind::C10,
-                }],
+                members: vec![Parameter::new(k, &NeoHookean::SPEC, 0).unwrap()],
                 lower: 1e-4,
                 upper: 1e-2,
             })
