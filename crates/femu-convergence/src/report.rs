@@ -244,9 +244,18 @@ pub fn write_outputs(
         "command": "convergence",
         "inputs": {
             "thigh": study.thigh,
-            "materials": study.materials.iter().map(|m| json!({
-                "region": m.region, "c10_kpa": m.c10_mpa * 1e3, "d_per_mpa": m.d_per_mpa
-            })).collect::<Vec<_>>(),
+            "materials": study.materials.iter().map(|m| {
+                let law = femu_mech::material::material_from_def(m).ok();
+                let value = |name: &str| {
+                    let law = law.as_ref()?;
+                    law.parameter_index(name).map(|k| law.parameter(k))
+                };
+                json!({
+                    "region": m.name,
+                    "c10_kpa": value("C10").map(|c| c * 1e3),
+                    "d_per_mpa": value("D"),
+                })
+            }).collect::<Vec<_>>(),
             "loading": result.loading,
             "loading_detail": format!("{:?}", study.loading),
             "elements": study.elements.iter().map(|k| k.deck_name()).collect::<Vec<_>>(),

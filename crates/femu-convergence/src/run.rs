@@ -4,10 +4,12 @@
 use crate::rate::{fit_rate_against_finest, RateFit};
 use crate::study::{ConvergenceStudy, MeshSequence};
 use crate::ConvergenceError;
-use femu_geometry::{parametric_thigh_on_raster, Material, ThighModel};
+use femu_geometry::{parametric_thigh_on_raster, ThighModel};
 use femu_mech::loading::{apply_loading, Loading};
+use femu_mech::material::{material_def, material_from_def, MaterialError};
 use femu_mech::output::peak_memory_mb;
 use femu_mech::{Model, SolverOptions, StaticSolver};
+use femu_mesh::MaterialDef;
 use femu_mesh::{ElementKind, PointInterpolation};
 use serde::Serialize;
 use std::time::Instant;
@@ -198,13 +200,21 @@ fn meshed_area(thigh: &ThighModel) -> f64 {
     thigh.region_areas().values().sum()
 }
 
-/// Materials with every D multiplied by `d_scale`.
-fn scaled_materials(materials: &[Material], d_scale: f64) -> Vec<Material> {
+/// Materials with every D (the volumetric compliance every registered law has) multiplied by
+/// `d_scale`.
+fn scaled_materials(
+    materials: &[MaterialDef],
+    d_scale: f64,
+) -> Result<Vec<MaterialDef>, MaterialError> {
     materials
         .iter()
-        .map(|m| Material {
-            d_per_mpa: m.d_per_mpa * d_scale,
-            ..m.clone()
+        .map(|m| {
+            let mut law = material_from_def(m)?;
+            if let Some(k) = law.parameter_index("D") {
+                let d = law.parameter(k);
+                law.set_parameter(k, d * d_scale);
+            }
+            Ok(material_def(&m.name, &*law))
         })
         .collect()
 }
@@ -224,13 +234,17 @@ fn solve_run(
     let t0 = Instant::now();
     reset_peak_memory();
     let thigh = with_element_kind(quads, kind);
-    let materials = scaled_materials(&study.materials, d_scale);
     let what = format!(
         "{} mesh {} ({} elements)",
         kind.deck_name(),
         k + 1,
         thigh.mesh.mesh.elements.len()
     );
+    let materials =
+        scaled_materials(&study.materials, d_scale).map_err(|e| ConvergenceError::Model {
+            what: what.clone(),
+            message: e.to_string(),
+        })?;
     // The femur fixed, no load; then the test on the skin.
     let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0).map_err(|e| {
         ConvergenceError::Model {
@@ -600,7 +614,11 @@ fn locking_summary(
         let v: Vec<f64> = study
             .materials
             .iter()
-            .map(|m| 1.0 / (m.c10_mpa * m.d_per_mpa * scale))
+            .map(|m| {
+                material_from_def(m).map_or(f64::NAN, |law| {
+                    law.bulk_modulus() / (law.shear_modulus() * scale)
+                })
+            })
             .collect();
         [
             v.iter().copied().fold(f64::INFINITY, f64::min),

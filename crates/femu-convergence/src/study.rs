@@ -2,9 +2,9 @@
 //! points of the seed's mesh validation (§2.1.2.1). The study file's `[convergence]` table
 //! (femu-study) describes it; [`ConvergenceStudy::validate`] checks its ranges.
 
-use femu_geometry::{Material, ThighParams};
+use femu_geometry::{table1_materials, ThighParams};
 use femu_mech::loading::Loading;
-use femu_mesh::ElementKind;
+use femu_mesh::{ElementKind, MaterialDef};
 use serde::Deserialize;
 
 /// The mesh sequence: target element counts or element sizes, coarse to fine.
@@ -95,7 +95,7 @@ pub struct ConvergenceStudy {
     /// The built-in thigh's dimensions (its mesh-size keys unset: the sequence sets them).
     pub thigh: ThighParams,
     /// Materials per region (Table 1 unless overridden).
-    pub materials: Vec<Material>,
+    pub materials: Vec<MaterialDef>,
     /// The loading test.
     pub loading: Loading,
     /// Element types compared, in the order given.
@@ -126,7 +126,7 @@ impl Default for ConvergenceStudy {
     fn default() -> Self {
         ConvergenceStudy {
             thigh: ThighParams::default(),
-            materials: Material::table1(),
+            materials: table1_materials(),
             loading: Loading::seed_contention(),
             elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
             meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),

@@ -1,5 +1,6 @@
 //! Exports of a meshed thigh: the contention deck (Abaqus/CalculiX `.inp`, runnable by `ccx`
-//! as is), the ParaView file of the regions, and the default materials (the seed's Table 1).
+//! as is), the ParaView file of the regions, and the default materials (the seed's Table 1, as
+//! deck materials: this crate knows no mechanics, `femu-mech`'s registry interprets them).
 
 use crate::mesher::ThighModel;
 use crate::quality::scaled_jacobian;
@@ -20,38 +21,28 @@ pub const TABLE1: [(&str, f64, f64); 5] = [
     ("SARTORIUS", 3.75, 18.0),
 ];
 
-/// A compressible Neo-Hookean material of a region (Abaqus form
-/// `W = C10 (I1bar - 3) + (1/D)(J - 1)^2`).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Material {
-    pub region: String,
-    /// C10 (MPa).
-    pub c10_mpa: f64,
-    /// D (MPa^-1).
-    pub d_per_mpa: f64,
+/// The seed's Table 1 as deck materials named by region: compressible Neo-Hookean
+/// (`*HYPERELASTIC, NEO HOOKE` with the data line `C10, D1` in MPa and MPa⁻¹).
+pub fn table1_materials() -> Vec<MaterialDef> {
+    TABLE1
+        .iter()
+        .map(|&(r, c10_kpa, d)| MaterialDef {
+            name: r.to_string(),
+            keyword: "NEO HOOKE".to_string(),
+            constants: vec![c10_kpa * 1e-3, d],
+            line: None,
+        })
+        .collect()
 }
 
-impl Material {
-    /// The seed's Table 1 materials.
-    pub fn table1() -> Vec<Material> {
-        TABLE1
-            .iter()
-            .map(|&(r, c10_kpa, d)| Material {
-                region: r.to_string(),
-                c10_mpa: c10_kpa * 1e-3,
-                d_per_mpa: d,
-            })
-            .collect()
-    }
-}
-
-/// The contention test of the seed on a meshed thigh: one material per region (found by name,
-/// case-insensitively, in `materials`), every node of the node set `FEMUR` fixed, a follower
+/// The contention test of the seed on a meshed thigh: one material per region (the material
+/// of `materials` whose name is the region's, case-insensitively; any law, checked when a model
+/// is built from the deck), every node of the node set `FEMUR` fixed, a follower
 /// pressure `pressure_mpa` on every face of the surface `SKIN` (the seed: 20 mmHg,
 /// [`crate::CONTENTION_MPA`]), one static step with NLGEOM.
 pub fn contention_deck(
     model: &ThighModel,
-    materials: &[Material],
+    materials: &[MaterialDef],
     pressure_mpa: f64,
 ) -> Result<Deck, GeometryError> {
     if !pressure_mpa.is_finite() {
@@ -73,19 +64,11 @@ pub fn contention_deck(
     for (r, name) in model.regions.iter().enumerate() {
         let m = materials
             .iter()
-            .find(|m| m.region.eq_ignore_ascii_case(name))
+            .find(|m| m.name.eq_ignore_ascii_case(name))
             .ok_or_else(|| GeometryError::NoMaterial(name.clone()))?;
-        if !(m.c10_mpa > 0.0) || !(m.d_per_mpa > 0.0) {
-            return Err(GeometryError::param(
-                &format!("material of {name}"),
-                format!("C10 {} MPa, D {} 1/MPa", m.c10_mpa, m.d_per_mpa),
-                "C10 and D must be positive",
-            ));
-        }
         deck.materials.push(MaterialDef {
             name: name.clone(),
-            c10: m.c10_mpa,
-            d1: m.d_per_mpa,
+            ..m.clone()
         });
         deck.region_names.push(name.clone());
         for &e in g.mesh.element_set(name).unwrap_or(&[]) {

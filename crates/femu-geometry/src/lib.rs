@@ -43,7 +43,9 @@ pub mod picture;
 pub mod quality;
 
 pub use error::GeometryError;
-pub use export::{contention_deck, write_inp_with_surfaces, write_regions_vtu, Material, TABLE1};
+pub use export::{
+    contention_deck, table1_materials, write_inp_with_surfaces, write_regions_vtu, TABLE1,
+};
 pub use labels::{parse_label_map, read_label_image, LabelImage, LabelSpec};
 pub use mesher::{mesh_label_image, MeshOptions, ThighModel};
 pub use parametric::{parametric_thigh, parametric_thigh_on_raster, MeshSize, ThighParams};

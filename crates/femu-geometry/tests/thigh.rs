@@ -28,7 +28,7 @@ fn scratch(name: &str) -> PathBuf {
 
 /// Solves the contention deck of a model; returns max |u| (mm).
 fn solve_contention(model: &ThighModel) -> f64 {
-    let deck = contention_deck(model, &Material::table1(), CONTENTION_MPA).unwrap();
+    let deck = contention_deck(model, &table1_materials(), CONTENTION_MPA).unwrap();
     assert_eq!(deck.pressures.len(), model.mesh.surfaces["SKIN"].len());
     let model = Model::from_deck(deck).unwrap();
     let sol = StaticSolver::new(&model, SolverOptions::default())
@@ -457,7 +457,7 @@ fn bad_inputs_are_clear_errors() {
     // A region without a Table 1 material cannot make a deck.
     let odd = LabelSpec::new("1=adductor", &[7], &[0]).unwrap();
     let m = mesh_label_image(&img, &odd, Some(0.25), &options(4.0)).unwrap();
-    let e = contention_deck(&m, &Material::table1(), CONTENTION_MPA).unwrap_err();
+    let e = contention_deck(&m, &table1_materials(), CONTENTION_MPA).unwrap_err();
     assert!(
         matches!(e, GeometryError::NoMaterial(ref r) if r == "ADDUCTOR"),
         "{e}"
@@ -591,7 +591,7 @@ fn default_parametric_thigh_has_the_seed_scale() {
 fn exports_read_back_and_calculix_agrees() {
     let dir = scratch("export");
     let model = parametric_thigh(&ThighParams::coarse(), ElementKind::Cpe4).unwrap();
-    let deck = contention_deck(&model, &Material::table1(), CONTENTION_MPA).unwrap();
+    let deck = contention_deck(&model, &table1_materials(), CONTENTION_MPA).unwrap();
     let inp = dir.join("thigh.inp");
     write_inp_with_surfaces(&deck, &model.mesh.surfaces, &inp).unwrap();
     let back = femu_mesh::read_inp(&inp).unwrap();

@@ -28,7 +28,7 @@ use std::time::Instant;
 pub type Columns = Vec<Vec<f64>>;
 
 /// A free parameter: the model parameters it moves together, and its bounds (model units).
-#[derive(Debug, Clone, Serialize, Deserialize)]
+#[derive(Debug, Clone, Serialize)]
 pub struct FreeParameter {
     pub name: String,
     pub members: Vec<Parameter>,
@@ -623,17 +623,14 @@ pub fn latin_hypercube(free: &[FreeParameter], n: usize, seed: u64) -> Vec<Vec<f
 #[cfg(test)]
 mod tests {
     use super::*;
-    use femu_mech::sensitivity::ParameterKind;
+    use femu_mech::material::{MaterialLaw, NeoHookean};
 
     #[test]
     fn latin_hypercube_fills_every_stratum() {
         let free: Vec<FreeParameter> = (0..3)
             .map(|k| FreeParameter {
                 name: format!("P{k}"),
-                members: vec![Parameter {
-                    material: k,
-                    kind: ParameterKind::C10,
-                }],
+                members: vec![Parameter::new(k, &NeoHookean::SPEC, 0).unwrap()],
                 lower: 1e-4,
                 upper: 1e-2,
             })

@@ -4,7 +4,7 @@
 //! displacements are interpolated at the grid points, and femu identifies the ten parameters
 //! back without noise. Skips with a message when ccx is absent.
 
-use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_identify::fit::{levenberg_marquardt, FreeParameter, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::sensitivity::all_parameters;
@@ -29,8 +29,7 @@ fn ccx_ready(deck: &mut Deck) {
     let r = |v: &mut f64| *v = format!("{v:.13e}").parse().unwrap();
     deck.mesh.nodes.iter_mut().flatten().for_each(r);
     for m in &mut deck.materials {
-        r(&mut m.c10);
-        r(&mut m.d1);
+        m.constants.iter_mut().for_each(r);
     }
     deck.boundaries.iter_mut().for_each(|b| r(&mut b.value));
     deck.point_loads
@@ -51,7 +50,7 @@ fn ccx_field_is_identified_back_without_noise() {
         ElementKind::Cpe4,
     )
     .unwrap();
-    let mut deck = contention_deck(&t, &Material::table1(), 20.0 * femu_mesh::MMHG_IN_MPA).unwrap();
+    let mut deck = contention_deck(&t, &table1_materials(), 20.0 * femu_mesh::MMHG_IN_MPA).unwrap();
     deck.pressures_to_dead_loads();
     ccx_ready(&mut deck);
 

@@ -11,7 +11,7 @@
 //! iteration the relative residual `‖R‖/‖f_ref‖` with the step length taken (`residual@step`);
 //! then the plate's travel and force, the time of setup + solve and where it went.
 
-use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_mech::loading::{apply_loading, Loading};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::ElementKind;
@@ -45,7 +45,7 @@ fn main() {
     )
     .expect("built-in thigh");
     let skin = thigh.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&thigh, &Material::table1(), 0.0).expect("deck");
+    let mut deck = contention_deck(&thigh, &table1_materials(), 0.0).expect("deck");
     deck.pressures.clear();
     let mut model = Model::from_deck(deck).expect("model");
     apply_loading(&mut model, &skin, &Loading::seed_compression()).expect("compression");

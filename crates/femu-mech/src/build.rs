@@ -3,8 +3,9 @@
 //! Unknown set names panic: the builder is for programs, whose set names are fixed in code;
 //! user input goes through the deck reader and its errors.
 
+use crate::material::{material_def, Material, NeoHookean};
 use femu_mesh::generate::GeneratedMesh;
-use femu_mesh::{BoundaryCondition, Deck, FacePressure, MaterialDef, StepDef};
+use femu_mesh::{BoundaryCondition, Deck, FacePressure, StepDef};
 
 /// Assembles a [`Deck`] from a generated mesh: one material per element set (in the order
 /// given), node sets fixed in both directions, follower pressure on named surfaces.
@@ -30,15 +31,23 @@ impl DeckBuilder {
         }
     }
 
-    /// Assigns a Neo-Hookean material (C10 in MPa, D in MPa^-1) to element set `elset`;
-    /// the set becomes a region of the same name.
-    pub fn material(mut self, elset: &str, c10: f64, d: f64) -> Self {
+    /// Assigns a Neo-Hookean material (C10 in MPa, D in MPa^-1) to element set `elset` (the
+    /// seed's law; [`DeckBuilder::law`] for any law).
+    pub fn material(self, elset: &str, c10: f64, d: f64) -> Self {
+        self.law(elset, NeoHookean { c10, d })
+    }
+
+    /// The same Neo-Hookean material on every element (region `ALL`).
+    pub fn material_everywhere(self, c10: f64, d: f64) -> Self {
+        self.law_everywhere(NeoHookean { c10, d })
+    }
+
+    /// Assigns a material of any registered law (e.g. `MooneyRivlin { c10, c01, d }`, internal
+    /// units) to element set `elset`; the set becomes a region of the same name. Its values
+    /// are checked when the model is built.
+    pub fn law(mut self, elset: &str, law: impl Material) -> Self {
         let m = self.deck.materials.len();
-        self.deck.materials.push(MaterialDef {
-            name: elset.to_string(),
-            c10,
-            d1: d,
-        });
+        self.deck.materials.push(material_def(elset, &law));
         self.deck.region_names.push(elset.to_string());
         let set = self
             .deck
@@ -53,14 +62,14 @@ impl DeckBuilder {
         self
     }
 
-    /// The same material on every element (region `ALL`).
-    pub fn material_everywhere(mut self, c10: f64, d: f64) -> Self {
+    /// The same material of any law on every element (region `ALL`).
+    pub fn law_everywhere(mut self, law: impl Material) -> Self {
         let n = self.deck.mesh.elements.len();
         self.deck
             .mesh
             .element_sets
             .insert("ALL".into(), (0..n).collect());
-        self.material("ALL", c10, d)
+        self.law("ALL", law)
     }
 
     /// The nodes of a set; an unknown name is a programming error of the caller.
@@ -129,12 +138,17 @@ impl DeckBuilder {
     }
 }
 
-/// Material of one region of a Gmsh model (C10 in MPa, D in MPa^-1).
-#[derive(Debug, Clone, PartialEq)]
+/// Material of one region of a Gmsh model: any registered law.
+#[derive(Debug, Clone)]
 pub struct RegionMaterial {
     pub region: String,
-    pub c10: f64,
-    pub d: f64,
+    pub law: Box<dyn Material>,
+}
+
+impl PartialEq for RegionMaterial {
+    fn eq(&self, other: &Self) -> bool {
+        self.region == other.region && *self.law == *other.law
+    }
 }
 
 /// Prescribed displacement of every node of a physical curve (dofs 0 = x, 1 = y).
@@ -253,11 +267,7 @@ pub fn deck_from_msh(msh: femu_mesh::MshModel, setup: &MshSetup) -> Result<Deck,
                 available: names(mesh.element_sets.keys().collect()),
             })?
             .to_vec();
-        deck.materials.push(MaterialDef {
-            name: rm.region.clone(),
-            c10: rm.c10,
-            d1: rm.d,
-        });
+        deck.materials.push(material_def(&rm.region, &*rm.law));
         deck.region_names.push(rm.region.clone());
         for e in set {
             deck.element_material[e] = m;

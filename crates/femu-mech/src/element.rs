@@ -13,8 +13,8 @@
 //! `femu-mesh` crate documentation.
 
 use crate::material::{
-    cauchy_from_derivatives, cof2, det2, log_strain, Hyperelastic, InvariantDerivatives,
-    NeoHookean, NeoHookeanRate, NonPositiveJacobian, Tensor2,
+    cauchy_from_derivatives, cof2, det2, log_strain, EnergyPart, Hyperelastic,
+    InvariantDerivatives, NonPositiveJacobian, Tensor2,
 };
 use femu_mesh::ElementKind;
 
@@ -168,33 +168,6 @@ pub trait SolidElement: Sync {
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian>;
 
-    /// The internal forces of the two unit Neo-Hookean rate energies at local displacements
-    /// `u`: `f_c10` of `W = I1bar - 3` and `f_inv_d` of `W = (J - 1)²` (see
-    /// [`NeoHookeanRate`]); the Neo-Hookean force is `C10 f_c10 + (1/D) f_inv_d`, so these
-    /// are `∂f_int/∂C10` and `∂f_int/∂(1/D)` (parameter sensitivities, seed §2.3). The default
-    /// evaluates the element twice; formulations override it with one pass over the Gauss
-    /// points.
-    fn rate_forces(
-        &self,
-        geo: &ElementGeometry,
-        u: &[[f64; 2]],
-        f_c10: &mut [f64],
-        f_inv_d: &mut [f64],
-    ) -> Result<(), NonPositiveJacobian> {
-        for (rate, force) in [
-            (NeoHookeanRate::UNIT_C10, f_c10),
-            (NeoHookeanRate::UNIT_INV_D, f_inv_d),
-        ] {
-            let mut out = ElementResult {
-                energy: 0.0,
-                force,
-                stiffness: None,
-            };
-            self.evaluate(geo, &rate, u, &mut out)?;
-        }
-        Ok(())
-    }
-
     /// Element averages (area-weighted over the Gauss points) of the output fields at local
     /// displacements `u`, in one pass.
     fn averages(
@@ -259,16 +232,19 @@ pub struct DisplacementElement;
 #[derive(Debug, Clone, Copy)]
 pub struct MeanDilatationElement;
 
-/// [`SolidElement::evaluate`] of `geo`'s element type for the Neo-Hookean law `law`: the
-/// static solver's hot loop. The material is called directly, so its invariant derivatives
-/// inline into the Gauss-point loop, and on x86-64 CPUs with AVX2 the loop runs a copy of
-/// itself compiled for AVX2 ([`crate::simd::with_avx2`]; detected at run time, the binary stays
-/// portable). The copy does the same IEEE operations in the same order (the compiler neither
-/// reassociates nor fuses them), so both give the same results to the bit (unit test); the
-/// AVX2 copy takes less than half the time (`examples/assembly_cost`).
-pub fn evaluate_neo_hookean(
+/// [`SolidElement::evaluate`] of `geo`'s element type for the material type `M`: the static
+/// solver's hot loop, compiled once per registered law (through
+/// [`crate::material::Material::evaluate_element`], one dynamic call per element). The
+/// material is called directly, so its invariant derivatives inline into the Gauss-point loop,
+/// and on x86-64 CPUs with AVX2 the loop runs a copy of itself compiled for AVX2
+/// ([`crate::simd::with_avx2`]; detected at run time, the binary stays portable). The copy does
+/// the same IEEE operations in the same order (the compiler neither reassociates nor fuses
+/// them), so both give the same results to the bit (unit test); the AVX2 copy takes less than
+/// half the time (`examples/assembly_cost`).
+#[inline(always)]
+pub fn evaluate_static<M: Hyperelastic>(
     geo: &ElementGeometry,
-    law: &NeoHookean,
+    law: &M,
     u: &[[f64; 2]],
     out: &mut ElementResult,
 ) -> Result<(), NonPositiveJacobian> {
@@ -465,7 +441,7 @@ fn integrate<const N: usize>(
 
 impl DisplacementElement {
     /// [`SolidElement::evaluate`] for any material type (`dyn Hyperelastic` through the trait,
-    /// a concrete law in [`evaluate_neo_hookean`]).
+    /// a concrete law in [`evaluate_static`]).
     #[inline(always)]
     fn evaluate_with<M: Hyperelastic + ?Sized>(
         geo: &ElementGeometry,
@@ -492,31 +468,6 @@ impl SolidElement for DisplacementElement {
         out: &mut ElementResult,
     ) -> Result<(), NonPositiveJacobian> {
         Self::evaluate_with(geo, mat, u, out)
-    }
-
-    /// One pass: at each Gauss point the isochoric unit stress and the volumetric one,
-    /// `P = U'(J) cof F` with `U = (J - 1)²`.
-    fn rate_forces(
-        &self,
-        geo: &ElementGeometry,
-        u: &[[f64; 2]],
-        f_c10: &mut [f64],
-        f_inv_d: &mut [f64],
-    ) -> Result<(), NonPositiveJacobian> {
-        let n = geo.n_nodes;
-        f_c10[..2 * n].fill(0.0);
-        f_inv_d[..2 * n].fill(0.0);
-        let (iso, vol) = (NeoHookeanRate::UNIT_C10, NeoHookeanRate::UNIT_INV_D);
-        for g in 0..geo.n_gauss {
-            let gp = &geo.gauss[g];
-            let f = geo.deformation_gradient(g, u);
-            let r = iso.response_isochoric(&f, false)?;
-            add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, f_c10);
-            let p = vol.volumetric(det2(&f))[1];
-            let pk1 = cof2(&f).map(|c| p * c);
-            add_stress_divergence(n, &gp.dn_dx, gp.weight, &pk1, f_inv_d);
-        }
-        Ok(())
     }
 
     fn averages(
@@ -595,42 +546,6 @@ impl SolidElement for MeanDilatationElement {
         Self::evaluate_with(geo, mat, u, out)
     }
 
-    /// One pass: the isochoric unit force at each Gauss point, and `U'(θ) g` with
-    /// `U = (θ - 1)²` for the volumetric one (`g = V_e ∂θ/∂u`, as in [`Self::evaluate`]).
-    fn rate_forces(
-        &self,
-        geo: &ElementGeometry,
-        u: &[[f64; 2]],
-        f_c10: &mut [f64],
-        f_inv_d: &mut [f64],
-    ) -> Result<(), NonPositiveJacobian> {
-        let n = geo.n_nodes;
-        let nd = 2 * n;
-        f_c10[..nd].fill(0.0);
-        f_inv_d[..nd].fill(0.0);
-        let unit = NeoHookeanRate::UNIT_C10;
-        let mut volume = 0.0;
-        for g in 0..geo.n_gauss {
-            let gp = &geo.gauss[g];
-            let f = geo.deformation_gradient(g, u);
-            let r = unit.response_isochoric(&f, false)?;
-            volume += gp.weight * det2(&f);
-            add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, f_c10);
-            let c = cof2(&f);
-            for a in 0..n {
-                let d = gp.dn_dx[a];
-                f_inv_d[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
-                f_inv_d[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
-            }
-        }
-        let theta = volume / geo.area;
-        let p = NeoHookeanRate::UNIT_INV_D.volumetric(theta)[1];
-        for v in &mut f_inv_d[..nd] {
-            *v *= p;
-        }
-        Ok(())
-    }
-
     /// The isochoric stress averaged over the Gauss points plus the element's pressure
     /// `p = U'(θ)` (θ = the averaged J) on the diagonal.
     fn averages(
@@ -646,6 +561,81 @@ impl SolidElement for MeanDilatationElement {
         }
         Ok(avg)
     }
+}
+
+/// The internal forces of the energies `E_k` (`k < count`, each given with the part of the
+/// energy it lives in by `term(k)`) at local displacements `u`, in one pass over the Gauss
+/// points: `forces[k * MAX_DOFS..][..2 n]`. With `W = Σ c_k E_k` these are `∂f_int/∂c_k`
+/// (parameter sensitivities, seed §2.3; see [`crate::material::law`]).
+///
+/// CPE4 and CPE3: an isochoric term adds `w P_k:∇N` at each point (P_k of `E_k`'s isochoric
+/// part), a volumetric one `w E_k'(J) cof F:∇N`. CPE4H: the isochoric terms as for CPE4, a
+/// volumetric one `E_k'(θ) g` with `g = Σ_g w_g cof(F_g) ∇N` (`V_e ∂θ/∂u`, as in
+/// [`MeanDilatationElement`]'s evaluation): the mean-dilatation force is linear in the energy
+/// too, so these are exact for every formulation.
+pub fn unit_energy_forces<U: Hyperelastic>(
+    geo: &ElementGeometry,
+    u: &[[f64; 2]],
+    count: usize,
+    term: impl Fn(usize) -> (U, EnergyPart),
+    forces: &mut [f64],
+) -> Result<(), NonPositiveJacobian> {
+    let n = geo.n_nodes;
+    let nd = 2 * n;
+    for k in 0..count {
+        forces[k * MAX_DOFS..k * MAX_DOFS + nd].fill(0.0);
+    }
+    let mean_dilatation = geo.kind == ElementKind::Cpe4h;
+    // CPE4H: Σ_g w_g cof(F_g) ∇N_a and Σ_g w_g J_g.
+    let mut volume_gradient = [0.0; MAX_DOFS];
+    let mut volume = 0.0;
+    for g in 0..geo.n_gauss {
+        let gp = &geo.gauss[g];
+        let f = geo.deformation_gradient(g, u);
+        let j = det2(&f);
+        if !(j > 0.0) {
+            return Err(NonPositiveJacobian(j));
+        }
+        for k in 0..count {
+            let (energy, part) = term(k);
+            let force = &mut forces[k * MAX_DOFS..(k + 1) * MAX_DOFS];
+            match part {
+                EnergyPart::Isochoric => {
+                    let r = energy.response_isochoric(&f, false)?;
+                    add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, force);
+                }
+                EnergyPart::Volumetric if !mean_dilatation => {
+                    let p = energy.volumetric(j)[1];
+                    let pk1 = cof2(&f).map(|c| p * c);
+                    add_stress_divergence(n, &gp.dn_dx, gp.weight, &pk1, force);
+                }
+                EnergyPart::Volumetric => {}
+            }
+        }
+        if mean_dilatation {
+            volume += gp.weight * j;
+            let c = cof2(&f);
+            for a in 0..n {
+                let d = gp.dn_dx[a];
+                volume_gradient[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
+                volume_gradient[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
+            }
+        }
+    }
+    if mean_dilatation {
+        let theta = volume / geo.area;
+        for k in 0..count {
+            let (energy, part) = term(k);
+            if part == EnergyPart::Volumetric {
+                let p = energy.volumetric(theta)[1];
+                let force = &mut forces[k * MAX_DOFS..k * MAX_DOFS + nd];
+                for (v, g) in force.iter_mut().zip(&volume_gradient) {
+                    *v = g * p;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -673,55 +663,149 @@ mod tests {
         }
     }
 
-    /// The one-pass rate forces of the hybrid element equal two evaluations with the unit rate
-    /// energies (to round-off: the same sums in another order).
+    /// The one-pass unit-energy forces equal one evaluation per unit energy `E_k` (to round-off:
+    /// the same sums in another order), for every element type and each law.
     #[test]
-    fn one_pass_rate_forces_match_two_evaluations() {
-        let x = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
-        let u = [[0.01, -0.02], [0.05, 0.03], [-0.04, 0.08], [0.02, -0.01]];
-        for kind in [ElementKind::Cpe4h, ElementKind::Cpe4] {
-            check_rate_forces(kind, &x, &u);
+    fn one_pass_unit_forces_match_one_evaluation_per_term() {
+        use crate::material::{MaterialLaw, MooneyRivlin, NeoHookean, Yeoh};
+        fn check<L: MaterialLaw>() {
+            let x = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
+            // Large enough for the cubic term of the Yeoh law (I1bar - 3 ≈ 0.1).
+            let u = [[0.04, -0.08], [0.2, 0.12], [-0.16, 0.32], [0.08, -0.04]];
+            let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
+            for (kind, x, n) in [
+                (ElementKind::Cpe4h, x, 4),
+                (ElementKind::Cpe4, x, 4),
+                (ElementKind::Cpe3, tri, 3),
+            ] {
+                let geo = ElementGeometry::new(kind, &x).unwrap();
+                let count = L::SPEC.parameters.len();
+                let mut forces = vec![0.0; count * MAX_DOFS];
+                let term = |k| (L::unit_energy(k), L::SPEC.parameters[k].part);
+                unit_energy_forces(&geo, &u[..n], count, term, &mut forces).unwrap();
+                for k in 0..count {
+                    let mut want = [0.0; MAX_DOFS];
+                    let mut out = ElementResult {
+                        energy: 0.0,
+                        force: &mut want,
+                        stiffness: None,
+                    };
+                    let energy = L::unit_energy(k);
+                    formulation(kind)
+                        .evaluate(&geo, &energy, &u[..n], &mut out)
+                        .unwrap();
+                    let got = &forces[k * MAX_DOFS..(k + 1) * MAX_DOFS];
+                    let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                    assert!(scale > 1e-5, "{}: a non-trivial force", L::SPEC.name);
+                    for (g, w) in got.iter().zip(want.iter()) {
+                        assert!(
+                            (g - w).abs() <= 1e-14 * scale,
+                            "{} {kind:?} term {k}: {g} vs {w}",
+                            L::SPEC.name
+                        );
+                    }
+                }
+            }
         }
-        let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
-        check_rate_forces(ElementKind::Cpe3, &tri, &u[..3]);
+        check::<NeoHookean>();
+        check::<MooneyRivlin>();
+        check::<Yeoh>();
     }
 
-    fn check_rate_forces(kind: ElementKind, x: &[[f64; 2]; MAX_NODES], u: &[[f64; 2]]) {
-        let geo = ElementGeometry::new(kind, x).unwrap();
-        let element = formulation(kind);
-        let (mut c10, mut inv_d) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS]);
-        element.rate_forces(&geo, u, &mut c10, &mut inv_d).unwrap();
-        let (mut c10_ref, mut inv_d_ref) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS]);
-        for (a, b, f) in [(1.0, 0.0, &mut c10_ref), (0.0, 1.0, &mut inv_d_ref)] {
-            let mut out = ElementResult {
-                energy: 0.0,
-                force: f,
-                stiffness: None,
-            };
-            element
-                .evaluate(&geo, &NeoHookeanRate { c10: a, inv_d: b }, u, &mut out)
-                .unwrap();
+    /// The Neo-Hookean unit forces are, to the bit, those of the one-pass code they replaced
+    /// (kept here as the reference: `NeoHookeanRate`'s isochoric stress, then `U'(J) cof F`, or
+    /// for CPE4H `U'(θ)` times the summed `w cof(F) ∇N`), so the sensitivities did not change.
+    #[test]
+    fn neo_hookean_unit_forces_are_those_of_the_former_one_pass_code() {
+        use crate::material::neo_hookean::NeoHookeanRate;
+        use crate::material::{MaterialLaw, NeoHookean};
+        use rand::{Rng, SeedableRng};
+        fn former(geo: &ElementGeometry, u: &[[f64; 2]]) -> Result<[f64; 16], NonPositiveJacobian> {
+            let (n, mut out) = (geo.n_nodes, [0.0; 16]);
+            let (f_c10, f_inv_d) = out.split_at_mut(MAX_DOFS);
+            let (iso, vol) = (NeoHookeanRate::UNIT_C10, NeoHookeanRate::UNIT_INV_D);
+            let mut volume = 0.0;
+            for g in 0..geo.n_gauss {
+                let gp = &geo.gauss[g];
+                let f = geo.deformation_gradient(g, u);
+                let r = iso.response_isochoric(&f, false)?;
+                add_stress_divergence(n, &gp.dn_dx, gp.weight, &r.pk1, f_c10);
+                if geo.kind == ElementKind::Cpe4h {
+                    volume += gp.weight * det2(&f);
+                    let c = cof2(&f);
+                    for a in 0..n {
+                        let d = gp.dn_dx[a];
+                        f_inv_d[2 * a] += gp.weight * (c[0] * d[0] + c[1] * d[1]);
+                        f_inv_d[2 * a + 1] += gp.weight * (c[2] * d[0] + c[3] * d[1]);
+                    }
+                } else {
+                    let p = vol.volumetric(det2(&f))[1];
+                    let pk1 = cof2(&f).map(|c| p * c);
+                    add_stress_divergence(n, &gp.dn_dx, gp.weight, &pk1, f_inv_d);
+                }
+            }
+            if geo.kind == ElementKind::Cpe4h {
+                let p = vol.volumetric(volume / geo.area)[1];
+                for v in &mut f_inv_d[..2 * n] {
+                    *v *= p;
+                }
+            }
+            Ok(out)
         }
-        for (got, want) in [(&c10, &c10_ref), (&inv_d, &inv_d_ref)] {
-            let scale = want.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-            assert!(scale > 1e-3, "a non-trivial force");
-            for (g, w) in got.iter().zip(want.iter()) {
-                assert!((g - w).abs() <= 1e-14 * scale, "{g} vs {w}");
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let quad = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
+        let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
+        for (kind, x) in [
+            (ElementKind::Cpe4, quad),
+            (ElementKind::Cpe4h, quad),
+            (ElementKind::Cpe3, tri),
+        ] {
+            let geo = ElementGeometry::new(kind, &x).unwrap();
+            for trial in 0..200 {
+                let scale = 1.5 * f64::from(trial) / 200.0;
+                let u: Vec<[f64; 2]> = (0..geo.n_nodes)
+                    .map(|_| {
+                        [
+                            scale * rng.gen_range(-1.0..1.0),
+                            scale * rng.gen_range(-1.0..1.0),
+                        ]
+                    })
+                    .collect();
+                let mut now = [0.0; 16];
+                let term = |k| {
+                    (
+                        NeoHookean::unit_energy(k),
+                        NeoHookean::SPEC.parameters[k].part,
+                    )
+                };
+                let status = unit_energy_forces(&geo, &u, 2, term, &mut now);
+                match former(&geo, &u) {
+                    Ok(want) => {
+                        assert!(status.is_ok());
+                        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&now), bits(&want), "{kind:?}, trial {trial}");
+                    }
+                    Err(e) => assert_eq!(status, Err(e), "{kind:?}, trial {trial}"),
+                }
             }
         }
     }
 
-    /// The solver's Neo-Hookean path (static material, AVX2 copy where the CPU has it) gives
-    /// the trait's results (dynamic material, baseline instructions) to the bit: energy,
-    /// force, stiffness, and the same error for an inverted element, for every element type.
+    /// The solver's path (static material, AVX2 copy where the CPU has it, reached through one
+    /// dynamic call: [`crate::material::Material::evaluate_element`]) gives the trait's results
+    /// (dynamic material, baseline instructions) to the bit: energy, force, stiffness, and the
+    /// same error for an inverted element, for every element type and every registered law (at
+    /// its typical parameters); for the Neo-Hookean law also the generic kernel called with the
+    /// concrete type.
     #[test]
-    fn neo_hookean_path_matches_the_trait_to_the_bit() {
+    fn static_path_matches_the_trait_to_the_bit() {
+        use crate::material::{Material, NeoHookean, LAWS};
         use rand::{Rng, SeedableRng};
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let law = NeoHookean::new(0.0123, 0.456).unwrap();
+        let neo_hookean = NeoHookean::new(0.0123, 0.456).unwrap();
         let quad = [[0.0, 0.0], [2.0, 0.1], [2.2, 1.3], [-0.1, 1.0]];
         let tri = [[0.0, 0.0], [2.0, 0.1], [0.3, 1.4], [0.0, 0.0]];
-        let evaluate = |path: u8, geo: &ElementGeometry, u: &[[f64; 2]]| {
+        let evaluate = |path: u8, law: &dyn Material, geo: &ElementGeometry, u: &[[f64; 2]]| {
             let (mut force, mut stiffness) = ([0.0; MAX_DOFS], [0.0; MAX_DOFS * MAX_DOFS]);
             let mut out = ElementResult {
                 energy: 0.0,
@@ -729,14 +813,14 @@ mod tests {
                 stiffness: Some(&mut stiffness),
             };
             let status = match path {
-                0 => formulation(geo.kind).evaluate(geo, &law as &dyn Hyperelastic, u, &mut out),
+                0 => formulation(geo.kind).evaluate(geo, law as &dyn Hyperelastic, u, &mut out),
                 1 => match geo.kind {
                     ElementKind::Cpe4h => {
-                        MeanDilatationElement::evaluate_with(geo, &law, u, &mut out)
+                        MeanDilatationElement::evaluate_with(geo, &neo_hookean, u, &mut out)
                     }
-                    _ => DisplacementElement::evaluate_with(geo, &law, u, &mut out),
+                    _ => DisplacementElement::evaluate_with(geo, &neo_hookean, u, &mut out),
                 },
-                _ => evaluate_neo_hookean(geo, &law, u, &mut out),
+                _ => law.evaluate_element(geo, u, &mut out),
             };
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<u64>>();
             let energy = out.energy.to_bits();
@@ -747,34 +831,46 @@ mod tests {
                 bits(&stiffness),
             )
         };
-        for (kind, x) in [
-            (ElementKind::Cpe4, quad),
-            (ElementKind::Cpe4h, quad),
-            (ElementKind::Cpe3, tri),
-        ] {
-            let geo = ElementGeometry::new(kind, &x).unwrap();
-            let n = geo.n_nodes;
-            let mut inverted = 0;
-            for trial in 0..200 {
-                // Up to 1.5 times the element size: the larger ones invert it.
-                let scale = 1.5 * f64::from(trial) / 200.0;
-                let u: Vec<[f64; 2]> = (0..n)
-                    .map(|_| {
-                        [
-                            scale * rng.gen_range(-1.0..1.0),
-                            scale * rng.gen_range(-1.0..1.0),
-                        ]
-                    })
-                    .collect();
-                let reference = evaluate(0, &geo, &u);
-                inverted += usize::from(reference.0.is_err());
-                assert_eq!(evaluate(1, &geo, &u), reference, "{kind:?}, trial {trial}");
-                assert_eq!(evaluate(2, &geo, &u), reference, "{kind:?}, trial {trial}");
+        let mut laws: Vec<Box<dyn Material>> = vec![Box::new(neo_hookean)];
+        for entry in LAWS {
+            let typical: Vec<f64> = entry.spec.parameters.iter().map(|p| p.typical).collect();
+            laws.push(entry.build(&typical).unwrap());
+        }
+        for (l, law) in laws.iter().enumerate() {
+            for (kind, x) in [
+                (ElementKind::Cpe4, quad),
+                (ElementKind::Cpe4h, quad),
+                (ElementKind::Cpe3, tri),
+            ] {
+                let geo = ElementGeometry::new(kind, &x).unwrap();
+                let n = geo.n_nodes;
+                let mut inverted = 0;
+                for trial in 0..200 {
+                    // Up to 1.5 times the element size: the larger ones invert it.
+                    let scale = 1.5 * f64::from(trial) / 200.0;
+                    let u: Vec<[f64; 2]> = (0..n)
+                        .map(|_| {
+                            [
+                                scale * rng.gen_range(-1.0..1.0),
+                                scale * rng.gen_range(-1.0..1.0),
+                            ]
+                        })
+                        .collect();
+                    let name = law.spec().name;
+                    let reference = evaluate(0, &**law, &geo, &u);
+                    inverted += usize::from(reference.0.is_err());
+                    if l == 0 {
+                        let generic = evaluate(1, &**law, &geo, &u);
+                        assert_eq!(generic, reference, "{name} {kind:?}, trial {trial}");
+                    }
+                    let fast = evaluate(2, &**law, &geo, &u);
+                    assert_eq!(fast, reference, "{name} {kind:?}, trial {trial}");
+                }
+                assert!(
+                    (1..100).contains(&inverted),
+                    "{kind:?}: {inverted} inverted"
+                );
             }
-            assert!(
-                (1..100).contains(&inverted),
-                "{kind:?}: {inverted} inverted"
-            );
         }
     }
 

@@ -10,7 +10,8 @@
 //!   in code; [`loading`]: the seed's three loading tests (contention, compression,
 //!   indentation) as named loadings; [`reference`](mod@reference): independent reference
 //!   solutions for verification.
-//! - [`material`]: compressible Neo-Hookean (Abaqus form, seed Eq. 1), stress and tangent.
+//! - [`material`]: the registry of hyperelastic laws (compressible Neo-Hookean, seed Eq. 1;
+//!   Mooney–Rivlin; Yeoh; Abaqus forms), their parameters, stress and tangent.
 //! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
 //! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,
 //!   node-to-surface augmented-Lagrangian contact.
@@ -48,6 +49,6 @@ pub mod solver;
 pub(crate) use femu_sparse::simd;
 
 pub use femu_sparse::Factorization;
-pub use material::{Hyperelastic, NeoHookean};
+pub use material::{Hyperelastic, Material, MaterialLaw, MooneyRivlin, NeoHookean, Yeoh};
 pub use model::{Model, ModelError};
 pub use solver::{Solution, SolveError, SolveReport, SolverOptions, StaticSolver};

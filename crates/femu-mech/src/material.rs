@@ -1,4 +1,11 @@
-//! Hyperelastic materials for plane strain (F33 = 1).
+//! Hyperelastic materials for plane strain (F33 = 1) and their registry.
+//!
+//! **The registry.** A law is one type implementing [`MaterialLaw`] in one file of this module,
+//! registered by one line in the list below ([`LAWS`]); deck reading and writing
+//! ([`material_from_def`], [`material_def`]), study-file keys ([`material_from_keys`]), the
+//! model's parameters and their sensitivities ([`crate::sensitivity`]) and the element kernels
+//! ([`Material::evaluate_element`]) all work from what the law declares. The steps are in
+//! `docs/adding-a-material.md`.
 //!
 //! Every material is written through the invariants `I1 = tr(F^T F)` (3D, so it includes
 //! `F33^2 = 1`) and `J = det F`, which gives the first Piola–Kirchhoff stress and its consistent
@@ -12,6 +19,36 @@
 //! where `cof(F) = J F^-T` is linear in F in two dimensions. The isochoric and volumetric parts
 //! are kept apart so that the hybrid element (CPE4H) can replace `U(J)` by `U(θ)` with the
 //! element's mean dilatation θ.
+
+pub mod law;
+mod registry;
+
+pub use law::{
+    AbaqusField, Bound, EnergyPart, LawSpec, Material, MaterialError, MaterialLaw, ParameterSpec,
+    Unit,
+};
+pub use registry::{
+    law, law_for_keyword, material_def, material_from_def, material_from_keys, parameter_key,
+    set_from_keys, LawEntry,
+};
+
+/// Declares each law's module (`pub mod`, the file of the same name here), re-exports its type
+/// and lists it in [`LAWS`].
+macro_rules! register_laws {
+    ($($module:ident :: $law:ident),+ $(,)?) => {
+        $(pub mod $module; pub use $module::$law;)+
+        /// The registered laws, in registration order.
+        pub static LAWS: &[LawEntry] =
+            &[$(LawEntry::of::<$law>(&<$law as MaterialLaw>::SPEC)),+];
+    };
+}
+
+// The registry: one line per law.
+register_laws! {
+    neo_hookean::NeoHookean,
+    mooney_rivlin::MooneyRivlin,
+    yeoh::Yeoh,
+}
 
 /// A 2x2 in-plane tensor stored row-major: `[F11, F12, F21, F22]`.
 pub type Tensor2 = [f64; 4];
@@ -163,42 +200,6 @@ fn assemble_response(
     }
 }
 
-/// Compressible Neo-Hookean material in the Abaqus form (seed Eq. 1):
-/// `W = C10 (I1bar - 3) + (1/D) (J - 1)^2`, `I1bar = J^(-2/3) I1`.
-///
-/// Small-strain equivalents: shear modulus `μ = 2 C10`, bulk modulus `K = 2/D` (the seed's
-/// "K = D/2" is a typo). Units: C10 in MPa, D in MPa^-1.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NeoHookean {
-    pub c10: f64,
-    pub d: f64,
-}
-
-impl NeoHookean {
-    /// A Neo-Hookean material; C10 > 0 and D > 0 (compressible) are required.
-    pub fn new(c10: f64, d: f64) -> Result<Self, String> {
-        if !(c10 > 0.0 && c10.is_finite()) {
-            return Err(format!("C10 must be positive and finite, got {c10}"));
-        }
-        if !(d > 0.0 && d.is_finite()) {
-            return Err(format!(
-                "D must be positive and finite (compressible), got {d}"
-            ));
-        }
-        Ok(NeoHookean { c10, d })
-    }
-
-    /// Small-strain shear modulus μ = 2 C10 (MPa).
-    pub fn shear_modulus(&self) -> f64 {
-        2.0 * self.c10
-    }
-
-    /// Small-strain bulk modulus K = 2/D (MPa).
-    pub fn bulk_modulus(&self) -> f64 {
-        2.0 / self.d
-    }
-}
-
 /// `J^(-1/3)` for `J > 0`, within 1.5 ulp of `1 / J.cbrt()` (unit test), at less than half its
 /// cost: a first guess from the exponent bits (about 3 % off), then three steps of the
 /// cubically convergent `y ← y (1 + r/3 + 2r²/9)`, `r = 1 - J y³` (the series of
@@ -219,78 +220,12 @@ pub fn inv_cbrt(j: f64) -> f64 {
     y
 }
 
-/// `c10 (J^(-2/3) I1 - 3)` and its invariant derivatives.
+/// `inv_d (J - 1)²` and its first two derivatives: the volumetric term every registered law
+/// shares (`inv_d` = 1/D).
 #[inline(always)]
-fn neo_hookean_isochoric(c10: f64, i1: f64, j: f64) -> InvariantDerivatives {
-    // The powers of J from J^(-1/3) by products (no cube root, no division).
-    let y = inv_cbrt(j);
-    let jm23 = y * y;
-    let jm1 = jm23 * y;
-    let jm53 = jm23 * jm1;
-    let jm83 = jm53 * jm1;
-    InvariantDerivatives {
-        w: c10 * (jm23 * i1 - 3.0),
-        w_i: c10 * jm23,
-        w_j: -2.0 / 3.0 * c10 * i1 * jm53,
-        w_ii: 0.0,
-        w_ij: -2.0 / 3.0 * c10 * jm53,
-        w_jj: 10.0 / 9.0 * c10 * i1 * jm83,
-    }
-}
-
-/// `inv_d (J - 1)^2` and its first two derivatives.
-#[inline(always)]
-fn neo_hookean_volumetric(inv_d: f64, j: f64) -> [f64; 3] {
+pub fn volumetric_quadratic(inv_d: f64, j: f64) -> [f64; 3] {
     let jm1 = j - 1.0;
     [jm1 * jm1 * inv_d, 2.0 * jm1 * inv_d, 2.0 * inv_d]
-}
-
-impl Hyperelastic for NeoHookean {
-    #[inline]
-    fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
-        neo_hookean_isochoric(self.c10, i1, j)
-    }
-
-    #[inline]
-    fn volumetric(&self, j: f64) -> [f64; 3] {
-        neo_hookean_volumetric(1.0 / self.d, j)
-    }
-}
-
-/// The energy `a (I1bar - 3) + b (J - 1)^2` with any real coefficients (no positivity check):
-/// the derivative of the Neo-Hookean energy with respect to one of its parameters. `W` is linear
-/// in C10 and in 1/D, so `∂W/∂C10` is this form with `(a, b) = (1, 0)` and `∂W/∂D` with
-/// `(0, -1/D²)`; evaluated by an element, it gives the exact `∂f_int/∂θ` (parameter
-/// sensitivities, seed §2.3).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct NeoHookeanRate {
-    /// `a`, the rate of C10.
-    pub c10: f64,
-    /// `b`, the rate of 1/D.
-    pub inv_d: f64,
-}
-
-impl NeoHookeanRate {
-    /// `∂W/∂C10`: the energy `I1bar - 3`.
-    pub const UNIT_C10: NeoHookeanRate = NeoHookeanRate {
-        c10: 1.0,
-        inv_d: 0.0,
-    };
-    /// `∂W/∂(1/D)`: the energy `(J - 1)²`.
-    pub const UNIT_INV_D: NeoHookeanRate = NeoHookeanRate {
-        c10: 0.0,
-        inv_d: 1.0,
-    };
-}
-
-impl Hyperelastic for NeoHookeanRate {
-    fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
-        neo_hookean_isochoric(self.c10, i1, j)
-    }
-
-    fn volumetric(&self, j: f64) -> [f64; 3] {
-        neo_hookean_volumetric(self.inv_d, j)
-    }
 }
 
 /// Cauchy stress `[σxx, σyy, σzz, σxy]` from a response at F (J = det F).
@@ -399,12 +334,5 @@ mod tests {
         for k in 0..4 {
             assert!((le[k] - exp[k]).abs() < 1e-12, "{k}: {le:?} vs {exp:?}");
         }
-    }
-
-    #[test]
-    fn rejects_bad_parameters() {
-        assert!(NeoHookean::new(-1.0, 1.0).is_err());
-        assert!(NeoHookean::new(1.0, 0.0).is_err());
-        assert!(NeoHookean::new(f64::NAN, 1.0).is_err());
     }
 }

@@ -4,8 +4,8 @@
 use crate::contact::RigidContact;
 use crate::element::{ElementGeometry, MAX_NODES};
 use crate::load::PressureFace;
-use crate::material::NeoHookean;
-use femu_mesh::{BoundaryCondition, Deck, Mesh, PointLoad, StepDef};
+use crate::material::{material_def, material_from_def, Material, MaterialError};
+use femu_mesh::{BoundaryCondition, Deck, MaterialDef, Mesh, PointLoad, StepDef};
 use rayon::prelude::*;
 
 /// Problems found while building a model.
@@ -17,8 +17,13 @@ pub enum ModelError {
         gauss_point: usize,
         det_j: f64,
     },
-    #[error("material '{name}': {message}")]
-    BadMaterial { name: String, message: String },
+    #[error("material '{name}'{}: {source}", line.map(|l| format!(" (deck line {l})")).unwrap_or_default())]
+    BadMaterial {
+        name: String,
+        /// The deck line of the material's data, when it came from a file.
+        line: Option<usize>,
+        source: Box<MaterialError>,
+    },
     #[error("element {label}: no material assigned")]
     NoMaterial { label: i64 },
     #[error("pressure on element {label}: face {face} does not exist")]
@@ -29,11 +34,37 @@ pub enum ModelError {
     Unrestrained,
 }
 
-/// A named material of the model.
-#[derive(Debug, Clone, PartialEq)]
+/// A named material of the model: any registered law ([`crate::material::LAWS`]).
+#[derive(Debug, Clone)]
 pub struct NamedMaterial {
     pub name: String,
-    pub law: NeoHookean,
+    pub law: Box<dyn Material>,
+}
+
+impl PartialEq for NamedMaterial {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name && *self.law == *other.law
+    }
+}
+
+impl NamedMaterial {
+    /// The material of a deck, through the registry (errors name the deck line).
+    pub fn from_def(def: &MaterialDef) -> Result<NamedMaterial, ModelError> {
+        let law = material_from_def(def).map_err(|source| ModelError::BadMaterial {
+            name: def.name.clone(),
+            line: def.line,
+            source: Box::new(source),
+        })?;
+        Ok(NamedMaterial {
+            name: def.name.clone(),
+            law,
+        })
+    }
+
+    /// Its deck form: `*MATERIAL, NAME=` with the law's `*HYPERELASTIC` keyword and data line.
+    pub fn to_def(&self) -> MaterialDef {
+        material_def(&self.name, &*self.law)
+    }
 }
 
 /// Everything the static solver needs.
@@ -69,18 +100,8 @@ impl Model {
             point_loads,
         } = deck;
         let materials = materials
-            .into_iter()
-            .map(|m| {
-                NeoHookean::new(m.c10, m.d1)
-                    .map(|law| NamedMaterial {
-                        name: m.name.clone(),
-                        law,
-                    })
-                    .map_err(|message| ModelError::BadMaterial {
-                        name: m.name,
-                        message,
-                    })
-            })
+            .iter()
+            .map(NamedMaterial::from_def)
             .collect::<Result<Vec<_>, _>>()?;
         // Element geometry in parallel; the errors are then reported in element order (the
         // first bad element, as a serial loop would).

@@ -31,7 +31,7 @@ pub fn element_fields(model: &Model, u: &[f64]) -> ElementFields {
             let ue = model.gather(e, u);
             let mat = &model.materials[model.element_material[e]].law;
             formulation(geo.kind)
-                .averages(geo, mat, &ue[..geo.n_nodes])
+                .averages(geo, &**mat, &ue[..geo.n_nodes])
                 .unwrap_or(ElementAverages {
                     log_strain: [f64::NAN; 4],
                     cauchy_stress: [f64::NAN; 4],

@@ -2,11 +2,13 @@
 //! version of the seed's §2.3, Eq. 3, which used finite differences).
 //!
 //! At a converged state `R(u(θ), θ) = 0`, so `K_T ∂u/∂θ_k = -∂R/∂θ_k`. Only the internal force
-//! depends on the material parameters, and the Neo-Hookean energy
-//! `W = C10 (I1bar - 3) + (1/D)(J - 1)²` is linear in C10 and in 1/D: `∂f_int/∂θ_k` is the
-//! internal force of the rate energy [`NeoHookeanRate`] over the elements of the parameter's
-//! material, exact for every element formulation (the CPE4H mean-dilatation force is linear in
-//! the energy too). One back-substitution per parameter with the tangent of the solve.
+//! depends on the material parameters, and every registered law is linear in a function of each
+//! parameter (`W = Σ_k c_k(θ_k) E_k`, e.g. the Neo-Hookean
+//! `W = C10 (I1bar - 3) + (1/D)(J - 1)²`, linear in C10 and in 1/D): `∂f_int/∂θ_k` is the
+//! internal force of the energy `c_k'(θ_k) E_k` over the elements of the parameter's material
+//! ([`crate::material::Material::rate_forces`]), exact for every element formulation (the CPE4H
+//! mean-dilatation force is linear in the energy too). One back-substitution per parameter with
+//! the tangent of the solve.
 //!
 //! **Contact.** The sensitivity is that of the exactly constrained problem (the limit the
 //! augmented-Lagrangian iterations converge to): the nodes in contact at the converged state keep
@@ -29,8 +31,8 @@
 //! does not, the exact tangent is factorized. The solver lends all of this as one
 //! [`Linearization`]: the state, its tangent, the factors and the active contact constraints.
 
-use crate::element::{formulation, MAX_DOFS};
-use crate::material::NeoHookeanRate;
+use crate::element::MAX_DOFS;
+use crate::material::{LawSpec, ParameterSpec};
 use crate::model::Model;
 use crate::solver::{AssemblyError, Linearization, StaticSolver};
 use femu_sparse::LinearSolveError;
@@ -39,70 +41,110 @@ use rayon::prelude::*;
 use serde::Serialize;
 use std::time::Instant;
 
-/// Which Neo-Hookean parameter.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
-pub enum ParameterKind {
-    /// C10 (MPa).
-    C10,
-    /// D (MPa⁻¹).
-    D,
-}
-
-/// One material parameter of a model: C10 or D of material `material`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, serde::Deserialize)]
+/// One material parameter of a model: parameter `index` of the law of material `material`, as
+/// the law declares it (`spec`). Its name is the parameter's and the material's, `C10_FAT`,
+/// `D_QUADRICEPS`, `C01_FAT`.
+#[derive(Debug, Clone, Copy)]
 pub struct Parameter {
     pub material: usize,
-    pub kind: ParameterKind,
+    pub index: usize,
+    spec: &'static ParameterSpec,
 }
 
 impl Parameter {
-    /// The parameter's value in `model` (MPa or MPa⁻¹).
-    pub fn value(&self, model: &Model) -> f64 {
-        let law = &model.materials[self.material].law;
-        match self.kind {
-            ParameterKind::C10 => law.c10,
-            ParameterKind::D => law.d,
-        }
+    /// Parameter `index` of `law` on material `material` (`None` if the law has no such
+    /// parameter).
+    pub fn new(material: usize, law: &'static LawSpec, index: usize) -> Option<Parameter> {
+        law.parameters.get(index).map(|spec| Parameter {
+            material,
+            index,
+            spec,
+        })
     }
 
-    /// Sets the parameter's value in `model` (the caller keeps it positive and finite).
+    /// Parameter `index` of material `material` of `model`.
+    pub fn of(model: &Model, material: usize, index: usize) -> Option<Parameter> {
+        let law = model.materials.get(material)?.law.spec();
+        Parameter::new(material, law, index)
+    }
+
+    /// The parameter of `model` named `name` (`C10_FAT`, case-insensitive).
+    pub fn named(model: &Model, name: &str) -> Option<Parameter> {
+        all_parameters(model)
+            .into_iter()
+            .find(|p| p.name(model).eq_ignore_ascii_case(name))
+    }
+
+    /// What its law declares about it: name, unit, bounds, log scale.
+    pub fn spec(&self) -> &'static ParameterSpec {
+        self.spec
+    }
+
+    /// The parameter's value in `model` (internal units: MPa or MPa⁻¹).
+    pub fn value(&self, model: &Model) -> f64 {
+        model.materials[self.material].law.parameter(self.index)
+    }
+
+    /// Sets the parameter's value in `model` (the caller keeps it within its bounds).
     pub fn set(&self, model: &mut Model, value: f64) {
-        let law = &mut model.materials[self.material].law;
-        match self.kind {
-            ParameterKind::C10 => law.c10 = value,
-            ParameterKind::D => law.d = value,
-        }
+        model.materials[self.material]
+            .law
+            .set_parameter(self.index, value);
     }
 
     /// `C10_QUADRICEPS`, `D_FAT`, ... (material names as in the model).
     pub fn name(&self, model: &Model) -> String {
-        let kind = match self.kind {
-            ParameterKind::C10 => "C10",
-            ParameterKind::D => "D",
-        };
-        format!("{kind}_{}", model.materials[self.material].name)
+        format!("{}_{}", self.spec.name, model.materials[self.material].name)
     }
 
-    /// The rate energy `∂W/∂θ` (see [`NeoHookeanRate`]).
-    fn rate(&self, model: &Model) -> NeoHookeanRate {
-        match self.kind {
-            ParameterKind::C10 => NeoHookeanRate::UNIT_C10,
-            ParameterKind::D => {
-                let d = model.materials[self.material].law.d;
-                NeoHookeanRate {
-                    c10: 0.0,
-                    inv_d: -1.0 / (d * d),
-                }
-            }
-        }
+    /// Whether this parameter is one of `model`'s (its material exists and has this law's
+    /// parameter at `index`).
+    pub fn belongs_to(&self, model: &Model) -> bool {
+        model
+            .materials
+            .get(self.material)
+            .and_then(|m| m.law.spec().parameters.get(self.index))
+            .is_some_and(|p| std::ptr::eq(p, self.spec) || p == self.spec)
     }
 }
 
-/// C10 and D of every material of `model`, in material order: `[C10_0, D_0, C10_1, D_1, ...]`.
+impl PartialEq for Parameter {
+    fn eq(&self, other: &Self) -> bool {
+        self.material == other.material
+            && self.index == other.index
+            && self.spec.name == other.spec.name
+    }
+}
+
+impl Eq for Parameter {}
+
+impl std::hash::Hash for Parameter {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        (self.material, self.index, self.spec.name).hash(state);
+    }
+}
+
+/// Serialized as `{"material": 0, "kind": "C10"}` (the form result files have always had).
+impl Serialize for Parameter {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeStruct;
+        let mut s = serializer.serialize_struct("Parameter", 2)?;
+        s.serialize_field("material", &self.material)?;
+        s.serialize_field("kind", self.spec.name)?;
+        s.end()
+    }
+}
+
+/// Every parameter of every material of `model`: material by material, each law's parameters
+/// in the order it declares them (`[C10_0, D_0, C10_1, D_1, ...]` for Neo-Hookean materials).
 pub fn all_parameters(model: &Model) -> Vec<Parameter> {
-    (0..model.materials.len())
-        .flat_map(|m| {
-            [ParameterKind::C10, ParameterKind::D].map(|kind| Parameter { material: m, kind })
+    model
+        .materials
+        .iter()
+        .enumerate()
+        .flat_map(|(m, nm)| {
+            let law = nm.law.spec();
+            (0..law.parameters.len()).filter_map(move |k| Parameter::new(m, law, k))
         })
         .collect()
 }
@@ -118,9 +160,10 @@ pub enum SensitivityError {
     Factorization(#[source] LinearSolveError),
     #[error("the contact constraints are singular (pivot {pivot:.3e} of {size} active nodes)")]
     SingularContact { pivot: f64, size: usize },
-    #[error("parameter {index} refers to material {material}, the model has {count}")]
+    #[error("parameter {index} ({name}) of material {material} is not a parameter of the model ({count} materials)")]
     BadParameter {
         index: usize,
+        name: &'static str,
         material: usize,
         count: usize,
     },
@@ -157,9 +200,10 @@ pub struct SensitivityReport {
 /// calls it once per iteration).
 #[derive(Debug, Default)]
 pub struct DirectSensitivity {
-    /// Element rate forces of C10 (`a = 1`) and of 1/D (`b = 1`), `MAX_DOFS` per element.
-    f_c10: Vec<f64>,
-    f_invd: Vec<f64>,
+    /// Element rate forces `∂f_e/∂θ_k` of each parameter k of the element's material,
+    /// `MAX_DOFS` per parameter, `rate_stride` per element.
+    rates: Vec<f64>,
+    rate_stride: usize,
     /// The right-hand sides / solutions, one column per parameter.
     block: Vec<f64>,
     /// Three blocks of [`MAX_RHS`] columns at most: the right-hand sides of the refinement,
@@ -204,9 +248,10 @@ impl DirectSensitivity {
     ) -> Result<SensitivityReport, SensitivityError> {
         let t0 = Instant::now();
         for (index, p) in parameters.iter().enumerate() {
-            if p.material >= model.materials.len() {
+            if !p.belongs_to(model) {
                 return Err(SensitivityError::BadParameter {
                     index,
+                    name: p.spec.name,
                     material: p.material,
                     count: model.materials.len(),
                 });
@@ -319,23 +364,18 @@ impl DirectSensitivity {
         x.clear();
         x.resize(np * n_eq, 0.0);
         // The columns are independent: one task each, over the elements of its material.
-        let (f_c10, f_invd) = (&self.f_c10, &self.f_invd);
+        let (rates, stride) = (&self.rates, self.rate_stride);
         x.par_chunks_mut(n_eq).enumerate().for_each(|(k, col)| {
             let p = &parameters[k];
-            let rate = p.rate(model);
-            let (fe_all, scale) = match p.kind {
-                ParameterKind::C10 => (f_c10, rate.c10),
-                ParameterKind::D => (f_invd, rate.inv_d),
-            };
             for (e, el) in model.mesh.elements.iter().enumerate() {
                 if model.element_material[e] != p.material {
                     continue;
                 }
-                let fe = &fe_all[e * MAX_DOFS..(e + 1) * MAX_DOFS];
+                let fe = &rates[e * stride + p.index * MAX_DOFS..][..MAX_DOFS];
                 for (a, &n) in el.nodes().iter().enumerate() {
                     for i in 0..2 {
                         if let Some(q) = eqs[2 * n + i] {
-                            col[q] -= scale * fe[2 * a + i];
+                            col[q] -= fe[2 * a + i];
                         }
                     }
                 }
@@ -383,28 +423,30 @@ impl DirectSensitivity {
         Ok(report)
     }
 
-    /// Internal forces of the unit rate energies of C10 and of 1/D, element by element.
+    /// `∂f_e/∂θ_k` of every parameter of each element's material, element by element.
     fn element_rate_forces(
         &mut self,
         model: &Model,
         state: &[f64],
     ) -> Result<(), SensitivityError> {
         let n_el = model.mesh.elements.len();
-        self.f_c10.resize(n_el * MAX_DOFS, 0.0);
-        self.f_invd.resize(n_el * MAX_DOFS, 0.0);
+        let most = model
+            .materials
+            .iter()
+            .map(|m| m.law.spec().parameters.len())
+            .max()
+            .unwrap_or(0);
+        self.rate_stride = most.max(1) * MAX_DOFS;
+        self.rates.resize(n_el * self.rate_stride, 0.0);
         let failed = self
-            .f_c10
-            .par_chunks_mut(MAX_DOFS)
-            .zip(self.f_invd.par_chunks_mut(MAX_DOFS))
+            .rates
+            .par_chunks_mut(self.rate_stride)
             .enumerate()
-            .map(|(e, (fc, fd))| {
+            .map(|(e, forces)| {
                 let geo = &model.geometry[e];
                 let ue = model.gather(e, state);
-                let element = formulation(geo.kind);
-                if element
-                    .rate_forces(geo, &ue[..geo.n_nodes], fc, fd)
-                    .is_err()
-                {
+                let law = &model.materials[model.element_material[e]].law;
+                if law.rate_forces(geo, &ue[..geo.n_nodes], forces).is_err() {
                     return Some(e);
                 }
                 None

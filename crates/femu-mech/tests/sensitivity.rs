@@ -2,7 +2,7 @@
 //! on the built-in thigh (Table 1, coarse mesh) for each of the seed's tests and both quad
 //! element types.
 
-use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_mech::loading::{apply_loading, Loading, Side};
 use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -22,13 +22,23 @@ fn tight() -> SolverOptions {
 
 /// The built-in thigh with about `elements` quads, Table 1 materials, femur fixed.
 fn thigh(kind: ElementKind, loading: &Loading, elements: usize) -> Model {
+    thigh_with(kind, loading, elements, table1_materials())
+}
+
+/// [`thigh`] with the given deck materials (named by region).
+fn thigh_with(
+    kind: ElementKind,
+    loading: &Loading,
+    elements: usize,
+    materials: Vec<femu_mesh::MaterialDef>,
+) -> Model {
     let params = ThighParams {
         target_elements: Some(elements),
         ..Default::default()
     };
     let t = parametric_thigh(&params, kind).expect("thigh");
     let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &Material::table1(), 0.0).expect("deck");
+    let mut deck = contention_deck(&t, &materials, 0.0).expect("deck");
     deck.pressures.clear();
     let mut model = Model::from_deck(deck).expect("model");
     apply_loading(&mut model, &skin, loading).expect("loading");
@@ -56,11 +66,16 @@ fn rel_diff(a: &[f64], b: &[f64]) -> f64 {
 }
 
 fn check_against_fd(kind: ElementKind, loading: Loading, elements: usize, label: &str) {
-    let mut model = thigh(kind, &loading, elements);
+    let model = thigh(kind, &loading, elements);
+    assert_eq!(all_parameters(&model).len(), 10);
+    check_model_against_fd(model, label);
+}
+
+/// Every parameter's sensitivity of `model` against central differences of full re-solves.
+fn check_model_against_fd(mut model: Model, label: &str) {
     let mut solver = StaticSolver::new(&model, tight()).unwrap();
     let state = solve(&model, &mut solver, None);
     let params = all_parameters(&model);
-    assert_eq!(params.len(), 10);
     let mut dd = DirectSensitivity::new();
     let mut du = Vec::new();
     let report = dd
@@ -175,6 +190,66 @@ fn indentation_cpe4_matches_finite_differences() {
 #[test]
 fn indentation_cpe4h_matches_finite_differences() {
     check_against_fd(ElementKind::Cpe4h, indentation(), 1500, "indentation CPE4H");
+}
+
+/// Table 1's thigh with the fat a Yeoh material and the quadriceps a Mooney–Rivlin one (the
+/// other muscles Neo-Hookean), each parameter's term large enough to move the displacements
+/// far above the re-solves' round-off (with C30 = 10 kPa, `θ ∂u/∂θ` was 5e-7 mm under
+/// contention and the finite differences only good to 1e-5):
+/// the 13 parameters (C10, C20, C30, D of the fat; C10, C01, D of the quadriceps; C10, D of the
+/// others) against finite differences, under contention (CPE4H: the volumetric terms through
+/// the mean dilatation) and compression (CPE4, contact).
+#[test]
+fn mooney_rivlin_and_yeoh_sensitivities_match_finite_differences() {
+    use femu_mech::material::{material_def, MooneyRivlin, Yeoh};
+    let mut materials = table1_materials();
+    for m in &mut materials {
+        if m.name == "FAT" {
+            let yeoh = Yeoh {
+                c10: 0.8e-3,
+                c20: 20e-3,
+                c30: 500e-3,
+                d: 30.8,
+            };
+            *m = material_def("FAT", &yeoh);
+        } else if m.name == "QUADRICEPS" {
+            let mr = MooneyRivlin {
+                c10: 0.75e-3,
+                c01: 1.0e-3,
+                d: 18.0,
+            };
+            *m = material_def("QUADRICEPS", &mr);
+        }
+    }
+    for (kind, loading, label) in [
+        (
+            ElementKind::Cpe4h,
+            Loading::seed_contention(),
+            "Yeoh and Mooney-Rivlin, contention CPE4H",
+        ),
+        (
+            ElementKind::Cpe4,
+            Loading::seed_compression(),
+            "Yeoh and Mooney-Rivlin, compression CPE4",
+        ),
+    ] {
+        let model = thigh_with(kind, &loading, 500, materials.clone());
+        let names: Vec<String> = all_parameters(&model)
+            .iter()
+            .map(|p| p.name(&model))
+            .collect();
+        assert_eq!(names.len(), 13);
+        for n in [
+            "C20_FAT",
+            "C30_FAT",
+            "D_FAT",
+            "C01_QUADRICEPS",
+            "D_SARTORIUS",
+        ] {
+            assert!(names.iter().any(|x| x == n), "{n} in {names:?}");
+        }
+        check_model_against_fd(model, label);
+    }
 }
 
 /// Eq. 3: the global index is the RMS of the nodal map; scaling the parameter's derivative by

@@ -105,7 +105,7 @@ fn patch_test_on_distorted_mesh() {
             let s = formulation(geo.kind)
                 .cauchy_stress(
                     geo,
-                    &model.materials[0].law,
+                    &*model.materials[0].law,
                     &model.gather(e, &sol.u)[..geo.n_nodes],
                 )
                 .unwrap();
@@ -167,7 +167,7 @@ fn uniaxial_plane_strain_stretch_matches_closed_form() {
         let s = formulation(kind)
             .cauchy_stress(
                 geo,
-                &model.materials[0].law,
+                &*model.materials[0].law,
                 &model.gather(0, &sol.u)[..geo.n_nodes],
             )
             .unwrap();
@@ -234,7 +234,7 @@ fn biaxial_and_simple_shear_match_closed_form() {
             let s = formulation(kind)
                 .cauchy_stress(
                     geo,
-                    &model.materials[0].law,
+                    &*model.materials[0].law,
                     &model.gather(e, &sol.u)[..geo.n_nodes],
                 )
                 .unwrap();
@@ -348,7 +348,8 @@ fn warm_start_from_a_nearby_solution() {
     };
     let mut solver = StaticSolver::new(&model, options).unwrap();
     let first = solver.solve(&model).unwrap();
-    model.materials[0].law.c10 *= 1.01;
+    let c10 = model.materials[0].law.parameter(0);
+    model.materials[0].law.set_parameter(0, c10 * 1.01);
     let warm = solver
         .solve_with(&model, Some(&first.u), &mut |_| {})
         .unwrap();

@@ -5,13 +5,22 @@
 
 use crate::mesh::Mesh;
 
-/// A `*MATERIAL` with `*HYPERELASTIC, NEO HOOKE`: Abaqus form
-/// `W = C10 (I1bar - 3) + (1/D1) (J - 1)^2` (MPa, MPa^-1).
+/// A `*MATERIAL` with its `*HYPERELASTIC` law as the deck gives it: the law keyword and the
+/// constants of its data line. This crate knows no mechanics: which keywords exist, what the
+/// constants mean and which values are valid is decided by the material registry of `femu-mech`
+/// (`femu_mech::material`), whose errors name [`MaterialDef::line`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct MaterialDef {
     pub name: String,
-    pub c10: f64,
-    pub d1: f64,
+    /// The `*HYPERELASTIC` parameter naming the law, upper case with single blanks as written
+    /// (`NEO HOOKE`, `MOONEY-RIVLIN`, `YEOH`).
+    pub keyword: String,
+    /// The numbers of the law's data line in deck order (MPa, MPa^-1); trailing values the deck
+    /// leaves out are absent (Abaqus reads them as 0).
+    pub constants: Vec<f64>,
+    /// The 1-based deck line of the data line, for error messages (`None` for a deck built in
+    /// code).
+    pub line: Option<usize>,
 }
 
 /// A prescribed displacement of one degree of freedom (0 = x, 1 = y) of one node.

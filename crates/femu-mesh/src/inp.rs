@@ -17,7 +17,7 @@
 //! | `*ELEMENT, TYPE=CPE4\|CPE4H\|CPE3[, ELSET=]` | `label, n1, n2, n3[, n4]` |
 //! | `*NSET, NSET=[, GENERATE]`, `*ELSET, ELSET=[, GENERATE]` | labels or names of sets defined earlier; `first, last[, step]` with `GENERATE` |
 //! | `*SURFACE, NAME=[, TYPE=ELEMENT]` | `element or element set, S1..S4` |
-//! | `*MATERIAL, NAME=` then `*HYPERELASTIC, NEO HOOKE` | `C10, D1` (C10 > 0, D1 > 0: compressible) |
+//! | `*MATERIAL, NAME=` then `*HYPERELASTIC, <law>` | the law's constants, stored as given in [`MaterialDef`]; which laws exist and what their constants may be is the material registry's (`femu_mech::material`), checked when a model is built, with errors naming the data line |
 //! | `*SOLID SECTION, ELSET=, MATERIAL=` | optional thickness line; must be 1 (per-mm plane strain) |
 //! | `*BOUNDARY` (model or step data) | `node or node set, first dof[, last dof][, value]`; dofs above 2 ignored |
 //! | `*STEP[, NLGEOM[=YES\|NO]][, INC=n]` … `*END STEP` | exactly one step |
@@ -106,6 +106,9 @@ struct Record<'a> {
 struct Param {
     /// Upper case, blanks removed.
     key: String,
+    /// Upper case with single blanks, as shown in messages and kept where a parameter names
+    /// something (`NEO HOOKE` of `*HYPERELASTIC`).
+    display: String,
     value: Option<String>,
 }
 
@@ -163,10 +166,19 @@ fn lex<'a>(
                     continue;
                 }
                 let (key, value) = match part.split_once('=') {
-                    Some((k, v)) => (squash(k), Some(v.trim().to_string())),
-                    None => (squash(part), None),
+                    Some((k, v)) => (k, Some(v.trim().to_string())),
+                    None => (part, None),
                 };
-                params.push(Param { key, value });
+                let display = key
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" ")
+                    .to_ascii_uppercase();
+                params.push(Param {
+                    key: squash(key),
+                    display,
+                    value,
+                });
             }
             if let Some(done) = current.take() {
                 on_block(&done)?;
@@ -245,7 +257,8 @@ struct RawElement {
 struct RawMaterial {
     name: String,
     line: usize,
-    neo_hooke: Option<(f64, f64)>,
+    /// The `*HYPERELASTIC` law keyword, its constants and the line of its data.
+    law: Option<(String, Vec<f64>, usize)>,
 }
 
 struct RawSection {
@@ -871,30 +884,36 @@ impl<'f> Parser<'f> {
         self.materials.push(RawMaterial {
             name,
             line: b.line,
-            neo_hooke: None,
+            law: None,
         });
         Ok(())
     }
 
+    /// `*HYPERELASTIC, <law>` and its data line, stored as given: the law and the meaning of its
+    /// constants are the material registry's (`femu_mech::material`), which reports bad values
+    /// with the line kept here.
     fn hyperelastic(&mut self, b: &Block) -> Result<()> {
         let Some(m) = self.current_material else {
             return Err(self.err(b.line, "*HYPERELASTIC must follow a *MATERIAL definition"));
         };
-        if Self::param(b, "NEOHOOKE").is_none() || b.params.len() != 1 {
-            let given: Vec<&str> = b.params.iter().map(|p| p.key.as_str()).collect();
-            return Err(self.err(
-                b.line,
-                format!(
-                    "only *HYPERELASTIC, NEO HOOKE is supported (parameters given: {})",
-                    if given.is_empty() {
-                        "none, which means POLYNOMIAL".to_string()
-                    } else {
-                        given.join(", ")
-                    }
-                ),
-            ));
-        }
-        if self.materials[m].neo_hooke.is_some() {
+        let keyword = match b.params.as_slice() {
+            [p] if p.value.is_none() => p.display.clone(),
+            given => {
+                let given: Vec<&str> = given.iter().map(|p| p.display.as_str()).collect();
+                return Err(self.err(
+                    b.line,
+                    format!(
+                        "*HYPERELASTIC needs exactly one parameter, the law (e.g. *HYPERELASTIC, NEO HOOKE); given: {}",
+                        if given.is_empty() {
+                            "none, which means POLYNOMIAL".to_string()
+                        } else {
+                            given.join(", ")
+                        }
+                    ),
+                ));
+            }
+        };
+        if self.materials[m].law.is_some() {
             return Err(self.err(
                 b.line,
                 format!(
@@ -908,33 +927,27 @@ impl<'f> Parser<'f> {
             [] => {
                 return Err(self.err(
                     b.line,
-                    "*HYPERELASTIC, NEO HOOKE needs a data line 'C10, D1'",
+                    format!("*HYPERELASTIC, {keyword} needs a data line with its constants"),
                 ))
             }
             [_, r2, ..] => {
                 return Err(self.err(
                     r2.line,
-                    "*HYPERELASTIC: one data line 'C10, D1' expected (temperature-dependent data is not supported)",
+                    "*HYPERELASTIC: one data line expected (temperature-dependent data is not supported)",
                 ))
             }
         };
-        self.max_fields(b, r, 2, "C10, D1")?;
-        let c10 = self.num(&r.fields[0])?;
-        let d1 = self.opt_num(&r.fields, 1)?.unwrap_or(0.0);
-        if c10 <= 0.0 {
-            return Err(self.err(r.line, format!("*HYPERELASTIC: C10 must be > 0, got {c10}")));
-        }
-        if d1 < 0.0 {
-            return Err(self.err(r.line, format!("*HYPERELASTIC: D1 must be > 0, got {d1}")));
-        }
-        if d1 == 0.0 {
-            return Err(self.err(
-                r.line,
-                "*HYPERELASTIC: D1 = 0 (or missing) means incompressible, which femu does not \
-                 support: give D1 > 0 (compressible neo-Hooke)",
-            ));
-        }
-        self.materials[m].neo_hooke = Some((c10, d1));
+        // Blank trailing fields are absent values; a blank field before a number reads as 0,
+        // as in Abaqus.
+        let last = r.fields.iter().rposition(|f| !f.text.is_empty());
+        let constants = r.fields[..last.map_or(0, |l| l + 1)]
+            .iter()
+            .map(|f| match f.text.is_empty() {
+                true => Ok(0.0),
+                false => self.num(f),
+            })
+            .collect::<Result<Vec<f64>>>()?;
+        self.materials[m].law = Some((keyword, constants, r.line));
         Ok(())
     }
 
@@ -1286,19 +1299,20 @@ impl<'f> Parser<'f> {
         // Materials and sections.
         let mut materials = Vec::with_capacity(self.materials.len());
         for m in &self.materials {
-            let Some((c10, d1)) = m.neo_hooke else {
+            let Some((keyword, constants, line)) = &m.law else {
                 return Err(self.err(
                     m.line,
                     format!(
-                        "material '{}' has no *HYPERELASTIC, NEO HOOKE definition",
+                        "material '{}' has no *HYPERELASTIC definition (e.g. *HYPERELASTIC, NEO HOOKE)",
                         m.name
                     ),
                 ));
             };
             materials.push(MaterialDef {
                 name: m.name.clone(),
-                c10,
-                d1,
+                keyword: keyword.clone(),
+                constants: constants.clone(),
+                line: Some(*line),
             });
         }
         let n_el = mesh.elements.len();
@@ -1576,7 +1590,7 @@ pub const ALL_NODES_SET: &str = "NALL";
 /// Layout: `*NODE, NSET=NALL` (all nodes, full precision), one `*ELEMENT` block per (element
 /// type, region) with `ELSET=` the region, `*NSET` / `*ELSET` for the other sets of the mesh
 /// (a mesh node set named `NALL` is replaced by all nodes), `*MATERIAL` +
-/// `*HYPERELASTIC, NEO HOOKE`, one `*SOLID SECTION` per region, zero `*BOUNDARY` conditions as
+/// `*HYPERELASTIC, <law>` with the law's constants, one `*SOLID SECTION` per region, zero `*BOUNDARY` conditions as
 /// model data, then `*STEP, NLGEOM[=NO], INC=`, `*STATIC`, the nonzero `*BOUNDARY` values,
 /// `*DLOAD` (`label, Pn, value`), `*CLOAD`, `*NODE PRINT, NSET=NALL` / `U`,
 /// `*NODE FILE` / `U` and `*END STEP`.
@@ -1730,11 +1744,26 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
         write_labels(w, set.iter().map(|&n| mesh.node_labels[n]))?;
     }
     for m in &deck.materials {
-        finite("C10", m.c10)?;
-        finite("D1", m.d1)?;
+        let keyword_ok = !m.keyword.is_empty()
+            && m.keyword
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == ' ' || c == '-' || c == '_');
+        if !keyword_ok || m.constants.is_empty() {
+            return Err(invalid(format!(
+                "material '{}': the *HYPERELASTIC law '{}' with {} constants cannot be written",
+                m.name,
+                m.keyword,
+                m.constants.len()
+            )));
+        }
+        let mut data = Vec::with_capacity(m.constants.len());
+        for &c in &m.constants {
+            finite(&format!("a constant of material '{}'", m.name), c)?;
+            data.push(fmt_f64(c));
+        }
         writeln!(w, "*MATERIAL, NAME={}", m.name)?;
-        writeln!(w, "*HYPERELASTIC, NEO HOOKE")?;
-        writeln!(w, "{}, {}", fmt_f64(m.c10), fmt_f64(m.d1))?;
+        writeln!(w, "*HYPERELASTIC, {}", m.keyword)?;
+        writeln!(w, "{}", data.join(", "))?;
     }
     for (r, name) in deck.region_names.iter().enumerate() {
         if let Some(m) = region_material[r] {

@@ -7,10 +7,10 @@ use crate::schema::{
     DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
 };
 use anyhow::{bail, Context, Result};
-use femu_geometry::{Material, MeshOptions, ThighModel};
+use femu_geometry::{table1_materials, MeshOptions, ThighModel};
 use femu_mech::loading::apply_loading;
 use femu_mech::Model;
-use femu_mesh::{Deck, ElementKind};
+use femu_mesh::{Deck, ElementKind, MaterialDef};
 use std::path::Path;
 
 /// A study's model before any loading.
@@ -34,9 +34,9 @@ impl StudyModel {
     }
 }
 
-/// Table 1 with the study's `[materials]` values (regions checked against `regions`).
-fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<Material>> {
-    let mut materials = Material::table1();
+/// Table 1 with the study's `[materials]` (regions checked against `regions`).
+fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialDef>> {
+    let mut materials = table1_materials();
     for spec in specs {
         let region = &spec.region;
         if !regions.iter().any(|r| r.eq_ignore_ascii_case(region)) {
@@ -47,17 +47,14 @@ fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<Material>
         }
         let m = materials
             .iter_mut()
-            .find(|m| m.region.eq_ignore_ascii_case(region))
+            .find(|m| m.name.eq_ignore_ascii_case(region))
             .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
-        if let Some(c) = spec.value("C10") {
-            m.c10_mpa = c;
-        }
-        if let Some(d) = spec.value("D") {
-            m.d_per_mpa = d;
-        }
+        *m = spec
+            .apply(m)
+            .with_context(|| format!("[materials.{region}]"))?;
     }
     for r in regions {
-        if !materials.iter().any(|m| m.region.eq_ignore_ascii_case(r)) {
+        if !materials.iter().any(|m| m.name.eq_ignore_ascii_case(r)) {
             bail!(
                 "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
             );
@@ -164,12 +161,9 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
                 path.display()
             )
         })?;
-        if let Some(c) = spec.value("C10") {
-            deck.materials[m].c10 = c;
-        }
-        if let Some(d) = spec.value("D") {
-            deck.materials[m].d1 = d;
-        }
+        deck.materials[m] = spec
+            .apply(&deck.materials[m])
+            .with_context(|| format!("[materials.{name}]"))?;
     }
     Ok(StudyModel {
         model: Model::from_deck(deck)?,
@@ -192,7 +186,7 @@ pub fn thigh_deck(elements: usize, kind: ElementKind) -> Result<(Deck, Vec<(usiz
     let thigh = femu_geometry::parametric_thigh(&params, kind)?;
     let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
     let deck =
-        femu_geometry::contention_deck(&thigh, &Material::table1(), femu_geometry::CONTENTION_MPA)?;
+        femu_geometry::contention_deck(&thigh, &table1_materials(), femu_geometry::CONTENTION_MPA)?;
     Ok((deck, skin))
 }
 
@@ -203,19 +197,16 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
     let name = mesh.display().to_string();
     let mut regions = Vec::new();
     for m in &study.model.materials {
-        let (Some(c10), Some(d)) = (m.value("C10"), m.value("D")) else {
-            return Err(study
-                .key_error(
-                    &format!("materials.{}", m.region),
-                    "",
-                    "a Gmsh region needs both C10 (c10_kpa or c10_mpa) and D (d_per_mpa)".into(),
-                )
-                .into());
-        };
+        let law = m.build().map_err(|e| {
+            study.key_error(
+                &format!("materials.{}", m.region),
+                "",
+                format!("a Gmsh region needs its whole material: {e}"),
+            )
+        })?;
         regions.push(RegionMaterial {
             region: m.region.clone(),
-            c10,
-            d,
+            law,
         });
     }
     // The seed's default tests (no [[test]] given) do not apply to a Gmsh mesh.

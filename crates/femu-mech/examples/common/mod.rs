@@ -37,7 +37,7 @@ pub fn thigh_deck(elements: usize, kind: ElementKind) -> (Deck, Vec<(usize, usiz
     let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
     let deck = femu_geometry::contention_deck(
         &thigh,
-        &femu_geometry::Material::table1(),
+        &femu_geometry::table1_materials(),
         femu_geometry::CONTENTION_MPA,
     )
     .expect("deck");

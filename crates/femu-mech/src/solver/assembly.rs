@@ -7,7 +7,7 @@
 //! [`Assembly::assemble`].
 
 use crate::contact::TravelControl;
-use crate::element::{evaluate_neo_hookean, ElementResult, MAX_DOFS};
+use crate::element::{ElementResult, MAX_DOFS};
 use crate::model::Model;
 use femu_sparse::{CscPattern, NodeGraph};
 use rayon::prelude::*;
@@ -392,7 +392,7 @@ impl Assembly {
                     force: fe,
                     stiffness: with_tangent.then_some(ke),
                 };
-                if let Err(j) = evaluate_neo_hookean(geo, mat, &ue[..geo.n_nodes], &mut out) {
+                if let Err(j) = mat.evaluate_element(geo, &ue[..geo.n_nodes], &mut out) {
                     return Some((e, j.0));
                 }
                 None

@@ -1,6 +1,6 @@
 //! Fixtures shared by the femu-mech integration tests.
 
-use femu_geometry::{contention_deck, parametric_thigh, Material, ThighParams};
+use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_mech::loading::{apply_loading, Loading};
 use femu_mech::Model;
 use femu_mesh::ElementKind;
@@ -17,7 +17,7 @@ pub fn thigh_model(elements: usize, kind: ElementKind, loading: &Loading) -> Mod
     )
     .unwrap();
     let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &Material::table1(), 0.0).unwrap();
+    let mut deck = contention_deck(&t, &table1_materials(), 0.0).unwrap();
     deck.pressures.clear();
     let mut model = Model::from_deck(deck).unwrap();
     apply_loading(&mut model, &skin, loading).unwrap();

@@ -90,8 +90,11 @@ fn good_deck() {
     assert_eq!(d.element_region, vec![0, 1]);
     assert_eq!(d.element_material, vec![0, 1]);
     assert_eq!(d.materials[0].name, "FatMat");
-    assert_eq!(d.materials[0].c10, 0.00175);
-    assert_eq!(d.materials[1].d1, 0.5);
+    assert_eq!(d.materials[0].keyword, "NEO HOOKE");
+    assert_eq!(d.materials[0].constants, vec![0.00175, 1.0]);
+    assert_eq!(d.materials[0].line, Some(28));
+    assert_eq!(d.materials[1].keyword, "NEOHOOKE");
+    assert_eq!(d.materials[1].constants, vec![0.01, 0.5]);
     assert!(d.step.nlgeom);
     assert_eq!(d.step.max_increments, 50);
     assert_eq!(d.step.initial_increment, 0.1);
@@ -223,16 +226,24 @@ fn errors_name_file_line_and_problem() {
             "model.inp:14: element 1 is inverted or degenerate",
         ),
         (
-            GOOD.replace("0.01, 0.5d0", "0.01, 0.0"),
-            "model.inp:31: *HYPERELASTIC: D1 = 0 (or missing) means incompressible",
+            GOOD.replace("0.01, 0.5d0", "0.01, x"),
+            "model.inp:31: cannot read 'x' as a number",
         ),
         (
-            GOOD.replace("0.01, 0.5d0", "0.01"),
-            "model.inp:31: *HYPERELASTIC: D1 = 0",
+            GOOD.replace("0.01, 0.5d0", "0.01, 0.5\n0.02, 0.5"),
+            "model.inp:32: *HYPERELASTIC: one data line expected",
         ),
         (
-            GOOD.replace("0.00175, 1.0", "-0.00175, 1.0"),
-            "model.inp:28: *HYPERELASTIC: C10 must be > 0",
+            GOOD.replace("0.01, 0.5d0\n", ""),
+            "model.inp:30: *HYPERELASTIC, NEOHOOKE needs a data line",
+        ),
+        (
+            GOOD.replace("*hyperelastic, neo hooke\n0.00175, 1.0\n", ""),
+            "model.inp:26: material 'FatMat' has no *HYPERELASTIC definition",
+        ),
+        (
+            GOOD.replace("*hyperelastic, neo hooke", "*hyperelastic, polynomial, n=1"),
+            "model.inp:27: *HYPERELASTIC needs exactly one parameter, the law (e.g. *HYPERELASTIC, NEO HOOKE); given: POLYNOMIAL, N",
         ),
         (
             GOOD.replace("*End Step", "*End Step\n*STEP\n*STATIC\n*END STEP"),
@@ -315,7 +326,7 @@ fn errors_name_file_line_and_problem() {
         ),
         (
             GOOD.replace("*hyperelastic, neo hooke", "*hyperelastic"),
-            "model.inp:27: only *HYPERELASTIC, NEO HOOKE is supported",
+            "model.inp:27: *HYPERELASTIC needs exactly one parameter, the law (e.g. *HYPERELASTIC, NEO HOOKE); given: none, which means POLYNOMIAL",
         ),
         (
             GOOD.replace("*Heading", "*Part, name=P"),
@@ -376,7 +387,15 @@ fn round_trip() {
     assert_eq!(d2.mesh.node_labels, d.mesh.node_labels);
     assert_eq!(d2.mesh.elements, d.mesh.elements);
     assert_eq!(d2.mesh.element_labels, d.mesh.element_labels);
-    assert_eq!(d2.materials, d.materials);
+    // The same materials; only the lines of their data differ.
+    let without_lines = |d: &Deck| {
+        d.materials
+            .iter()
+            .map(|m| (m.name.clone(), m.keyword.clone(), m.constants.clone()))
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(without_lines(&d2), without_lines(&d));
+    assert!(d2.materials.iter().all(|m| m.line.is_some()));
     assert_eq!(d2.element_material, d.element_material);
     assert_eq!(d2.element_region, d.element_region);
     assert_eq!(d2.region_names, d.region_names);
@@ -460,8 +479,9 @@ fn block_2x2() -> Deck {
         mesh,
         materials: vec![MaterialDef {
             name: "Fat".into(),
-            c10: 0.00175,
-            d1: 10.0,
+            keyword: "NEO HOOKE".into(),
+            constants: vec![0.00175, 10.0],
+            line: None,
         }],
         element_material: vec![0; 4],
         element_region: vec![0; 4],

@@ -25,8 +25,9 @@ use super::raw::ConvergenceEntry;
 use super::tests::TestSpec;
 use super::StudyError;
 use femu_convergence::{ConvergenceStudy, DicGrid, MeshSequence};
-use femu_geometry::Material;
+use femu_geometry::table1_materials;
 use femu_mesh::ElementKind;
+use femu_mesh::MaterialDef;
 
 /// The `[convergence]` table, checked.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -191,27 +192,28 @@ pub(crate) fn view(v: ViewInputs, lines: &KeyLines) -> Result<ConvergenceStudy, 
     Ok(study)
 }
 
-/// Table 1 with the study's `[materials]` values (regions of the built-in thigh only).
-fn table1_with(materials: &[MaterialSpec], lines: &KeyLines) -> Result<Vec<Material>, StudyError> {
-    let mut out = Material::table1();
+/// Table 1 with the study's `[materials]` (regions of the built-in thigh only).
+fn table1_with(
+    materials: &[MaterialSpec],
+    lines: &KeyLines,
+) -> Result<Vec<MaterialDef>, StudyError> {
+    let mut out = table1_materials();
     for m in materials {
+        let table = format!("materials.{}", m.region);
         let entry = out
             .iter_mut()
-            .find(|x| x.region.eq_ignore_ascii_case(&m.region))
+            .find(|x| x.name.eq_ignore_ascii_case(&m.region))
             .ok_or_else(|| {
                 lines.err(
-                    &format!("materials.{}", m.region),
+                    &table,
                     0,
                     "",
                     "not a region of the built-in thigh (fat, quadriceps, ischio, gracilis, sartorius)".into(),
                 )
             })?;
-        if let Some(c) = m.value("C10") {
-            entry.c10_mpa = c;
-        }
-        if let Some(d) = m.value("D") {
-            entry.d_per_mpa = d;
-        }
+        *entry = m
+            .apply(entry)
+            .map_err(|e| lines.err(&table, 0, "", e.to_string()))?;
     }
     Ok(out)
 }

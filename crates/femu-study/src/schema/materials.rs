@@ -1,152 +1,157 @@
 //! `[materials.REGION]`: the law of a region and its parameters, each key carrying its unit
-//! (`c10_kpa` or `c10_mpa`, `d_per_mpa`).
+//! (`c10_kpa` or `c10_mpa`, `d_per_mpa`, `c01_kpa`, ...). The laws and their keys are the
+//! registry's (`femu_mech::material::LAWS`): nothing here names a parameter.
+//!
+//! ```toml
+//! [materials.FAT]             # override parameters of the region's law (Table 1: Neo-Hookean)
+//! c10_kpa = 0.8
+//! [materials.QUADRICEPS]      # or give the region another law, with every parameter
+//! law = "mooney-rivlin"
+//! c10_kpa = 1.0
+//! c01_kpa = 0.75
+//! d_per_mpa = 18.0
+//! ```
 
 use super::lines::KeyLines;
 use super::StudyError;
+use femu_mech::material::{
+    law, material_def, material_from_def, material_from_keys, parameter_key, set_from_keys,
+    LawEntry, Material, MaterialError,
+};
+use femu_mesh::MaterialDef;
 use std::collections::BTreeMap;
 
-/// The unit family of a material parameter, which decides the key suffixes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ParameterUnit {
-    /// A stress-like coefficient: `_kpa` or `_mpa` (stored in MPa).
-    Stress,
-    /// A compliance: `_per_mpa` (stored in MPa⁻¹).
-    Compliance,
-}
-
-impl ParameterUnit {
-    /// The key suffixes and their factor to the stored unit.
-    fn suffixes(self) -> &'static [(&'static str, f64)] {
-        match self {
-            ParameterUnit::Stress => &[("kpa", 1e-3), ("mpa", 1.0)],
-            ParameterUnit::Compliance => &[("per_mpa", 1.0)],
-        }
-    }
-}
-
-/// The parameters of the compressible Neo-Hookean law (seed Eq. 1), in the order of
-/// `femu_mech`'s parameters of a material.
-const NEO_HOOKEAN: [(&str, ParameterUnit); 2] = [
-    ("C10", ParameterUnit::Stress),
-    ("D", ParameterUnit::Compliance),
-];
-
-/// A region's material as the study gives it: the values it sets (the rest keep the model's
-/// defaults: Table 1 for the built-in thigh, the deck's own for a deck).
-#[derive(Debug, Clone, PartialEq)]
+/// A region's material as the study gives it.
+#[derive(Debug, Clone)]
 pub struct MaterialSpec {
     /// The region (or a deck's material, or a Gmsh physical surface) name as written; regions
     /// are matched without regard to case.
     pub region: String,
-    /// `(parameter, value in MPa or MPa⁻¹)`, e.g. `("C10", 1.75e-3)`.
-    pub values: Vec<(String, f64)>,
+    /// `law = ...`: the region gets this law, every parameter given; `None`: the region keeps
+    /// its model's law (Table 1's Neo-Hookean, a deck's own) and the keys override parameters.
+    pub law: Option<&'static LawEntry>,
+    /// The parameter keys and values as written (`("c10_kpa", 0.8)`).
+    pub keys: Vec<(String, f64)>,
 }
 
-impl MaterialSpec {
-    /// The value the study sets for `parameter` (`"C10"`, `"D"`), if any.
-    pub fn value(&self, parameter: &str) -> Option<f64> {
-        self.values
-            .iter()
-            .find(|(p, _)| p.eq_ignore_ascii_case(parameter))
-            .map(|v| v.1)
+impl PartialEq for MaterialSpec {
+    fn eq(&self, other: &Self) -> bool {
+        self.region == other.region
+            && self.keys == other.keys
+            && self.law.map(|l| l.spec.name) == other.law.map(|l| l.spec.name)
     }
 }
 
-/// Checks every `[materials.REGION]` table.
+impl MaterialSpec {
+    fn pairs(&self) -> impl Iterator<Item = (&str, f64)> {
+        self.keys.iter().map(|(k, v)| (k.as_str(), *v))
+    }
+
+    /// The material of the region: `default` (the model's own) with the study's law or values.
+    pub fn apply(&self, default: &MaterialDef) -> Result<MaterialDef, MaterialError> {
+        let material = match self.law {
+            Some(entry) => material_from_keys(entry.spec.name, self.pairs())?,
+            None => {
+                let mut m = material_from_def(default)?;
+                set_from_keys(&mut *m, self.pairs())?;
+                m
+            }
+        };
+        Ok(material_def(&default.name, &*material))
+    }
+
+    /// The material of a region with no default (a Gmsh physical surface): its law
+    /// (Neo-Hookean unless named) with every parameter given.
+    pub fn build(&self) -> Result<Box<dyn Material>, MaterialError> {
+        let name = self.law.map_or("neo-hookean", |l| l.spec.name);
+        material_from_keys(name, self.pairs())
+    }
+}
+
+/// Checks every `[materials.REGION]` table; `default_law` is the law a region keeps when the
+/// study names none (`None` for a deck, whose materials are read later).
 pub(crate) fn parse(
     tables: &BTreeMap<String, BTreeMap<String, toml::Value>>,
+    default_law: Option<&'static LawEntry>,
     lines: &KeyLines,
 ) -> Result<Vec<MaterialSpec>, StudyError> {
     tables
         .iter()
-        .map(|(region, keys)| parse_one(region, keys, lines))
+        .map(|(region, keys)| parse_one(region, keys, default_law, lines))
         .collect()
 }
 
 fn parse_one(
     region: &str,
-    keys: &BTreeMap<String, toml::Value>,
+    table: &BTreeMap<String, toml::Value>,
+    default_law: Option<&'static LawEntry>,
     lines: &KeyLines,
 ) -> Result<MaterialSpec, StudyError> {
-    let table = format!("materials.{region}");
-    let valid = || {
-        NEO_HOOKEAN
-            .iter()
-            .flat_map(|(p, u)| {
-                u.suffixes()
-                    .iter()
-                    .map(move |(s, _)| format!("{}_{s}", p.to_ascii_lowercase()))
-            })
-            .collect::<Vec<_>>()
-            .join(", ")
+    let at = format!("materials.{region}");
+    let law = match table.get("law") {
+        None => None,
+        Some(toml::Value::String(name)) => {
+            Some(law(name).map_err(|e| lines.err(&at, 0, "law", e.to_string()))?)
+        }
+        Some(other) => {
+            return Err(lines.err(&at, 0, "law", format!("must be a law's name, got {other}")))
+        }
     };
-    let mut values = Vec::new();
-    for key in keys.keys() {
-        let known = NEO_HOOKEAN.iter().any(|(p, u)| {
-            u.suffixes()
-                .iter()
-                .any(|(s, _)| *key == format!("{}_{s}", p.to_ascii_lowercase()))
-        });
-        if !known {
-            return Err(lines.err(
-                &table,
-                0,
-                key,
-                format!("unknown field `{key}` (valid: {})", valid()),
-            ));
-        }
+    let mut keys = Vec::new();
+    for (key, v) in table.iter().filter(|(k, _)| *k != "law") {
+        let value = match v {
+            toml::Value::Float(f) => *f,
+            toml::Value::Integer(i) => *i as f64,
+            other => return Err(lines.err(&at, 0, key, format!("must be a number, got {other}"))),
+        };
+        keys.push((key.clone(), value));
     }
-    for (parameter, unit) in NEO_HOOKEAN {
-        let stem = parameter.to_ascii_lowercase();
-        let given: Vec<(String, f64)> = unit
-            .suffixes()
-            .iter()
-            .map(|(s, f)| (format!("{stem}_{s}"), *f))
-            .filter(|(k, _)| keys.contains_key(k))
-            .collect();
-        match given.as_slice() {
-            [] => {}
-            [(key, factor)] => {
-                let v = number(&keys[key]).ok_or_else(|| {
-                    lines.err(
-                        &table,
-                        0,
-                        key,
-                        format!("must be a number, got {}", keys[key]),
-                    )
-                })?;
-                let v = lines.positive(&table, 0, key, v)?;
-                values.push((parameter.to_string(), v * factor));
-            }
-            [_, (second, _), ..] => {
-                return Err(lines.err(
-                    &table,
-                    0,
-                    second,
-                    format!(
-                        "give {} not both",
-                        given
-                            .iter()
-                            .map(|(k, _)| k.as_str())
-                            .collect::<Vec<_>>()
-                            .join(" or ")
-                            + ","
-                    ),
-                ))
-            }
-        }
-    }
-    Ok(MaterialSpec {
+    let spec = MaterialSpec {
         region: region.to_string(),
-        values,
-    })
+        law,
+        keys,
+    };
+    // Checked now against the law the region will have (a deck's, when no law is named, only
+    // once the deck is read).
+    let checked = match (law, default_law) {
+        (Some(_), _) => spec.build().map(|_| ()),
+        (None, Some(entry)) => entry
+            .build(
+                &entry
+                    .spec
+                    .parameters
+                    .iter()
+                    .map(|p| p.typical)
+                    .collect::<Vec<_>>(),
+            )
+            .and_then(|mut m| set_from_keys(&mut *m, spec.pairs())),
+        (None, None) => Ok(()),
+    };
+    checked.map_err(|e| {
+        let key = key_of(&e, &spec, law.or(default_law));
+        lines.err(&at, 0, &key, e.to_string())
+    })?;
+    Ok(spec)
 }
 
-/// A TOML number (an integer is a number too).
-fn number(v: &toml::Value) -> Option<f64> {
-    match v {
-        toml::Value::Float(f) => Some(*f),
-        toml::Value::Integer(i) => Some(*i as f64),
-        _ => None,
+/// The study key an error is about (empty: the table).
+fn key_of(e: &MaterialError, spec: &MaterialSpec, law: Option<&'static LawEntry>) -> String {
+    match e {
+        MaterialError::UnknownKey { key, .. } => key.clone(),
+        MaterialError::DuplicateParameter { second, .. } => second.clone(),
+        MaterialError::OutOfRange { parameter, .. } => spec
+            .keys
+            .iter()
+            .map(|(k, _)| k)
+            .find(|k| {
+                *k == parameter
+                    || law.is_some_and(|l| {
+                        parameter_key(l.spec, k)
+                            .is_some_and(|(i, _)| l.spec.parameters[i].name == parameter)
+                    })
+            })
+            .cloned()
+            .unwrap_or_default(),
+        _ => String::new(),
     }
 }

@@ -36,7 +36,7 @@ pub use geometry::{
     ELEMENTS_RANGE,
 };
 pub use identification::{Grouping, IdentificationSpec, Steps};
-pub use materials::{MaterialSpec, ParameterUnit};
+pub use materials::MaterialSpec;
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
 pub use tests::{seed_tests, TestSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
@@ -161,7 +161,13 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         &lines,
         base,
     )?;
-    let materials = materials::parse(&file.materials, &lines)?;
+    // A region keeps Table 1's Neo-Hookean unless the study names a law; a deck's materials
+    // are its own, checked once it is read.
+    let default_law = match geometry {
+        Geometry::Deck(_) => None,
+        _ => femu_mech::material::law("neo-hookean").ok(),
+    };
+    let materials = materials::parse(&file.materials, default_law, &lines)?;
     let tests = tests::parse(file.test.as_deref(), &lines)?;
     let measurement = measurement::parse(
         file.grid.clone(),

@@ -33,13 +33,13 @@ fn reads_keys_and_names_bad_ones() {
     .unwrap();
     assert_eq!(p.model.resolution, Resolution::Elements(800));
     assert_eq!(p.model.element, QuadElement::Cpe4);
+    assert_eq!(p.model.materials.len(), 1);
+    assert_eq!(p.model.materials[0].region, "fat");
     assert_eq!(
-        p.model.materials,
-        vec![MaterialSpec {
-            region: "fat".into(),
-            values: vec![("C10".into(), 1e-3)]
-        }]
+        p.model.materials[0].keys,
+        vec![("c10_kpa".to_string(), 1.0)]
     );
+    assert!(p.model.materials[0].law.is_none());
     assert_eq!(p.tests.len(), 1);
     assert_eq!(p.groups.len(), 1);
     let e = err("[model]\nelemnts = 3\n");
@@ -57,6 +57,29 @@ fn reads_keys_and_names_bad_ones() {
     );
     let e = err("[materials.fat]\nc10_kpa = \"soft\"\n");
     assert!(e.contains("must be a number"), "{e}");
+    // The registry's laws and keys, named with their line.
+    let e = err("[materials.fat]\nlaw = \"ogden\"\n");
+    assert!(
+        e.contains("[materials.fat] law (line 2)") && e.contains("mooney"),
+        "{e}"
+    );
+    let e = err("[materials.fat]\nlaw = \"mooney-rivlin\"\nc10_kpa = 1\nd_per_mpa = 18\n");
+    assert!(e.contains("C01") && e.contains("c01_kpa"), "{e}");
+    let e = err("[materials.fat]\nc10_kpa = 1e300\n");
+    assert!(
+        e.contains("[materials.fat] c10_kpa (line 2)") && e.contains("out of range"),
+        "{e}"
+    );
+    let e = err("[materials.fat]\nc01_kpa = 1\n");
+    assert!(e.contains("[materials.fat] c01_kpa (line 2)"), "{e}");
+    let mr = parse(
+        "[materials.fat]\nlaw = \"mooney-rivlin\"\nc10_kpa = 0.5\nc01_kpa = 0.3\nd_per_mpa = 30\n",
+        Path::new("."),
+    )
+    .unwrap();
+    let m = mr.model.materials[0].build().unwrap();
+    assert_eq!(m.spec().name, "mooney-rivlin");
+    assert_eq!(m.parameters(), vec![0.5e-3, 0.3e-3, 30.0]);
 }
 
 /// The example of `femu init` is valid and spells out the defaults.
@@ -73,16 +96,11 @@ fn the_example_study_is_the_default() {
     assert_eq!(e.model.resolution, Resolution::Elements(6000));
     // Every Table 1 value restated.
     for m in &e.model.materials {
-        let t = femu_geometry::TABLE1
-            .iter()
-            .find(|t| t.0.eq_ignore_ascii_case(&m.region))
+        let t = femu_geometry::table1_materials()
+            .into_iter()
+            .find(|t| t.name.eq_ignore_ascii_case(&m.region))
             .expect("a Table 1 region");
-        assert_eq!(
-            (m.value("C10").unwrap(), m.value("D").unwrap()),
-            (t.1 * 1e-3, t.2),
-            "{}",
-            m.region
-        );
+        assert_eq!(m.apply(&t).unwrap(), t, "{}", m.region);
     }
 }
 
@@ -166,7 +184,7 @@ fn the_gmsh_layout_is_a_view_of_the_schema() {
     )
     .unwrap();
     assert_eq!(s.model.element, QuadElement::Cpe4);
-    assert_eq!(s.model.materials[0].value("C10"), Some(0.8e-3));
+    assert_eq!(s.model.materials[0].build().unwrap().parameter(0), 0.8e-3);
     assert!((s.boundary.pressures[0].pressure - 2.666e-3).abs() < 1e-6);
     assert_eq!(s.boundary.fixed[0].dofs, vec![0, 1]);
     let s = parse(
@@ -210,12 +228,8 @@ fn the_convergence_layout_is_a_view_of_the_schema() {
             pressure: 10.0 * femu_mesh::MMHG_IN_MPA
         })
     );
-    let q = c
-        .materials
-        .iter()
-        .find(|m| m.region == "QUADRICEPS")
-        .unwrap();
-    assert_eq!(q.c10_mpa, 2e-3);
+    let q = c.materials.iter().find(|m| m.name == "QUADRICEPS").unwrap();
+    assert_eq!(q.constants[0], 2e-3);
     let e = err("target_elements = [500, 1000]\n");
     assert!(
         e.contains("target_elements (line 1)") && e.contains("at least 3"),

@@ -37,7 +37,7 @@ pub struct IdentificationSummary {
     pub points_in_tissue: usize,
     pub points_masked: usize,
     pub noise_sigma_mm: f64,
-    pub free_parameters: Vec<FreeParameter>,
+    pub free_parameters: Vec<FreeParameterSummary>,
     pub parameters: Vec<Estimate>,
     pub correlation: Vec<Vec<f64>>,
     pub best_cost: f64,
@@ -55,6 +55,40 @@ pub struct IdentificationSummary {
     /// Set when the user stopped the run: what was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
+}
+
+/// A model parameter as a free parameter lists it: its material (index) and parameter name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MemberSummary {
+    pub material: usize,
+    pub kind: String,
+}
+
+/// A free parameter of an identification: the model parameters it moves, its bounds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FreeParameterSummary {
+    pub name: String,
+    pub members: Vec<MemberSummary>,
+    pub lower: f64,
+    pub upper: f64,
+}
+
+impl From<&FreeParameter> for FreeParameterSummary {
+    fn from(f: &FreeParameter) -> Self {
+        FreeParameterSummary {
+            name: f.name.clone(),
+            members: f
+                .members
+                .iter()
+                .map(|m| MemberSummary {
+                    material: m.material,
+                    kind: m.spec().name.to_string(),
+                })
+                .collect(),
+            lower: f.lower,
+            upper: f.upper,
+        }
+    }
 }
 
 /// The measured field of an identification and where it came from.
@@ -399,7 +433,7 @@ pub fn identify_on(
         points_in_tissue: c.points_in_tissue,
         points_masked,
         noise_sigma_mm: study.measurement.sigma_mm,
-        free_parameters: free.clone(),
+        free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
         parameters,
         correlation: id.correlation,
         best_cost: best.cost,

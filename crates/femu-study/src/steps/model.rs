@@ -17,7 +17,7 @@ use crate::schema::{Geometry, QuadElement};
 use anyhow::{bail, Context, Result};
 use femu_geometry::{
     contention_deck, mesh_label_image, parametric_thigh, quality_report, read_label_image,
-    write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec, Material,
+    table1_materials, write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec,
     MeshOptions, QualityReport, ThighModel, ThighParams, CONTENTION_MPA, TABLE1,
 };
 use serde::{Deserialize, Serialize};
@@ -104,7 +104,7 @@ pub fn mesh_thigh(req: &ThighMeshRequest, out: &Path, progress: &dyn Progress) -
     let mesh_s = t0.elapsed().as_secs_f64();
     write_model_folder(
         &model,
-        &Material::table1(),
+        &table1_materials(),
         &ModelFolder {
             input,
             kind,
@@ -158,7 +158,7 @@ pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) 
     let mesh_s = t0.elapsed().as_secs_f64();
     write_model_folder(
         &model,
-        &Material::table1(),
+        &table1_materials(),
         &ModelFolder {
             input,
             kind,
@@ -185,7 +185,7 @@ pub struct ModelFolder<'a> {
 /// Writes the folder of a meshed thigh (see the module documentation).
 pub fn write_model_folder(
     model: &ThighModel,
-    materials: &[Material],
+    materials: &[femu_mesh::MaterialDef],
     f: &ModelFolder,
     progress: &dyn Progress,
 ) -> Result<()> {
@@ -318,16 +318,8 @@ pub fn write_study_model(
     let Some(thigh) = &built.thigh else {
         return write_deck_model(built, dir);
     };
-    let materials: Vec<Material> = built
-        .model
-        .materials
-        .iter()
-        .map(|m| Material {
-            region: m.name.clone(),
-            c10_mpa: m.law.c10,
-            d_per_mpa: m.law.d,
-        })
-        .collect();
+    let materials: Vec<femu_mesh::MaterialDef> =
+        built.model.materials.iter().map(|m| m.to_def()).collect();
     let (input, command) = match geometry {
         Geometry::Labels(l) => (
             serde_json::json!({"model": "label image", "image": l.image, "map": l.map}),

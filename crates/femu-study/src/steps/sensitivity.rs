@@ -132,6 +132,7 @@ pub fn run_on(
     create_dir(&args.out)?;
     let params = all_parameters(base);
     let names: Vec<String> = params.iter().map(|p| p.name(base)).collect();
+    let families: Vec<&str> = params.iter().map(|p| p.spec().name).collect();
     progress.note(&format!(
         "sensitivity: {} elements, {} nodes; {} tests, {} parameters",
         base.mesh.elements.len(),
@@ -217,7 +218,7 @@ pub fn run_on(
         let mut total: Option<Vec<Vec<f64>>> = None;
         for r in &results {
             let f = fisher::information(&columns_of(r), study.measurement.sigma_mm, tied)?;
-            ranking.push(rank(&r.name, gname, &f, tied));
+            ranking.push(rank(&r.name, gname, &f, tied, &families));
             match &mut total {
                 None => total = Some(f),
                 Some(t) => fisher::add_information(t, &f),
@@ -229,7 +230,13 @@ pub fn run_on(
                 .map(|r| r.name.as_str())
                 .collect::<Vec<_>>()
                 .join(" + ");
-            ranking.push(rank(&label, gname, total.as_ref().expect("tests"), tied));
+            ranking.push(rank(
+                &label,
+                gname,
+                total.as_ref().expect("tests"),
+                tied,
+                &families,
+            ));
         }
     }
     ranking.sort_by(|a, b| {
@@ -245,7 +252,7 @@ pub fn run_on(
     });
     write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
 
-    let finding = findings(&results, &names);
+    let finding = findings(&results, &families);
     if args.figures {
         write_figures(&args.out, &results, &names, progress)?;
     }
@@ -307,21 +314,29 @@ fn max_norm(u: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-fn rank(measurement: &str, grouping: &str, f: &[Vec<f64>], tied: &Tied) -> Ranking {
+/// The predicted identifiability of a measurement with information `f`; `families` names
+/// each model parameter's law parameter (`"C10"`, `"D"`, ...), a tied one its first member's.
+fn rank(
+    measurement: &str,
+    grouping: &str,
+    f: &[Vec<f64>],
+    tied: &Tied,
+    families: &[&str],
+) -> Ranking {
     let id = fisher::identifiability(f, &tied.names);
-    let worst = |prefix: &str| {
-        id.names
+    let worst = |family: &str| {
+        tied.members
             .iter()
             .zip(&id.relative_sd)
-            .filter(|(n, _)| n.starts_with(prefix))
+            .filter(|(members, _)| families[members[0]] == family)
             .map(|(_, s)| *s)
             .fold(0.0f64, f64::max)
     };
     Ranking {
         measurement: measurement.to_string(),
         grouping: grouping.to_string(),
-        worst_c10_relative_sd: worst("C10_"),
-        worst_d_relative_sd: worst("D_"),
+        worst_c10_relative_sd: worst("C10"),
+        worst_d_relative_sd: worst("D"),
         condition: id.condition,
         identifiability: id,
     }
@@ -515,20 +530,20 @@ fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
 
 /// The seed's qualitative finding, restated from the numbers: per test, whether the C10 or the
 /// D family is the more sensitive (mean of Eq. 3 over the five tissues).
-fn findings(results: &[TestResult], names: &[String]) -> Vec<String> {
+fn findings(results: &[TestResult], families: &[&str]) -> Vec<String> {
     results
         .iter()
         .map(|r| {
-            let mean = |prefix: &str| {
-                let v: Vec<f64> = names
+            let mean = |family: &str| {
+                let v: Vec<f64> = families
                     .iter()
                     .zip(&r.global)
-                    .filter(|(n, _)| n.starts_with(prefix))
+                    .filter(|(f, _)| **f == family)
                     .map(|(_, s)| *s)
                     .collect();
                 v.iter().sum::<f64>() / v.len().max(1) as f64
             };
-            let (c, d) = (mean("C10_"), mean("D_"));
+            let (c, d) = (mean("C10"), mean("D"));
             let (best, ratio) = if c >= d { ("C10", c / d) } else { ("D", d / c) };
             format!(
                 "{}: the {best} family is the more sensitive (mean Eq. 3 index C10 {c:.3e}, D {d:.3e}; ratio {ratio:.1})",

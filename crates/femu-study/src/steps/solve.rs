@@ -16,8 +16,9 @@ use std::time::Instant;
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MaterialSummary {
     pub name: String,
-    pub c10_kpa: f64,
-    pub d_per_mpa: f64,
+    /// C10 (kPa) and D (MPa⁻¹), when the material's law has them.
+    pub c10_kpa: Option<f64>,
+    pub d_per_mpa: Option<f64>,
     pub elements: usize,
 }
 
@@ -253,6 +254,11 @@ pub fn write_solved(
     }
 }
 
+/// The value of the parameter `name` of `law`, if its law has one.
+fn parameter_named(law: &dyn femu_mech::Material, name: &str) -> Option<f64> {
+    law.parameter_index(name).map(|k| law.parameter(k))
+}
+
 /// The summary of a solve.
 fn summary(
     model: &Model,
@@ -273,8 +279,8 @@ fn summary(
         .enumerate()
         .map(|(m, nm)| MaterialSummary {
             name: nm.name.clone(),
-            c10_kpa: nm.law.c10 * 1e3,
-            d_per_mpa: nm.law.d,
+            c10_kpa: parameter_named(&*nm.law, "C10").map(|c| c * 1e3),
+            d_per_mpa: parameter_named(&*nm.law, "D"),
             elements: model.element_material.iter().filter(|&&x| x == m).count(),
         })
         .collect();
