@@ -242,7 +242,7 @@ mmhg = 20
         (study.replace("surface_7", "NOPE"), "NOPE"),
         (
             study.replace("d_per_mpa = 18.0", "d = 18.0"),
-            "unknown field `d`",
+            "d (line 7): 'd' is not a parameter key of the neo-hookean law",
         ),
     ] {
         std::fs::write(dir.join("bad.toml"), bad).unwrap();

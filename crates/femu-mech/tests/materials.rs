@@ -359,7 +359,7 @@ fn deck_material_errors_say_what_is_valid() {
     let e = Model::from_deck(deck).unwrap_err().to_string();
     assert!(
         e.starts_with(
-            "material 'FAT' (deck line 21): D1 = 0 MPa⁻¹ is out of range: it must be > 0"
+            "material 'FAT' (deck line 21): D1 = 0 MPa⁻¹ is out of range: it must be ≥ 0.000001"
         ),
         "{e}"
     );

@@ -202,13 +202,19 @@ impl LawSpec {
     }
 }
 
+/// The largest stress-like coefficient a law accepts (MPa): 10 GPa, stiffer than cortical
+/// bone; far above any soft tissue, and far below the overflow of the element arithmetic.
+pub const STRESS_MAX_MPA: f64 = 1e4;
+/// The bounds of a volumetric compliance (MPa⁻¹): bulk moduli from 2e6 MPa down to 2e-6 MPa.
+pub const COMPLIANCE_RANGE: (f64, f64) = (1e-6, 1e6);
+
 /// C10, the coefficient of `I1bar - 3`, as the Neo-Hookean law declares it (the other laws
 /// start from it).
 pub const C10: ParameterSpec = ParameterSpec {
     name: "C10",
     unit: Unit::Stress,
     lower: Bound::Open(0.0),
-    upper: Bound::Unbounded,
+    upper: Bound::Closed(STRESS_MAX_MPA),
     log_scale: true,
     part: EnergyPart::Isochoric,
     typical: 1.75e-3,
@@ -220,8 +226,8 @@ pub const C10: ParameterSpec = ParameterSpec {
 pub const D: ParameterSpec = ParameterSpec {
     name: "D",
     unit: Unit::Compliance,
-    lower: Bound::Open(0.0),
-    upper: Bound::Unbounded,
+    lower: Bound::Closed(COMPLIANCE_RANGE.0),
+    upper: Bound::Closed(COMPLIANCE_RANGE.1),
     log_scale: true,
     part: EnergyPart::Volumetric,
     typical: 18.0,

@@ -110,7 +110,7 @@ impl MaterialLaw for MooneyRivlin {
                 name: "C01",
                 unit: Unit::Stress,
                 lower: Bound::Closed(0.0),
-                upper: Bound::Unbounded,
+                upper: Bound::Closed(super::law::STRESS_MAX_MPA),
                 log_scale: false,
                 part: EnergyPart::Isochoric,
                 typical: 0.75e-3,

@@ -93,7 +93,7 @@ const fn higher(
         name,
         unit: Unit::Stress,
         lower,
-        upper: Bound::Unbounded,
+        upper: Bound::Closed(super::law::STRESS_MAX_MPA),
         log_scale: false,
         part: EnergyPart::Isochoric,
         typical,
@@ -138,7 +138,7 @@ impl MaterialLaw for Yeoh {
             },
             higher(
                 "C20",
-                Bound::Unbounded,
+                Bound::Closed(-super::law::STRESS_MAX_MPA),
                 -0.3e-3,
                 "coefficient of (I1bar - 3)²; if negative, C20² < 3 C10 C30",
             ),

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum StudyError {
     /// The file cannot be read.
-    #[error("cannot read study file {path}: {source}")]
+    #[error("cannot read study file {path}: {error}")]
     Read {
         path: PathBuf,
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// Not TOML, or a key the schema does not know (the TOML parser's message names the key
     /// and the line).
@@ -22,10 +22,10 @@ pub enum StudyError {
     #[error("{0}")]
     Study(String),
     /// An error inside a named study file.
-    #[error("study file {file}: {source}")]
+    #[error("study file {file}: {error}")]
     InFile {
         file: PathBuf,
-        source: Box<StudyError>,
+        error: Box<StudyError>,
     },
 }
 
@@ -42,7 +42,7 @@ impl StudyError {
     pub fn in_file(self, file: &std::path::Path) -> StudyError {
         StudyError::InFile {
             file: file.to_path_buf(),
-            source: Box::new(self),
+            error: Box::new(self),
         }
     }
 }

@@ -117,9 +117,9 @@ pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, Stud
 
 /// Reads and checks a study file.
 pub fn read(path: &Path) -> Result<Study, StudyError> {
-    let text = std::fs::read_to_string(path).map_err(|source| StudyError::Read {
+    let text = std::fs::read_to_string(path).map_err(|error| StudyError::Read {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let base = path.parent().unwrap_or(Path::new("."));
     parse(&text, base).map_err(|e| e.in_file(path))

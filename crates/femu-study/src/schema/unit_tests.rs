@@ -47,12 +47,12 @@ fn reads_keys_and_names_bad_ones() {
     assert!(err("[[test]]\nkind = \"stretch\"\n").contains("stretch"));
     assert!(err("[[test]]\nkind = \"compression\"\n").contains("force_n_per_mm"));
     assert!(err("[noise]\nsigma_mm = -1\n").contains("sigma_mm"));
-    assert!(err("[materials.fat]\nc10_kpa = 1\nc10_mpa = 1\n").contains("not both"));
+    assert!(err("[materials.fat]\nc10_kpa = 1\nc10_mpa = 1\n").contains("given twice"));
     assert!(err("[[test]]\nkind = \"contention\"\nforce_n_per_mm = 1\n")
         .contains("not a key of a contention test"));
     let e = err("[materials.fat]\nc10_kpa = 0.8\nd = 30.8\n");
     assert!(
-        e.contains("unknown field `d`") && e.contains("line 3"),
+        e.contains("'d' is not a parameter key") && e.contains("line 3"),
         "{e}"
     );
     let e = err("[materials.fat]\nc10_kpa = \"soft\"\n");
