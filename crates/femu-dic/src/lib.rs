@@ -14,6 +14,7 @@
 //! - [`lab`]: the virtual lab (speckle images warped by known displacement fields).
 //! - [`noise`]: random error from pairs of images of an unloaded specimen.
 
+pub mod anderson;
 pub mod bspline;
 pub mod dicom;
 pub mod error;
@@ -23,6 +24,7 @@ pub mod lab;
 pub mod mesh;
 pub mod noise;
 pub mod output;
+pub mod quality;
 pub mod solver;
 pub mod sparse;
 
