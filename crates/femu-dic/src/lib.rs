@@ -15,7 +15,9 @@
 //! - [`noise`]: random error from pairs of images of an unloaded specimen.
 
 pub mod anderson;
+pub mod auto;
 pub mod bspline;
+pub mod consistency;
 pub mod dicom;
 pub mod error;
 pub mod fft;

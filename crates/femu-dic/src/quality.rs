@@ -34,6 +34,7 @@
 use crate::error::DicError;
 use crate::solver::DicResult;
 use crate::sparse::Cholesky;
+use rayon::prelude::*;
 
 /// The nodal covariance (eq. 4) on the pattern of the Gauss–Newton matrix.
 #[derive(Debug, Clone)]
@@ -111,19 +112,37 @@ fn sandwich(
     let sys = &res.system;
     let p = &sys.pattern;
     let n = p.n;
-    let mut chol = Cholesky::factorize(p, &sys.a_values())?;
+    let chol = Cholesky::factorize(p, &sys.a_values())?;
+    // Columns j of C = A⁻¹ M_σ A⁻¹ in blocks (multi-column solves), blocks in parallel.
+    const BLOCK: usize = 64;
+    let blocks: Vec<Vec<(usize, f64)>> = (0..n.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|blk| {
+            let j0 = blk * BLOCK;
+            let nc = BLOCK.min(n - j0);
+            let mut z = vec![0.0; n * nc];
+            for c in 0..nc {
+                z[c * n + j0 + c] = 1.0;
+            }
+            chol.solve_columns_in_place(&mut z, nc);
+            let mut y = vec![0.0; n * nc];
+            for c in 0..nc {
+                p.mul_vec(m_sigma, &z[c * n..(c + 1) * n], &mut y[c * n..(c + 1) * n]);
+            }
+            chol.solve_columns_in_place(&mut y, nc);
+            let mut out = Vec::new();
+            for c in 0..nc {
+                let j = j0 + c;
+                for k in p.col_ptr[j]..p.col_ptr[j + 1] {
+                    out.push((k, y[c * n + p.row_idx[k]]));
+                }
+            }
+            out
+        })
+        .collect();
     let mut values = vec![0.0; p.nnz()];
-    let mut z = vec![0.0; n];
-    let mut y = vec![0.0; n];
-    for j in 0..n {
-        z.fill(0.0);
-        z[j] = 1.0;
-        chol.solve_in_place(&mut z);
-        p.mul_vec(m_sigma, &z, &mut y);
-        chol.solve_in_place(&mut y);
-        for k in p.col_ptr[j]..p.col_ptr[j + 1] {
-            values[k] = y[p.row_idx[k]];
-        }
+    for (k, v) in blocks.into_iter().flatten() {
+        values[k] = v;
     }
     let at = |r: usize, c: usize| p.position(r, c).map_or(0.0, |k| values[k]);
     let node = (0..n / 2)
