@@ -12,8 +12,8 @@
 //!   (`RMS / √2`, both images being noisy).
 //!
 //! Choice. The element size is the smallest multiple of 4 px, at least 16, whose area holds
-//! [`SPECKLES_PER_ELEMENT`] speckle cells `FWHM_x × FWHM_y` (an element must see several
-//! independent speckles; B-mode speckle is some 25 x 4 px on the Logiq E9 frames, so 16 px). The regularization length is the
+//! [`SPECKLES_PER_ELEMENT`] speckle cells `FWHM_x × FWHM_y` (an element must see more than one
+//! independent speckle; B-mode speckle is some 25–31 x 4 px on the Logiq E9 frames, so 16 px). The regularization length is the
 //! first rung of the ladder `4h, 8h, 16h` (at most the ROI's longer side) whose correlation
 //! converges with at least half of the elements trusted; the ladder starts at `8h` when the
 //! median texture ratio is below [`LINE_TEXTURE`] (line-like texture needs the support of more
@@ -31,7 +31,7 @@ use crate::solver::{correlate, DicOptions, DicResult};
 pub const LINE_TEXTURE: f64 = 0.25;
 
 /// Speckle cells (FWHM_x x FWHM_y) an element holds at least.
-pub const SPECKLES_PER_ELEMENT: f64 = 2.5;
+pub const SPECKLES_PER_ELEMENT: f64 = 2.0;
 
 /// Minimum share of trusted elements for a rung to be accepted.
 pub const MIN_TRUSTED: f64 = 0.5;
@@ -53,9 +53,10 @@ pub enum Setting {
 pub struct ImageStatistics {
     /// Speckle size (FWHM of the autocorrelation) along x and y (pixels).
     pub speckle_fwhm_px: [f64; 2],
-    /// Median over the elements of the small / large structure-tensor eigenvalue.
+    /// Median over the element-sized blocks of the reference of the small / large
+    /// structure-tensor eigenvalue.
     pub texture_ratio_median: f64,
-    /// Median over the elements of `sqrt(small eigenvalue)` (grey levels per pixel).
+    /// Median over the blocks of `sqrt(small eigenvalue)` (grey levels per pixel).
     pub texture_gradient_median: f64,
     /// Grey-level noise per image from the pair (residual RMS of the first correlation / √2).
     pub pair_noise_grey: f64,
@@ -156,6 +157,37 @@ pub fn speckle_fwhm(img: &GreyImage, r: &Rect) -> [f64; 2] {
     [half(0), half(1)]
 }
 
+/// Median over the `h x h` blocks of `r` of the structure-tensor eigenvalues of the reference
+/// (central differences): `(median of small / large, median of sqrt(small))`.
+pub fn texture(img: &GreyImage, r: &Rect, h: usize) -> (f64, f64) {
+    let mut ratio = Vec::new();
+    let mut small = Vec::new();
+    for by in 0..r.h / h {
+        for bx in 0..r.w / h {
+            let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+            for y in r.y + by * h..r.y + (by + 1) * h {
+                for x in r.x + bx * h..r.x + (bx + 1) * h {
+                    let gx = 0.5
+                        * (img.at((x + 1).min(img.width - 1), y) - img.at(x.saturating_sub(1), y));
+                    let gy = 0.5
+                        * (img.at(x, (y + 1).min(img.height - 1)) - img.at(x, y.saturating_sub(1)));
+                    sxx += gx * gx;
+                    syy += gy * gy;
+                    sxy += gx * gy;
+                }
+            }
+            let n = (h * h) as f64;
+            let (sxx, syy, sxy) = (sxx / n, syy / n, sxy / n);
+            let half = 0.5 * (sxx + syy);
+            let disc = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+            let (lo, hi) = ((half - disc).max(0.0), half + disc);
+            ratio.push(if hi > 0.0 { lo / hi } else { 0.0 });
+            small.push(lo.sqrt());
+        }
+    }
+    (median(ratio), median(small))
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.total_cmp(b));
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
@@ -218,10 +250,11 @@ pub fn correlate_auto(
     }
     .min(bb.w.min(bb.h) / 2)
     .max(4);
+    let (ratio, gradient) = texture(f, &bb, h0);
     let mut stats = ImageStatistics {
         speckle_fwhm_px: fwhm,
-        texture_ratio_median: f64::NAN,
-        texture_gradient_median: f64::NAN,
+        texture_ratio_median: ratio,
+        texture_gradient_median: gradient,
         pair_noise_grey: f64::NAN,
     };
     let mut attempts = Vec::new();
@@ -242,12 +275,11 @@ pub fn correlate_auto(
                 };
                 [4.0, 8.0, 16.0]
                     .iter()
-                    .filter(|&&k| k >= start || stats.texture_ratio_median.is_nan())
+                    .filter(|&&k| k >= start)
                     .map(|k| Some((k * h as f64).min(longest)))
                     .collect()
             }
         };
-        let mut ladder = ladder;
         let mut k = 0;
         while k < ladder.len() {
             let opts = DicOptions {
@@ -275,25 +307,13 @@ pub fn correlate_auto(
                 }
             };
             if stats.pair_noise_grey.is_nan() {
-                let tex = &m.res.element_texture;
-                stats.texture_ratio_median = median(
-                    tex.iter()
-                        .map(|t| t.structure[0] / t.structure[1].max(1e-300))
-                        .collect(),
-                );
-                stats.texture_gradient_median =
-                    median(tex.iter().map(|t| t.structure[0].sqrt()).collect());
                 stats.pair_noise_grey = m.res.residual_rms / std::f64::consts::SQRT_2;
-                // The first rung was picked before the texture was known: drop the rungs
-                // below the start that the texture asks for (the one just run stays).
-                if regularization == Setting::Auto && stats.texture_ratio_median < LINE_TEXTURE {
-                    let first = ladder[k];
-                    ladder.retain(|l| l.map_or(true, |v| v >= 8.0 * h as f64 || Some(v) == first));
-                    k = ladder.iter().position(|l| *l == first).unwrap_or(0);
-                }
             }
             let mut a = attempt_of(&m, &opts);
-            let ok = a.converged && a.trusted_fraction >= MIN_TRUSTED;
+            // Options given in full: the result is returned whatever it is (the caller writes
+            // it and reports a non-convergence with [`advice`]).
+            let forced = element != Setting::Auto && regularization != Setting::Auto;
+            let ok = forced || (a.converged && a.trusted_fraction >= MIN_TRUSTED);
             if !a.converged {
                 a.note = Some("not converged".into());
             } else if !ok {
@@ -337,6 +357,23 @@ pub fn correlate_auto(
     Err(DicError::Diverged(failure_advice(
         f, &bb, &attempts, sizes[0],
     )))
+}
+
+/// What to try when a correlation with element `h` did not converge: a larger element, a
+/// longer regularization, a ROI away from the dark bands (computed from the image).
+pub fn advice(f: &GreyImage, bb: &Rect, h: usize) -> String {
+    let roi_hint = match tissue_box(f, bb, h) {
+        Some(t) if t != *bb => format!(
+            "; or a smaller ROI away from the dark bands, e.g. --roi {},{},{},{}",
+            t.x, t.y, t.w, t.h
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "try the automatic choice (no --element, no --regularization), a larger element (--element {}), a longer regularization (--regularization {}){roi_hint}",
+        2 * h,
+        16 * h
+    )
 }
 
 /// The error message when nothing converged: what was tried and what to try.

@@ -84,6 +84,24 @@ pub fn composition(ab: &CheckedField, bc: &CheckedField, ac: &CheckedField) -> V
         .collect()
 }
 
+/// Repeated correlation of unloaded frames: the measured displacement itself is the error.
+pub fn repeated(ab: &CheckedField) -> Vec<CheckPoint> {
+    ab.res
+        .mesh
+        .nodes
+        .iter()
+        .filter_map(|p| {
+            let (u, s, t) = ab.at(p[0], p[1])?;
+            Some(CheckPoint {
+                x: *p,
+                diff: u,
+                sd: s,
+                trusted: t,
+            })
+        })
+        .collect()
+}
+
 /// The statistics of a check over one region.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct RegionStats {

@@ -17,10 +17,13 @@
 pub mod anderson;
 pub mod auto;
 pub mod bspline;
+pub mod check;
+pub mod command;
 pub mod consistency;
 pub mod dicom;
 pub mod error;
 pub mod fft;
+pub mod figures;
 pub mod image;
 pub mod lab;
 pub mod mesh;

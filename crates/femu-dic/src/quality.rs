@@ -76,8 +76,13 @@ pub fn noise_weighted_matrix(res: &DicResult, element_variance: &[f64]) -> Vec<f
 /// The covariance (eq. 4) with `σ_e²` the residual variance of each element and the residual's
 /// spatial correlation (`res.system.elem_m_noise`).
 pub fn covariance(res: &DicResult) -> Result<NodalCovariance, DicError> {
-    let sys = &res.system;
     let var: Vec<f64> = res.element_residual.iter().map(|r| r * r).collect();
+    sandwich(res, &var, &noise_matrix(res))
+}
+
+/// `M_σ` assembled from the per-element noise matrices (`res.system.elem_m_noise`).
+pub fn noise_matrix(res: &DicResult) -> Vec<f64> {
+    let sys = &res.system;
     let mut m_sigma = vec![0.0; sys.pattern.nnz()];
     for (d, me) in sys.dofs.iter().zip(&sys.elem_m_noise) {
         for i in 0..8 {
@@ -90,7 +95,7 @@ pub fn covariance(res: &DicResult) -> Result<NodalCovariance, DicError> {
             }
         }
     }
-    sandwich(res, &var, &m_sigma)
+    m_sigma
 }
 
 /// The covariance (eq. 4) for given element noise variances `σ_e²` (grey levels²) and white
@@ -208,7 +213,18 @@ pub enum Trust {
 }
 
 impl Trust {
-    /// The code written in `elements.csv` (0 trusted).
+    /// The name written in `elements.csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Trust::Trusted => "trusted",
+            Trust::Decorrelated => "decorrelated",
+            Trust::HighResidual => "high-residual",
+            Trust::Shadow => "shadow",
+            Trust::LowTexture => "low-texture",
+        }
+    }
+
+    /// A number per reason (0 trusted), for the maps.
     pub fn code(self) -> u8 {
         match self {
             Trust::Trusted => 0,
