@@ -310,8 +310,9 @@ pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
 /// `femu dic-check FRAMES...`.
 #[derive(Args, Debug, Clone)]
 pub struct DicCheckArgs {
-    /// Frames of a sequence (PNG, TIFF, DICOM; a multi-frame DICOM file gives all its frames).
-    #[arg(required = true, num_args = 2..)]
+    /// Frames of a sequence (PNG, TIFF, DICOM; a multi-frame DICOM file gives all its frames;
+    /// at least 2 frames in all).
+    #[arg(required = true, num_args = 1..)]
     pub frames: Vec<PathBuf>,
     #[command(flatten)]
     pub corr: CorrelationArgs,

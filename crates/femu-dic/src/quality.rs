@@ -108,16 +108,35 @@ pub fn covariance_with(
     sandwich(res, element_variance, &m_sigma)
 }
 
+/// The covariance an unregularized Q4 DIC would have on the same images and mesh,
+/// `M⁻¹ M_σ M⁻¹` (the same noise, `λ = 0`): the expected scatter of a DIC without
+/// regularization (muDIC, for instance) where it converges to the same minimum.
+pub fn covariance_unregularized(res: &DicResult) -> Result<NodalCovariance, DicError> {
+    let var: Vec<f64> = res.element_residual.iter().map(|r| r * r).collect();
+    let m = res.system.m_values.clone();
+    sandwich_with(res, &var, &noise_matrix(res), &m)
+}
+
 /// `C = A⁻¹ M_σ A⁻¹` on the pattern of `A`.
 fn sandwich(
     res: &DicResult,
     element_variance: &[f64],
     m_sigma: &[f64],
 ) -> Result<NodalCovariance, DicError> {
+    sandwich_with(res, element_variance, m_sigma, &res.system.a_values())
+}
+
+/// `C = A⁻¹ M_σ A⁻¹` for the matrix `a_values` on the pattern of the system.
+fn sandwich_with(
+    res: &DicResult,
+    element_variance: &[f64],
+    m_sigma: &[f64],
+    a_values: &[f64],
+) -> Result<NodalCovariance, DicError> {
     let sys = &res.system;
     let p = &sys.pattern;
     let n = p.n;
-    let chol = Cholesky::factorize(p, &sys.a_values())?;
+    let chol = Cholesky::factorize(p, a_values)?;
     // Columns j of C = A⁻¹ M_σ A⁻¹ in blocks (multi-column solves), blocks in parallel.
     const BLOCK: usize = 64;
     let blocks: Vec<Vec<(usize, f64)>> = (0..n.div_ceil(BLOCK))
