@@ -241,15 +241,18 @@ pub fn correlate_auto(
 ) -> Result<(Measured, Choice), DicError> {
     let bb = roi.bounding_box(f.width, f.height)?;
     let fwhm = speckle_fwhm(f, &bb);
+    // An explicit element size is used as given (the mesh reports a size that does not fit);
+    // the automatic one is kept within half the ROI.
     let h0 = match element {
         Setting::Given(h) => h as usize,
-        _ => {
-            (16.0f64.max((SPECKLES_PER_ELEMENT * fwhm[0] * fwhm[1]).sqrt()) / 4.0).ceil() as usize
-                * 4
-        }
-    }
-    .min(bb.w.min(bb.h) / 2)
-    .max(4);
+        _ => ((16.0f64.max((SPECKLES_PER_ELEMENT * fwhm[0] * fwhm[1]).sqrt()) / 4.0).ceil()
+            as usize
+            * 4)
+        .min(bb.w.min(bb.h) / 2)
+        .max(4),
+    };
+    // Element size and ROI errors (an element larger than the ROI, an empty mask) at once.
+    crate::mesh::DicMesh::new(roi, f.width, f.height, h0)?;
     let (ratio, gradient) = texture(f, &bb, h0);
     let mut stats = ImageStatistics {
         speckle_fwhm_px: fwhm,
@@ -276,7 +279,7 @@ pub fn correlate_auto(
                 [4.0, 8.0, 16.0]
                     .iter()
                     .filter(|&&k| k >= start)
-                    .map(|k| Some((k * h as f64).min(longest)))
+                    .map(|k| Some((k * h as f64).min(longest).max(2.0 * h as f64)))
                     .collect()
             }
         };
@@ -431,7 +434,7 @@ pub fn tissue_box(f: &GreyImage, bb: &Rect, h: usize) -> Option<Rect> {
     let (y0, y1) = span(&row)?;
     let (x0, x1) = (x0 + h, x1.saturating_sub(h));
     let (y0, y1) = (y0 + h, y1.saturating_sub(h));
-    (x1 > x0 + 2 * h && y1 > y0 + 2 * h).then_some(Rect {
+    (x1 > x0 + 2 * h && y1 > y0 + 2 * h).then(|| Rect {
         x: bb.x + x0,
         y: bb.y + y0,
         w: x1 - x0,
