@@ -40,6 +40,9 @@ pub struct CorrelationArgs {
     /// Convergence: RMS of the nodal displacement increments (pixels).
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
+    /// Depth of the Anderson acceleration of the Gauss–Newton iterations (0: plain steps).
+    #[arg(long, default_value_t = femu_dic::anderson::DEFAULT_DEPTH)]
+    pub acceleration: usize,
     /// Maximum Gauss–Newton iterations.
     #[arg(long, default_value_t = 100)]
     pub max_iterations: usize,
@@ -176,6 +179,7 @@ impl CorrelationArgs {
             pyramid_levels: self.levels,
             fft_init: !self.no_fft,
             flag_factor: self.flag_factor,
+            acceleration_depth: self.acceleration,
             ..Default::default()
         }
     }

@@ -48,7 +48,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let spec = CorrelationSpec {
         roi: RoiSpec::Rect(roi),
-        options: DicOptions::default(),
+        options: DicOptions {
+            acceleration_depth: femu_dic::anderson::DEFAULT_DEPTH,
+            ..Default::default()
+        },
         element: Setting::Auto,
         regularization: Setting::Auto,
         trust: TrustCriteria::default(),

@@ -23,6 +23,9 @@
 //!
 //! Every buffer is allocated once in [`Anderson::new`]; [`Anderson::update`] allocates nothing.
 
+/// The depth `femu dic` and `femu dic-check` use.
+pub const DEFAULT_DEPTH: usize = 5;
+
 /// A step longer than this factor times the previous one restarts the history.
 pub const RESTART_GROWTH: f64 = 2.0;
 

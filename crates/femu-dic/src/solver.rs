@@ -81,7 +81,9 @@ pub struct DicOptions {
     /// An element is flagged when its residual RMS exceeds this factor times the median.
     pub flag_factor: f64,
     /// Depth of the Anderson acceleration of the Gauss–Newton iterations (module
-    /// [`crate::anderson`]; 0: plain modified Gauss–Newton steps).
+    /// [`crate::anderson`]; 0, the default here: plain modified Gauss–Newton steps, as the
+    /// ultrasound simulator's incremental DIC was validated with; `femu dic` uses
+    /// [`crate::anderson::DEFAULT_DEPTH`]).
     pub acceleration_depth: usize,
 }
 
@@ -96,7 +98,7 @@ impl Default for DicOptions {
             pyramid_levels: None,
             fft_init: true,
             flag_factor: 3.0,
-            acceleration_depth: 5,
+            acceleration_depth: 0,
         }
     }
 }

@@ -34,7 +34,10 @@ fn spec() -> CorrelationSpec {
             w: 512,
             h: 416,
         }),
-        options: DicOptions::default(),
+        options: DicOptions {
+            acceleration_depth: femu_dic::anderson::DEFAULT_DEPTH,
+            ..Default::default()
+        },
         element: Setting::Auto,
         regularization: Setting::Auto,
         trust: TrustCriteria::default(),
