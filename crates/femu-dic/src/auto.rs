@@ -13,11 +13,11 @@
 //!
 //! Choice. The element size is the smallest multiple of 4 px, at least 16, whose area holds
 //! [`SPECKLES_PER_ELEMENT`] speckle cells `FWHM_x × FWHM_y` (an element must see more than one
-//! independent speckle; B-mode speckle is some 25–31 x 4 px on the Logiq E9 frames, so 16 px). The regularization length is the
-//! first rung of the ladder `4h, 8h, 16h` (at most the ROI's longer side) whose correlation
-//! converges with at least half of the elements trusted; the ladder starts at `8h` when the
-//! median texture ratio is below [`LINE_TEXTURE`] (line-like texture needs the support of more
-//! neighbours). If no rung converges the element size is doubled once and the ladder walked
+//! independent speckle; B-mode speckle is some 25–31 x 4 px on the Logiq E9 frames, so
+//! 16 px). The regularization length is the first rung of the ladder `off, 4h, 8h, 16h` (at
+//! most the ROI's longer side) whose correlation converges with at least half of the elements
+//! trusted; when the median texture ratio is below [`LINE_TEXTURE`] (line-like texture, which
+//! needs the support of more neighbours: muscle fibres, fascia) the ladder starts at `8h`. If no rung converges the element size is doubled once and the ladder walked
 //! again. When everything fails the error names what was tried and what to try next.
 
 use crate::error::DicError;
@@ -276,10 +276,15 @@ pub fn correlate_auto(
                 } else {
                     4.0
                 };
-                [4.0, 8.0, 16.0]
-                    .iter()
-                    .filter(|&&k| k >= start)
-                    .map(|k| Some((k * h as f64).min(longest).max(2.0 * h as f64)))
+                // Isotropic texture: first without regularization (full resolution).
+                let off = (start == 4.0).then_some(None);
+                off.into_iter()
+                    .chain(
+                        [4.0, 8.0, 16.0]
+                            .iter()
+                            .filter(|&&k| k >= start)
+                            .map(|k| Some((k * h as f64).min(longest).max(2.0 * h as f64))),
+                    )
                     .collect()
             }
         };
@@ -341,7 +346,7 @@ pub fn correlate_auto(
                         if stats.texture_ratio_median < LINE_TEXTURE {
                             "line-like: ladder from 8 elements"
                         } else {
-                            "ladder from 4 elements"
+                            "ladder from no regularization"
                         }
                     ),
                 };
@@ -479,14 +484,10 @@ mod tests {
         )
         .unwrap();
         assert!(m.res.converged);
+        assert_eq!(c.element_size_px, 16, "sqrt(2) x 5.5 px is below 16: {c:?}");
         assert_eq!(
-            c.element_size_px, 16,
-            "sqrt(2.5) x 6.66 px is below 16: {c:?}"
-        );
-        assert_eq!(
-            c.regularization_px,
-            Some(64.0),
-            "isotropic speckle: 4 elements {c:?}"
+            c.regularization_px, None,
+            "isotropic speckle: no regularization needed {c:?}"
         );
         assert_eq!(c.attempts.len(), 1);
     }
