@@ -1,22 +1,17 @@
-//! `femu dic REF DEF` (global Q4 DIC between two images) and `femu dic-noise IMAGES...`
-//! (random error from successive images of unloaded tissue).
+//! `femu dic REF DEF` (global Q4 DIC between two images, `femu_dic::command::run_dic`),
+//! `femu dic-check FRAMES...` (self-consistency on a sequence, `femu_dic::check::run_check`)
+//! and `femu dic-noise IMAGES...` (random error from successive images of unloaded tissue).
+//! The files they write are documented in those library modules.
 //!
-//! `femu dic` writes into `--out`:
-//! - `field.csv` — the measured-field CSV of conventions.md (`x,y,ux,uy,w`, mm, model frame)
-//!   on a regular grid; `w` = 0 in elements flagged for a high residual;
-//! - `nodes.csv` — nodal displacements in pixels and mm; `elements.csv` — strain, residual,
-//!   flag per element; `result.vtu` — the mesh for ParaView;
-//! - `ux.png`, `uy.png`, `exx.png`, `eyy.png`, `exy.png`, `residual.png` — maps over the
-//!   reference image with colour bars;
-//! - `summary.json` — inputs, options, pixel size and its source, iterations, residual,
-//!   timings.
-//!
-//! Thin glue: parsing and validation here, everything numerical in `femu-dic`.
+//! Thin glue: parsing and validation here, everything numerical and every file in `femu-dic`.
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use femu_dic::output::{self, DicSummary, ModelFrame};
-use femu_dic::{correlate, Brightness, DicOptions, DicResult, GreyImage, PixelSize, Rect, Roi};
+use femu_dic::auto::Setting;
+use femu_dic::check::{run_check, CheckJob};
+use femu_dic::command::{run_dic, CorrelationSpec, DicJob, RoiSpec};
+use femu_dic::quality::TrustCriteria;
+use femu_dic::{Brightness, DicOptions, GreyImage, PixelSize, Rect, Roi};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -39,21 +34,26 @@ pub struct CorrelationArgs {
     /// are inside). Without --roi or --mask, the whole image.
     #[arg(long)]
     pub mask: Option<PathBuf>,
-    /// Element size (pixels).
-    #[arg(long, default_value_t = 16)]
-    pub element: usize,
+    /// Element size (pixels); default: chosen from the speckle size (at least 16; dic-noise: 16).
+    #[arg(long)]
+    pub element: Option<usize>,
     /// Convergence: RMS of the nodal displacement increments (pixels).
     #[arg(long, default_value_t = 1e-3)]
     pub tolerance: f64,
+    /// Depth of the Anderson acceleration of the Gauss–Newton iterations (0: plain steps).
+    #[arg(long, default_value_t = femu_dic::anderson::DEFAULT_DEPTH)]
+    pub acceleration: usize,
     /// Maximum Gauss–Newton iterations.
     #[arg(long, default_value_t = 100)]
     pub max_iterations: usize,
     /// Brightness/contrast correction of the deformed image.
     #[arg(long, value_enum, default_value = "global")]
     pub brightness: BrightnessArg,
-    /// Tikhonov (Laplacian) regularization length (pixels); off by default.
-    #[arg(long)]
-    pub regularization: Option<f64>,
+    /// Tikhonov (Laplacian) regularization length: pixels, `off`, or `auto` (the default for
+    /// dic and dic-check: the first of off, 4, 8, 16 elements that converges with half of the
+    /// elements trusted, from 8 elements when the texture is line-like; dic-noise: off).
+    #[arg(long, default_value = "auto")]
+    pub regularization: String,
     /// Pyramid levels above full resolution (default: automatic, up to 2).
     #[arg(long)]
     pub levels: Option<usize>,
@@ -63,6 +63,10 @@ pub struct CorrelationArgs {
     /// Flag elements whose residual exceeds this factor times the median.
     #[arg(long, default_value_t = 3.0)]
     pub flag_factor: f64,
+    /// Elements whose correlation score (ZNCC of the reference and the corrected deformed
+    /// image) is below this value are not trusted (weight 0).
+    #[arg(long, default_value_t = 0.5)]
+    pub min_zncc: f64,
     /// Pixel size in mm (one value, or x,y); overrides the DICOM header.
     #[arg(long)]
     pub pixel_size: Option<String>,
@@ -134,9 +138,37 @@ fn parse_pair(name: &str, s: &str) -> Result<[f64; 2]> {
 }
 
 impl CorrelationArgs {
-    fn options(&self) -> DicOptions {
+    fn regularization_setting(&self) -> Result<Setting> {
+        Ok(match self.regularization.trim() {
+            "auto" => Setting::Auto,
+            "off" | "none" => Setting::Off,
+            v => Setting::Given(
+                v.parse::<f64>()
+                    .ok()
+                    .filter(|l| *l > 0.0)
+                    .with_context(|| {
+                        format!(
+                            "--regularization '{v}': expected a length in pixels, 'auto' or 'off'"
+                        )
+                    })?,
+            ),
+        })
+    }
+
+    /// The options with a fixed element size and regularization (dic-noise: auto = 16 px, off).
+    fn options(&self) -> Result<DicOptions> {
+        Ok(DicOptions {
+            element_size: self.element.unwrap_or(16),
+            regularization_length: match self.regularization_setting()? {
+                Setting::Given(l) => Some(l),
+                _ => None,
+            },
+            ..self.base_options()
+        })
+    }
+
+    fn base_options(&self) -> DicOptions {
         DicOptions {
-            element_size: self.element,
             tolerance: self.tolerance,
             max_iterations: self.max_iterations,
             brightness: match self.brightness {
@@ -144,11 +176,35 @@ impl CorrelationArgs {
                 BrightnessArg::Global => Brightness::Global,
                 BrightnessArg::PerElement => Brightness::PerElement,
             },
-            regularization_length: self.regularization,
             pyramid_levels: self.levels,
             fft_init: !self.no_fft,
             flag_factor: self.flag_factor,
+            acceleration_depth: self.acceleration,
+            ..Default::default()
         }
+    }
+
+    /// The correlation as `femu dic` and `femu dic-check` run it.
+    fn spec(&self) -> Result<CorrelationSpec> {
+        if !(self.min_zncc > -1.0 && self.min_zncc < 1.0) {
+            bail!("--min-zncc {}: must lie in (-1, 1)", self.min_zncc);
+        }
+        Ok(CorrelationSpec {
+            roi: match (&self.roi, &self.mask) {
+                (Some(r), _) => RoiSpec::Rect(Rect::parse(r)?),
+                (None, Some(m)) => RoiSpec::Mask(m.clone()),
+                (None, None) => RoiSpec::Whole,
+            },
+            options: self.base_options(),
+            element: self
+                .element
+                .map_or(Setting::Auto, |h| Setting::Given(h as f64)),
+            regularization: self.regularization_setting()?,
+            trust: TrustCriteria {
+                min_zncc: self.min_zncc,
+                ..Default::default()
+            },
+        })
     }
 
     fn roi(&self, width: usize, height: usize) -> Result<Roi> {
@@ -192,156 +248,33 @@ impl CorrelationArgs {
     }
 }
 
-#[derive(Serialize)]
-struct Inputs<'a> {
-    reference: &'a Path,
-    deformed: &'a Path,
-    frame_ref: usize,
-    frame_def: usize,
-    image_size_px: (usize, usize),
-    roi: Option<&'a str>,
-    mask: Option<&'a Path>,
-    options: &'a DicOptions,
-}
-
-#[derive(Serialize)]
-struct Summary<'a> {
-    femu_version: &'static str,
-    command: &'static str,
-    inputs: Inputs<'a>,
-    /// Pixel size (mm/px) and where it comes from; null if unknown (mm = px then).
-    pixel_size: Option<PixelSize>,
-    model_frame: ModelFrame,
-    result: DicSummary,
-    grid_points: usize,
-    outputs: Vec<&'static str>,
-    warnings: Vec<String>,
-    wall_time_s: f64,
-}
-
 /// `femu dic`.
 pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
-    let t0 = Instant::now();
-    let f = GreyImage::open(&a.reference, a.frame_ref)?;
-    let g = GreyImage::open(&a.deformed, a.frame_def)?;
-    let opts = a.corr.options();
-    let roi = a.corr.roi(f.width, f.height)?;
-    let mut warnings = Vec::new();
-    let pixel_size = a.corr.pixel_size(f.pixel_size)?;
     let origin = parse_pair("origin", &a.origin)?;
-    let frame = ModelFrame {
+    let job = DicJob {
+        reference: a.reference.clone(),
+        deformed: a.deformed.clone(),
+        frame_ref: a.frame_ref,
+        frame_def: a.frame_def,
+        correlation: a.corr.spec()?,
+        pixel_size: a.corr.pixel_size(None)?,
         origin_px: origin,
-        pixel_size_mm: pixel_size.map(|p| [p.dx_mm, p.dy_mm]).unwrap_or([1.0, 1.0]),
         x_left: a.x_left,
         y_up: a.y_up,
+        grid_step_px: a.grid,
+        figures: !a.no_figures,
+        out: a.out.clone(),
     };
-    if pixel_size.is_none() {
-        warnings.push(
-            "pixel size unknown (no DICOM header, no --pixel-size): the mm columns are in pixels"
-                .to_string(),
-        );
-    }
-    let res = correlate(&f, &g, &roi, &opts)?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("cannot create the output folder {}", a.out.display()))?;
-    let step = a.grid.unwrap_or(opts.element_size as f64);
-    let points = output::grid(&res, &frame, step)?;
-    let size_note = match pixel_size {
-        Some(p) => format!("pixel size {} x {} mm ({})", p.dx_mm, p.dy_mm, p.source),
-        None => "pixel size unknown: 1 mm = 1 px".to_string(),
-    };
-    let comments = vec![
-        format!(
-            "femu dic {}: reference {} (frame {}), deformed {} (frame {})",
-            env!("CARGO_PKG_VERSION"),
-            a.reference.display(),
-            a.frame_ref,
-            a.deformed.display(),
-            a.frame_def
-        ),
-        format!(
-            "units mm; {size_note}; origin at pixel ({}, {}); x {}, y {}",
-            origin[0],
-            origin[1],
-            if a.x_left { "left" } else { "right" },
-            if a.y_up { "up" } else { "down" }
-        ),
-        format!(
-            "global Q4 DIC, element {} px, grid step {step} px; w = 0 in elements flagged for a high residual",
-            opts.element_size
-        ),
-    ];
-    output::write_field_csv(&a.out.join("field.csv"), &points, &comments)?;
-    output::write_nodes_csv(&a.out.join("nodes.csv"), &res, &frame)?;
-    output::write_elements_csv(&a.out.join("elements.csv"), &res, &frame)?;
-    output::write_vtu(&a.out.join("result.vtu"), &res, &frame)?;
-    let mut outputs = vec![
-        "field.csv",
-        "nodes.csv",
-        "elements.csv",
-        "result.vtu",
-        "summary.json",
-    ];
-    if !a.no_figures {
-        write_maps(&a.out, &f, &res, &frame, pixel_size.is_some())?;
-        outputs.extend([
-            "ux.png",
-            "uy.png",
-            "exx.png",
-            "eyy.png",
-            "exy.png",
-            "residual.png",
-        ]);
-    }
-    let flagged = res.flagged.iter().filter(|&&b| b).count();
-    if flagged > 0 {
-        warnings.push(format!(
-            "{flagged} element(s) flagged for a residual above {} x the median (w = 0 in field.csv)",
-            opts.flag_factor
-        ));
-    }
-    if res.residual_percent > 5.0 {
-        warnings.push(format!(
-            "high grey-level residual ({:.1} % of the dynamic range): the images may not show the same texture (try --brightness per-element, a mask or a regularization length)",
-            res.residual_percent
-        ));
-    }
-    if !res.converged {
-        warnings.push(format!(
-            "not converged in {} iterations (last increment {:.2e} px)",
-            res.iterations, res.last_increment_px
-        ));
-    }
-    let summary = Summary {
-        femu_version: env!("CARGO_PKG_VERSION"),
-        command: "dic",
-        inputs: Inputs {
-            reference: &a.reference,
-            deformed: &a.deformed,
-            frame_ref: a.frame_ref,
-            frame_def: a.frame_def,
-            image_size_px: (f.width, f.height),
-            roi: a.corr.roi.as_deref(),
-            mask: a.corr.mask.as_deref(),
-            options: &opts,
-        },
-        pixel_size,
-        model_frame: frame,
-        result: DicSummary::of(&res),
-        grid_points: points.len(),
-        outputs,
-        warnings: warnings.clone(),
-        wall_time_s: t0.elapsed().as_secs_f64(),
-    };
-    let path = a.out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+    let r = run_dic(&job)?;
     if !quiet {
-        let s = &summary.result;
+        let s = &r.result;
         println!(
-            "DIC: {} elements of {} px, {} iterations ({}), residual {:.3} grey levels ({:.2} % of the dynamic), mean u = ({:.4}, {:.4}) px, {:.3} s",
+            "DIC: {} elements of {} px, regularization {}, {} iterations ({}), residual {:.3} grey levels ({:.2} % of the dynamic), mean u = ({:.4}, {:.4}) px, {:.3} s",
             s.elements,
             s.element_size_px,
+            r.choice
+                .regularization_px
+                .map_or("off".to_string(), |l| format!("{l} px")),
             s.iterations,
             if s.converged { "converged" } else { "NOT converged" },
             s.residual_rms,
@@ -350,126 +283,107 @@ pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
             s.mean_u_px[1],
             s.timings.total_s
         );
-        for w in &warnings {
+        println!("options: {}", r.choice.reason);
+        println!(
+            "quality: {} of {} elements trusted; nodal sd median ({:.3}, {:.3}) px, 90th percentile ({:.3}, {:.3}) px",
+            r.quality.trusted_elements,
+            s.elements,
+            r.quality.sd_median_px[0],
+            r.quality.sd_median_px[1],
+            r.quality.sd_p90_px[0],
+            r.quality.sd_p90_px[1]
+        );
+        for w in &r.warnings {
             eprintln!("warning: {w}");
         }
         println!("results in {}", a.out.display());
     }
-    if !res.converged {
+    if !r.result.converged {
         bail!(
-            "the correlation did not converge in {} iterations (last increment {:.2e} px > {:.1e}); the last field is in {}",
-            res.iterations,
-            res.last_increment_px,
-            opts.tolerance,
-            a.out.display()
+            "the correlation did not converge in {} iterations (last increment {:.2e} px > {:.1e}); the last field is in {}; {}",
+            r.result.iterations,
+            r.result.last_increment_px,
+            a.corr.tolerance,
+            a.out.display(),
+            r.advice.unwrap_or_default()
         );
     }
     Ok(())
 }
 
-/// The PNG maps over the reference image, cropped to the mesh with a margin.
-fn write_maps(
-    out: &Path,
-    f: &GreyImage,
-    res: &DicResult,
-    frame: &ModelFrame,
-    mm: bool,
-) -> Result<()> {
-    let (w, h) = (f.width, f.height);
-    let m = &res.mesh;
-    let mut ux = vec![f64::NAN; w * h];
-    let mut uy = vec![f64::NAN; w * h];
-    let mut strain = [
-        vec![f64::NAN; w * h],
-        vec![f64::NAN; w * h],
-        vec![f64::NAN; w * h],
-    ];
-    let es = output::element_strains(res, frame);
-    for e in 0..m.n_elements() {
-        let (px, py) = m.element_origin(e);
-        for j in 0..m.h {
-            for i in 0..m.h {
-                let (x, y) = (px + i, py + j);
-                let k = y * w + x;
-                if let Some(u) = m.interpolate(&res.displacement, x as f64, y as f64) {
-                    let um = frame.displacement(u);
-                    ux[k] = if mm { um[0] } else { u[0] };
-                    uy[k] = if mm { um[1] } else { u[1] };
-                }
-                for c in 0..3 {
-                    strain[c][k] = es[e][c];
-                }
-            }
+/// `femu dic-check FRAMES...`.
+#[derive(Args, Debug, Clone)]
+pub struct DicCheckArgs {
+    /// Frames of a sequence (PNG, TIFF, DICOM; a multi-frame DICOM file gives all its frames;
+    /// at least 2 frames in all).
+    #[arg(required = true, num_args = 1..)]
+    pub frames: Vec<PathBuf>,
+    #[command(flatten)]
+    pub corr: CorrelationArgs,
+    /// The frames are repeated acquisitions of unloaded tissue (adds the random error).
+    #[arg(long)]
+    pub unloaded: bool,
+    /// Skip the PNG maps.
+    #[arg(long)]
+    pub no_figures: bool,
+    /// Output folder (created if absent).
+    #[arg(long, default_value = "out/dic-check")]
+    pub out: PathBuf,
+}
+
+/// `femu dic-check`.
+pub fn run_dic_check(a: &DicCheckArgs, quiet: bool) -> Result<()> {
+    let job = CheckJob {
+        frames: a.frames.clone(),
+        correlation: a.corr.spec()?,
+        unloaded: a.unloaded,
+        figures: !a.no_figures,
+        out: a.out.clone(),
+    };
+    let r = run_check(&job)?;
+    if !quiet {
+        for p in &r.pairs {
+            println!(
+                "{} -> {}: {} ({} px, regularization {}, {} iterations, {:.0} % trusted)",
+                p.reference,
+                p.deformed,
+                if p.converged {
+                    "converged"
+                } else {
+                    "NOT converged"
+                },
+                p.element_size_px,
+                p.regularization_px
+                    .map_or("off".to_string(), |l| format!("{l} px")),
+                p.iterations,
+                100.0 * p.trusted_fraction
+            );
         }
+        for c in &r.pooled {
+            let (all, tr) = (&c.regions[0], &c.regions[4]);
+            println!(
+                "{} ({}): RMS (x, y) ({:.3}, {:.3}) px over {} points, trusted ({:.3}, {:.3}) px over {}, predicted sd ({:.3}, {:.3}) px",
+                c.check,
+                c.frames[0],
+                all.rms_px[0],
+                all.rms_px[1],
+                all.points,
+                tr.rms_px[0],
+                tr.rms_px[1],
+                tr.points,
+                tr.predicted_sd_px[0],
+                tr.predicted_sd_px[1]
+            );
+        }
+        println!("results in {}", a.out.display());
     }
-    let residual: Vec<f64> = res.residual_image.iter().map(|&v| v as f64).collect();
-    let margin = m.h;
-    let x0 = m.x0.saturating_sub(margin);
-    let y0 = m.y0.saturating_sub(margin);
-    let x1 = (m.x0 + m.nx * m.h + margin).min(w);
-    let y1 = (m.y0 + m.ny * m.h + margin).min(h);
-    let unit = if mm { "mm" } else { "px" };
-    let maps: [(&str, &[f64], String, String, bool); 6] = [
-        (
-            "ux.png",
-            &ux,
-            "Horizontal displacement ux".into(),
-            format!("ux ({unit})"),
-            false,
-        ),
-        (
-            "uy.png",
-            &uy,
-            "Vertical displacement uy".into(),
-            format!("uy ({unit})"),
-            false,
-        ),
-        (
-            "exx.png",
-            &strain[0],
-            "Strain exx (element centres)".into(),
-            "exx (-)".into(),
-            true,
-        ),
-        (
-            "eyy.png",
-            &strain[1],
-            "Strain eyy (element centres)".into(),
-            "eyy (-)".into(),
-            true,
-        ),
-        (
-            "exy.png",
-            &strain[2],
-            "Shear strain exy (element centres)".into(),
-            "exy (-)".into(),
-            true,
-        ),
-        (
-            "residual.png",
-            &residual,
-            format!("Grey-level residual (RMS {:.2})", res.residual_rms),
-            "f - g(x+u) (grey levels)".into(),
-            true,
-        ),
-    ];
-    for (name, values, title, label, diverging) in maps {
-        // Colour range from the 1st to the 99th percentile, so that a few wild values (a
-        // flagged element) do not wash out the map.
-        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-        v.sort_by(|a, b| a.total_cmp(b));
-        let range = (v.len() > 1).then(|| (v[v.len() / 100], v[v.len() - 1 - v.len() / 100]));
-        let range = range.filter(|r| r.1 > r.0);
-        let opts = femu_plot::ImageField {
-            title,
-            value_label: label,
-            diverging,
-            range,
-            crop: Some((x0, y0, x1 - x0, y1 - y0)),
-            ..Default::default()
-        };
-        femu_plot::image_field_png(&out.join(name), &f.data, w, h, values, &opts)
-            .with_context(|| format!("cannot draw {}", out.join(name).display()))?;
+    if !r.all_converged {
+        bail!(
+            "{} of {} correlations did not converge (pairs.csv in {})",
+            r.pairs.iter().filter(|p| !p.converged).count(),
+            r.pairs.len(),
+            a.out.display()
+        );
     }
     Ok(())
 }
@@ -498,7 +412,7 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         .iter()
         .map(|p| GreyImage::open(p, 0))
         .collect::<std::result::Result<_, _>>()?;
-    let opts = a.corr.options();
+    let opts = a.corr.options()?;
     let roi = a.corr.roi(images[0].width, images[0].height)?;
     let pixel_size = a.corr.pixel_size(images[0].pixel_size)?;
     let pairs = femu_dic::noise::successive_pairs(&images, &roi, &opts)?;

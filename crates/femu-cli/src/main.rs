@@ -228,6 +228,9 @@ enum Command {
     /// DIC random error: correlates successive images of unloaded tissue and reports the
     /// standard deviation of ux and uy per pair (CSV, box plot).
     DicNoise(dic_cmd::DicNoiseArgs),
+    /// DIC self-consistency on a sequence: forward-backward, composition (and repeated
+    /// correlation of unloaded frames), per depth band, with the options femu dic chooses.
+    DicCheck(dic_cmd::DicCheckArgs),
     /// Virtual experiment with images: simulated B-mode images of the unloaded and loaded
     /// thigh (same scatterers moved by the FE field), DIC, comparison with the FE field;
     /// writes ref.png, def.png, measured.csv (for identify --measured), maps, summary.json.
@@ -396,6 +399,7 @@ fn main() -> ExitCode {
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
         Command::Dic(args) => dic_cmd::run(&args, quiet),
         Command::DicNoise(args) => dic_cmd::run_noise(&args, quiet),
+        Command::DicCheck(args) => dic_cmd::run_dic_check(&args, quiet),
         Command::UsSim(args) => us_cmd::sim(&args, quiet),
         Command::UsScan(args) => us_cmd::scan(&args, quiet),
         Command::UsSettings(args) => us_cmd::run_settings(&args, quiet),

@@ -46,6 +46,9 @@ fn dic_writes_the_output_folder() {
         "field.csv",
         "nodes.csv",
         "elements.csv",
+        "covariance.mtx",
+        "hessian.mtx",
+        "hessian_noise.mtx",
         "result.vtu",
         "summary.json",
         "ux.png",
@@ -54,13 +57,17 @@ fn dic_writes_the_output_folder() {
         "eyy.png",
         "exy.png",
         "residual.png",
+        "sd.png",
+        "zncc.png",
+        "trust.png",
     ] {
         assert!(out.join(name).is_file(), "{name} missing");
     }
     let csv = std::fs::read_to_string(out.join("field.csv")).unwrap();
     let mut rows = csv.lines().filter(|l| !l.starts_with('#'));
-    assert_eq!(rows.next(), Some("x,y,ux,uy,w"));
-    // ux = 0.4 px x 0.1 mm, uy = -0.25 px x 0.1 mm x (-1: y up) = +0.025 mm.
+    assert_eq!(rows.next(), Some("x,y,ux,uy,sx,sy,w"));
+    // ux = 0.4 px x 0.1 mm, uy = -0.25 px x 0.1 mm x (-1: y up) = +0.025 mm; noise-free
+    // 8-bit images: standard deviations of a few thousandths of a pixel (1e-4 mm), positive.
     let mut n = 0;
     for r in rows {
         let v: Vec<f64> = r.split(',').map(|t| t.parse().unwrap()).collect();
@@ -68,6 +75,11 @@ fn dic_writes_the_output_folder() {
             (v[2] - 0.04).abs() < 0.002 && (v[3] - 0.025).abs() < 0.002,
             "{r}"
         );
+        assert!(
+            v[4] > 0.0 && v[4] < 2e-3 && v[5] > 0.0 && v[5] < 2e-3,
+            "{r}"
+        );
+        assert!(v[6] == 0.0 || v[6] == 1.0, "{r}");
         n += 1;
     }
     assert_eq!(n, 80, "grid points: 10 x 8 elements at the default step");
@@ -75,6 +87,79 @@ fn dic_writes_the_output_folder() {
         serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     assert_eq!(sum["result"]["converged"], true);
     assert_eq!(sum["pixel_size"]["source"], "option --pixel-size");
+    assert_eq!(sum["choice"]["element_size_px"], 16);
+    assert!(
+        sum["choice"]["regularization_px"].is_null(),
+        "speckle: unregularized"
+    );
+    // The covariance file: a symmetric Matrix Market matrix over 2 x 99 equations, whose
+    // diagonal matches the nodal sd of nodes.csv.
+    let mtx = std::fs::read_to_string(out.join("covariance.mtx")).unwrap();
+    let mut lines = mtx.lines().filter(|l| !l.starts_with('%'));
+    let dims: Vec<usize> = lines
+        .next()
+        .unwrap()
+        .split_whitespace()
+        .map(|t| t.parse().unwrap())
+        .collect();
+    assert_eq!((dims[0], dims[1]), (198, 198));
+    let diag: std::collections::HashMap<usize, f64> = lines
+        .filter_map(|l| {
+            let v: Vec<&str> = l.split_whitespace().collect();
+            (v[0] == v[1]).then(|| (v[0].parse().unwrap(), v[2].parse().unwrap()))
+        })
+        .collect();
+    let nodes = std::fs::read_to_string(out.join("nodes.csv")).unwrap();
+    let mut it = nodes.lines();
+    let head: Vec<&str> = it.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    for l in it {
+        let v: Vec<&str> = l.split(',').collect();
+        let node: usize = v[0].parse().unwrap();
+        let sd: f64 = v[col("sd_ux_px")].parse().unwrap();
+        let var = diag[&(2 * (node - 1) + 1)];
+        assert!(
+            (sd * sd - var).abs() <= 1e-5 * var,
+            "node {node}: {sd}² vs {var}"
+        );
+    }
+}
+
+#[test]
+fn dic_check_writes_pairs_checks_and_maps() {
+    let dir = scratch("check");
+    let s3 = Speckle::new(160, 144, 1.5, 12);
+    let mut paths = Vec::new();
+    for (k, t) in [(0.0, 0.0), (0.4, -0.2), (0.9, 0.1)].iter().enumerate() {
+        let p = dir.join(format!("f{k}.png"));
+        lab::quantize_8bit(&s3.deformed(&lab::translation(t.0, t.1)))
+            .save_png(&p)
+            .unwrap();
+        paths.push(p);
+    }
+    let out = dir.join("out");
+    let mut args = vec!["dic-check"];
+    args.extend(paths.iter().map(|p| s(p)));
+    args.extend(["--roi", "16,16,128,112", "--out", s(&out), "--quiet"]);
+    let o = femu(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let pairs = std::fs::read_to_string(out.join("pairs.csv")).unwrap();
+    assert_eq!(
+        pairs.lines().count(),
+        1 + 2 + 2 + 1,
+        "2 forward, 2 backward, 1 direct"
+    );
+    let sum: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(sum["all_converged"], true);
+    for c in sum["pooled"].as_array().unwrap() {
+        let rms = &c["regions"][0]["rms_px"];
+        for k in 0..2 {
+            assert!(rms[k].as_f64().unwrap() < 0.02, "{c}");
+        }
+    }
+    assert!(out.join("composition_f0_f1_f2.png").is_file());
+    assert!(out.join("forward-backward_f0_f1_f0.png").is_file());
 }
 
 #[test]

@@ -16,15 +16,22 @@
 
 #![forbid(unsafe_code)]
 
+pub mod anderson;
+pub mod auto;
 pub mod bspline;
+pub mod check;
+pub mod command;
+pub mod consistency;
 pub mod dicom;
 pub mod error;
 pub mod fft;
+pub mod figures;
 pub mod image;
 pub mod lab;
 pub mod mesh;
 pub mod noise;
 pub mod output;
+pub mod quality;
 pub mod solver;
 pub mod sparse;
 

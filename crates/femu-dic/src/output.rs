@@ -2,6 +2,7 @@
 //! `conventions.md` on a regular grid, nodal and element tables, the VTU file and the summary.
 
 use crate::error::DicError;
+use crate::quality::{NodalCovariance, Trust};
 use crate::solver::{DicResult, LevelReport, Timings};
 use std::io::Write;
 use std::path::Path;
@@ -82,13 +83,34 @@ pub struct GridPoint {
     /// In the model frame (mm).
     pub x_mm: [f64; 2],
     pub u_mm: [f64; 2],
-    /// Weight: 1, or 0 in an element flagged for a high residual.
+    /// Standard deviations of the displacement in the model frame (mm), from the nodal
+    /// covariance ([`crate::quality`]); NaN when no covariance was given.
+    pub s_mm: [f64; 2],
+    /// Weight: 1, or 0 in an element that is not trusted (flagged for a high residual, or by
+    /// the trust mask when one is given).
     pub w: f64,
 }
 
 /// The field sampled every `step` pixels over the active elements (cell centres of a grid
-/// tiling the mesh).
+/// tiling the mesh), without standard deviations; weight 0 in flagged elements.
 pub fn grid(res: &DicResult, frame: &ModelFrame, step: f64) -> Result<Vec<GridPoint>, DicError> {
+    grid_with_quality(res, None, frame, step)
+}
+
+/// The quality a grid reads: the nodal covariance and the trust of each element.
+pub struct Quality<'a> {
+    pub cov: &'a NodalCovariance,
+    pub trust: &'a [Trust],
+}
+
+/// [`grid`] with the standard deviations of each point (`sx, sy`, mm) and weight 0 in the
+/// elements the trust mask rejects.
+pub fn grid_with_quality(
+    res: &DicResult,
+    quality: Option<&Quality>,
+    frame: &ModelFrame,
+    step: f64,
+) -> Result<Vec<GridPoint>, DicError> {
     if !(step > 0.0 && step.is_finite()) {
         return Err(DicError::option(
             "grid step",
@@ -107,12 +129,21 @@ pub fn grid(res: &DicResult, frame: &ModelFrame, step: f64) -> Result<Vec<GridPo
                 let u = m
                     .interpolate(&res.displacement, p[0], p[1])
                     .expect("located");
+                let (s_mm, trusted) = match quality {
+                    Some(q) => {
+                        let sd = q.cov.point_sd(res, p[0], p[1]).expect("located");
+                        let d = frame.pixel_size_mm;
+                        ([sd[0] * d[0], sd[1] * d[1]], q.trust[e] == Trust::Trusted)
+                    }
+                    None => ([f64::NAN; 2], !res.flagged[e]),
+                };
                 out.push(GridPoint {
                     x_px: p,
                     u_px: u,
                     x_mm: frame.point(p),
                     u_mm: frame.displacement(u),
-                    w: if res.flagged[e] { 0.0 } else { 1.0 },
+                    s_mm,
+                    w: if trusted { 1.0 } else { 0.0 },
                 });
             }
         }
@@ -120,7 +151,8 @@ pub fn grid(res: &DicResult, frame: &ModelFrame, step: f64) -> Result<Vec<GridPo
     Ok(out)
 }
 
-/// Writes the measured-field CSV (`x,y,ux,uy,w`, mm) with `comments` as `#` lines.
+/// Writes the measured-field CSV with `comments` as `#` lines: `x,y,ux,uy,sx,sy,w` (mm) when
+/// the points carry standard deviations, `x,y,ux,uy,w` otherwise.
 pub fn write_field_csv(
     path: &Path,
     points: &[GridPoint],
@@ -131,26 +163,57 @@ pub fn write_field_csv(
     for c in comments {
         writeln!(f, "# {c}").map_err(&e)?;
     }
-    writeln!(f, "x,y,ux,uy,w").map_err(&e)?;
+    let with_sd = points.iter().all(|p| p.s_mm.iter().all(|v| v.is_finite()));
+    writeln!(
+        f,
+        "{}",
+        if with_sd {
+            "x,y,ux,uy,sx,sy,w"
+        } else {
+            "x,y,ux,uy,w"
+        }
+    )
+    .map_err(&e)?;
     for p in points {
-        writeln!(
+        write!(
             f,
-            "{:.12e},{:.12e},{:.12e},{:.12e},{}",
-            p.x_mm[0], p.x_mm[1], p.u_mm[0], p.u_mm[1], p.w
+            "{:.12e},{:.12e},{:.12e},{:.12e},",
+            p.x_mm[0], p.x_mm[1], p.u_mm[0], p.u_mm[1]
         )
         .map_err(&e)?;
+        if with_sd {
+            write!(f, "{:.6e},{:.6e},", p.s_mm[0], p.s_mm[1]).map_err(&e)?;
+        }
+        writeln!(f, "{}", p.w).map_err(&e)?;
     }
     f.flush().map_err(&e)
 }
 
-/// Writes `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm`.
-pub fn write_nodes_csv(path: &Path, res: &DicResult, frame: &ModelFrame) -> Result<(), DicError> {
+/// Writes `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm`, and with a quality also
+/// `sd_ux_px,sd_uy_px,corr_xy,w` (`w` = 1 when every element around the node is trusted).
+pub fn write_nodes_csv(
+    path: &Path,
+    res: &DicResult,
+    frame: &ModelFrame,
+    quality: Option<&Quality>,
+) -> Result<(), DicError> {
     let e = werr(path);
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
-    writeln!(f, "node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm").map_err(&e)?;
+    let node_w = quality.map(|q| node_weights(res, q.trust));
+    write!(f, "node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm").map_err(&e)?;
+    writeln!(
+        f,
+        "{}",
+        if quality.is_some() {
+            ",sd_ux_px,sd_uy_px,corr_xy,w"
+        } else {
+            ""
+        }
+    )
+    .map_err(&e)?;
     for (n, (p, u)) in res.mesh.nodes.iter().zip(&res.displacement).enumerate() {
         let (xm, um) = (frame.point(*p), frame.displacement(*u));
-        writeln!(
+        write!(
             f,
             "{},{},{},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e},{:.12e}",
             n + 1,
@@ -164,25 +227,93 @@ pub fn write_nodes_csv(path: &Path, res: &DicResult, frame: &ModelFrame) -> Resu
             um[1]
         )
         .map_err(&e)?;
+        if let (Some(q), Some(w)) = (quality, &node_w) {
+            let s = q.cov.node[n];
+            write!(
+                f,
+                ",{:.6e},{:.6e},{:.6e},{}",
+                s.sd_ux_px, s.sd_uy_px, s.corr_xy, w[n]
+            )
+            .map_err(&e)?;
+        }
+        writeln!(f).map_err(&e)?;
     }
     f.flush().map_err(&e)
 }
 
-/// Element table: `element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged` (strain in the model
-/// frame, residual RMS in grey levels).
+/// 1 for a node whose elements are all trusted, else 0.
+pub fn node_weights(res: &DicResult, trust: &[Trust]) -> Vec<u8> {
+    let mut w = vec![1u8; res.mesh.n_nodes()];
+    for (c, t) in res.mesh.conn.iter().zip(trust) {
+        if *t != Trust::Trusted {
+            for &q in c {
+                w[q] = 0;
+            }
+        }
+    }
+    w
+}
+
+/// Writes the symmetric matrix `values` on `pattern` in the Matrix Market coordinate format
+/// (`real symmetric`: the lower triangle, 1-based indices; equation `2 (node − 1) + c + 1` for
+/// component `c` = 0 (x), 1 (y) of the 1-based `node` of `nodes.csv`), `comments` as `%` lines.
+pub fn write_matrix_market(
+    path: &Path,
+    pattern: &crate::sparse::CscPattern,
+    values: &[f64],
+    comments: &[String],
+) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    writeln!(f, "%%MatrixMarket matrix coordinate real symmetric").map_err(&e)?;
+    for c in comments {
+        writeln!(f, "% {c}").map_err(&e)?;
+    }
+    let lower = (0..pattern.n)
+        .map(|c| {
+            pattern.row_idx[pattern.col_ptr[c]..pattern.col_ptr[c + 1]]
+                .iter()
+                .filter(|&&r| r >= c)
+                .count()
+        })
+        .sum::<usize>();
+    writeln!(f, "{} {} {}", pattern.n, pattern.n, lower).map_err(&e)?;
+    for c in 0..pattern.n {
+        for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
+            let r = pattern.row_idx[k];
+            if r >= c {
+                writeln!(f, "{} {} {:.15e}", r + 1, c + 1, values[k]).map_err(&e)?;
+            }
+        }
+    }
+    f.flush().map_err(&e)
+}
+
+/// Element table: `element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged,zncc,grey_std,
+/// texture_small,texture_large` (strain in the model frame, residual RMS and grey-level
+/// standard deviation in grey levels, structure-tensor eigenvalues in grey levels²/px²), and
+/// with a trust mask `trust,w` (the reason, `trusted`, `decorrelated`, `high-residual`,
+/// `shadow`, `low-texture`, and the weight 1/0).
 pub fn write_elements_csv(
     path: &Path,
     res: &DicResult,
     frame: &ModelFrame,
+    trust: Option<&[Trust]>,
 ) -> Result<(), DicError> {
     let e = werr(path);
     let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
-    writeln!(f, "element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged").map_err(&e)?;
+    writeln!(
+        f,
+        "element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged,zncc,grey_std,texture_small,texture_large{}",
+        if trust.is_some() { ",trust,w" } else { "" }
+    )
+    .map_err(&e)?;
     for (k, c) in res.mesh.conn.iter().enumerate() {
         let s = frame.strain(res.mesh.gradient_at_centre(&res.displacement, k));
-        writeln!(
+        let t = &res.element_texture[k];
+        write!(
             f,
-            "{},{},{},{},{},{:.9e},{:.9e},{:.9e},{:.6e},{}",
+            "{},{},{},{},{},{:.9e},{:.9e},{:.9e},{:.6e},{},{:.4},{:.4},{:.6e},{:.6e}",
             k + 1,
             c[0] + 1,
             c[1] + 1,
@@ -192,9 +323,17 @@ pub fn write_elements_csv(
             s[1],
             s[2],
             res.element_residual[k],
-            res.flagged[k] as u8
+            res.flagged[k] as u8,
+            t.zncc,
+            t.std,
+            t.structure[0],
+            t.structure[1]
         )
         .map_err(&e)?;
+        if let Some(tr) = trust {
+            write!(f, ",{},{}", tr[k].name(), (tr[k] == Trust::Trusted) as u8).map_err(&e)?;
+        }
+        writeln!(f).map_err(&e)?;
     }
     f.flush().map_err(&e)
 }

@@ -39,6 +39,7 @@
 //! not the maximum, so that one weakly constrained corner node in a textureless spot does not
 //! hold the whole field hostage; such a node's element keeps a high residual and is flagged.
 
+use crate::anderson::Anderson;
 use crate::bspline::BSpline;
 use crate::error::DicError;
 use crate::image::GreyImage;
@@ -79,6 +80,11 @@ pub struct DicOptions {
     pub fft_init: bool,
     /// An element is flagged when its residual RMS exceeds this factor times the median.
     pub flag_factor: f64,
+    /// Depth of the Anderson acceleration of the Gauss–Newton iterations (module
+    /// [`crate::anderson`]; 0, the default here: plain modified Gauss–Newton steps, as the
+    /// ultrasound simulator's incremental DIC was validated with; `femu dic` uses
+    /// [`crate::anderson::DEFAULT_DEPTH`]).
+    pub acceleration_depth: usize,
 }
 
 impl Default for DicOptions {
@@ -92,6 +98,7 @@ impl Default for DicOptions {
             pyramid_levels: None,
             fft_init: true,
             flag_factor: 3.0,
+            acceleration_depth: 0,
         }
     }
 }
@@ -108,10 +115,13 @@ impl DicOptions {
             return Err(DicError::option("max iterations", "must be at least 1"));
         }
         if let Some(l) = self.regularization_length {
-            if !(l > 0.0 && l.is_finite()) {
+            if !(l >= 2.0 * self.element_size as f64 && l.is_finite()) {
                 return Err(DicError::option(
                     "regularization length",
-                    format!("{l} px must be positive"),
+                    format!(
+                        "{l} px must be at least twice the element size ({} px): a shorter wave is not seen by the nodes",
+                        self.element_size
+                    ),
                 ));
             }
         }
@@ -180,6 +190,91 @@ pub struct DicResult {
     pub levels: Vec<LevelReport>,
     pub timings: Timings,
     pub image_size: (usize, usize),
+    /// The Gauss–Newton system of the finest level, for the covariance ([`crate::quality`]).
+    pub system: GaussNewtonSystem,
+    /// Grey-level statistics of each element at convergence.
+    pub element_texture: Vec<ElementTexture>,
+}
+
+/// What the reference image offers an element, and how well the corrected deformed image
+/// matches it at convergence.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct ElementTexture {
+    /// Mean and standard deviation of the reference grey levels over the element.
+    pub mean: f64,
+    pub std: f64,
+    /// Eigenvalues (small, large) of the mean structure tensor `⟨∇f ∇fᵀ⟩` (grey levels² / px²):
+    /// a small first one is the aperture problem (texture along one direction only).
+    pub structure: [f64; 2],
+    /// Zero-normalized cross-correlation of `f` and the corrected `g̃(x + u)` over the element
+    /// (1: identical up to brightness and contrast; near 0: decorrelated speckle).
+    pub zncc: f64,
+}
+
+impl ElementTexture {
+    fn of(f: &[f64], fx: &[f64], fy: &[f64], g: impl Iterator<Item = f64>) -> Self {
+        let n = f.len() as f64;
+        let mean = f.iter().sum::<f64>() / n;
+        let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+        for (gx, gy) in fx.iter().zip(fy) {
+            sxx += gx * gx;
+            syy += gy * gy;
+            sxy += gx * gy;
+        }
+        let (sxx, syy, sxy) = (sxx / n, syy / n, sxy / n);
+        let half_tr = 0.5 * (sxx + syy);
+        let disc = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+        let gv: Vec<f64> = g.collect();
+        let gm = gv.iter().sum::<f64>() / n;
+        let (mut cfg, mut cff, mut cgg) = (0.0, 0.0, 0.0);
+        for (a, b) in f.iter().zip(&gv) {
+            cfg += (a - mean) * (b - gm);
+            cff += (a - mean) * (a - mean);
+            cgg += (b - gm) * (b - gm);
+        }
+        ElementTexture {
+            mean,
+            std: (cff / n).sqrt(),
+            structure: [(half_tr - disc).max(0.0), half_tr + disc],
+            zncc: if cff > 0.0 && cgg > 0.0 {
+                cfg / (cff * cgg).sqrt()
+            } else {
+                0.0
+            },
+        }
+    }
+}
+
+/// The Gauss–Newton matrices of the finest level: `M` (eq. 2) assembled and per element, and the
+/// regularization `λK` on the same pattern. The matrix of the iterations is `A = M + λK`.
+#[derive(Debug, Clone)]
+pub struct GaussNewtonSystem {
+    /// Symmetric pattern over the equations `2 node + component`.
+    pub pattern: CscPattern,
+    pub m_values: Vec<f64>,
+    /// `λK` on the pattern (`None` without regularization).
+    pub reg_values: Option<Vec<f64>>,
+    /// `λ` (dimensionless weight of eq. 3) when regularized.
+    pub lambda: Option<f64>,
+    /// Per element, `M_e` (row-major 8 x 8) over the equations of `dofs[e]`.
+    pub elem_m: Vec<[f64; 64]>,
+    /// Per element, the covariance of its right-hand side `b_e = Σ (N ∇f) r` under the
+    /// residual's own noise: `σ_e² Σ_k Σ_l ρ(x_k − x_l) w_k w_lᵀ`, `w = N ∇f` (eq. 4 of
+    /// [`crate::quality`]; `σ_e² M_e` for white noise).
+    pub elem_m_noise: Vec<[f64; 64]>,
+    /// The spatial correlation `ρ` of the residual used there.
+    pub residual_correlation: ResidualCorrelation,
+    pub dofs: Vec<[usize; 8]>,
+}
+
+impl GaussNewtonSystem {
+    /// `A = M + λK` on the pattern.
+    pub fn a_values(&self) -> Vec<f64> {
+        match &self.reg_values {
+            None => self.m_values.clone(),
+            Some(k) => self.m_values.iter().zip(k).map(|(m, k)| m + k).collect(),
+        }
+    }
 }
 
 /// One pyramid level: pixels of the ROI ordered element by element, reference values and
@@ -194,9 +289,9 @@ struct Level {
     /// Equations of each element: `2 node + component`, nodes in element order.
     dofs: Vec<[usize; 8]>,
     pattern: CscPattern,
-    /// `M` on the pattern (kept for the diagnostics and the tests).
-    #[cfg_attr(not(test), allow(dead_code))]
+    /// `M` on the pattern, and per element (row-major 8 x 8), for the covariance of the result.
     m_values: Vec<f64>,
+    elem_m: Vec<[f64; 64]>,
     /// The regularization `K` on the pattern, with its weight `λ`.
     reg: Option<(Vec<f64>, f64)>,
     chol: Cholesky,
@@ -210,6 +305,8 @@ struct Level {
     corr: Vec<(f64, f64)>,
     rhs: Vec<f64>,
     work: Vec<f64>,
+    /// Anderson acceleration of the fixed-point iteration (module [`crate::anderson`]).
+    anderson: Anderson,
 }
 
 impl Level {
@@ -219,6 +316,7 @@ impl Level {
         roi: &Roi,
         h: usize,
         reg_length: Option<f64>,
+        acceleration: usize,
     ) -> Result<Self, DicError> {
         let mesh = DicMesh::new(roi, reference.width, reference.height, h)?;
         let spline = BSpline::new(&reference.data, reference.width, reference.height);
@@ -403,12 +501,14 @@ impl Level {
             corr: vec![(1.0, 0.0); ne],
             rhs: vec![0.0; n_eq],
             work: vec![0.0; n_eq],
+            anderson: Anderson::new(n_eq, acceleration),
             f,
             fx,
             fy,
             dofs,
             pattern,
             m_values,
+            elem_m,
             reg,
             chol,
             f_stats,
@@ -562,13 +662,7 @@ impl Level {
                 }
             }
             self.chol.solve_in_place(&mut self.rhs);
-            let mut sq = 0.0;
-            let mut amax = 0.0f64;
-            for (ai, d) in a.iter_mut().zip(&self.rhs) {
-                *ai += d;
-                sq += d * d;
-                amax = amax.max(ai.abs());
-            }
+            let sq: f64 = self.rhs.iter().map(|d| d * d).sum();
             // RMS over the nodes of the nodal increment |δa_n| (pixels).
             inc = (2.0 * sq / a.len() as f64).sqrt();
             if !inc.is_finite() {
@@ -576,13 +670,17 @@ impl Level {
                     "non-finite displacement increment at iteration {it}"
                 )));
             }
-            if amax > limit {
+            if inc < tol {
+                // The last (plain) step: the fixed point itself, not an extrapolation.
+                a.iter_mut().zip(&self.rhs).for_each(|(x, d)| *x += d);
+                return Ok((it, true, inc));
+            }
+            self.anderson.update(a, &self.rhs);
+            let amax = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if !(amax <= limit) {
                 return Err(DicError::Diverged(format!(
                     "at iteration {it} a nodal displacement reached {amax:.1} px, beyond the image size; the images may not show the same scene (try a mask, brightness correction or a regularization length)"
                 )));
-            }
-            if inc < tol {
-                return Ok((it, true, inc));
             }
         }
         Ok((max_iter, false, inc))
@@ -593,6 +691,135 @@ impl Level {
         let s: f64 = self.elem_g.iter().map(|v| v[2]).sum();
         (s / self.gw.len() as f64).sqrt()
     }
+}
+
+/// The normalized autocorrelation `ρ(dx, dy)` of the converged residual image (speckle-sized
+/// for B-mode images, where the decorrelation noise is as large as the speckle), over the lags
+/// `|dx| ≤ lx`, `|dy| ≤ ly`, each range ending where `ρ` along that axis falls below
+/// [`ResidualCorrelation::CUTOFF`] (at most [`ResidualCorrelation::MAX_LAG`] px).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ResidualCorrelation {
+    pub lx: usize,
+    pub ly: usize,
+    /// `(2 ly + 1) x (2 lx + 1)` values, row `dy + ly`, column `dx + lx`.
+    pub rho: Vec<f64>,
+}
+
+impl ResidualCorrelation {
+    pub const CUTOFF: f64 = 0.05;
+    pub const MAX_LAG: usize = 8;
+
+    fn lag(r: &[f32], w: usize, h: usize, dx: i64, dy: i64) -> f64 {
+        let (mut s, mut s0) = (0.0f64, 0.0f64);
+        for y in 0..h as i64 {
+            let y2 = y + dy;
+            if y2 < 0 || y2 >= h as i64 {
+                continue;
+            }
+            for x in 0..w as i64 {
+                let x2 = x + dx;
+                if x2 < 0 || x2 >= w as i64 {
+                    continue;
+                }
+                let a = r[(y * w as i64 + x) as usize] as f64;
+                let b = r[(y2 * w as i64 + x2) as usize] as f64;
+                if a.is_finite() && b.is_finite() {
+                    s += a * b;
+                    s0 += a * a;
+                }
+            }
+        }
+        if s0 > 0.0 {
+            s / s0
+        } else {
+            0.0
+        }
+    }
+
+    /// From a residual image (NaN outside the mesh).
+    pub fn of(r: &[f32], w: usize, h: usize) -> Self {
+        let reach = |axis: usize| {
+            (1..=Self::MAX_LAG)
+                .find(|&k| {
+                    let (dx, dy) = if axis == 0 {
+                        (k as i64, 0)
+                    } else {
+                        (0, k as i64)
+                    };
+                    Self::lag(r, w, h, dx, dy) < Self::CUTOFF
+                })
+                .map_or(Self::MAX_LAG, |k| k - 1)
+        };
+        let (lx, ly) = (reach(0), reach(1));
+        let rho = (0..=2 * ly)
+            .flat_map(|j| (0..=2 * lx).map(move |i| (i, j)))
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|(i, j)| Self::lag(r, w, h, i as i64 - lx as i64, j as i64 - ly as i64))
+            .collect();
+        ResidualCorrelation { lx, ly, rho }
+    }
+
+    #[inline]
+    fn at(&self, dx: i64, dy: i64) -> f64 {
+        self.rho
+            [(dy + self.ly as i64) as usize * (2 * self.lx + 1) + (dx + self.lx as i64) as usize]
+    }
+}
+
+/// The per-element noise matrices `σ_e² Σ_k Σ_l ρ(x_k − x_l) w_k w_lᵀ` (pixel pairs within the
+/// element: the pairs that straddle two elements are left out, which underestimates the
+/// variance by the share of pixels within a correlation length of an element edge).
+fn noise_matrices(level: &Level, variance: &[f64], rho: &ResidualCorrelation) -> Vec<[f64; 64]> {
+    let h = level.mesh.h;
+    let npx = h * h;
+    (0..level.mesh.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let w = |k: usize| {
+                let n = &level.ntab[k];
+                let (gx, gy) = (level.fx[e * npx + k], level.fy[e * npx + k]);
+                let mut v = [0.0; 8];
+                for a in 0..4 {
+                    v[2 * a] = n[a] * gx;
+                    v[2 * a + 1] = n[a] * gy;
+                }
+                v
+            };
+            let mut m = [0.0f64; 64];
+            for k in 0..npx {
+                let (kx, ky) = ((k % h) as i64, (k / h) as i64);
+                let wk = w(k);
+                let mut acc = [0.0; 8];
+                for dy in -(rho.ly as i64)..=rho.ly as i64 {
+                    let ly = ky + dy;
+                    if ly < 0 || ly >= h as i64 {
+                        continue;
+                    }
+                    for dx in -(rho.lx as i64)..=rho.lx as i64 {
+                        let lx = kx + dx;
+                        if lx < 0 || lx >= h as i64 {
+                            continue;
+                        }
+                        let c = rho.at(dx, dy);
+                        let wl = w((ly * h as i64 + lx) as usize);
+                        for b in 0..8 {
+                            acc[b] += c * wl[b];
+                        }
+                    }
+                }
+                for a in 0..8 {
+                    for b in 0..8 {
+                        m[a * 8 + b] += wk[a] * acc[b];
+                    }
+                }
+            }
+            for v in m.iter_mut() {
+                *v *= variance[e];
+            }
+            m
+        })
+        .collect()
 }
 
 /// Rows of the regularization operator `L`: the 5-point Laplacian (weights `−4, 1, 1, 1, 1`)
@@ -758,7 +985,16 @@ pub fn correlate(
             &refs[l],
             &rois[l],
             h,
-            opts.regularization_length.map(|v| v / (1 << l) as f64),
+            // The same physical length on every level, but at least 4 elements: a shorter
+            // plane wave is aliased on the node grid and would give a meaningless weight λ.
+            opts.regularization_length.map(|v| {
+                if l == 0 {
+                    v
+                } else {
+                    (v / (1 << l) as f64).max(4.0 * h as f64)
+                }
+            }),
+            opts.acceleration_depth,
         );
         let mut level = match level {
             Ok(lv) => lv,
@@ -835,6 +1071,18 @@ pub fn correlate(
         .iter()
         .map(|&r| r > opts.flag_factor * median)
         .collect();
+    let element_texture: Vec<ElementTexture> = (0..ne)
+        .map(|e| {
+            let r = e * npx..(e + 1) * npx;
+            let (s, o) = level.corr[e];
+            ElementTexture::of(
+                &level.f[r.clone()],
+                &level.fx[r.clone()],
+                &level.fy[r.clone()],
+                level.gw[r].iter().map(|g| s * g + o),
+            )
+        })
+        .collect();
     let mut residual_image = vec![f32::NAN; width * height];
     for e in 0..ne {
         let (px, py) = level.mesh.element_origin(e);
@@ -844,6 +1092,9 @@ pub fn correlate(
             residual_image[(py + k / h) * width + px + k % h] = r as f32;
         }
     }
+    let element_variance: Vec<f64> = element_residual.iter().map(|r| r * r).collect();
+    let rho = ResidualCorrelation::of(&residual_image, width, height);
+    let elem_m_noise = noise_matrices(&level, &element_variance, &rho);
     let (fmin, fmax) = level
         .f
         .iter()
@@ -852,7 +1103,22 @@ pub fn correlate(
         });
     let residual_rms = level.residual_rms();
     timings.total_s = t0.elapsed().as_secs_f64();
+    let system = GaussNewtonSystem {
+        reg_values: level
+            .reg
+            .as_ref()
+            .map(|(k, lambda)| k.iter().map(|v| lambda * v).collect()),
+        lambda: level.reg.as_ref().map(|r| r.1),
+        pattern: level.pattern,
+        m_values: level.m_values,
+        elem_m: level.elem_m,
+        elem_m_noise,
+        residual_correlation: rho,
+        dofs: level.dofs,
+    };
     Ok(DicResult {
+        system,
+        element_texture,
         displacement: a.chunks(2).map(|c| [c[0], c[1]]).collect(),
         iterations,
         converged,
@@ -886,7 +1152,7 @@ mod tests {
             w: 32,
             h: 32,
         });
-        let level = Level::new(&f, &roi, 8, None).unwrap();
+        let level = Level::new(&f, &roi, 8, None, 0).unwrap();
         (f, level)
     }
 
@@ -949,7 +1215,7 @@ mod tests {
             w: 32,
             h: 32,
         });
-        let mut level = Level::new(&f, &roi, 8, None).unwrap();
+        let mut level = Level::new(&f, &roi, 8, None, 0).unwrap();
         let g = BSpline::new(&gi.data, gi.width, gi.height);
         let n = 2 * level.mesh.n_nodes();
         let a0: Vec<f64> = (0..n)
@@ -1011,6 +1277,62 @@ mod tests {
             b_max < 0.01 * g_max,
             "b at the solution {b_max} vs gradient scale {g_max}"
         );
+    }
+
+    /// The Gauss–Newton Hessian of the whole cost, `2 (M + λK)`, against central second
+    /// differences of `Φ(a) + λ aᵀKa` (eq. 1 and 3) at the solution of a noise-free translation
+    /// (there `r ≈ 0`, so the term `Σ r ∇²r` that Gauss–Newton drops vanishes to the
+    /// interpolation error). Step 1e-3 px: truncation O(ε²) relative ~1e-6; the tolerance 2 % of
+    /// the largest entry covers the remaining residual term (r is the B-spline interpolation
+    /// error, ~1e-2 grey levels here).
+    #[test]
+    fn regularized_hessian_matches_second_differences_of_the_cost() {
+        let s = Speckle::new(64, 64, 1.5, 9);
+        let f = s.reference();
+        let (tx, ty) = (0.3, -0.2);
+        let gi = s.deformed(&lab::translation(tx, ty));
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 32,
+            h: 32,
+        });
+        let mut level = Level::new(&f, &roi, 8, Some(16.0), 0).unwrap();
+        let g = BSpline::new(&gi.data, gi.width, gi.height);
+        let n = 2 * level.mesh.n_nodes();
+        let (kv, lambda) = level.reg.clone().expect("regularized");
+        let cost = |level: &mut Level, a: &[f64]| {
+            let r2: f64 = residuals(level, &g, a).iter().map(|r| r * r).sum();
+            r2 + lambda * level.pattern.quadratic_form(&kv, a)
+        };
+        let a0: Vec<f64> = (0..n).map(|q| if q % 2 == 0 { tx } else { ty }).collect();
+        let eps = 1e-3;
+        let scale = level
+            .m_values
+            .iter()
+            .zip(&kv)
+            .fold(0.0f64, |m, (a, k)| m.max((a + lambda * k).abs()));
+        let mut worst = 0.0f64;
+        for p in 0..n {
+            for q in 0..=p {
+                let mut a = a0.clone();
+                let mut at = |dp: f64, dq: f64| {
+                    a.copy_from_slice(&a0);
+                    a[p] += dp;
+                    a[q] += dq;
+                    cost(&mut level, &a)
+                };
+                let fd = (at(eps, eps) - at(eps, -eps) - at(-eps, eps) + at(-eps, -eps))
+                    / (4.0 * eps * eps);
+                let analytic = 2.0
+                    * level
+                        .pattern
+                        .position(p, q)
+                        .map_or(0.0, |k| level.m_values[k] + lambda * kv[k]);
+                worst = worst.max((fd - analytic).abs() / (2.0 * scale));
+            }
+        }
+        assert!(worst < 0.02, "largest relative difference {worst}");
     }
 
     #[test]

@@ -161,6 +161,21 @@ impl Cholesky {
         );
     }
 
+    /// Solves `A X = R` in place for the `ncols` columns of `rhs` (column-major, `n` rows each),
+    /// with a workspace of its own (allocated per call: for the covariance, not the iterations).
+    pub fn solve_columns_in_place(&self, rhs: &mut [f64], ncols: usize) {
+        let n = self.symbolic.nrows();
+        debug_assert_eq!(rhs.len(), n * ncols);
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(ncols, self.par));
+        let llt = LltRef::new(&self.symbolic, &self.l_values);
+        llt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, ncols),
+            self.par,
+            MemStack::new(&mut mem),
+        );
+    }
+
     /// Number of stored entries of the factor.
     pub fn factor_nnz(&self) -> usize {
         self.l_values.len()

@@ -1,0 +1,494 @@
+//! Options chosen from the images: what `femu dic` does when the user does not set the element
+//! size or the regularization length.
+//!
+//! The statistics come from the images themselves:
+//! - the **speckle size**: full width at half maximum of the normalized autocorrelation of the
+//!   reference over the ROI, along x and y (B-mode speckle is longer laterally than axially);
+//! - the **texture per element**: the eigenvalues of the mean structure tensor `⟨∇f ∇fᵀ⟩` of
+//!   each element; their ratio (small / large) measures how one-directional the texture is
+//!   (muscle fibres and fascia are lines: displacement along them is poorly determined, the
+//!   aperture problem);
+//! - the **grey-level noise of the pair**: the residual of the first correlation, per image
+//!   (`RMS / √2`, both images being noisy).
+//!
+//! Choice. The element size is the smallest multiple of 4 px, at least 16, whose area holds
+//! [`SPECKLES_PER_ELEMENT`] speckle cells `FWHM_x × FWHM_y` (an element must see more than one
+//! independent speckle; B-mode speckle is some 25–31 x 4 px on the Logiq E9 frames, so
+//! 16 px). The regularization length is the first rung of the ladder `off, 4h, 8h, 16h` (at
+//! most the ROI's longer side) whose correlation converges with at least half of the elements
+//! trusted; when the median texture ratio is below [`LINE_TEXTURE`] (line-like texture, which
+//! needs the support of more neighbours: muscle fibres, fascia) the ladder starts at `8h`. If no rung converges the element size is doubled once and the ladder walked
+//! again. When everything fails the error names what was tried and what to try next.
+
+use crate::error::DicError;
+use crate::image::GreyImage;
+use crate::mesh::{Rect, Roi};
+use crate::quality::{self, NodalCovariance, Trust, TrustCriteria};
+use crate::solver::{correlate, DicOptions, DicResult};
+
+/// Median texture ratio (small / large structure-tensor eigenvalue) below which the texture
+/// counts as line-like.
+pub const LINE_TEXTURE: f64 = 0.25;
+
+/// Speckle cells (FWHM_x x FWHM_y) an element holds at least.
+pub const SPECKLES_PER_ELEMENT: f64 = 2.0;
+
+/// Minimum share of trusted elements for a rung to be accepted.
+pub const MIN_TRUSTED: f64 = 0.5;
+
+/// How the element size or the regularization length is set.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Setting {
+    /// Chosen from the images.
+    Auto,
+    /// Off (regularization only).
+    Off,
+    /// Given by the user (pixels).
+    Given(f64),
+}
+
+/// Statistics of the images that the choice reads.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ImageStatistics {
+    /// Speckle size (FWHM of the autocorrelation) along x and y (pixels).
+    pub speckle_fwhm_px: [f64; 2],
+    /// Median over the element-sized blocks of the reference of the small / large
+    /// structure-tensor eigenvalue.
+    pub texture_ratio_median: f64,
+    /// Median over the blocks of `sqrt(small eigenvalue)` (grey levels per pixel).
+    pub texture_gradient_median: f64,
+    /// Grey-level noise per image from the pair (residual RMS of the first correlation / √2).
+    pub pair_noise_grey: f64,
+}
+
+/// One correlation tried.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Attempt {
+    pub element_size_px: usize,
+    pub regularization_px: Option<f64>,
+    pub converged: bool,
+    pub iterations: usize,
+    pub last_increment_px: f64,
+    pub residual_rms: f64,
+    pub trusted_fraction: f64,
+    /// 90th percentile of the larger nodal standard deviation (pixels).
+    pub sd_p90_px: f64,
+    /// Why it failed or was not kept.
+    pub note: Option<String>,
+}
+
+/// The choice and how it was reached.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Choice {
+    pub statistics: ImageStatistics,
+    pub attempts: Vec<Attempt>,
+    pub element_size_px: usize,
+    pub regularization_px: Option<f64>,
+    pub reason: String,
+}
+
+/// A correlation with its quality.
+pub struct Measured {
+    pub res: DicResult,
+    pub cov: NodalCovariance,
+    pub trust: Vec<Trust>,
+}
+
+/// Half-width of the box filter removed before the autocorrelation (pixels).
+const DETREND_RADIUS: usize = 8;
+
+/// FWHM of the normalized autocorrelation of the speckle of `img` over `r` along x and y
+/// (pixels; twice the lag at which it falls to ½, linearly interpolated; capped at 64 px). The
+/// local mean over a `17 x 17` box is removed first, so that fascia and other long structures
+/// (and the depth-dependent brightness) do not count as speckle.
+pub fn speckle_fwhm(img: &GreyImage, r: &Rect) -> [f64; 2] {
+    let (w, h) = (r.w, r.h);
+    // Box mean by a summed-area table over the rectangle (clamped at its edges).
+    let mut sat = vec![0.0; (w + 1) * (h + 1)];
+    for y in 0..h {
+        for x in 0..w {
+            sat[(y + 1) * (w + 1) + x + 1] =
+                img.at(r.x + x, r.y + y) + sat[y * (w + 1) + x + 1] + sat[(y + 1) * (w + 1) + x]
+                    - sat[y * (w + 1) + x];
+        }
+    }
+    let d = DETREND_RADIUS;
+    let hp: Vec<f64> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            let (x0, x1, y0, y1) = (
+                x.saturating_sub(d),
+                (x + d + 1).min(w),
+                y.saturating_sub(d),
+                (y + d + 1).min(h),
+            );
+            let s = sat[y1 * (w + 1) + x1] - sat[y0 * (w + 1) + x1] - sat[y1 * (w + 1) + x0]
+                + sat[y0 * (w + 1) + x0];
+            img.at(r.x + x, r.y + y) - s / ((x1 - x0) * (y1 - y0)) as f64
+        })
+        .collect();
+    let rho = |dx: usize, dy: usize| {
+        let (mut s, mut s0) = (0.0, 0.0);
+        for y in 0..h - dy {
+            for x in 0..w - dx {
+                let a = hp[y * w + x];
+                s += a * hp[(y + dy) * w + x + dx];
+                s0 += a * a;
+            }
+        }
+        if s0 > 0.0 {
+            s / s0
+        } else {
+            0.0
+        }
+    };
+    let half = |axis: usize| {
+        let mut prev = 1.0;
+        for k in 1..=32usize.min(if axis == 0 { w } else { h } - 1) {
+            let v = if axis == 0 { rho(k, 0) } else { rho(0, k) };
+            if v <= 0.5 {
+                return 2.0 * ((k - 1) as f64 + (prev - 0.5) / (prev - v));
+            }
+            prev = v;
+        }
+        64.0
+    };
+    [half(0), half(1)]
+}
+
+/// Median over the `h x h` blocks of `r` of the structure-tensor eigenvalues of the reference
+/// (central differences): `(median of small / large, median of sqrt(small))`.
+pub fn texture(img: &GreyImage, r: &Rect, h: usize) -> (f64, f64) {
+    let mut ratio = Vec::new();
+    let mut small = Vec::new();
+    for by in 0..r.h / h {
+        for bx in 0..r.w / h {
+            let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+            for y in r.y + by * h..r.y + (by + 1) * h {
+                for x in r.x + bx * h..r.x + (bx + 1) * h {
+                    let gx = 0.5
+                        * (img.at((x + 1).min(img.width - 1), y) - img.at(x.saturating_sub(1), y));
+                    let gy = 0.5
+                        * (img.at(x, (y + 1).min(img.height - 1)) - img.at(x, y.saturating_sub(1)));
+                    sxx += gx * gx;
+                    syy += gy * gy;
+                    sxy += gx * gy;
+                }
+            }
+            let n = (h * h) as f64;
+            let (sxx, syy, sxy) = (sxx / n, syy / n, sxy / n);
+            let half = 0.5 * (sxx + syy);
+            let disc = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+            let (lo, hi) = ((half - disc).max(0.0), half + disc);
+            ratio.push(if hi > 0.0 { lo / hi } else { 0.0 });
+            small.push(lo.sqrt());
+        }
+    }
+    (median(ratio), median(small))
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+fn measure(
+    f: &GreyImage,
+    g: &GreyImage,
+    roi: &Roi,
+    opts: &DicOptions,
+    criteria: &TrustCriteria,
+) -> Result<Measured, DicError> {
+    let res = correlate(f, g, roi, opts)?;
+    let cov = quality::covariance(&res)?;
+    let trust = quality::element_trust(&res, &cov, criteria);
+    Ok(Measured { res, cov, trust })
+}
+
+fn attempt_of(m: &Measured, opts: &DicOptions) -> Attempt {
+    let trusted = m.trust.iter().filter(|&&t| t == Trust::Trusted).count();
+    let mut sd: Vec<f64> = m
+        .cov
+        .node
+        .iter()
+        .map(|n| n.sd_ux_px.max(n.sd_uy_px))
+        .collect();
+    sd.sort_by(|a, b| a.total_cmp(b));
+    Attempt {
+        element_size_px: opts.element_size,
+        regularization_px: opts.regularization_length,
+        converged: m.res.converged,
+        iterations: m.res.iterations,
+        last_increment_px: m.res.last_increment_px,
+        residual_rms: m.res.residual_rms,
+        trusted_fraction: trusted as f64 / m.trust.len().max(1) as f64,
+        sd_p90_px: sd.get(sd.len() * 9 / 10).copied().unwrap_or(f64::NAN),
+        note: None,
+    }
+}
+
+/// Correlates `f` → `g` with the element size and regularization length chosen as the module
+/// documentation says (or as given), returning the field with its quality and the choice.
+pub fn correlate_auto(
+    f: &GreyImage,
+    g: &GreyImage,
+    roi: &Roi,
+    base: &DicOptions,
+    element: Setting,
+    regularization: Setting,
+    criteria: &TrustCriteria,
+) -> Result<(Measured, Choice), DicError> {
+    let bb = roi.bounding_box(f.width, f.height)?;
+    let fwhm = speckle_fwhm(f, &bb);
+    // An explicit element size is used as given (the mesh reports a size that does not fit);
+    // the automatic one is kept within half the ROI.
+    let h0 = match element {
+        Setting::Given(h) => h as usize,
+        _ => ((16.0f64.max((SPECKLES_PER_ELEMENT * fwhm[0] * fwhm[1]).sqrt()) / 4.0).ceil()
+            as usize
+            * 4)
+        .min(bb.w.min(bb.h) / 2)
+        .max(4),
+    };
+    // Element size and ROI errors (an element larger than the ROI, an empty mask) at once.
+    crate::mesh::DicMesh::new(roi, f.width, f.height, h0)?;
+    let (ratio, gradient) = texture(f, &bb, h0);
+    let mut stats = ImageStatistics {
+        speckle_fwhm_px: fwhm,
+        texture_ratio_median: ratio,
+        texture_gradient_median: gradient,
+        pair_noise_grey: f64::NAN,
+    };
+    let mut attempts = Vec::new();
+    let sizes: Vec<usize> = match element {
+        Setting::Given(_) => vec![h0],
+        _ => vec![h0, 2 * h0],
+    };
+    let longest = bb.w.max(bb.h) as f64;
+    for &h in &sizes {
+        let ladder: Vec<Option<f64>> = match regularization {
+            Setting::Off => vec![None],
+            Setting::Given(l) => vec![Some(l)],
+            Setting::Auto => {
+                let start = if stats.texture_ratio_median < LINE_TEXTURE {
+                    8.0
+                } else {
+                    4.0
+                };
+                // Isotropic texture: first without regularization (full resolution).
+                let off = (start == 4.0).then_some(None);
+                off.into_iter()
+                    .chain(
+                        [4.0, 8.0, 16.0]
+                            .iter()
+                            .filter(|&&k| k >= start)
+                            .map(|k| Some((k * h as f64).min(longest).max(2.0 * h as f64))),
+                    )
+                    .collect()
+            }
+        };
+        let mut k = 0;
+        while k < ladder.len() {
+            let opts = DicOptions {
+                element_size: h,
+                regularization_length: ladder[k],
+                ..base.clone()
+            };
+            let m = match measure(f, g, roi, &opts, criteria) {
+                Ok(m) => m,
+                Err(e @ (DicError::Roi(_) | DicError::SizeMismatch { .. })) => return Err(e),
+                Err(e) => {
+                    attempts.push(Attempt {
+                        element_size_px: h,
+                        regularization_px: ladder[k],
+                        converged: false,
+                        iterations: 0,
+                        last_increment_px: f64::NAN,
+                        residual_rms: f64::NAN,
+                        trusted_fraction: 0.0,
+                        sd_p90_px: f64::NAN,
+                        note: Some(e.to_string()),
+                    });
+                    k += 1;
+                    continue;
+                }
+            };
+            if stats.pair_noise_grey.is_nan() {
+                stats.pair_noise_grey = m.res.residual_rms / std::f64::consts::SQRT_2;
+            }
+            let mut a = attempt_of(&m, &opts);
+            // Options given in full: the result is returned whatever it is (the caller writes
+            // it and reports a non-convergence with [`advice`]).
+            let forced = element != Setting::Auto && regularization != Setting::Auto;
+            let ok = forced || (a.converged && a.trusted_fraction >= MIN_TRUSTED);
+            if !a.converged {
+                a.note = Some("not converged".into());
+            } else if !ok {
+                a.note = Some(format!(
+                    "only {:.0} % of the elements trusted",
+                    100.0 * a.trusted_fraction
+                ));
+            }
+            attempts.push(a);
+            if ok {
+                let reason = match (element, regularization) {
+                    (Setting::Given(_), Setting::Given(_) | Setting::Off) => {
+                        "as given".to_string()
+                    }
+                    _ => format!(
+                        "the first rung of the ladder (element {h} px, regularization {}) that converged with at least {:.0} % of the elements trusted; speckle FWHM {:.1} x {:.1} px, texture ratio {:.2} ({})",
+                        ladder[k].map_or("off".to_string(), |l| format!("{l} px")),
+                        100.0 * MIN_TRUSTED,
+                        fwhm[0],
+                        fwhm[1],
+                        stats.texture_ratio_median,
+                        if stats.texture_ratio_median < LINE_TEXTURE {
+                            "line-like: ladder from 8 elements"
+                        } else {
+                            "ladder from no regularization"
+                        }
+                    ),
+                };
+                let choice = Choice {
+                    statistics: stats,
+                    attempts,
+                    element_size_px: h,
+                    regularization_px: ladder[k],
+                    reason,
+                };
+                return Ok((m, choice));
+            }
+            k += 1;
+        }
+    }
+    Err(DicError::Diverged(failure_advice(
+        f, &bb, &attempts, sizes[0],
+    )))
+}
+
+/// What to try when a correlation with element `h` did not converge: a larger element, a
+/// longer regularization, a ROI away from the dark bands (computed from the image).
+pub fn advice(f: &GreyImage, bb: &Rect, h: usize) -> String {
+    let roi_hint = match tissue_box(f, bb, h) {
+        Some(t) if t != *bb => format!(
+            "; or a smaller ROI away from the dark bands, e.g. --roi {},{},{},{}",
+            t.x, t.y, t.w, t.h
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "try the automatic choice (no --element, no --regularization), a larger element (--element {}), a longer regularization (--regularization {}){roi_hint}",
+        2 * h,
+        16 * h
+    )
+}
+
+/// The error message when nothing converged: what was tried and what to try.
+fn failure_advice(f: &GreyImage, bb: &Rect, attempts: &[Attempt], h: usize) -> String {
+    let tried: Vec<String> = attempts
+        .iter()
+        .map(|a| {
+            format!(
+                "element {} px, regularization {}: {}",
+                a.element_size_px,
+                a.regularization_px
+                    .map_or("off".into(), |l| format!("{l} px")),
+                a.note.clone().unwrap_or_else(|| "rejected".into())
+            )
+        })
+        .collect();
+    let tissue = tissue_box(f, bb, h);
+    let roi_hint = match tissue {
+        Some(t) if t != *bb => format!(
+            "; or a smaller ROI away from the dark bands, e.g. --roi {},{},{},{}",
+            t.x, t.y, t.w, t.h
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "no correlation converged ({}). Try a larger element (--element {}), a longer regularization (--regularization {}){roi_hint}",
+        tried.join("; "),
+        4 * h,
+        32 * h
+    )
+}
+
+/// The run of rows and of columns of `bb`, around its middle, whose mean grey level exceeds a
+/// fifth of the median row/column mean (the dark side bands and bottom of a B-mode frame fall
+/// below), shrunk by one element.
+pub fn tissue_box(f: &GreyImage, bb: &Rect, h: usize) -> Option<Rect> {
+    let col: Vec<f64> = (bb.x..bb.x + bb.w)
+        .map(|x| (bb.y..bb.y + bb.h).map(|y| f.at(x, y)).sum::<f64>() / bb.h as f64)
+        .collect();
+    let row: Vec<f64> = (bb.y..bb.y + bb.h)
+        .map(|y| (bb.x..bb.x + bb.w).map(|x| f.at(x, y)).sum::<f64>() / bb.w as f64)
+        .collect();
+    // The run of bright enough lines around the middle of the ROI.
+    let span = |v: &[f64]| {
+        let thr = 0.2 * median(v.to_vec());
+        let mid = v.len() / 2;
+        if !(v[mid] > thr) {
+            return None;
+        }
+        let a = (0..mid).rev().find(|&i| !(v[i] > thr)).map_or(0, |i| i + 1);
+        let b = (mid..v.len()).find(|&i| !(v[i] > thr)).unwrap_or(v.len());
+        Some((a, b))
+    };
+    let (x0, x1) = span(&col)?;
+    let (y0, y1) = span(&row)?;
+    let (x0, x1) = (x0 + h, x1.saturating_sub(h));
+    let (y0, y1) = (y0 + h, y1.saturating_sub(h));
+    (x1 > x0 + 2 * h && y1 > y0 + 2 * h).then(|| Rect {
+        x: bb.x + x0,
+        y: bb.y + y0,
+        w: x1 - x0,
+        h: y1 - y0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lab::{self, Speckle};
+
+    /// The speckle of the virtual lab (Gaussian spots of σ = 2 px): the autocorrelation of a
+    /// random sum of spots is the spot's own, `exp(−d²/(4σ²))`, whose FWHM is
+    /// `4σ √(ln 2) = 6.66 px` before the detrending. And the automatic choice converges on a translated pair.
+    #[test]
+    fn speckle_size_and_automatic_choice() {
+        let s = Speckle::new(160, 160, 2.0, 8);
+        let f = s.reference();
+        let r = Rect {
+            x: 16,
+            y: 16,
+            w: 128,
+            h: 128,
+        };
+        let w = speckle_fwhm(&f, &r);
+        // Removing the 17 x 17 box mean also removes part of the spot's own low frequencies,
+        // which narrows the autocorrelation (measured 5.4-5.5 px): the bound is 0.75-1.05 of
+        // the theoretical 6.66 px.
+        for v in w {
+            assert!((0.75 * 6.66..1.05 * 6.66).contains(&v), "FWHM {w:?}");
+        }
+        let g = s.deformed(&lab::translation(0.3, 0.1));
+        let (m, c) = correlate_auto(
+            &f,
+            &g,
+            &Roi::Rect(r),
+            &DicOptions::default(),
+            Setting::Auto,
+            Setting::Auto,
+            &TrustCriteria::default(),
+        )
+        .unwrap();
+        assert!(m.res.converged);
+        assert_eq!(c.element_size_px, 16, "sqrt(2) x 5.5 px is below 16: {c:?}");
+        assert_eq!(
+            c.regularization_px, None,
+            "isotropic speckle: no regularization needed {c:?}"
+        );
+        assert_eq!(c.attempts.len(), 1);
+    }
+}

@@ -1,0 +1,393 @@
+//! `femu dic REF DEF` as a library function: read the images, choose the options
+//! ([`crate::auto`]), correlate, compute the quality ([`crate::quality`]) and write the output
+//! folder. The CLI parses its arguments into a [`DicJob`] and calls [`run_dic`].
+//!
+//! Files written into `out` (all coordinates and displacements in the model frame, mm, unless
+//! the column name says px):
+//!
+//! | file | content |
+//! |---|---|
+//! | `field.csv` | the measured-field CSV of conventions.md: `x,y,ux,uy,sx,sy,w` on a regular grid; `sx, sy` standard deviations from the nodal covariance, `w` = 0 in the elements the trust mask rejects |
+//! | `nodes.csv` | `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm,sd_ux_px,sd_uy_px,corr_xy,w` |
+//! | `elements.csv` | strain, residual, ZNCC, grey-level std, structure-tensor eigenvalues, `trust` (reason) and `w` per element |
+//! | `covariance.mtx` | the nodal covariance `C = A⁻¹ M_σ A⁻¹` (px²) on the pattern of `A` (nodal 2 x 2 blocks and the pairs of nodes sharing an element or a regularization row), Matrix Market, lower triangle, equation `2 (node − 1) + c + 1` |
+//! | `hessian.mtx` | `A = M + λK`, the Gauss–Newton matrix of the iterations (grey levels² / px²) |
+//! | `hessian_noise.mtx` | `M_σ`, the covariance of the right-hand side under the residual's noise (grey levels⁴ / px²): with `A`, the factors of `C` |
+//! | `result.vtu` | mesh with displacement, standard deviations, strain, residual, trust |
+//! | `ux.png` … `residual.png`, `sd.png`, `zncc.png`, `trust.png` | maps over the reference image |
+//! | `summary.json` | [`DicReport`]: inputs, the choice of the options and every attempt, the result, the quality |
+
+use crate::auto::{self, Choice, Measured, Setting};
+use crate::error::DicError;
+use crate::image::{GreyImage, PixelSize};
+use crate::mesh::{Rect, Roi};
+use crate::output::{self, DicSummary, ModelFrame, Quality};
+use crate::quality::{Trust, TrustCriteria};
+use crate::solver::DicOptions;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Where to correlate.
+#[derive(Debug, Clone, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RoiSpec {
+    /// The whole image.
+    Whole,
+    Rect(Rect),
+    /// A mask image (pixels brighter than half its maximum are inside).
+    Mask(PathBuf),
+}
+
+impl RoiSpec {
+    /// The ROI over an image of `width x height`.
+    pub fn resolve(&self, width: usize, height: usize) -> Result<Roi, DicError> {
+        match self {
+            RoiSpec::Whole => Ok(Roi::Rect(Rect {
+                x: 0,
+                y: 0,
+                w: width,
+                h: height,
+            })),
+            RoiSpec::Rect(r) => Ok(Roi::Rect(*r)),
+            RoiSpec::Mask(p) => {
+                let img = GreyImage::open(p, 0)?;
+                if (img.width, img.height) != (width, height) {
+                    return Err(DicError::Roi(format!(
+                        "{}: the mask is {} x {} px, the images {width} x {height} px",
+                        p.display(),
+                        img.width,
+                        img.height
+                    )));
+                }
+                Ok(Roi::mask_from_image(&img))
+            }
+        }
+    }
+}
+
+/// How to correlate: the options of [`crate::correlate`] and the automatic choice.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CorrelationSpec {
+    pub roi: RoiSpec,
+    /// Everything but the element size and the regularization length, which come from
+    /// `element` and `regularization`.
+    pub options: DicOptions,
+    pub element: Setting,
+    pub regularization: Setting,
+    pub trust: TrustCriteria,
+}
+
+impl CorrelationSpec {
+    /// Correlates `f → g` as specified.
+    pub fn measure(&self, f: &GreyImage, g: &GreyImage) -> Result<(Measured, Choice), DicError> {
+        let roi = self.roi.resolve(f.width, f.height)?;
+        auto::correlate_auto(
+            f,
+            g,
+            &roi,
+            &self.options,
+            self.element,
+            self.regularization,
+            &self.trust,
+        )
+    }
+}
+
+/// Everything `femu dic` needs.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DicJob {
+    pub reference: PathBuf,
+    pub deformed: PathBuf,
+    pub frame_ref: usize,
+    pub frame_def: usize,
+    pub correlation: CorrelationSpec,
+    /// Pixel size given by the user (overrides the DICOM header).
+    pub pixel_size: Option<PixelSize>,
+    pub origin_px: [f64; 2],
+    pub x_left: bool,
+    pub y_up: bool,
+    /// Step of the grid of `field.csv` (pixels; default the element size).
+    pub grid_step_px: Option<f64>,
+    pub figures: bool,
+    pub out: PathBuf,
+}
+
+/// Summary of the quality of a field.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct QualitySummary {
+    pub trusted_elements: usize,
+    /// Elements per reason (`decorrelated`, `high-residual`, `shadow`, `low-texture`).
+    pub untrusted: Vec<(String, usize)>,
+    /// Median and 90th percentile of the nodal standard deviations (px), over the trusted
+    /// nodes.
+    pub sd_median_px: [f64; 2],
+    pub sd_p90_px: [f64; 2],
+    /// Correlation lengths of the residual used in the covariance (px).
+    pub residual_correlation_lags_px: [usize; 2],
+    pub criteria: TrustCriteria,
+}
+
+/// What `femu dic` reports (`summary.json`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct DicReport {
+    pub femu_version: &'static str,
+    pub command: &'static str,
+    pub job: DicJob,
+    pub image_size_px: (usize, usize),
+    /// Pixel size (mm/px) and its source; null if unknown (then mm = px).
+    pub pixel_size: Option<PixelSize>,
+    pub model_frame: ModelFrame,
+    pub choice: Choice,
+    pub result: DicSummary,
+    pub quality: QualitySummary,
+    pub grid_points: usize,
+    pub outputs: Vec<&'static str>,
+    pub warnings: Vec<String>,
+    /// What to try next, when the correlation did not converge.
+    pub advice: Option<String>,
+    pub wall_time_s: f64,
+}
+
+fn percentile(mut v: Vec<f64>, p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+/// The quality summary of a measured field.
+pub fn quality_summary(m: &Measured, criteria: &TrustCriteria) -> QualitySummary {
+    let w = output::node_weights(&m.res, &m.trust);
+    let pick = |c: usize| -> Vec<f64> {
+        m.cov
+            .node
+            .iter()
+            .zip(&w)
+            .filter(|(_, &w)| w == 1)
+            .map(|(n, _)| if c == 0 { n.sd_ux_px } else { n.sd_uy_px })
+            .collect()
+    };
+    let untrusted = [
+        Trust::Decorrelated,
+        Trust::HighResidual,
+        Trust::Shadow,
+        Trust::LowTexture,
+    ]
+    .iter()
+    .map(|t| {
+        (
+            t.name().to_string(),
+            m.trust.iter().filter(|&x| x == t).count(),
+        )
+    })
+    .collect();
+    let rho = &m.res.system.residual_correlation;
+    QualitySummary {
+        trusted_elements: m.trust.iter().filter(|&&t| t == Trust::Trusted).count(),
+        untrusted,
+        sd_median_px: [percentile(pick(0), 0.5), percentile(pick(1), 0.5)],
+        sd_p90_px: [percentile(pick(0), 0.9), percentile(pick(1), 0.9)],
+        residual_correlation_lags_px: [rho.lx, rho.ly],
+        criteria: *criteria,
+    }
+}
+
+/// Runs `femu dic`: writes the output folder and returns the report. A correlation that ran
+/// with given options but did not converge is written and reported (`result.converged`
+/// false); the caller decides how to exit.
+pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
+    let t0 = Instant::now();
+    let f = GreyImage::open(&job.reference, job.frame_ref)?;
+    let g = GreyImage::open(&job.deformed, job.frame_def)?;
+    let pixel_size = job.pixel_size.or(f.pixel_size);
+    let frame = ModelFrame {
+        origin_px: job.origin_px,
+        pixel_size_mm: pixel_size.map_or([1.0, 1.0], |p| [p.dx_mm, p.dy_mm]),
+        x_left: job.x_left,
+        y_up: job.y_up,
+    };
+    let (m, choice) = job.correlation.measure(&f, &g)?;
+    std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
+        path: job.out.clone(),
+        message: e.to_string(),
+    })?;
+    let step = job.grid_step_px.unwrap_or(m.res.mesh.h as f64);
+    let q = Quality {
+        cov: &m.cov,
+        trust: &m.trust,
+    };
+    let points = output::grid_with_quality(&m.res, Some(&q), &frame, step)?;
+    let mut warnings = Vec::new();
+    if pixel_size.is_none() {
+        warnings.push(
+            "pixel size unknown (no DICOM header, no --pixel-size): the mm columns are in pixels"
+                .to_string(),
+        );
+    }
+    write_tables(job, &m, &choice, &frame, pixel_size, &points)?;
+    let mut outputs = vec![
+        "field.csv",
+        "nodes.csv",
+        "elements.csv",
+        "covariance.mtx",
+        "hessian.mtx",
+        "hessian_noise.mtx",
+        "result.vtu",
+        "summary.json",
+    ];
+    if job.figures {
+        crate::figures::write_maps(&job.out, &f, &m, &frame, pixel_size.is_some())?;
+        outputs.extend(crate::figures::MAPS);
+    }
+    let quality = quality_summary(&m, &job.correlation.trust);
+    let untrusted = m.trust.len() - quality.trusted_elements;
+    if untrusted > 0 {
+        warnings.push(format!(
+            "{untrusted} of {} elements not trusted ({}): w = 0 in field.csv",
+            m.trust.len(),
+            quality
+                .untrusted
+                .iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(r, n)| format!("{n} {r}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+    }
+    if m.res.residual_percent > 5.0 {
+        warnings.push(format!(
+            "high grey-level residual ({:.1} % of the dynamic range): the images may not show the same texture (try --brightness per-element, a mask or a longer regularization)",
+            m.res.residual_percent
+        ));
+    }
+    if !m.res.converged {
+        warnings.push(format!(
+            "not converged in {} iterations (last increment {:.2e} px)",
+            m.res.iterations, m.res.last_increment_px
+        ));
+    }
+    let report = DicReport {
+        femu_version: env!("CARGO_PKG_VERSION"),
+        command: "dic",
+        job: job.clone(),
+        image_size_px: (f.width, f.height),
+        pixel_size,
+        model_frame: frame,
+        choice,
+        result: DicSummary::of(&m.res),
+        quality,
+        grid_points: points.len(),
+        outputs,
+        warnings,
+        advice: (!m.res.converged).then(|| {
+            let mesh = &m.res.mesh;
+            let bb = Rect {
+                x: mesh.x0,
+                y: mesh.y0,
+                w: mesh.nx * mesh.h,
+                h: mesh.ny * mesh.h,
+            };
+            auto::advice(&f, &bb, mesh.h)
+        }),
+        wall_time_s: t0.elapsed().as_secs_f64(),
+    };
+    write_json(&job.out.join("summary.json"), &report)?;
+    Ok(report)
+}
+
+/// Writes a serializable value as pretty JSON.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), DicError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(path, text).map_err(|e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// `field.csv`, `nodes.csv`, `elements.csv`, the three matrices and `result.vtu`.
+fn write_tables(
+    job: &DicJob,
+    m: &Measured,
+    choice: &Choice,
+    frame: &ModelFrame,
+    pixel_size: Option<PixelSize>,
+    points: &[output::GridPoint],
+) -> Result<(), DicError> {
+    let out = &job.out;
+    let size_note = match pixel_size {
+        Some(p) => format!("pixel size {} x {} mm ({})", p.dx_mm, p.dy_mm, p.source),
+        None => "pixel size unknown: 1 mm = 1 px".to_string(),
+    };
+    let comments = vec![
+        format!(
+            "femu dic {}: reference {} (frame {}), deformed {} (frame {})",
+            env!("CARGO_PKG_VERSION"),
+            job.reference.display(),
+            job.frame_ref,
+            job.deformed.display(),
+            job.frame_def
+        ),
+        format!(
+            "units mm; {size_note}; origin at pixel ({}, {}); x {}, y {}",
+            frame.origin_px[0],
+            frame.origin_px[1],
+            if frame.x_left { "left" } else { "right" },
+            if frame.y_up { "up" } else { "down" }
+        ),
+        format!(
+            "global Q4 DIC, element {} px, regularization {}, grid step {} px; sx, sy: standard deviations from the nodal covariance (covariance.mtx); w = 0 in elements not trusted (elements.csv)",
+            choice.element_size_px,
+            choice
+                .regularization_px
+                .map_or("off".to_string(), |l| format!("{l} px")),
+            points
+                .get(1)
+                .map_or(f64::NAN, |p| (p.x_px[0] - points[0].x_px[0]).abs())
+        ),
+    ];
+    output::write_field_csv(&out.join("field.csv"), points, &comments)?;
+    let q = Quality {
+        cov: &m.cov,
+        trust: &m.trust,
+    };
+    output::write_nodes_csv(&out.join("nodes.csv"), &m.res, frame, Some(&q))?;
+    output::write_elements_csv(&out.join("elements.csv"), &m.res, frame, Some(&m.trust))?;
+    let sys = &m.res.system;
+    let eq = "equation 2 (node - 1) + c + 1, c = 0 for ux, 1 for uy, node of nodes.csv";
+    output::write_matrix_market(
+        &out.join("covariance.mtx"),
+        &sys.pattern,
+        &m.cov.values,
+        &[
+            "femu dic: nodal covariance C = A^-1 M_sigma A^-1 (px^2), entries on the pattern of A only".into(),
+            eq.into(),
+        ],
+    )?;
+    output::write_matrix_market(
+        &out.join("hessian.mtx"),
+        &sys.pattern,
+        &sys.a_values(),
+        &[
+            format!(
+                "femu dic: Gauss-Newton matrix A = M + lambda K (grey levels^2/px^2), lambda = {}",
+                sys.lambda.unwrap_or(0.0)
+            ),
+            eq.into(),
+        ],
+    )?;
+    let m_sigma = crate::quality::noise_matrix(&m.res);
+    output::write_matrix_market(
+        &out.join("hessian_noise.mtx"),
+        &sys.pattern,
+        &m_sigma,
+        &[
+            "femu dic: M_sigma, covariance of the Gauss-Newton right-hand side under the residual noise; C = A^-1 M_sigma A^-1".into(),
+            eq.into(),
+        ],
+    )?;
+    output::write_vtu(&out.join("result.vtu"), &m.res, frame)
+}

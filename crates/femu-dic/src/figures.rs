@@ -1,0 +1,225 @@
+//! The maps of `femu dic` over the reference image (cropped to the mesh with a margin of one
+//! element), with colour bars: displacements, strains, residual, and the quality (nodal
+//! standard deviation, ZNCC per element, the trust mask).
+
+use crate::auto::Measured;
+use crate::error::DicError;
+use crate::image::GreyImage;
+use crate::output::{self, ModelFrame};
+use crate::quality::Trust;
+use std::path::Path;
+
+/// The files [`write_maps`] writes.
+pub const MAPS: [&str; 9] = [
+    "ux.png",
+    "uy.png",
+    "exx.png",
+    "eyy.png",
+    "exy.png",
+    "residual.png",
+    "sd.png",
+    "zncc.png",
+    "trust.png",
+];
+
+/// One map: file, values per pixel, title, colour-bar label, diverging, fixed range.
+pub struct Map<'a> {
+    pub name: &'a str,
+    pub values: Vec<f64>,
+    pub title: String,
+    pub label: String,
+    pub diverging: bool,
+    pub range: Option<(f64, f64)>,
+}
+
+/// Draws `map` over `f`, cropped to `crop`; the colour range, unless given, from the 1st to the
+/// 99th percentile (a few wild values do not wash out the map).
+pub fn draw(
+    out: &Path,
+    f: &GreyImage,
+    map: &Map,
+    crop: (usize, usize, usize, usize),
+) -> Result<(), DicError> {
+    let range = map.range.or_else(|| {
+        let mut v: Vec<f64> = map
+            .values
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
+        v.sort_by(|a, b| a.total_cmp(b));
+        (v.len() > 1)
+            .then(|| (v[v.len() / 100], v[v.len() - 1 - v.len() / 100]))
+            .filter(|r| r.1 > r.0)
+    });
+    let opts = femu_plot::ImageField {
+        title: map.title.clone(),
+        value_label: map.label.clone(),
+        diverging: map.diverging,
+        range,
+        crop: Some(crop),
+        ..Default::default()
+    };
+    let path = out.join(map.name);
+    femu_plot::image_field_png(&path, &f.data, f.width, f.height, &map.values, &opts).map_err(|e| {
+        DicError::Write {
+            path: path.clone(),
+            message: e.to_string(),
+        }
+    })
+}
+
+/// Per pixel of the mesh: `value(element, x, y)`, NaN elsewhere.
+fn per_pixel(
+    m: &Measured,
+    w: usize,
+    h: usize,
+    value: impl Fn(usize, usize, usize) -> f64,
+) -> Vec<f64> {
+    let mesh = &m.res.mesh;
+    let mut v = vec![f64::NAN; w * h];
+    for e in 0..mesh.n_elements() {
+        let (px, py) = mesh.element_origin(e);
+        for j in 0..mesh.h {
+            for i in 0..mesh.h {
+                v[(py + j) * w + px + i] = value(e, px + i, py + j);
+            }
+        }
+    }
+    v
+}
+
+/// The crop of the maps: the mesh with a margin of one element.
+pub fn crop_of(m: &Measured, w: usize, h: usize) -> (usize, usize, usize, usize) {
+    let mesh = &m.res.mesh;
+    let x0 = mesh.x0.saturating_sub(mesh.h);
+    let y0 = mesh.y0.saturating_sub(mesh.h);
+    let x1 = (mesh.x0 + mesh.nx * mesh.h + mesh.h).min(w);
+    let y1 = (mesh.y0 + mesh.ny * mesh.h + mesh.h).min(h);
+    (x0, y0, x1 - x0, y1 - y0)
+}
+
+/// Writes the nine maps of [`MAPS`].
+pub fn write_maps(
+    out: &Path,
+    f: &GreyImage,
+    m: &Measured,
+    frame: &ModelFrame,
+    mm: bool,
+) -> Result<(), DicError> {
+    let (w, h) = (f.width, f.height);
+    let res = &m.res;
+    let mesh = &res.mesh;
+    let unit = if mm { "mm" } else { "px" };
+    let disp = |c: usize| {
+        per_pixel(m, w, h, |_, x, y| {
+            mesh.interpolate(&res.displacement, x as f64, y as f64)
+                .map_or(
+                    f64::NAN,
+                    |u| {
+                        if mm {
+                            frame.displacement(u)[c]
+                        } else {
+                            u[c]
+                        }
+                    },
+                )
+        })
+    };
+    let es = output::element_strains(res, frame);
+    let strain = |c: usize| per_pixel(m, w, h, |e, _, _| es[e][c]);
+    let sd = per_pixel(m, w, h, |_, x, y| {
+        m.cov
+            .point_sd(res, x as f64, y as f64)
+            .map_or(f64::NAN, |s| s[0].max(s[1]))
+    });
+    let untrusted = m.trust.iter().filter(|&&t| t != Trust::Trusted).count();
+    let maps = [
+        Map {
+            name: "ux.png",
+            values: disp(0),
+            title: "Horizontal displacement ux".into(),
+            label: format!("ux ({unit})"),
+            diverging: false,
+            range: None,
+        },
+        Map {
+            name: "uy.png",
+            values: disp(1),
+            title: "Vertical displacement uy".into(),
+            label: format!("uy ({unit})"),
+            diverging: false,
+            range: None,
+        },
+        Map {
+            name: "exx.png",
+            values: strain(0),
+            title: "Strain exx (element centres)".into(),
+            label: "exx (-)".into(),
+            diverging: true,
+            range: None,
+        },
+        Map {
+            name: "eyy.png",
+            values: strain(1),
+            title: "Strain eyy (element centres)".into(),
+            label: "eyy (-)".into(),
+            diverging: true,
+            range: None,
+        },
+        Map {
+            name: "exy.png",
+            values: strain(2),
+            title: "Shear strain exy (element centres)".into(),
+            label: "exy (-)".into(),
+            diverging: true,
+            range: None,
+        },
+        Map {
+            name: "residual.png",
+            values: res.residual_image.iter().map(|&v| v as f64).collect(),
+            title: format!("Grey-level residual (RMS {:.2})", res.residual_rms),
+            label: "f - g(x+u) (grey levels)".into(),
+            diverging: true,
+            range: None,
+        },
+        Map {
+            name: "sd.png",
+            values: sd,
+            title: "Standard deviation of the displacement (larger component)".into(),
+            label: "sd (px)".into(),
+            diverging: false,
+            range: None,
+        },
+        Map {
+            name: "zncc.png",
+            values: per_pixel(m, w, h, |e, _, _| res.element_texture[e].zncc),
+            title: format!(
+                "Correlation score per element (ZNCC; below {} not trusted)",
+                0.5
+            ),
+            label: "ZNCC (-)".into(),
+            diverging: false,
+            range: Some((0.0, 1.0)),
+        },
+        Map {
+            name: "trust.png",
+            values: per_pixel(m, w, h, |e, _, _| match m.trust[e] {
+                Trust::Trusted => f64::NAN,
+                t => t.code() as f64,
+            }),
+            title: format!(
+                "Not trusted: {untrusted} of {} elements (1 decorrelated, 2 high residual, 3 shadow, 4 low texture)",
+                m.trust.len()
+            ),
+            label: "reason".into(),
+            diverging: false,
+            range: Some((1.0, 4.0)),
+        },
+    ];
+    let crop = crop_of(m, w, h);
+    for map in &maps {
+        draw(out, f, map, crop)?;
+    }
+    Ok(())
+}

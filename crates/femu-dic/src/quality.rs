@@ -1,0 +1,311 @@
+//! How good a measured field is: the nodal covariance from the Gauss–Newton system and the
+//! grey-level noise, per-point standard deviations, and the mask of the elements not to trust.
+//!
+//! **Covariance.** At convergence the nodal values solve `A a = b(a) + …` with
+//! `A = M + λK` (eq. 2–3 of [`crate::solver`]). A grey-level perturbation `η(x)` of the residual
+//! (image noise, speckle decorrelation) moves them by `δa = A⁻¹ Σ_x (N ∇f)(x) η(x)`; with `η`
+//! independent from pixel to pixel, of variance `σ_e²` in element `e`, the covariance is the
+//! sandwich
+//!
+//! ```text
+//! C = A⁻¹ M_σ A⁻¹,   M_σ = Σ_e σ_e² M_e                                                  (4)
+//! ```
+//!
+//! (Besnard, Hild & Roux 2006; Leclerc et al. 2009 for the regularized case). Without
+//! regularization and with one `σ` everywhere it is the familiar `C = σ² M⁻¹`. `σ_e²` is the
+//! variance of the converged residual `f − g̃(x + u)` over the element, i.e. the noise of both
+//! images together (`2σ²` for independent noise of variance `σ²` in each), estimated from the
+//! frame pair itself, so decorrelated elements get large variances. The virtual lab checks (4)
+//! against the scatter of many noise realizations (`tests/covariance.rs`).
+//!
+//! `C` is dense; what is computed here is its restriction to the pattern of `A` (the
+//! covariances between equations that share an element or a regularization row), which holds
+//! every nodal 2 x 2 block and what a point inside an element needs, by two sparse solves and
+//! one product per equation: `z_j = A⁻¹ M_σ A⁻¹ e_j` is the column `j` of `C`.
+//!
+//! **Trust.** An element is not to be trusted when its corrected deformed image does not match
+//! the reference (zero-normalized cross-correlation below [`TrustCriteria::min_zncc`]:
+//! decorrelated speckle, out-of-plane motion), when its residual is flagged (above
+//! `flag_factor` times the median), when it lies in a shadow (grey-level standard deviation
+//! below [`TrustCriteria::min_std_fraction`] of the median element's), or when the predicted
+//! standard deviation of one of its nodes exceeds [`TrustCriteria::max_sd_factor`] times the
+//! median (too little texture, or texture along one direction only).
+
+use crate::error::DicError;
+use crate::solver::DicResult;
+use crate::sparse::Cholesky;
+use rayon::prelude::*;
+
+/// The nodal covariance (eq. 4) on the pattern of the Gauss–Newton matrix.
+#[derive(Debug, Clone)]
+pub struct NodalCovariance {
+    /// `σ_e²` per element (grey levels²).
+    pub element_variance: Vec<f64>,
+    /// `C` on `res.system.pattern` (pixels²).
+    pub values: Vec<f64>,
+    /// Per node: standard deviations of ux, uy (pixels) and their correlation coefficient.
+    pub node: Vec<NodeSd>,
+}
+
+/// Standard deviations of one node (pixels) and the correlation of its two components.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct NodeSd {
+    pub sd_ux_px: f64,
+    pub sd_uy_px: f64,
+    pub corr_xy: f64,
+}
+
+/// `M_σ = Σ_e σ_e² M_e` on the pattern of the system.
+pub fn noise_weighted_matrix(res: &DicResult, element_variance: &[f64]) -> Vec<f64> {
+    let sys = &res.system;
+    let mut v = vec![0.0; sys.pattern.nnz()];
+    for ((d, me), s2) in sys.dofs.iter().zip(&sys.elem_m).zip(element_variance) {
+        for i in 0..8 {
+            for j in 0..8 {
+                let pos = sys
+                    .pattern
+                    .position(d[i], d[j])
+                    .expect("element entry in the pattern");
+                v[pos] += s2 * me[i * 8 + j];
+            }
+        }
+    }
+    v
+}
+
+/// The covariance (eq. 4) with `σ_e²` the residual variance of each element and the residual's
+/// spatial correlation (`res.system.elem_m_noise`).
+pub fn covariance(res: &DicResult) -> Result<NodalCovariance, DicError> {
+    let var: Vec<f64> = res.element_residual.iter().map(|r| r * r).collect();
+    sandwich(res, &var, &noise_matrix(res))
+}
+
+/// `M_σ` assembled from the per-element noise matrices (`res.system.elem_m_noise`).
+pub fn noise_matrix(res: &DicResult) -> Vec<f64> {
+    let sys = &res.system;
+    let mut m_sigma = vec![0.0; sys.pattern.nnz()];
+    for (d, me) in sys.dofs.iter().zip(&sys.elem_m_noise) {
+        for i in 0..8 {
+            for j in 0..8 {
+                let pos = sys
+                    .pattern
+                    .position(d[i], d[j])
+                    .expect("element entry in the pattern");
+                m_sigma[pos] += me[i * 8 + j];
+            }
+        }
+    }
+    m_sigma
+}
+
+/// The covariance (eq. 4) for given element noise variances `σ_e²` (grey levels²) and white
+/// noise (no spatial correlation).
+pub fn covariance_with(
+    res: &DicResult,
+    element_variance: &[f64],
+) -> Result<NodalCovariance, DicError> {
+    let m_sigma = noise_weighted_matrix(res, element_variance);
+    sandwich(res, element_variance, &m_sigma)
+}
+
+/// The covariance an unregularized Q4 DIC would have on the same images and mesh,
+/// `M⁻¹ M_σ M⁻¹` (the same noise, `λ = 0`): the expected scatter of a DIC without
+/// regularization (muDIC, for instance) where it converges to the same minimum.
+pub fn covariance_unregularized(res: &DicResult) -> Result<NodalCovariance, DicError> {
+    let var: Vec<f64> = res.element_residual.iter().map(|r| r * r).collect();
+    let m = res.system.m_values.clone();
+    sandwich_with(res, &var, &noise_matrix(res), &m)
+}
+
+/// `C = A⁻¹ M_σ A⁻¹` on the pattern of `A`.
+fn sandwich(
+    res: &DicResult,
+    element_variance: &[f64],
+    m_sigma: &[f64],
+) -> Result<NodalCovariance, DicError> {
+    sandwich_with(res, element_variance, m_sigma, &res.system.a_values())
+}
+
+/// `C = A⁻¹ M_σ A⁻¹` for the matrix `a_values` on the pattern of the system.
+fn sandwich_with(
+    res: &DicResult,
+    element_variance: &[f64],
+    m_sigma: &[f64],
+    a_values: &[f64],
+) -> Result<NodalCovariance, DicError> {
+    let sys = &res.system;
+    let p = &sys.pattern;
+    let n = p.n;
+    let chol = Cholesky::factorize(p, a_values)?;
+    // Columns j of C = A⁻¹ M_σ A⁻¹ in blocks (multi-column solves), blocks in parallel.
+    const BLOCK: usize = 64;
+    let blocks: Vec<Vec<(usize, f64)>> = (0..n.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|blk| {
+            let j0 = blk * BLOCK;
+            let nc = BLOCK.min(n - j0);
+            let mut z = vec![0.0; n * nc];
+            for c in 0..nc {
+                z[c * n + j0 + c] = 1.0;
+            }
+            chol.solve_columns_in_place(&mut z, nc);
+            let mut y = vec![0.0; n * nc];
+            for c in 0..nc {
+                p.mul_vec(m_sigma, &z[c * n..(c + 1) * n], &mut y[c * n..(c + 1) * n]);
+            }
+            chol.solve_columns_in_place(&mut y, nc);
+            let mut out = Vec::new();
+            for c in 0..nc {
+                let j = j0 + c;
+                for k in p.col_ptr[j]..p.col_ptr[j + 1] {
+                    out.push((k, y[c * n + p.row_idx[k]]));
+                }
+            }
+            out
+        })
+        .collect();
+    let mut values = vec![0.0; p.nnz()];
+    for (k, v) in blocks.into_iter().flatten() {
+        values[k] = v;
+    }
+    let at = |r: usize, c: usize| p.position(r, c).map_or(0.0, |k| values[k]);
+    let node = (0..n / 2)
+        .map(|q| {
+            let (vx, vy, cxy) = (
+                at(2 * q, 2 * q),
+                at(2 * q + 1, 2 * q + 1),
+                at(2 * q, 2 * q + 1),
+            );
+            NodeSd {
+                sd_ux_px: vx.max(0.0).sqrt(),
+                sd_uy_px: vy.max(0.0).sqrt(),
+                corr_xy: if vx > 0.0 && vy > 0.0 {
+                    cxy / (vx * vy).sqrt()
+                } else {
+                    0.0
+                },
+            }
+        })
+        .collect();
+    Ok(NodalCovariance {
+        element_variance: element_variance.to_vec(),
+        values,
+        node,
+    })
+}
+
+impl NodalCovariance {
+    /// Standard deviations of ux, uy (pixels) at `(x, y)` inside the mesh: `u = Σ N_a a_a`, so
+    /// `var u_x = Σ_ab N_a N_b C[2a, 2b]` over the element's nodes.
+    pub fn point_sd(&self, res: &DicResult, x: f64, y: f64) -> Option<[f64; 2]> {
+        let (e, xi, eta) = res.mesh.locate(x, y)?;
+        let nsh = crate::mesh::DicMesh::shape(xi, eta);
+        let c = res.mesh.conn[e];
+        let p = &res.system.pattern;
+        let mut v = [0.0; 2];
+        for comp in 0..2 {
+            for a in 0..4 {
+                for b in 0..4 {
+                    let pos = p.position(2 * c[a] + comp, 2 * c[b] + comp)?;
+                    v[comp] += nsh[a] * nsh[b] * self.values[pos];
+                }
+            }
+        }
+        Some([v[0].max(0.0).sqrt(), v[1].max(0.0).sqrt()])
+    }
+}
+
+/// Why an element is (not) trusted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Trust {
+    Trusted,
+    /// The deformed image does not match the reference (low ZNCC).
+    Decorrelated,
+    /// Residual above `flag_factor` times the median.
+    HighResidual,
+    /// Too little grey-level variation (acoustic shadow, black band).
+    Shadow,
+    /// Predicted nodal standard deviation far above the median (little or one-directional
+    /// texture).
+    LowTexture,
+}
+
+impl Trust {
+    /// The name written in `elements.csv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Trust::Trusted => "trusted",
+            Trust::Decorrelated => "decorrelated",
+            Trust::HighResidual => "high-residual",
+            Trust::Shadow => "shadow",
+            Trust::LowTexture => "low-texture",
+        }
+    }
+
+    /// A number per reason (0 trusted), for the maps.
+    pub fn code(self) -> u8 {
+        match self {
+            Trust::Trusted => 0,
+            Trust::Decorrelated => 1,
+            Trust::HighResidual => 2,
+            Trust::Shadow => 3,
+            Trust::LowTexture => 4,
+        }
+    }
+}
+
+/// Thresholds of the trust mask.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct TrustCriteria {
+    /// Minimum ZNCC of `f` and `g̃(x + u)` over the element.
+    pub min_zncc: f64,
+    /// Minimum grey-level standard deviation as a fraction of the median element's.
+    pub min_std_fraction: f64,
+    /// Maximum nodal standard deviation as a multiple of the median over the nodes.
+    pub max_sd_factor: f64,
+}
+
+impl Default for TrustCriteria {
+    fn default() -> Self {
+        TrustCriteria {
+            min_zncc: 0.5,
+            min_std_fraction: 0.3,
+            max_sd_factor: 4.0,
+        }
+    }
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// The trust of every element (the first failed criterion in the order of [`Trust`]).
+pub fn element_trust(res: &DicResult, cov: &NodalCovariance, c: &TrustCriteria) -> Vec<Trust> {
+    let std_med = median(res.element_texture.iter().map(|t| t.std).collect());
+    let sd = |q: usize| cov.node[q].sd_ux_px.max(cov.node[q].sd_uy_px);
+    let sd_med = median((0..cov.node.len()).map(sd).collect());
+    (0..res.mesh.n_elements())
+        .map(|e| {
+            let t = &res.element_texture[e];
+            if t.zncc < c.min_zncc {
+                Trust::Decorrelated
+            } else if res.flagged[e] {
+                Trust::HighResidual
+            } else if t.std < c.min_std_fraction * std_med {
+                Trust::Shadow
+            } else if res.mesh.conn[e]
+                .iter()
+                .any(|&q| sd(q) > c.max_sd_factor * sd_med)
+            {
+                Trust::LowTexture
+            } else {
+                Trust::Trusted
+            }
+        })
+        .collect()
+}
