@@ -19,10 +19,10 @@
 
 use super::geometry::{Geometry, Resolution};
 use super::lines::KeyLines;
+use super::loading_tests::TestSpec;
 use super::materials::MaterialSpec;
 use super::measurement::GridSpec;
 use super::raw::ConvergenceEntry;
-use super::tests::TestSpec;
 use super::StudyError;
 use femu_convergence::{ConvergenceStudy, DicGrid, MeshSequence};
 use femu_geometry::table1_materials;
