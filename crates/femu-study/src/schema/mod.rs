@@ -37,7 +37,7 @@ pub use geometry::{
 };
 pub use identification::{Grouping, IdentificationSpec, Steps};
 pub use loading_tests::{seed_tests, TestSpec};
-pub use materials::MaterialSpec;
+pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
