@@ -200,6 +200,26 @@ pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
     let t0 = Instant::now();
     let f = GreyImage::open(&job.reference, job.frame_ref)?;
     let g = GreyImage::open(&job.deformed, job.frame_def)?;
+    run_dic_on(job, &f, &g, t0).map(|run| run.report)
+}
+
+/// What [`run_dic_on`] computed, besides the files: the report, the measured field with its
+/// covariance and trust, and the points of `field.csv`.
+pub struct DicRun {
+    pub report: DicReport,
+    pub measured: Measured,
+    pub grid: Vec<output::GridPoint>,
+}
+
+/// `femu dic` on images already in memory (read from `job`'s files, or handed over by a
+/// script; `job.reference` and `job.deformed` then only name them): correlates, writes
+/// `job.out` and returns the report with the field; `t0` is when the work began.
+pub fn run_dic_on(
+    job: &DicJob,
+    f: &GreyImage,
+    g: &GreyImage,
+    t0: Instant,
+) -> Result<DicRun, DicError> {
     let pixel_size = job.pixel_size.or(f.pixel_size);
     let frame = ModelFrame {
         origin_px: job.origin_px,
@@ -207,7 +227,7 @@ pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
         x_left: job.x_left,
         y_up: job.y_up,
     };
-    let (m, choice) = job.correlation.measure(&f, &g)?;
+    let (m, choice) = job.correlation.measure(f, g)?;
     std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
@@ -237,7 +257,7 @@ pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
         "summary.json",
     ];
     if job.figures {
-        crate::figures::write_maps(&job.out, &f, &m, &frame, pixel_size.is_some())?;
+        crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some())?;
         outputs.extend(crate::figures::MAPS);
     }
     let quality = quality_summary(&m, &job.correlation.trust);
@@ -288,12 +308,16 @@ pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
                 w: mesh.nx * mesh.h,
                 h: mesh.ny * mesh.h,
             };
-            auto::advice(&f, &bb, mesh.h)
+            auto::advice(f, &bb, mesh.h)
         }),
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
     write_json(&job.out.join("summary.json"), &report)?;
-    Ok(report)
+    Ok(DicRun {
+        report,
+        measured: m,
+        grid: points,
+    })
 }
 
 /// Writes a serializable value as pretty JSON.
