@@ -134,27 +134,42 @@ pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
             "parametric thigh".to_string(),
         ),
         Geometry::Labels(l) => {
-            let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
-                .context("[labels] map/bone/background")?;
             let img = femu_geometry::read_label_image(&l.image, l.slice)
                 .with_context(|| format!("[labels] image {}", l.image.display()))?;
-            let options = MeshOptions {
-                element_size_mm: match spec.resolution {
-                    Resolution::SizeMm(h) => h,
-                    _ => DEFAULT_LABEL_SIZE_MM,
-                },
-                kind,
-                min_island_mm2: l.min_island_mm2,
-                ..MeshOptions::default()
-            };
-            (
-                femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
-                    .with_context(|| format!("meshing {}", l.image.display()))?,
-                format!("label image {}", l.image.display()),
-            )
+            return build_from_label_image(spec, &img);
         }
         Geometry::Deck(path) => return deck_model(&spec.materials, path),
     };
+    thigh_study_model(spec, thigh, source)
+}
+
+/// Builds the model of `spec`, a `[labels]` geometry, from its label image already in memory
+/// (read from a file, or handed over by a script); `[labels] image` only names it in messages.
+pub fn build_from_label_image(
+    spec: &ModelSpec,
+    img: &femu_geometry::LabelImage,
+) -> Result<StudyModel> {
+    let Geometry::Labels(l) = &spec.geometry else {
+        bail!("internal: a label image for a model that is not a [labels] geometry");
+    };
+    let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
+        .context("[labels] map/bone/background")?;
+    let options = MeshOptions {
+        element_size_mm: match spec.resolution {
+            Resolution::SizeMm(h) => h,
+            _ => DEFAULT_LABEL_SIZE_MM,
+        },
+        kind: spec.element.kind(),
+        min_island_mm2: l.min_island_mm2,
+        ..MeshOptions::default()
+    };
+    let thigh = femu_geometry::mesh_label_image(img, &labels, l.pixel_size_mm, &options)
+        .with_context(|| format!("meshing {}", l.image.display()))?;
+    thigh_study_model(spec, thigh, format!("label image {}", l.image.display()))
+}
+
+/// A meshed thigh with the materials of `spec` as the study's model.
+fn thigh_study_model(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
     let regions = materials(&spec.materials, &thigh.regions)?;
     let (model, skin) = thigh_as_model(&thigh, regions)?;
     Ok(StudyModel {
