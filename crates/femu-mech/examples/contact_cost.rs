@@ -180,6 +180,12 @@ fn main() {
                 last = Some(s);
             }
             Err(e) => {
+                if let femu_mech::SolveError::NotConverged { partial, .. } = &e {
+                    print_history(partial);
+                    for [t, f] in partial.report.force_travel(0) {
+                        println!("  travel {t:.4} mm, force {f:.5} N/mm");
+                    }
+                }
                 eprintln!("{} failed after {seconds:.3} s: {e}", c.name);
                 std::process::exit(1);
             }
