@@ -29,8 +29,13 @@ use super::assembly::NONE;
 use super::factor::TangentFactor;
 use femu_sparse::MAX_RHS;
 
-/// Most rank-one terms of the update (columns of `K⁻¹ V` kept).
-const MAX_TERMS: usize = 64;
+/// Most rank-one terms in the update of one active-set iteration.
+const MAX_TERMS: usize = 48;
+
+/// Most columns `K⁻¹ v` kept over the active-set iterations of one correction (52 MB at the
+/// paper scale's 51 569 equations; the first correction of a compression increment there
+/// needs up to 37).
+const MAX_COLUMNS: usize = 64;
 
 /// Most active-set iterations per correction.
 const MAX_SWEEPS: usize = 12;
@@ -218,7 +223,7 @@ pub(crate) struct ActiveSetSolver {
 impl ActiveSetSolver {
     /// Replaces the plain Newton correction `du` (`K du = -R`, `K` factorized in `factor`) by
     /// the correction of the active set consistent with it, if the iterations find one within
-    /// [`MAX_SWEEPS`] and [`MAX_TERMS`]; otherwise `du` is left as it is.
+    /// [`MAX_SWEEPS`], [`MAX_TERMS`] and [`MAX_COLUMNS`]; otherwise `du` is left as it is.
     pub fn correct(&mut self, factor: &mut TangentFactor, du: &mut [f64]) -> ActiveSetOutcome {
         let n = du.len();
         let nc = self.candidates.len();
@@ -309,7 +314,7 @@ impl ActiveSetSolver {
         self.pending.clear();
         self.pending
             .extend((0..w.terms.len()).filter(|&t| w.term_columns[t] == NONE));
-        if w.columns + self.pending.len() > 2 * MAX_TERMS {
+        if w.columns + self.pending.len() > MAX_COLUMNS {
             return false;
         }
         let need = (w.columns + self.pending.len()) * n;
