@@ -193,13 +193,13 @@ pub(crate) struct Along {
 #[derive(Debug, Default)]
 struct Woodbury {
     terms: Vec<Term>,
-    /// Per term: its candidate and its column in `z`.
+    /// Per term: its candidate and its column in the column store.
     owners: Vec<usize>,
     term_columns: Vec<usize>,
     /// Per candidate: the column of its first term (`NONE`: not solved yet).
     column_of: Vec<usize>,
-    /// `K⁻¹ v`, one column of `n_eq` after the other.
-    z: Vec<f64>,
+    /// Columns solved so far (`K⁻¹ v`, one of `n_eq` after the other, in the store lent to
+    /// [`ActiveSetSolver::correct`]).
     columns: usize,
     /// The capacitance matrix (row-major) and its right-hand side.
     m: Vec<f64>,
@@ -224,7 +224,29 @@ impl ActiveSetSolver {
     /// Replaces the plain Newton correction `du` (`K du = -R`, `K` factorized in `factor`) by
     /// the correction of the active set consistent with it, if the iterations find one within
     /// [`MAX_SWEEPS`], [`MAX_TERMS`] and [`MAX_COLUMNS`]; otherwise `du` is left as it is.
-    pub fn correct(&mut self, factor: &mut TangentFactor, du: &mut [f64]) -> ActiveSetOutcome {
+    ///
+    /// `store` holds the columns `K⁻¹ v`: the solver's element-matrix buffer, idle between
+    /// assemblies (13 MB at the paper scale, 31 columns), lengthened if more are needed and
+    /// given back at its length, its values spent.
+    pub fn correct(
+        &mut self,
+        factor: &mut TangentFactor,
+        du: &mut [f64],
+        store: &mut Vec<f64>,
+    ) -> ActiveSetOutcome {
+        let length = store.len();
+        let out = self.iterate(factor, du, store);
+        store.truncate(length);
+        out
+    }
+
+    /// See [`Self::correct`].
+    fn iterate(
+        &mut self,
+        factor: &mut TangentFactor,
+        du: &mut [f64],
+        store: &mut Vec<f64>,
+    ) -> ActiveSetOutcome {
         let n = du.len();
         let nc = self.candidates.len();
         self.in_set.clear();
@@ -251,10 +273,11 @@ impl ActiveSetSolver {
                 out.sweeps = sweep;
                 break;
             }
-            if sweep == MAX_SWEEPS || !self.collect_terms() || !self.solve_columns(factor, n) {
+            if sweep == MAX_SWEEPS || !self.collect_terms() || !self.solve_columns(factor, n, store)
+            {
                 return out;
             }
-            if !self.woodbury(du) {
+            if !self.woodbury(du, store) {
                 return out;
             }
             plain = false;
@@ -309,7 +332,7 @@ impl ActiveSetSolver {
     }
 
     /// Solves `K z = v` for the terms without a column, [`MAX_RHS`] at a time.
-    fn solve_columns(&mut self, factor: &mut TangentFactor, n: usize) -> bool {
+    fn solve_columns(&mut self, factor: &mut TangentFactor, n: usize, z: &mut Vec<f64>) -> bool {
         let w = &mut self.woodbury;
         self.pending.clear();
         self.pending
@@ -318,12 +341,12 @@ impl ActiveSetSolver {
             return false;
         }
         let need = (w.columns + self.pending.len()) * n;
-        if w.z.len() < need {
-            w.z.resize(need, 0.0);
+        if z.len() < need {
+            z.resize(need, 0.0);
         }
         for chunk in self.pending.chunks(MAX_RHS) {
             let first = w.columns;
-            let block = &mut w.z[first * n..(first + chunk.len()) * n];
+            let block = &mut z[first * n..(first + chunk.len()) * n];
             block.fill(0.0);
             for (j, &t) in chunk.iter().enumerate() {
                 let k = w.owners[t];
@@ -348,13 +371,12 @@ impl ActiveSetSolver {
     /// `K⁻¹ b = du + Σ w_j z_j`, `x = K⁻¹ b - Z (C⁻¹ + Vᵀ Z)⁻¹ Vᵀ K⁻¹ b` with `C` the terms'
     /// coefficients. False if the capacitance matrix is singular (e.g. a force-controlled body
     /// left with no contact).
-    fn woodbury(&mut self, du: &[f64]) -> bool {
+    fn woodbury(&mut self, du: &[f64], z: &[f64]) -> bool {
         let n = du.len();
         let Woodbury {
             terms,
             owners,
             term_columns,
-            z,
             m,
             y,
             ..
@@ -532,7 +554,9 @@ mod tests {
             candidates: candidates.clone(),
             ..Default::default()
         };
-        let outcome = solver.correct(&mut factor, &mut du);
+        let mut store = Vec::new();
+        let outcome = solver.correct(&mut factor, &mut du, &mut store);
+        assert!(store.is_empty(), "the store is given back at its length");
         assert!(outcome.consistent && outcome.sweeps >= 1, "{outcome:?}");
         let along = solver.along().to_vec();
         assert!(outcome.changes >= 2, "{outcome:?} {along:?}");

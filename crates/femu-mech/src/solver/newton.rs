@@ -679,7 +679,7 @@ impl StaticSolver {
         fref: f64,
         record: &mut IncrementRecord,
     ) -> Result<Correction, AttemptFailure> {
-        let (assembly, work) = (&self.assembly, &mut self.work);
+        let (assembly, work) = (&mut self.assembly, &mut self.work);
         self.factor
             .factorize(&assembly.pattern, &assembly.system.values)?;
         record.iterations.push(IterationRecord {
@@ -695,7 +695,9 @@ impl StaticSolver {
         if !model.contacts.is_empty() {
             self.contact
                 .linearize(model, u, &assembly.dofs.eq, &mut self.active_set.candidates);
-            self.active_set.correct(&mut self.factor, &mut work.du);
+            let store = &mut assembly.ke;
+            self.active_set
+                .correct(&mut self.factor, &mut work.du, store);
         }
         let s0 = directional(&work.du, &assembly.system.rhs);
         let max_du = work.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
