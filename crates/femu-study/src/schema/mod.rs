@@ -21,10 +21,10 @@ mod geometry;
 mod identification;
 mod legacy;
 mod lines;
+mod loading_tests;
 mod materials;
 mod measurement;
 mod raw;
-mod tests;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
@@ -36,9 +36,9 @@ pub use geometry::{
     ELEMENTS_RANGE,
 };
 pub use identification::{Grouping, IdentificationSpec, Steps};
-pub use materials::MaterialSpec;
+pub use loading_tests::{seed_tests, TestSpec};
+pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
-pub use tests::{seed_tests, TestSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
 use lines::KeyLines;
@@ -168,7 +168,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let tests = tests::parse(file.test.as_deref(), &lines)?;
+    let tests = loading_tests::parse(file.test.as_deref(), &lines)?;
     let measurement = measurement::parse(
         file.grid.clone(),
         file.noise,
