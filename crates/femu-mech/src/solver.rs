@@ -18,6 +18,7 @@
 //! The sensitivities read a converged state through [`Linearization`] (`linearization`):
 //! the state, its tangent, the factors and the active contact constraints.
 
+mod active_set;
 mod assembly;
 mod contact_state;
 mod factor;
@@ -139,6 +140,8 @@ pub struct StaticSolver {
     pub options: SolverOptions,
     assembly: Assembly,
     contact: ContactState,
+    /// The contact set of each Newton correction (see [`active_set`]).
+    active_set: active_set::ActiveSetSolver,
     factor: TangentFactor,
     work: NewtonWork,
     setup_time_s: f64,
@@ -183,6 +186,7 @@ impl StaticSolver {
             work: NewtonWork::new(assembly.dofs.n_eq, model.state_len()),
             assembly,
             contact,
+            active_set: Default::default(),
             factor,
             setup_time_s: t0.elapsed().as_secs_f64(),
         })
