@@ -4,7 +4,7 @@
 mod common;
 use common::{femu, scratch, write};
 
-/// Compression on a 600-quad thigh, noise 1e-9 mm, D of ischio, sartorius and gracilis tied:
+/// Compression on a 700-quad thigh, noise 1e-9 mm, D of ischio, sartorius and gracilis tied:
 /// identified back from the CSV to 0.1 % (the noise is far below the model's sensitivity).
 #[test]
 fn synth_then_identify_recovers_table1() {
@@ -12,7 +12,7 @@ fn synth_then_identify_recovers_table1() {
     let study = write(
         &dir,
         "study.toml",
-        "[model]\nelements = 600\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 2\n",
     );
     let synth = dir.join("synth");
@@ -116,8 +116,8 @@ fn synth_then_identify_recovers_table1() {
     }
 }
 
-/// Multilevel: three starts on a coarse (~450-quad) thigh, the best refined on 1 200 quads, noise-free data
-/// of the 1 200-quad model: the refined optimum is the fine model's (Table 1 to 1e-4), in a
+/// Multilevel: three starts on a coarse (~800-quad) thigh, the best refined on 1 800 quads, noise-free data
+/// of the 1 800-quad model: the refined optimum is the fine model's (Table 1 to 1e-4), in a
 /// handful of fine forward solves.
 #[test]
 fn multilevel_identification_refines_on_the_fine_mesh() {
@@ -125,8 +125,8 @@ fn multilevel_identification_refines_on_the_fine_mesh() {
     let study = write(
         &dir,
         "study.toml",
-        "[model]\nelements = 1200\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
-         [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 3\ncoarse_elements = 300\n",
+        "[model]\nelements = 1800\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+         [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 3\ncoarse_elements = 700\n",
     );
     let out = dir.join("identify");
     let o = femu(&[
@@ -155,7 +155,7 @@ fn multilevel_identification_refines_on_the_fine_mesh() {
 #[test]
 fn the_travel_term_adds_information() {
     let dir = scratch("travel");
-    let base = "[model]\nelements = 500\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+    let base = "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
                 [grid]\ncounts = [16, 16]\n[identification]\nstarts = 1\n";
     let run = |name: &str, extra: &str| -> serde_json::Value {
         let study = write(&dir, &format!("{name}.toml"), &format!("{base}{extra}"));
@@ -215,7 +215,7 @@ fn bad_inputs_are_named() {
     let study = write(
         &dir,
         "s.toml",
-        "[model]\nelements = 300\n[identification]\nstarts = 1\n",
+        "[model]\nelements = 700\n[identification]\nstarts = 1\n",
     );
     let nan = write(&dir, "m.csv", "x,y,ux,uy\n0,40,0.1,0.1\n0,41,NaN,0.1\n");
     let o = femu(&[
@@ -231,7 +231,7 @@ fn bad_inputs_are_named() {
     let fixed = write(
         &dir,
         "f.toml",
-        "[model]\nelements = 300\n[identification]\nfixed = [\"C10_BONE\"]\n",
+        "[model]\nelements = 700\n[identification]\nfixed = [\"C10_BONE\"]\n",
     );
     let o = femu(&[
         "identify",

@@ -215,3 +215,67 @@ fn mesh_labels_on_the_mri_slice_and_bad_inputs() {
     assert!(String::from_utf8_lossy(&o.stderr).contains("LABEL=REGION"));
     std::fs::remove_dir_all(&out).ok();
 }
+
+/// Issues 32.7 and 32.8: a thigh too coarse to keep its regions, and a label-image mesh whose
+/// estimated size is absurd, are refused at once with the limit (before: `--elements 100`
+/// gave 639 quads without a femur; `--size 0.01` ran 40 s to 3.6 GB and aborted).
+#[test]
+fn too_coarse_or_absurd_meshes_are_refused_with_the_limit() {
+    let out = scratch("limits");
+    let o = femu(&[
+        "mesh",
+        "thigh",
+        "--elements",
+        "100",
+        "--out",
+        out.join("thigh").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(err.contains("at least 622"), "{err}");
+    assert!(!out.join("thigh/mesh.inp").exists());
+    // A 60 x 60 px disk of tissue (label 1) around a bone (label 7), 0.5 mm pixels.
+    std::fs::create_dir_all(&out).unwrap();
+    let labels = out.join("disk.png");
+    let data = (0..60 * 60)
+        .map(|k| {
+            let (x, y) = ((k % 60) as f64 - 29.5, (k / 60) as f64 - 29.5);
+            match x.hypot(y) {
+                r if r < 8.0 => 7.0,
+                r if r < 28.0 => 1.0,
+                _ => 0.0,
+            }
+        })
+        .collect();
+    let img = femu_dic::GreyImage {
+        width: 60,
+        height: 60,
+        data,
+        pixel_size: None,
+    };
+    img.save_png(&labels).unwrap();
+    let t = std::time::Instant::now();
+    let o = femu(&[
+        "mesh",
+        "labels",
+        labels.to_str().unwrap(),
+        "--pixel-size",
+        "0.5",
+        "--map",
+        "1=fat",
+        "--bone",
+        "7",
+        "--size",
+        "0.01",
+        "--out",
+        out.join("labels").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("quads") && err.contains("above the limit of 500000"),
+        "{err}"
+    );
+    assert!(t.elapsed().as_secs_f64() < 10.0, "{:?}", t.elapsed());
+    std::fs::remove_dir_all(&out).ok();
+}

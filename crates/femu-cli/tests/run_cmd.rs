@@ -11,7 +11,7 @@ use common::{femu, json, scratch};
 /// A small thigh (400 quads), contention and compression, a 24 x 24 grid, two starts.
 const TINY: &str = r#"
 [model]
-elements = 400
+elements = 700
 [[test]]
 kind = "contention"
 [[test]]
@@ -246,7 +246,7 @@ fn a_run_that_fails_midway_keeps_its_finished_steps() {
     let study = dir.join("study.toml");
     std::fs::write(
         &study,
-        "[model]\nelements = 300\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [run]\nsensitivity = false\n[measurement]\nfile = \"field.csv\"\n",
     )
     .unwrap();

@@ -84,7 +84,7 @@ fn bad_studies_are_named() {
         ("[model]\nelemnts = 800\n", "elemnts"),
         ("[materials.bone]\nc10_kpa = 1.0\n", "[materials.bone]"),
         ("[parameters]\ngroups = [[\"D_FEMUR\"]]\n", "D_FEMUR"),
-        ("[grid]\norigin_mm = [1000.0, 1000.0]\nspacing_mm = 1.0\ncounts = [4, 4]\n[model]\nelements = 300\n[[test]]\nkind = \"contention\"\n", "no grid point"),
+        ("[grid]\norigin_mm = [1000.0, 1000.0]\nspacing_mm = 1.0\ncounts = [4, 4]\n[model]\nelements = 700\n[[test]]\nkind = \"contention\"\n", "no grid point"),
     ];
     for (k, (text, needle)) in cases.iter().enumerate() {
         let study = write_study(&dir, text);
@@ -95,7 +95,7 @@ fn bad_studies_are_named() {
             dir.join(format!("o{k}")).to_str().unwrap(),
             "--no-figures",
             "--elements",
-            "300",
+            "700",
         ]);
         assert!(!o.status.success(), "case {k} should fail");
         let err = String::from_utf8_lossy(&o.stderr);

@@ -4,7 +4,7 @@
 
 use crate::schema::{
     Geometry, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
-    DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
+    DEFAULT_LABEL_SIZE_MM,
 };
 use anyhow::{bail, Context, Result};
 use femu_geometry::{table1_materials, MeshOptions, ThighModel};
@@ -176,13 +176,13 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
 /// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a
 /// contention deck: Table 1 materials, femur fixed, 20 mmHg on the skin; and its skin faces.
 pub fn thigh_deck(elements: usize, kind: ElementKind) -> Result<(Deck, Vec<(usize, usize)>)> {
-    if !ELEMENTS_RANGE.contains(&elements) {
-        bail!("the number of elements must be in [100, 500000], got {elements}");
-    }
     let params = femu_geometry::ThighParams {
         target_elements: Some(elements),
         ..Default::default()
     };
+    if let Err(m) = crate::schema::thigh_elements(&params, elements) {
+        bail!("the number of elements: {m}");
+    }
     let thigh = femu_geometry::parametric_thigh(&params, kind)?;
     let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
     let deck =

@@ -31,6 +31,7 @@ pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
+pub(crate) use geometry::thigh_elements;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
@@ -105,11 +106,12 @@ pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, Stud
         None => Study::default(),
     };
     if let Some(n) = elements {
-        if !ELEMENTS_RANGE.contains(&n) {
-            return Err(StudyError::Study(format!(
-                "--elements must be in [100, 500000], got {n}"
-            )));
-        }
+        let checked = match &s.model.geometry {
+            Geometry::Thigh(t) => geometry::thigh_elements(t, n),
+            _ if !ELEMENTS_RANGE.contains(&n) => Err(format!("must be in [100, 500000], got {n}")),
+            _ => Ok(()),
+        };
+        checked.map_err(|m| StudyError::Study(format!("--elements: {m}")))?;
         s.model.resolution = Resolution::Elements(n);
     }
     Ok(s)

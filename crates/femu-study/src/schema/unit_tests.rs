@@ -136,6 +136,29 @@ fn mistakes_name_the_key_and_line() {
     assert!(e.contains("optimizer") && e.contains("lm, bfgs"), "{e}");
     let e = err("[model]\nelements = 5\n");
     assert!(e.contains("[model] elements (line 2)"), "{e}");
+    // Issue 32.7: a thigh too coarse to keep its regions (100 elements gave no femur).
+    let e = err("[model]\nelements = 300\n");
+    assert!(
+        e.contains("[model] elements (line 2)") && e.contains("at least 622"),
+        "{e}"
+    );
+    let e = err("[model]\nsize_mm = 6\n");
+    assert!(
+        e.contains("[model] size_mm (line 2)") && e.contains("at most 4.50 mm"),
+        "{e}"
+    );
+    let e = err("[thigh]\ngracilis_semi_axes_mm = [13, 4]\n[model]\nelements = 1000\n");
+    assert!(e.contains("at least 3145"), "{e}");
+    let e = err("[model]\nelements = 1500\n[identification]\ncoarse_elements = 400\n");
+    assert!(
+        e.contains("[identification] coarse_elements (line 4)") && e.contains("at least 622"),
+        "{e}"
+    );
+    let e = load(None, Some(300)).unwrap_err().to_string();
+    assert!(
+        e.contains("--elements") && e.contains("at least 622"),
+        "{e}"
+    );
     // A multilevel identification whose coarse mesh is finer than the model's.
     let e = err("[model]\nelements = 1500\n[identification]\ncoarse_elements = 100000\n");
     assert!(

@@ -56,6 +56,8 @@ pub fn demo(
     progress: &dyn Progress,
 ) -> Result<RunRecord> {
     let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
+    schema::thigh_elements(&femu_geometry::ThighParams::default(), n)
+        .map_err(|m| anyhow::anyhow!("--elements: {m}"))?;
     let text = demo_study(n);
     let study = schema::parse(&text, out).map_err(|e| anyhow::anyhow!("the demo study: {e}"))?;
     if study.model.resolution != schema::Resolution::Elements(n)
