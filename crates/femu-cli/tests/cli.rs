@@ -237,6 +237,19 @@ fn a_node_no_element_uses_is_held_and_reported() {
     assert!(rows.iter().flatten().all(|v| v.is_finite()));
     assert!(out.join("result.vtu").exists());
     assert_eq!(summary(&out)["unused_nodes"], serde_json::json!([99]));
+    // Issue 32.2: the deck's own folder as --out is refused, the deck untouched.
+    let o = femu(&[
+        "solve",
+        deck.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("holds the input"),
+        "{err}"
+    );
+    assert!(!dir.join("summary.json").exists());
 }
 
 #[test]

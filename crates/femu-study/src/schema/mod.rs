@@ -234,6 +234,21 @@ impl Study {
         )
     }
 
+    /// The data files the study reads: its label image, deck and measured field (an output
+    /// folder must not hold them: `femu_mesh::folder`).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(l.image.as_path()),
+            Geometry::Deck(p) => files.push(p.as_path()),
+            Geometry::Thigh(_) => {}
+        }
+        if let MeasurementSource::File { path, .. } = &self.measurement.source {
+            files.push(path.as_path());
+        }
+        files
+    }
+
     /// Whether the study names its tests (`[[test]]`), rather than taking the seed's three.
     pub fn tests_given(&self) -> bool {
         self.tests_given

@@ -119,6 +119,7 @@ pub fn mesh_thigh(req: &ThighMeshRequest, out: &Path, progress: &dyn Progress) -
 /// `femu mesh labels`: a segmented image meshed into `out`.
 pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) -> Result<()> {
     let t0 = Instant::now();
+    femu_mesh::folder::refuse_inputs_in(out, &[&req.image])?;
     let spec = LabelSpec::new(&req.map, &req.bone, &req.background)
         .context("--map/--bone/--background")?;
     for name in spec.region_names() {

@@ -381,6 +381,7 @@ pub fn solve_file(
     progress: &dyn Progress,
 ) -> Result<()> {
     let t0 = Instant::now();
+    femu_mesh::folder::refuse_inputs_in(out, &[input])?;
     let ext = input
         .extension()
         .and_then(|e| e.to_str())
