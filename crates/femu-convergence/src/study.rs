@@ -230,7 +230,10 @@ impl ConvergenceStudy {
         if !(g.origin_mm[0].is_finite() && g.origin_mm[1].is_finite()) {
             return key("grid.origin_mm", "must be finite".into());
         }
-        if g.counts[0] == 0 || g.counts[1] == 0 || g.counts[0] * g.counts[1] > 1_000_000 {
+        if g.counts[0] == 0
+            || g.counts[1] == 0
+            || g.counts[0].saturating_mul(g.counts[1]) > 1_000_000
+        {
             return key(
                 "grid.counts",
                 format!("{:?}: between 1 and 1e6 points", g.counts),

@@ -454,6 +454,17 @@ fn bad_inputs_are_clear_errors() {
         mesh_label_image(&img, &spec, Some(0.25), &bad),
         Err(GeometryError::InvalidParameter { .. })
     ));
+    // Issue 28.4: NIfTI headers claiming a huge slice or volume (a few bytes of data) are
+    // refused from the header, with the size and the limit.
+    for (name, (nx, ny, nz), expect) in [
+        ("slice.nii", (30000, 30000, 1), "30000 x 30000 pixels"),
+        ("volume.nii", (5000, 5000, 30000), "7.5e11 voxels"),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, nifti_bytes(nx, ny, nz, 1.0, &[0; 16], false)).unwrap();
+        let e = read_label_image(&p, Some(0)).unwrap_err().to_string();
+        assert!(e.contains(expect) && e.contains("above the limit"), "{e}");
+    }
     // Issue 32.8: an element size whose mesh would be absurd is refused at once, with the
     // estimate and the limit (0.01 mm on the MRI slice ran 40 s to 3.6 GB and aborted).
     let t = std::time::Instant::now();

@@ -780,10 +780,16 @@ impl<'f> Parser<'f> {
                         ),
                     ));
                 }
-                if (last as i128 - first as i128) / step as i128 > 100_000_000 {
-                    return Err(
-                        self.err(r.line, format!("{}, GENERATE: range too large", b.display))
-                    );
+                let count = (last as i128 - first as i128) / step as i128 + 1;
+                if count > MAX_GENERATED as i128 {
+                    return Err(self.err(
+                        r.line,
+                        format!(
+                            "{}, GENERATE: {first}, {last}, {step} makes {count} members, above the limit of {MAX_GENERATED} (some {} MB)",
+                            b.display,
+                            count.saturating_mul(16) / 1_000_000
+                        ),
+                    ));
                 }
                 members.extend((first..=last).step_by(step as usize).map(|l| (l, r.line)));
             } else {
@@ -1521,6 +1527,11 @@ fn check_plane_strain_dofs(first: usize, last: usize) -> std::result::Result<(),
     }
     Ok(())
 }
+
+/// The most members a `GENERATE` line may make (16 bytes each): ten million, far above any
+/// deck femu can solve (500 000 quads), so that `1, 1000000000` is refused before it is
+/// allocated (issue 28.4).
+const MAX_GENERATED: usize = 10_000_000;
 
 fn face_number(text: &str, prefix: char) -> Option<usize> {
     let rest = text

@@ -27,6 +27,7 @@ pub mod deck;
 pub mod folder;
 pub mod generate;
 pub mod inp;
+pub mod limits;
 pub mod locate;
 pub mod mesh;
 pub mod msh;

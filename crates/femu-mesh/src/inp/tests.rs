@@ -278,6 +278,11 @@ fn errors_name_file_line_and_problem() {
             "model.inp:43: *DLOAD: element 2 is a CPE3 with faces P1..P3, not P4",
         ),
         (
+            // Issue 28.4: a GENERATE range refused before it is allocated.
+            GOOD.replace("1, 4, 3\n", "1, 1000000000, 1\n"),
+            "model.inp:19: *NSET, GENERATE: 1, 1000000000, 1 makes 1000000000 members, above the limit of 10000000",
+        ),
+        (
             // A *BOUNDARY on a dof plane strain lacks would leave the node free (issue 32.5).
             GOOD.replace("right, 1, 1, 0.25", "right, 7, 7"),
             "model.inp:41: *BOUNDARY: dof 7: not a dof of plane strain (only 1 = x and 2 = y)",
