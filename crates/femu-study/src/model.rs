@@ -34,8 +34,12 @@ impl StudyModel {
     }
 }
 
-/// Table 1 with the study's `[materials]` (regions checked against `regions`).
-fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialDef>> {
+/// Table 1 with the study's `[materials]` (regions checked against `regions`): a Table 1
+/// region's table overrides its parameters (or gives it another law); a region outside Table 1
+/// (`6=adductor` in a label map) gets the whole material its table gives (Neo-Hookean unless
+/// `law` names another; issue 32.13); a region with neither is an error naming the table to
+/// add. `femu mesh labels --materials` and the study share it.
+pub fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialDef>> {
     let mut materials = table1_materials();
     for spec in specs {
         let region = &spec.region;
@@ -45,18 +49,30 @@ fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialD
                 regions.join(", ")
             );
         }
-        let m = materials
+        match materials
             .iter_mut()
             .find(|m| m.name.eq_ignore_ascii_case(region))
-            .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
-        *m = spec
-            .apply(m)
-            .with_context(|| format!("[materials.{region}]"))?;
+        {
+            Some(m) => {
+                *m = spec
+                    .apply(m)
+                    .with_context(|| format!("[materials.{region}]"))?
+            }
+            None => {
+                let law = spec.build().with_context(|| {
+                    format!("[materials.{region}]: {region} is not in Table 1, so its table gives its whole material")
+                })?;
+                materials.push(femu_mech::material::material_def(
+                    &region.to_ascii_uppercase(),
+                    &*law,
+                ));
+            }
+        }
     }
     for r in regions {
         if !materials.iter().any(|m| m.name.eq_ignore_ascii_case(r)) {
             bail!(
-                "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
+                "region {r} has no material (it is not in the seed's Table 1): add a [materials.{r}] table with c10_kpa and d_per_mpa (or law = \"...\" and its keys), or map its label to a Table 1 region"
             );
         }
     }
@@ -130,6 +146,19 @@ pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
 /// A deck: its materials (overridden by `[materials.NAME]`, NAME a material or a region), its
 /// boundary conditions; the skin is the set of faces its `*DLOAD` loads, then removed.
 fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
+    let mut deck = read_deck(specs, path)?;
+    let skin: Vec<(usize, usize)> = deck.pressures.iter().map(|p| (p.element, p.face)).collect();
+    deck.pressures.clear();
+    Ok(StudyModel {
+        model: Model::from_deck(deck)?,
+        skin,
+        thigh: None,
+        source: format!("deck {}", path.display()),
+    })
+}
+
+/// A study's deck with the study's `[materials]` applied; it must load a skin (`*DLOAD`).
+pub(crate) fn read_deck(specs: &[MaterialSpec], path: &Path) -> Result<Deck> {
     let mut deck = femu_mesh::read_inp(path)?;
     if deck.pressures.is_empty() {
         bail!(
@@ -137,8 +166,6 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
             path.display()
         );
     }
-    let skin: Vec<(usize, usize)> = deck.pressures.iter().map(|p| (p.element, p.face)).collect();
-    deck.pressures.clear();
     for spec in specs {
         let name = &spec.region;
         let by_material = deck
@@ -165,12 +192,7 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
             .apply(&deck.materials[m])
             .with_context(|| format!("[materials.{name}]"))?;
     }
-    Ok(StudyModel {
-        model: Model::from_deck(deck)?,
-        skin,
-        thigh: None,
-        source: format!("deck {}", path.display()),
-    })
+    Ok(deck)
 }
 
 /// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a

@@ -24,6 +24,7 @@ mod lines;
 mod materials;
 mod measurement;
 mod raw;
+mod regions;
 mod tests;
 pub mod ultrasound;
 
@@ -76,10 +77,11 @@ pub struct Study {
     pub boundary: MeshBoundary,
     /// `[convergence]`: the convergence view (see [`Study::convergence_study`]).
     pub convergence: ConvergenceSpec,
-    /// Whether `[grid]` and `[[test]]` were written (the convergence and Gmsh views need to
-    /// know).
+    /// Whether `[grid]`, `[[test]]` and `[parameters] groups` were written (the convergence and
+    /// Gmsh views, and the check of the group names, need to know).
     grid_given: bool,
     tests_given: bool,
+    groups_given: bool,
     /// The text's key lines, for the views checked later.
     lines: std::sync::Arc<KeyLines>,
 }
@@ -102,7 +104,7 @@ pub fn seed_groups() -> Vec<Vec<String>> {
 /// The study of a command: the file if given (else the defaults), `--elements` over it.
 pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, StudyError> {
     let mut s = match study {
-        Some(p) => read(p)?,
+        Some(p) => read_for_model(p)?,
         None => Study::default(),
     };
     if let Some(n) = elements {
@@ -115,6 +117,15 @@ pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, Stud
         s.model.resolution = Resolution::Elements(n);
     }
     Ok(s)
+}
+
+/// Reads and checks a study file for a command that builds the study's model (every command
+/// but `femu solve MESH.msh --study`, whose materials name the mesh's physical surfaces):
+/// [`read`], then what needs the files: [`Study::check_model_inputs`].
+pub fn read_for_model(path: &Path) -> Result<Study, StudyError> {
+    let study = read(path)?;
+    study.check_model_inputs().map_err(|e| e.in_file(path))?;
+    Ok(study)
 }
 
 /// Reads and checks a study file.
@@ -182,6 +193,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
+    let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
         _ => seed_groups(),
@@ -204,6 +216,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         convergence,
         grid_given: file.grid.is_some(),
         tests_given: file.test.is_some(),
+        groups_given,
         lines: std::sync::Arc::new(lines),
     };
     if study.convergence.given {
@@ -230,6 +243,71 @@ impl Study {
                 tests: &self.tests,
                 grid: self.grid_given.then_some(&self.measurement.grid),
             },
+            &self.lines,
+        )
+    }
+
+    /// The checks that need the files and the model's regions, before anything runs (issue
+    /// 32.11): the label image, deck and measured field exist; every region has a material and
+    /// every `[materials]` table a region (see [`regions`]); the names in `[identification]
+    /// fixed` and `[parameters] groups` are parameters of the model (a deck is read for its
+    /// materials).
+    pub fn check_model_inputs(&self) -> Result<(), StudyError> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(("labels", "image", &l.image)),
+            Geometry::Deck(p) => files.push(("model", "deck", p)),
+            Geometry::Thigh(_) => {}
+        }
+        if let MeasurementSource::File { path, .. } = &self.measurement.source {
+            files.push(("measurement", "file", path));
+        }
+        for (table, key, path) in files {
+            if !path.is_file() {
+                return Err(self.lines.err(
+                    table,
+                    0,
+                    key,
+                    format!(
+                        "{} does not exist (relative names start from the study file's folder)",
+                        path.display()
+                    ),
+                ));
+            }
+        }
+        let regions =
+            match regions::of_geometry(&self.model.geometry, &self.model.materials, &self.lines)? {
+                Some(r) => r,
+                None => {
+                    let Geometry::Deck(path) = &self.model.geometry else {
+                        unreachable!("of_geometry knows every other geometry")
+                    };
+                    let deck = crate::model::read_deck(&self.model.materials, path)
+                        .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
+                    deck.materials
+                        .iter()
+                        .map(|m| {
+                            femu_mech::material::material_from_def(m)
+                                .map(|law| regions::RegionLaw {
+                                    name: m.name.clone(),
+                                    law: law.spec(),
+                                })
+                                .map_err(|e| {
+                                    self.lines.err(
+                                        "model",
+                                        0,
+                                        "deck",
+                                        format!("material {}: {e}", m.name),
+                                    )
+                                })
+                        })
+                        .collect::<Result<Vec<_>, _>>()?
+                }
+            };
+        regions::check_parameter_names(
+            &regions,
+            &self.identification.fixed,
+            self.groups_given.then_some(&self.groups[..]),
             &self.lines,
         )
     }

@@ -76,7 +76,7 @@ pub fn demo(
 /// `femu run STUDY --out DIR`.
 pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<RunRecord> {
     // Checked in full before anything is computed or written.
-    let study = schema::read(study_file)?;
+    let study = schema::read_for_model(study_file)?;
     let text = std::fs::read_to_string(study_file)?;
     run_study(
         &study,
