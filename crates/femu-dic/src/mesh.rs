@@ -42,15 +42,15 @@ impl Rect {
         let int = |t: &str| t.parse::<usize>().ok();
         if let [a, b, c, d] = v[..] {
             if let (Some(a), Some(b), Some(c), Some(d)) = (int(a), int(b), int(c), int(d)) {
-                let corners = (c > a && d > b)
-                    .then(|| {
-                        format!(
-                            ", or {a},{b},{}x{} if {c},{d} is the opposite corner",
-                            c - a,
-                            d - b
-                        )
-                    })
-                    .unwrap_or_default();
+                let corners = if c > a && d > b {
+                    format!(
+                        ", or {a},{b},{}x{} if {c},{d} is the opposite corner",
+                        c - a,
+                        d - b
+                    )
+                } else {
+                    String::new()
+                };
                 return Err(bad(format!(
                     "four numbers are ambiguous (width and height, or the opposite corner): write {a},{b},{c}x{d} if {c},{d} are the width and height{corners}"
                 )));
