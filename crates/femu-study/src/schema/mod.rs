@@ -21,11 +21,11 @@ mod geometry;
 mod identification;
 mod legacy;
 mod lines;
+mod loading_tests;
 mod materials;
 mod measurement;
 mod raw;
 mod regions;
-mod tests;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
@@ -38,9 +38,9 @@ pub use geometry::{
     ELEMENTS_RANGE,
 };
 pub use identification::{Grouping, IdentificationSpec, Steps};
-pub use materials::MaterialSpec;
+pub use loading_tests::{seed_tests, TestSpec};
+pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
-pub use tests::{seed_tests, TestSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
 use lines::KeyLines;
@@ -181,7 +181,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let tests = tests::parse(file.test.as_deref(), &lines)?;
+    let tests = loading_tests::parse(file.test.as_deref(), &lines)?;
     let measurement = measurement::parse(
         file.grid.clone(),
         file.noise,
@@ -282,26 +282,15 @@ impl Study {
                     let Geometry::Deck(path) = &self.model.geometry else {
                         unreachable!("of_geometry knows every other geometry")
                     };
-                    let deck = crate::model::read_deck(&self.model.materials, path)
+                    let (deck, _) = crate::model::read_deck(&self.model.materials, path)
                         .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
                     deck.materials
                         .iter()
-                        .map(|m| {
-                            femu_mech::material::material_from_def(m)
-                                .map(|law| regions::RegionLaw {
-                                    name: m.name.clone(),
-                                    law: law.spec(),
-                                })
-                                .map_err(|e| {
-                                    self.lines.err(
-                                        "model",
-                                        0,
-                                        "deck",
-                                        format!("material {}: {e}", m.name),
-                                    )
-                                })
+                        .map(|m| regions::RegionLaw {
+                            name: m.name.clone(),
+                            law: m.law.spec(),
                         })
-                        .collect::<Result<Vec<_>, _>>()?
+                        .collect()
                 }
             };
         regions::check_parameter_names(

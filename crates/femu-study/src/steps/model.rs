@@ -126,8 +126,11 @@ pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) 
         .context("--map/--bone/--background")?;
     // Every region's material before anything is read or meshed: Table 1, or the
     // `--materials` file's table for a region outside it (issue 32.13).
-    let materials = crate::model::materials(&req.materials, &spec.region_names())
-        .context("--map and --materials")?;
+    let materials: Vec<_> = crate::model::materials(&req.materials, &spec.region_names())
+        .context("--map and --materials")?
+        .iter()
+        .map(|m| m.to_def())
+        .collect();
     if let Some(s) = req.pixel_size_mm {
         if !(s > 0.0) || !s.is_finite() {
             bail!("--pixel-size must be a positive number of mm, got {s}");
