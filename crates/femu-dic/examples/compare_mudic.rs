@@ -37,7 +37,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .cloned()
     };
     let python = opt("--python").ok_or("--python PYTHON (with muDIC) is required")?;
-    let roi = Rect::parse(&opt("--roi").unwrap_or_else(|| "144,80,512,416".into()))?;
+    let roi = Rect::parse(&opt("--roi").unwrap_or_else(|| "144,80,512x416".into()))?;
     let out = PathBuf::from(opt("--out").unwrap_or_else(|| "target/compare-mudic".into()));
     // muDIC's element size: without regularization 16 px elements diverge on these frames
     // (measured: 183 of 891 nodes beyond 20 px on 048 -> 050), so 32 px by default.

@@ -575,3 +575,68 @@ pub fn estimates(
         .collect();
     Ok((out, id))
 }
+
+/// What makes an identification's values or intervals meaningless, one sentence each, for
+/// the console, the summary and the report (issue 32.6: such fits used to end with exit 0,
+/// `inf %` standard deviations and no word): a best start that did not converge, a parameter
+/// at one of its bounds (the data do not hold it inside), an infinite or undefined standard
+/// deviation (the field does not determine it).
+pub fn warnings(
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    estimates: &[Estimate],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let unconverged: Vec<&FitResult> = campaign.best.iter().filter(|b| !b.converged).collect();
+    if let Some(b) = unconverged.first() {
+        let of = if campaign.best.len() > 1 {
+            format!(
+                " in {} of {} repeats",
+                unconverged.len(),
+                campaign.best.len()
+            )
+        } else {
+            String::new()
+        };
+        out.push(format!(
+            "the best start did not converge{of} ({} after {} iterations): its values are not an optimum; see starts.csv",
+            b.reason, b.iterations
+        ));
+    }
+    let best = &campaign.best[0];
+    let mut at_bounds = Vec::new();
+    for (f, &t) in free.iter().zip(&best.theta) {
+        // The optimizers clamp ln θ to the log-bounds: at a bound to rounding.
+        let side = if (t / f.lower).ln().abs() < 1e-9 {
+            Some(("lower", f.lower))
+        } else if (t / f.upper).ln().abs() < 1e-9 {
+            Some(("upper", f.upper))
+        } else {
+            None
+        };
+        if let Some((side, b)) = side {
+            let (unit, factor) = f.members[0].spec().unit.report();
+            at_bounds.push(format!("{} ({side}, {} {unit})", f.name, b * factor));
+        }
+    }
+    if !at_bounds.is_empty() {
+        out.push(format!(
+            "{} of {} parameters stopped at a bound: {}; the data do not hold them inside the bounds, so their values and intervals mean nothing (fix or tie them, widen [identification] bounds_factor, or measure a test that moves them)",
+            at_bounds.len(),
+            free.len(),
+            at_bounds.join(", ")
+        ));
+    }
+    let undetermined: Vec<&str> = estimates
+        .iter()
+        .filter(|e| !e.relative_sd.is_finite())
+        .map(|e| e.name.as_str())
+        .collect();
+    if !undetermined.is_empty() {
+        out.push(format!(
+            "no finite standard deviation for {}: the measured field does not determine them (their Jacobian columns are zero or combinations of the others); fix or tie them",
+            undetermined.join(", ")
+        ));
+    }
+    out
+}

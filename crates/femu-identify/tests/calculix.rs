@@ -44,7 +44,7 @@ fn ccx_field_is_identified_back_without_noise() {
     }
     let t = parametric_thigh(
         &ThighParams {
-            target_elements: Some(600),
+            target_elements: Some(700),
             ..Default::default()
         },
         ElementKind::Cpe4,

@@ -725,23 +725,37 @@ fn identification_section(
             solves.join(", "),
             s.wall_time_s
         ));
+        if !s.warnings.is_empty() {
+            html.p(&format!(
+                "<b>Warning</b>: {}",
+                s.warnings
+                    .iter()
+                    .map(|w| esc(w))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ));
+        }
+        // In the units of the seed's Table 1 (C10 kPa, D MPa⁻¹).
         let rows: Vec<Vec<String>> = s
             .parameters
             .iter()
-            .map(|p| {
+            .zip(&s.free_parameters)
+            .map(|(p, f)| {
                 vec![
                     p.name.clone(),
-                    p.reference.map(g).unwrap_or("-".into()),
-                    g(p.identified),
+                    esc(&f.unit),
+                    p.reference.map(|v| g(f.shown(v))).unwrap_or("-".into()),
+                    g(f.shown(p.identified)),
                     p.relative_error.map(pct).unwrap_or("-".into()),
-                    format!("[{}, {}]", g(p.ci95[0]), g(p.ci95[1])),
+                    format!("[{}, {}]", g(f.shown(p.ci95[0])), g(f.shown(p.ci95[1]))),
                     pct(p.relative_sd),
                 ]
             })
             .collect();
         html.table(
             &[
-                "parameter (C10 MPa, D 1/MPa)",
+                "parameter",
+                "unit",
                 "reference",
                 "identified",
                 "error (Eq. 4)",

@@ -1,6 +1,6 @@
 //! `[parameters]`, `[identification]`, `[run]`: what is identified, how, and which steps run.
 
-use super::geometry::{Geometry, Resolution, DEFAULT_ELEMENTS, ELEMENTS_RANGE};
+use super::geometry::{thigh_elements, Geometry, Resolution, DEFAULT_ELEMENTS};
 use super::lines::KeyLines;
 use super::loading_tests::TestSpec;
 use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
@@ -138,18 +138,13 @@ pub(crate) fn parse(
     let coarse_elements = match e.coarse_elements {
         None => None,
         Some(n) => {
-            if !matches!(geometry, Geometry::Thigh(_)) {
+            let Geometry::Thigh(thigh) = geometry else {
                 return Err(err(
                     "coarse_elements",
                     "multilevel identification needs the built-in thigh ([thigh])".into(),
                 ));
-            }
-            if !ELEMENTS_RANGE.contains(&n) {
-                return Err(err(
-                    "coarse_elements",
-                    format!("must be in [100, 500000], got {n}"),
-                ));
-            }
+            };
+            thigh_elements(thigh, n).map_err(|m| err("coarse_elements", m))?;
             let fine = match resolution {
                 Resolution::Elements(m) => m,
                 Resolution::Default => DEFAULT_ELEMENTS,
@@ -160,7 +155,7 @@ pub(crate) fn parse(
                     "coarse_elements",
                     format!(
                         "{n} is not coarser than the model's {fine} elements: the starts run on the coarse mesh and the best is refined on [model]'s; give fewer (e.g. {})",
-                        (fine / 3).max(100)
+                        (fine / 3).max(thigh.min_target_elements())
                     ),
                 ));
             }

@@ -161,14 +161,23 @@ pub(crate) fn parse(
     })
 }
 
+/// The largest measurement grid (points).
+pub const MAX_GRID_POINTS: usize = 4_000_000;
+
 fn check_grid(g: GridEntry, lines: &KeyLines) -> Result<GridSpec, StudyError> {
     let counts = g.counts.unwrap_or([64, 64]);
-    if counts[0] < 2 || counts[1] < 2 || counts[0] * counts[1] > 4_000_000 {
+    // 4e6 points: the projection and the Jacobian hold 2 rows per point and parameter, some
+    // 1 GB for ten parameters (issue 28.4; the product saturates, a huge count cannot wrap).
+    let points = counts[0].saturating_mul(counts[1]);
+    if counts[0] < 2 || counts[1] < 2 || points > MAX_GRID_POINTS {
         return Err(lines.err(
             "grid",
             0,
             "counts",
-            format!("must be at least 2 x 2 and at most 4e6 points, got {counts:?}"),
+            format!(
+                "must be at least 2 x 2 and at most {MAX_GRID_POINTS} points, got {counts:?} ({:.1e} points)",
+                points as f64
+            ),
         ));
     }
     if let Some(s) = g.spacing_mm {

@@ -25,12 +25,14 @@ mod loading_tests;
 mod materials;
 mod measurement;
 mod raw;
+mod regions;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
+pub(crate) use geometry::thigh_elements;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
@@ -75,10 +77,11 @@ pub struct Study {
     pub boundary: MeshBoundary,
     /// `[convergence]`: the convergence view (see [`Study::convergence_study`]).
     pub convergence: ConvergenceSpec,
-    /// Whether `[grid]` and `[[test]]` were written (the convergence and Gmsh views need to
-    /// know).
+    /// Whether `[grid]`, `[[test]]` and `[parameters] groups` were written (the convergence and
+    /// Gmsh views, and the check of the group names, need to know).
     grid_given: bool,
     tests_given: bool,
+    groups_given: bool,
     /// The text's key lines, for the views checked later.
     lines: std::sync::Arc<KeyLines>,
 }
@@ -101,18 +104,28 @@ pub fn seed_groups() -> Vec<Vec<String>> {
 /// The study of a command: the file if given (else the defaults), `--elements` over it.
 pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, StudyError> {
     let mut s = match study {
-        Some(p) => read(p)?,
+        Some(p) => read_for_model(p)?,
         None => Study::default(),
     };
     if let Some(n) = elements {
-        if !ELEMENTS_RANGE.contains(&n) {
-            return Err(StudyError::Study(format!(
-                "--elements must be in [100, 500000], got {n}"
-            )));
-        }
+        let checked = match &s.model.geometry {
+            Geometry::Thigh(t) => geometry::thigh_elements(t, n),
+            _ if !ELEMENTS_RANGE.contains(&n) => Err(format!("must be in [100, 500000], got {n}")),
+            _ => Ok(()),
+        };
+        checked.map_err(|m| StudyError::Study(format!("--elements: {m}")))?;
         s.model.resolution = Resolution::Elements(n);
     }
     Ok(s)
+}
+
+/// Reads and checks a study file for a command that builds the study's model (every command
+/// but `femu solve MESH.msh --study`, whose materials name the mesh's physical surfaces):
+/// [`read`], then what needs the files: [`Study::check_model_inputs`].
+pub fn read_for_model(path: &Path) -> Result<Study, StudyError> {
+    let study = read(path)?;
+    study.check_model_inputs().map_err(|e| e.in_file(path))?;
+    Ok(study)
 }
 
 /// Reads and checks a study file.
@@ -180,6 +193,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
+    let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
         _ => seed_groups(),
@@ -202,6 +216,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         convergence,
         grid_given: file.grid.is_some(),
         tests_given: file.test.is_some(),
+        groups_given,
         lines: std::sync::Arc::new(lines),
     };
     if study.convergence.given {
@@ -230,6 +245,75 @@ impl Study {
             },
             &self.lines,
         )
+    }
+
+    /// The checks that need the files and the model's regions, before anything runs (issue
+    /// 32.11): the label image, deck and measured field exist; every region has a material and
+    /// every `[materials]` table a region (see [`regions`]); the names in `[identification]
+    /// fixed` and `[parameters] groups` are parameters of the model (a deck is read for its
+    /// materials).
+    pub fn check_model_inputs(&self) -> Result<(), StudyError> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(("labels", "image", &l.image)),
+            Geometry::Deck(p) => files.push(("model", "deck", p)),
+            Geometry::Thigh(_) => {}
+        }
+        if let MeasurementSource::File { path, .. } = &self.measurement.source {
+            files.push(("measurement", "file", path));
+        }
+        for (table, key, path) in files {
+            if !path.is_file() {
+                return Err(self.lines.err(
+                    table,
+                    0,
+                    key,
+                    format!(
+                        "{} does not exist (relative names start from the study file's folder)",
+                        path.display()
+                    ),
+                ));
+            }
+        }
+        let regions =
+            match regions::of_geometry(&self.model.geometry, &self.model.materials, &self.lines)? {
+                Some(r) => r,
+                None => {
+                    let Geometry::Deck(path) = &self.model.geometry else {
+                        unreachable!("of_geometry knows every other geometry")
+                    };
+                    let (deck, _) = crate::model::read_deck(&self.model.materials, path)
+                        .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
+                    deck.materials
+                        .iter()
+                        .map(|m| regions::RegionLaw {
+                            name: m.name.clone(),
+                            law: m.law.spec(),
+                        })
+                        .collect()
+                }
+            };
+        regions::check_parameter_names(
+            &regions,
+            &self.identification.fixed,
+            self.groups_given.then_some(&self.groups[..]),
+            &self.lines,
+        )
+    }
+
+    /// The data files the study reads: its label image, deck and measured field (an output
+    /// folder must not hold them: `femu_mesh::folder`).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(l.image.as_path()),
+            Geometry::Deck(p) => files.push(p.as_path()),
+            Geometry::Thigh(_) => {}
+        }
+        if let MeasurementSource::File { path, .. } = &self.measurement.source {
+            files.push(path.as_path());
+        }
+        files
     }
 
     /// Whether the study names its tests (`[[test]]`), rather than taking the seed's three.

@@ -52,6 +52,10 @@ pub struct IdentificationSummary {
     pub forward_solves_per_start: Vec<usize>,
     pub starts: Vec<StartRecord>,
     pub wall_time_s: f64,
+    /// Why the values or intervals may mean nothing (a best start not converged, a parameter
+    /// at a bound, an infinite sd): `femu_identify::campaign::warnings`.
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// Set when the user stopped the run: what was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
@@ -71,11 +75,31 @@ pub struct FreeParameterSummary {
     pub members: Vec<MemberSummary>,
     pub lower: f64,
     pub upper: f64,
+    /// The unit tables show it in (C10 in kPa, D in MPa⁻¹: the seed's Table 1) and the factor
+    /// from the model unit (MPa, MPa⁻¹) to it.
+    #[serde(default)]
+    pub unit: String,
+    #[serde(default = "one")]
+    pub unit_factor: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl FreeParameterSummary {
+    /// `value` (model units) in the unit tables show.
+    pub fn shown(&self, value: f64) -> f64 {
+        value * self.unit_factor
+    }
 }
 
 impl From<&FreeParameter> for FreeParameterSummary {
     fn from(f: &FreeParameter) -> Self {
+        let (unit, unit_factor) = f.members[0].spec().unit.report();
         FreeParameterSummary {
+            unit: unit.to_string(),
+            unit_factor,
             name: f.name.clone(),
             members: f
                 .members
@@ -191,6 +215,7 @@ pub fn write_virtual_measurement(
 /// `femu synth`: the study's identification test on its model, the virtual measurement
 /// written to `out/measured.csv`.
 pub fn synth(study: &Study, out: &Path, progress: &dyn Progress) -> Result<()> {
+    femu_mesh::folder::refuse_inputs_in(out, &study.input_files())?;
     create_dir(out)?;
     let (model, test) = measured_model(study)?;
     write_virtual_measurement(study, &model, &test, &out.join("measured.csv"), progress)
@@ -224,6 +249,9 @@ pub fn identify(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<IdentificationSummary> {
+    let mut inputs = study.input_files();
+    inputs.extend(measured);
+    femu_mesh::folder::refuse_inputs_in(out, &inputs)?;
     let measured = match measured {
         Some(p) => Some(Measured {
             field: MeasuredField::read(p)?,
@@ -408,6 +436,7 @@ pub fn identify_on(
     write_starts_csv(&out.join("starts.csv"), &free, &c.starts)?;
     let (parameters, id) =
         campaign::estimates(&c, &free, &reference, reference_known, virtual_experiment)?;
+    let warnings = campaign::warnings(&c, &free, &parameters);
     let repeats = c.best.len();
     let best = &c.best[0];
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
@@ -452,25 +481,12 @@ pub fn identify_on(
             .collect(),
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
+        warnings,
         interrupted: interrupted
             .map(|n| format!("interrupted: {repeats} of {n} repeats finished and kept")),
     };
     write_json(&out.join("summary.json"), &summary)?;
-    progress.note(&format!(
-        "{:<36} {:>12} {:>12} {:>10} {:>10}",
-        "parameter", "reference", "identified", "error", "sd"
-    ));
-    for p in &summary.parameters {
-        progress.note(&format!(
-            "{:<36} {:>12} {:>12.5e} {:>10} {:>9.2}%",
-            p.name,
-            p.reference.map_or("-".into(), |v| format!("{v:.5e}")),
-            p.identified,
-            p.relative_error
-                .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
-            100.0 * p.relative_sd
-        ));
-    }
+    print_table(&summary, progress);
     progress.note(&format!(
         "wrote {} ({:.1} s)",
         out.display(),
@@ -481,6 +497,31 @@ pub fn identify_on(
             .context(format!("identification: {note} in {}", out.display())));
     }
     Ok(summary)
+}
+
+/// The identified parameters in the console, in the units of the seed's Table 1 (C10 kPa, D
+/// MPa⁻¹), then the warnings.
+fn print_table(summary: &IdentificationSummary, progress: &dyn Progress) {
+    progress.note(&format!(
+        "{:<36} {:>7} {:>12} {:>12} {:>10} {:>10}",
+        "parameter", "unit", "reference", "identified", "error", "sd"
+    ));
+    for (p, f) in summary.parameters.iter().zip(&summary.free_parameters) {
+        progress.note(&format!(
+            "{:<36} {:>7} {:>12} {:>12.5} {:>10} {:>9.2}%",
+            p.name,
+            f.unit,
+            p.reference
+                .map_or("-".into(), |v| format!("{:.5}", f.shown(v))),
+            f.shown(p.identified),
+            p.relative_error
+                .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
+            100.0 * p.relative_sd
+        ));
+    }
+    for w in &summary.warnings {
+        progress.warn(&format!("identification: {w}"));
+    }
 }
 
 fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord]) -> Result<()> {

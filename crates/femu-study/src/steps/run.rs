@@ -56,6 +56,8 @@ pub fn demo(
     progress: &dyn Progress,
 ) -> Result<RunRecord> {
     let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
+    schema::thigh_elements(&femu_geometry::ThighParams::default(), n)
+        .map_err(|m| anyhow::anyhow!("--elements: {m}"))?;
     let text = demo_study(n);
     let study = schema::parse(&text, out).map_err(|e| anyhow::anyhow!("the demo study: {e}"))?;
     if study.model.resolution != schema::Resolution::Elements(n)
@@ -74,7 +76,7 @@ pub fn demo(
 /// `femu run STUDY --out DIR`.
 pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<RunRecord> {
     // Checked in full before anything is computed or written.
-    let study = schema::read(study_file)?;
+    let study = schema::read_for_model(study_file)?;
     let text = std::fs::read_to_string(study_file)?;
     run_study(
         &study,
