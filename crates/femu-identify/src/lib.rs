@@ -7,6 +7,8 @@
 //! - [`measured`]: the measured-field CSV of conventions.md.
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
+//! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
+//!   the free parameters, stacked into one problem; each measurement's share of the information.
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
@@ -15,4 +17,5 @@
 pub mod campaign;
 pub mod fisher;
 pub mod fit;
+pub mod joint;
 pub mod measured;
