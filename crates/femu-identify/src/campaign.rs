@@ -812,18 +812,87 @@ pub struct Estimate {
     pub relative_error: Option<f64>,
     /// Relative standard deviation from the Jacobian at the optimum.
     pub relative_sd: f64,
+    /// The 95 % interval: from the Jacobian at the optimum, widened by the estimated
+    /// discretization bias when that is not negligible ([`widen`]).
     pub ci95: [f64; 2],
     /// Over the repeats: mean and standard deviation of Eq. 4 and of the identified value.
     pub mean_relative_error: Option<f64>,
     pub sd_relative_error: Option<f64>,
     pub sd_identified_relative: Option<f64>,
+    /// Over the repeats: the largest Eq. 4 error.
+    #[serde(default)]
+    pub max_relative_error: Option<f64>,
+    /// Over the repeats: the fraction whose 95 % interval (each from its own Jacobian, widened
+    /// like `ci95`) holds the reference.
+    #[serde(default)]
+    pub coverage95: Option<f64>,
+    /// The estimated discretization bias of the log-parameter (identified on the model's mesh
+    /// minus on a converged mesh; see `crate::discretization`), when it widened the interval.
+    #[serde(default)]
+    pub discretization_bias: Option<f64>,
+    /// The interval of the noise alone, when `ci95` was widened.
+    #[serde(default)]
+    pub ci95_noise: Option<[f64; 2]>,
+}
+
+/// The 95 % interval of `theta` with relative (log) standard deviation `sd` and an estimated
+/// bias `bias` of its logarithm: the hull of the intervals around `theta` and around the
+/// corrected `theta·e^(-bias)`.
+fn interval(theta: f64, sd: f64, bias: f64) -> [f64; 2] {
+    let corrected = theta * (-bias).exp();
+    [
+        theta.min(corrected) * (-1.96 * sd).exp(),
+        theta.max(corrected) * (1.96 * sd).exp(),
+    ]
+}
+
+/// The relative standard deviations of every repeat's optimum (whitened residuals when
+/// `known_noise`, else scaled by each repeat's residual variance).
+fn repeat_sds(
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    known_noise: bool,
+) -> Result<Vec<Vec<f64>>, CampaignError> {
+    let names: Vec<String> = free.iter().map(|f| f.name.clone()).collect();
+    campaign
+        .best
+        .iter()
+        .map(|b| {
+            let dof = b.data.saturating_sub(free.len()).max(1);
+            let s = if known_noise {
+                1.0
+            } else {
+                (2.0 * b.cost / dof as f64).sqrt()
+            };
+            let info = fisher::information(&b.jacobian, s.max(1e-300), &Tied::none(&names))?;
+            Ok(fisher::identifiability(&info, &names).relative_sd)
+        })
+        .collect()
+}
+
+/// Per parameter, the fraction of repeats whose interval (with `bias`) holds the reference.
+fn coverage(campaign: &Campaign, sds: &[Vec<f64>], reference: &[f64], bias: &[f64]) -> Vec<f64> {
+    (0..reference.len())
+        .map(|k| {
+            let hits = campaign
+                .best
+                .iter()
+                .zip(sds)
+                .filter(|(b, sd)| {
+                    let [lo, hi] = interval(b.theta[k], sd[k], bias[k]);
+                    lo <= reference[k] && reference[k] <= hi
+                })
+                .count();
+            hits as f64 / campaign.best.len().max(1) as f64
+        })
+        .collect()
 }
 
 /// The estimates of a campaign: identified values (first repeat), their relative standard
 /// deviations and 95 % intervals from the Jacobian at the optimum (the residuals have unit
 /// variance when the data are whitened, `known_noise`; otherwise the residual variance scales
-/// them), Eq. 4 errors when the references are the truth (`reference_known`), and the spread
-/// over the repeats.
+/// them), Eq. 4 errors when the references are the truth (`reference_known`), and the spread,
+/// the worst error and the interval coverage over the repeats.
 pub fn estimates(
     campaign: &Campaign,
     free: &[FreeParameter],
@@ -847,6 +916,14 @@ pub fn estimates(
         let m = mean(v);
         (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64).sqrt()
     };
+    let several = repeats > 1;
+    let statistics = reference_known && known_noise && several;
+    let covered = if statistics {
+        let sds = repeat_sds(campaign, free, known_noise)?;
+        Some(coverage(campaign, &sds, reference, &vec![0.0; free.len()]))
+    } else {
+        None
+    };
     let out = free
         .iter()
         .enumerate()
@@ -859,21 +936,52 @@ pub fn estimates(
                 .map(|b| ((b.theta[k] - reference[k]) / reference[k]).abs())
                 .collect();
             let logs: Vec<f64> = campaign.best.iter().map(|b| b.theta[k].ln()).collect();
-            let several = repeats > 1;
             Estimate {
                 name: f.name.clone(),
                 reference: reference_known.then_some(reference[k]),
                 identified: t,
                 relative_error: reference_known.then_some(errors[0]),
                 relative_sd: sd,
-                ci95: [t * (-1.96 * sd).exp(), t * (1.96 * sd).exp()],
-                mean_relative_error: (reference_known && known_noise && several)
-                    .then(|| mean(&errors)),
-                sd_relative_error: (reference_known && known_noise && several)
-                    .then(|| sd_of(&errors)),
+                ci95: interval(t, sd, 0.0),
+                mean_relative_error: statistics.then(|| mean(&errors)),
+                sd_relative_error: statistics.then(|| sd_of(&errors)),
                 sd_identified_relative: several.then(|| sd_of(&logs)),
+                max_relative_error: statistics.then(|| errors.iter().copied().fold(0.0, f64::max)),
+                coverage95: covered.as_ref().map(|c| c[k]),
+                discretization_bias: None,
+                ci95_noise: None,
             }
         })
         .collect();
     Ok((out, id))
+}
+
+/// Widens the intervals of `estimates` by the estimated discretization bias of each
+/// log-parameter (`bias[k]`: identified on the model's mesh minus converged; see
+/// `crate::discretization`): each interval becomes the hull of the intervals around the
+/// identified and around the bias-corrected value, the noise-only interval kept in
+/// `ci95_noise`; the coverage over the repeats is recounted with the widened intervals.
+pub fn widen(
+    estimates: &mut [Estimate],
+    bias: &[f64],
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    reference: &[f64],
+    known_noise: bool,
+) -> Result<(), CampaignError> {
+    let covered = if estimates.iter().any(|e| e.coverage95.is_some()) {
+        let sds = repeat_sds(campaign, free, known_noise)?;
+        Some(coverage(campaign, &sds, reference, bias))
+    } else {
+        None
+    };
+    for (k, e) in estimates.iter_mut().enumerate() {
+        e.ci95_noise = Some(e.ci95);
+        e.ci95 = interval(e.identified, e.relative_sd, bias[k]);
+        e.discretization_bias = Some(bias[k]);
+        if let Some(c) = &covered {
+            e.coverage95 = Some(c[k]);
+        }
+    }
+    Ok(())
 }
