@@ -16,6 +16,8 @@
 
 mod boundary;
 mod convergence;
+mod deck_loads;
+mod design;
 mod error;
 mod geometry;
 mod identification;
@@ -23,21 +25,24 @@ mod legacy;
 mod lines;
 mod materials;
 mod measurement;
+mod measurements;
 mod raw;
 mod tests;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
+pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
 };
-pub use identification::{Grouping, IdentificationSpec, Steps};
+pub use identification::{Discretization, Grouping, IdentificationSpec, Steps};
 pub use materials::MaterialSpec;
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
+pub use measurements::{Measurement, Region, WindowSpec};
 pub use tests::{seed_tests, TestSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
@@ -63,7 +68,12 @@ pub struct ModelSpec {
 pub struct Study {
     pub model: ModelSpec,
     pub tests: Vec<TestSpec>,
+    /// The grid, the default noise, and the first measurement's source and actuator term (the
+    /// one `[measurement]` of a single-measurement study).
     pub measurement: MeasurementSpec,
+    /// Every measurement (one for a single `[measurement]` or none given; a joint
+    /// identification fits them all).
+    pub measurements: Vec<Measurement>,
     /// Tied parameters (`[parameters] groups`; the seed's grouping when the study names none).
     pub groups: Vec<Vec<String>>,
     pub identification: IdentificationSpec,
@@ -75,9 +85,13 @@ pub struct Study {
     pub boundary: MeshBoundary,
     /// `[convergence]`: the convergence view (see [`Study::convergence_study`]).
     pub convergence: ConvergenceSpec,
+    /// `[design]`: the candidates of `femu design`.
+    pub design: DesignSpec,
     /// Whether `[grid]` and `[[test]]` were written (the convergence and Gmsh views need to
     /// know).
     grid_given: bool,
+    /// Whether the measurements were written as `[[measurement]]` (outputs per measurement).
+    measurement_list: bool,
     tests_given: bool,
     /// The text's key lines, for the views checked later.
     lines: std::sync::Arc<KeyLines>,
@@ -168,16 +182,37 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let tests = tests::parse(file.test.as_deref(), &lines)?;
-    let measurement = measurement::parse(
-        file.grid.clone(),
-        file.noise,
+    let mut tests = tests::parse(file.test.as_deref(), &lines)?;
+    if let Geometry::Deck(deck) = &geometry {
+        deck_loads::apply(deck, &mut tests, file.test.as_deref(), &lines)?;
+    }
+    let identification =
+        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let (grid, sigma_mm) = measurement::parse_grid_noise(file.grid.clone(), file.noise, &lines)?;
+    let probe = file.probe.unwrap_or_default();
+    let parsed = measurements::parse(
         file.measurement,
+        &tests,
+        &measurements::Defaults {
+            sigma_mm,
+            test: identification.test,
+            probe: &probe,
+        },
         &lines,
         base,
     )?;
-    let identification =
-        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let design = design::parse(file.design, &tests, &probe, &lines)?;
+    let first = &parsed.measurements[0];
+    let measurement = MeasurementSpec {
+        grid,
+        sigma_mm: if parsed.list {
+            sigma_mm
+        } else {
+            first.sigma_mm
+        },
+        source: first.source.clone(),
+        travel: first.travel,
+    };
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
     let groups = match file.parameters {
@@ -193,14 +228,17 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         },
         tests,
         measurement,
+        measurements: parsed.measurements,
         groups,
         identification,
         steps: identification::parse_steps(file.run),
-        probe: file.probe.unwrap_or_default(),
+        probe,
         ultrasound: file.ultrasound.unwrap_or_default(),
         boundary,
         convergence,
+        design,
         grid_given: file.grid.is_some(),
+        measurement_list: parsed.list,
         tests_given: file.test.is_some(),
         lines: std::sync::Arc::new(lines),
     };
@@ -232,6 +270,12 @@ impl Study {
         )
     }
 
+    /// Whether the measurements were written as a list (`[[measurement]]`, even of one): the
+    /// outputs are then per measurement.
+    pub fn measurement_list(&self) -> bool {
+        self.measurement_list
+    }
+
     /// Whether the study names its tests (`[[test]]`), rather than taking the seed's three.
     pub fn tests_given(&self) -> bool {
         self.tests_given
@@ -244,5 +288,7 @@ impl Study {
     }
 }
 
+#[cfg(test)]
+mod measurement_tests;
 #[cfg(test)]
 mod unit_tests;
