@@ -514,6 +514,33 @@ fn realize(
     })
 }
 
+/// The data of every field block of `blocks` in repeat `rep` as [`run_joint`] fits them: per
+/// block, its field (virtual segments realized with their noise) and each segment's points in
+/// it — what `femu synth` writes.
+pub fn realized_fields(
+    free_model: &Model,
+    free: &[FreeParameter],
+    reference: &[f64],
+    blocks: &[BlockSpec],
+    seed: u64,
+    rep: usize,
+) -> Result<Vec<(MeasuredField, Vec<Range<usize>>)>, CampaignError> {
+    blocks
+        .iter()
+        .filter_map(|b| match b {
+            BlockSpec::Field(f) => Some(f),
+            BlockSpec::Custom { .. } => None,
+        })
+        .enumerate()
+        .map(|(b, f)| {
+            let mut f = f.clone();
+            f.travel = None;
+            realize(&f, b, rep, free, free_model, reference, seed, None)
+                .map(|r| (r.field, r.segments))
+        })
+        .collect()
+}
+
 /// The FEMU block of `block` on `model` (the block's model or its coarse one) with the data of
 /// one repeat.
 fn field_problem(
