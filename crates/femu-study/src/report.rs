@@ -789,7 +789,11 @@ fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
             ];
             if repeats {
                 row.push(p.max_relative_error.map(pct).unwrap_or("-".into()));
-                row.push(p.coverage95.map(|c| format!("{:.0} %", 100.0 * c)).unwrap_or("-".into()));
+                row.push(
+                    p.coverage95
+                        .map(|c| format!("{:.0} %", 100.0 * c))
+                        .unwrap_or("-".into()),
+                );
             }
             row
         })
@@ -827,7 +831,12 @@ fn measurements_table(html: &mut Html, s: &IdentificationSummary) {
         .iter()
         .flat_map(|m| {
             let mut share = vec![m.label.clone(), m.points_in_tissue.to_string()];
-            share.extend(m.information.share.iter().map(|v| format!("{:.1} %", 100.0 * v)));
+            share.extend(
+                m.information
+                    .share
+                    .iter()
+                    .map(|v| format!("{:.1} %", 100.0 * v)),
+            );
             let mut alone = vec![format!("{} alone: sd", m.name), String::new()];
             alone.extend(m.information.alone_relative_sd.iter().map(|v| pct(*v)));
             [share, alone]
@@ -842,7 +851,11 @@ fn discretization_paragraph(html: &mut Html, s: &IdentificationSummary) {
     let Some(d) = &s.discretization else {
         return;
     };
-    let class = if d.status == "negligible" { "" } else { " class=\"bad\"" };
+    let class = if d.status == "negligible" {
+        ""
+    } else {
+        " class=\"bad\""
+    };
     let meshes: Vec<String> = d
         .levels
         .iter()
@@ -872,7 +885,11 @@ fn design_section(html: &mut Html, dir: &Path) -> Option<Vec<String>> {
          sds along the ellipsoid's axes); {} free parameters{}.",
         g(s.noise_sigma_mm),
         s.designs_ranked,
-        s.designs.iter().map(|d| d.measurements.len()).max().unwrap_or(1),
+        s.designs
+            .iter()
+            .map(|d| d.measurements.len())
+            .max()
+            .unwrap_or(1),
         s.parameters.len(),
         if s.grouped { ", groups tied" } else { "" }
     ));
@@ -891,7 +908,13 @@ fn design_section(html: &mut Html, dir: &Path) -> Option<Vec<String>> {
         }
         f
     };
-    let mut header = vec!["rank (A)", "rank (D)", "design", "A: RMS sd", "D: geometric sd"];
+    let mut header = vec![
+        "rank (A)",
+        "rank (D)",
+        "design",
+        "A: RMS sd",
+        "D: geometric sd",
+    ];
     let worst: Vec<String> = families.iter().map(|f| format!("worst {f} sd")).collect();
     header.extend(worst.iter().map(String::as_str));
     header.push("not identifiable");

@@ -180,7 +180,10 @@ pub fn run_on(
         spec.max_measurements,
         free.len()
     ));
-    let bar = progress.task("solving and differentiating the tests", Some(spec.tests.len()));
+    let bar = progress.task(
+        "solving and differentiating the tests",
+        Some(spec.tests.len()),
+    );
     let mut candidates = Vec::new();
     let mut summaries = Vec::new();
     let mut failed_tests = Vec::new();
@@ -438,7 +441,12 @@ fn write_figures(
             series.push(Series::new(
                 &format!("worst {f} sd"),
                 top.iter()
-                    .map(|d| (d.rank_a as f64, 100.0 * worst_of(&d.relative_sd, families, f)))
+                    .map(|d| {
+                        (
+                            d.rank_a as f64,
+                            100.0 * worst_of(&d.relative_sd, families, f),
+                        )
+                    })
                     .filter(|p| p.1.is_finite() && p.1 > 0.0)
                     .collect(),
                 LineStyle::Markers,

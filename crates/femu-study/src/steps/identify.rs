@@ -197,7 +197,11 @@ pub fn identify(
             let m = &study.measurements[0];
             vec![Prepared {
                 name: m.name.clone(),
-                label: format!("{}, file {}", study.tests[m.test].loading.name(), p.display()),
+                label: format!(
+                    "{}, file {}",
+                    study.tests[m.test].loading.name(),
+                    p.display()
+                ),
                 test: m.test,
                 data: PreparedData::Measured(Measured {
                     field: MeasuredField::read(p)?,
@@ -302,7 +306,10 @@ fn fit_or_keep(
     match joint::fit(study, grouped, models, prepared, &options, &on_event) {
         Ok(fit) => Ok((fit, None)),
         Err(FitFailure::Setup(e)) => Err(e),
-        Err(FitFailure::Campaign(campaign::CampaignError::Interrupted { finished, repeats }, free)) => {
+        Err(FitFailure::Campaign(
+            campaign::CampaignError::Interrupted { finished, repeats },
+            free,
+        )) => {
             if finished.best.is_empty() {
                 write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
                 return Err(anyhow::Error::new(crate::progress::Interrupted)
@@ -328,15 +335,17 @@ fn fit_or_keep(
         )) => {
             // What finished is kept: every start's outcome.
             write_starts_csv(&out.join("starts.csv"), &free, &starts)?;
-            Err(anyhow::Error::new(campaign::CampaignError::AllStartsFailed {
-                repeat,
-                reasons,
-                starts,
-            })
-            .context(format!(
-                "identification (every start in {})",
-                out.join("starts.csv").display()
-            )))
+            Err(
+                anyhow::Error::new(campaign::CampaignError::AllStartsFailed {
+                    repeat,
+                    reasons,
+                    starts,
+                })
+                .context(format!(
+                    "identification (every start in {})",
+                    out.join("starts.csv").display()
+                )),
+            )
         }
         Err(FitFailure::Campaign(e, _)) => Err(e.into()),
     }
@@ -355,7 +364,11 @@ fn estimate_with_check(
     reference_known: bool,
     known_noise: bool,
     progress: &dyn Progress,
-) -> Result<(Vec<Estimate>, femu_identify::fisher::Identifiability, Option<DiscretizationCheck>)> {
+) -> Result<(
+    Vec<Estimate>,
+    femu_identify::fisher::Identifiability,
+    Option<DiscretizationCheck>,
+)> {
     let (mut parameters, mut id) = campaign::estimates(
         &fit.campaign,
         &fit.free,
@@ -391,9 +404,18 @@ fn estimate_with_check(
                 known_noise,
             )?;
             // What remains beyond the finest mesh: the bias scaled by ρ^-p.
-            let remaining = checked.check.levels.last().map_or(1.0, |l| l.ratio).powf(-checked.check.rate);
+            let remaining = checked
+                .check
+                .levels
+                .last()
+                .map_or(1.0, |l| l.ratio)
+                .powf(-checked.check.rate);
             checked.check.bias.iter_mut().for_each(|b| *b *= remaining);
-            checked.check.bias_over_sd.iter_mut().for_each(|b| *b *= remaining);
+            checked
+                .check
+                .bias_over_sd
+                .iter_mut()
+                .for_each(|b| *b *= remaining);
             checked.check.status = "refined".into();
             checked.check.message = format!(
                 "identified again on {finest_elements} elements (the mesh biased the parameters by up to {:.1} sd); the bias left is estimated at up to {:.2} sd",
@@ -451,7 +473,15 @@ pub fn identify_on(
         if prepared.len() == 1 { "" } else { "s" },
         models.elements(),
         spec.starts,
-        if virtual_experiment || prepared.iter().any(|p| matches!(p.data, PreparedData::Virtual { .. })) { spec.repeat } else { 1 }
+        if virtual_experiment
+            || prepared
+                .iter()
+                .any(|p| matches!(p.data, PreparedData::Virtual { .. }))
+        {
+            spec.repeat
+        } else {
+            1
+        }
     ));
     if let Some(c) = models.coarse.first() {
         progress.note(&format!(
@@ -489,7 +519,15 @@ pub fn identify_on(
                 points: block.first_field.points[seg.points.clone()].to_vec(),
                 comments: Vec::new(),
             };
-            write_field_figures(out, &name, &models.full[b], &models.full[0], &fit.free, &field, &best.theta)?;
+            write_field_figures(
+                out,
+                &name,
+                &models.full[b],
+                &models.full[0],
+                &fit.free,
+                &field,
+                &best.theta,
+            )?;
         }
     }
     let summary = IdentificationSummary {
@@ -536,8 +574,12 @@ pub fn identify_on(
             .collect(),
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
-        interrupted: interrupted
-            .map(|n| format!("interrupted: {} of {n} repeats finished and kept", c.best.len())),
+        interrupted: interrupted.map(|n| {
+            format!(
+                "interrupted: {} of {n} repeats finished and kept",
+                c.best.len()
+            )
+        }),
         measurements,
         discretization: check,
     };
@@ -652,7 +694,12 @@ fn write_measurements_csv(
             m.points_masked,
             m.sigma_mm.map_or(String::new(), |s| format!("{s:e}"))
         )?;
-        for v in m.information.share.iter().chain(&m.information.alone_relative_sd) {
+        for v in m
+            .information
+            .share
+            .iter()
+            .chain(&m.information.alone_relative_sd)
+        {
             write!(w, ",{v:.6e}")?;
         }
         writeln!(w)?;
@@ -883,10 +930,7 @@ fn write_field_figures(
             .iter()
             .enumerate()
         {
-            let path = panels_dir.join(format!(
-                "{}_{comp}_{k}.png",
-                name.trim_end_matches(".png")
-            ));
+            let path = panels_dir.join(format!("{}_{comp}_{k}.png", name.trim_end_matches(".png")));
             femu_plot::image_field_png(
                 &path,
                 &grey,

@@ -8,7 +8,9 @@ use super::measure::{Prepared, PreparedData};
 use crate::model::StudyModel;
 use crate::schema::Study;
 use anyhow::{Context, Result};
-use femu_identify::campaign::{self, BlockSpec, Campaign, CampaignOptions, Data, Event, FieldBlock};
+use femu_identify::campaign::{
+    self, BlockSpec, Campaign, CampaignOptions, Data, Event, FieldBlock,
+};
 use femu_identify::fit::FreeParameter;
 use femu_mech::Model;
 

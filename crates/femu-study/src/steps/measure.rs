@@ -129,7 +129,12 @@ pub fn prepare(
                 MeasurementSource::File { path, frame } => {
                     let f = MeasuredField::read(path)?;
                     PreparedData::Measured(Measured {
-                        field: f.to_model_frame(frame.scale, frame.origin, frame.x_axis, frame.y_axis),
+                        field: f.to_model_frame(
+                            frame.scale,
+                            frame.origin,
+                            frame.x_axis,
+                            frame.y_axis,
+                        ),
                         source: path.display().to_string(),
                         reference_known: false,
                     })
@@ -196,11 +201,8 @@ pub fn write_measured(
     progress: &dyn Progress,
 ) -> Result<()> {
     let models = super::joint::TestModels::new(study, built, prepared)?;
-    let (free, reference) = super::identify::free_parameters(
-        study,
-        &models.full[0],
-        study.identification.grouped(),
-    )?;
+    let (free, reference) =
+        super::identify::free_parameters(study, &models.full[0], study.identification.grouped())?;
     let blocks = super::joint::blocks(prepared, &models, study);
     let seed = study.identification.seed;
     let fields = campaign::realized_fields(&models.full[0], &free, &reference, &blocks, seed, 0)?;
@@ -218,7 +220,11 @@ pub fn write_measured(
             dir.join("measured.csv")
         };
         let (comments, sigma) = match &p.data {
-            PreparedData::Virtual { points, total, sigma } => (
+            PreparedData::Virtual {
+                points,
+                total,
+                sigma,
+            } => (
                 vec![
                     "femu synth: virtual experiment (seed 2.4.1)".into(),
                     format!("{}; noise sigma {sigma} mm, seed {seed}", p.label),
