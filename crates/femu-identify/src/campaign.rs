@@ -11,7 +11,7 @@ use crate::fit::{
     bfgs, latin_hypercube, levenberg_marquardt, FitError, FitResult, FreeParameter, Gradient,
     LeastSquares, LmOptions, Problem,
 };
-use crate::joint::{self, Block, JointProblem};
+use crate::joint::{self, Block, JointProblem, Segments};
 use crate::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -159,19 +159,22 @@ pub fn virtual_field(
     seed: u64,
 ) -> Result<MeasuredField, CampaignError> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    virtual_segments(model, free, reference, &[(points, sigma)], &mut rng)
+    let mut parts = virtual_segments(model, free, reference, &[(points, sigma)], &mut rng)?;
+    Ok(parts.pop().unwrap_or_default())
 }
 
 /// The virtual measurement of several point sets of one model (probe windows of one test): one
 /// solve at the reference parameters, each set with the noise of its own standard deviation,
-/// drawn in order from `rng` (two per point).
+/// drawn in order from `rng` (two per point); one field per set. A point outside `model`'s
+/// mesh (the data's mesh may be another of the same geometry, whose polygonal outline differs
+/// near the skin) has no data and is left out.
 fn virtual_segments(
     model: &Model,
     free: &[FreeParameter],
     reference: &[f64],
     segments: &[(&[[f64; 2]], f64)],
     rng: &mut rand::rngs::StdRng,
-) -> Result<MeasuredField, CampaignError> {
+) -> Result<Vec<MeasuredField>, CampaignError> {
     let points: Vec<[f64; 2]> = segments
         .iter()
         .flat_map(|(p, _)| p.iter().copied())
@@ -179,10 +182,17 @@ fn virtual_segments(
     if points.is_empty() {
         return Err(CampaignError::NoGridPoint);
     }
+    let locator = PointLocator::new(&model.mesh);
+    let inside: Vec<bool> = points
+        .iter()
+        .map(|x| locator.locate(*x).is_some())
+        .collect();
     let all = MeasuredField {
         points: points
             .iter()
-            .map(|&x| MeasuredPoint {
+            .zip(&inside)
+            .filter(|(_, i)| **i)
+            .map(|(&x, _)| MeasuredPoint {
                 x,
                 u: [0.0; 2],
                 weight: [1.0; 2],
@@ -192,24 +202,29 @@ fn virtual_segments(
     };
     let mut p = Problem::new(model.clone(), SolverOptions::default(), &all, free.to_vec())?;
     let u = p.field_at(reference)?;
-    let mut out = MeasuredField::default();
-    let mut k = 0;
+    let mut out = Vec::with_capacity(segments.len());
+    let (mut k, mut row) = (0, 0);
     for &(pts, sigma) in segments {
-        let noise = Normal::new(0.0, sigma).map_err(|_| CampaignError::BadNoise(sigma))?;
         if !(sigma > 0.0) {
             return Err(CampaignError::BadNoise(sigma));
         }
+        let noise = Normal::new(0.0, sigma).map_err(|_| CampaignError::BadNoise(sigma))?;
+        let mut field = MeasuredField::default();
         for &x in pts {
-            out.points.push(MeasuredPoint {
-                x,
-                u: [
-                    u[2 * k] + noise.sample(rng),
-                    u[2 * k + 1] + noise.sample(rng),
-                ],
-                weight: [1.0 / (sigma * sigma); 2],
-            });
+            if inside[k] {
+                field.points.push(MeasuredPoint {
+                    x,
+                    u: [
+                        u[2 * row] + noise.sample(rng),
+                        u[2 * row + 1] + noise.sample(rng),
+                    ],
+                    weight: [1.0 / (sigma * sigma); 2],
+                });
+                row += 1;
+            }
             k += 1;
         }
+        out.push(field);
     }
     Ok(out)
 }
@@ -361,7 +376,7 @@ pub struct Campaign {
     pub blocks: Vec<BlockRecord>,
     /// The named parts of the stacked residual of the full model (see
     /// [`JointProblem::segments`]), for each measurement's share of the information.
-    pub layout: Vec<(String, Range<usize>)>,
+    pub layout: Segments,
 }
 
 /// One start of the optimizer; `coarse`: the first level of a multilevel identification,
@@ -470,14 +485,13 @@ fn realize(
             Data::Measured(_) => None,
         })
         .collect();
-    let mut virtual_field = if virtual_parts.is_empty() {
-        MeasuredField::default()
+    let mut virtual_fields = if virtual_parts.is_empty() {
+        Vec::new()
     } else {
         let (tfree, map) = joint::block_free(free, free_model, truth);
         let tref: Vec<f64> = map.iter().map(|&k| reference[k]).collect();
         virtual_segments(truth, &tfree, &tref, &virtual_parts, &mut rng)?
     }
-    .points
     .into_iter();
     let mut field = MeasuredField::default();
     let mut segments = Vec::new();
@@ -485,9 +499,9 @@ fn realize(
         let start = field.points.len();
         match d {
             Data::Measured(f) => field.points.extend_from_slice(&f.points),
-            Data::Virtual { points, .. } => field
+            Data::Virtual { .. } => field
                 .points
-                .extend(virtual_field.by_ref().take(points.len())),
+                .extend(virtual_fields.next().unwrap_or_default().points),
         }
         segments.push(start..field.points.len());
     }
@@ -514,6 +528,9 @@ fn realize(
     })
 }
 
+/// A field block's data: its field and each segment's points in it.
+pub type RealizedField = (MeasuredField, Vec<Range<usize>>);
+
 /// The data of every field block of `blocks` in repeat `rep` as [`run_joint`] fits them: per
 /// block, its field (virtual segments realized with their noise) and each segment's points in
 /// it — what `femu synth` writes.
@@ -524,7 +541,7 @@ pub fn realized_fields(
     blocks: &[BlockSpec],
     seed: u64,
     rep: usize,
-) -> Result<Vec<(MeasuredField, Vec<Range<usize>>)>, CampaignError> {
+) -> Result<Vec<RealizedField>, CampaignError> {
     blocks
         .iter()
         .filter_map(|b| match b {
@@ -718,7 +735,7 @@ fn run_repeat(
         repeat: rep,
         starts: starts.len(),
     });
-    type Outcome = Result<(FitResult, Vec<(String, Range<usize>)>), FitError>;
+    type Outcome = Result<(FitResult, Segments), FitError>;
     let outcomes: Vec<Outcome> = starts
         .par_iter()
         .map(|s| {
@@ -740,7 +757,7 @@ fn run_repeat(
             repeats: options.repeats.max(1),
         });
     }
-    let mut best: Option<(FitResult, Vec<(String, Range<usize>)>)> = None;
+    let mut best: Option<(FitResult, Segments)> = None;
     let mut reasons: Vec<(String, usize)> = Vec::new();
     for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
         let (result, error) = match o {
@@ -753,6 +770,10 @@ fn run_repeat(
                 if best.as_ref().is_none_or(|b| r.cost < b.0.cost) {
                     best = Some((r.clone(), layout));
                 }
+                // The record keeps no Jacobian (only the best needs it, for the intervals):
+                // 20 repeats of 2 starts on 10^5 residuals would hold 300 MB of them.
+                let mut r = r;
+                r.jacobian = Vec::new();
                 (Some(r), None)
             }
             Err(e) => {

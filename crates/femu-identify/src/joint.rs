@@ -27,6 +27,12 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 
+/// Named row ranges of a residual (the measurements it holds).
+pub type Segments = Vec<(String, Range<usize>)>;
+
+/// What a block's evaluation returns: residuals and, if asked, the Jacobian columns.
+type Evaluation = Result<(Vec<f64>, Option<Columns>), FitError>;
+
 /// One block of a joint problem: a least-squares problem and how its free parameters sit in the
 /// joint ones.
 pub struct Block {
@@ -119,7 +125,7 @@ impl JointProblem {
 
     /// The named parts of the stacked residual (block segments, and each block's rows outside
     /// its segments under the block's name), after at least one evaluation.
-    pub fn segments(&self) -> Vec<(String, Range<usize>)> {
+    pub fn segments(&self) -> Segments {
         let mut out = Vec::new();
         for (b, rows) in self.blocks.iter().zip(&self.rows) {
             let mut covered = vec![false; rows.len()];
@@ -160,7 +166,7 @@ impl LeastSquares for JointProblem {
         phi: &[f64],
         jacobian: bool,
     ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
-        let results: Vec<Result<(Vec<f64>, Option<Columns>), FitError>> = self
+        let results: Vec<Evaluation> = self
             .blocks
             .par_iter_mut()
             .map(|b| {

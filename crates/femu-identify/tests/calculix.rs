@@ -5,15 +5,14 @@
 //! back without noise. Skips with a message when ccx is absent.
 
 use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
-use femu_identify::fit::{levenberg_marquardt, FreeParameter, LmOptions, Problem};
+use femu_identify::fit::{levenberg_marquardt, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
-use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_mesh::ElementKind;
 
 mod common;
-use common::{ccx_displacements, ccx_installed, ccx_ready};
+use common::{ccx_displacements, ccx_installed, ccx_ready, free_parameters};
 
 #[test]
 fn ccx_field_is_identified_back_without_noise() {
@@ -52,19 +51,7 @@ fn ccx_field_is_identified_back_without_noise() {
     }
 
     let model = Model::from_deck(deck).unwrap();
-    let free: Vec<FreeParameter> = all_parameters(&model)
-        .into_iter()
-        .map(|p| {
-            let v = p.value(&model);
-            FreeParameter {
-                name: p.name(&model),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect();
-    let reference: Vec<f64> = free.iter().map(|f| f.members[0].value(&model)).collect();
+    let (free, reference) = free_parameters(&model);
     let start: Vec<f64> = reference
         .iter()
         .enumerate()

@@ -14,7 +14,6 @@ use femu_identify::discretization::{self, Level};
 use femu_identify::fisher::{self, Tied};
 use femu_identify::fit::{levenberg_marquardt, FreeParameter, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
-use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_mesh::{Deck, ElementKind};
@@ -22,7 +21,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 mod common;
-use common::{ccx_displacements, ccx_installed, ccx_ready};
+use common::{ccx_displacements, ccx_installed, ccx_ready, free_parameters};
 
 /// The shapes' raster shared by every mesh (the default for elements of 1 mm and more).
 const RASTER_MM: f64 = 0.25;
@@ -46,23 +45,6 @@ fn deck(h: f64) -> Deck {
     deck.step.max_increment = 0.25;
     ccx_ready(&mut deck);
     deck
-}
-
-fn free_parameters(model: &Model) -> (Vec<FreeParameter>, Vec<f64>) {
-    let free: Vec<FreeParameter> = all_parameters(model)
-        .into_iter()
-        .map(|p| {
-            let v = p.value(model);
-            FreeParameter {
-                name: p.name(model),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect();
-    let reference = free.iter().map(|f| f.members[0].value(model)).collect();
-    (free, reference)
 }
 
 /// The identified parameters and their relative sds (whitened residuals).

@@ -15,9 +15,11 @@ use femu_identify::fit::{levenberg_marquardt, FreeParameter, LeastSquares, LmOpt
 use femu_identify::joint::{block_free, information_shares, Block, JointProblem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::loading::{apply_loading, Loading};
-use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::ElementKind;
+
+mod common;
+use common::free_parameters;
 
 /// The built-in thigh (about `elements` CPE4H quads) unloaded, and its skin.
 fn thigh(elements: usize) -> (Model, Vec<(usize, usize)>) {
@@ -39,24 +41,6 @@ fn loaded(base: &Model, skin: &[(usize, usize)], test: &Loading) -> Model {
     let mut m = base.clone();
     apply_loading(&mut m, skin, test).unwrap();
     m
-}
-
-/// Ten free parameters, bounds a factor 4 either side of Table 1, and their references.
-fn free_parameters(model: &Model) -> (Vec<FreeParameter>, Vec<f64>) {
-    let free: Vec<FreeParameter> = all_parameters(model)
-        .into_iter()
-        .map(|p| {
-            let v = p.value(model);
-            FreeParameter {
-                name: p.name(model),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect();
-    let reference = free.iter().map(|f| f.members[0].value(model)).collect();
-    (free, reference)
 }
 
 /// A regular grid of `n x n` points over the model's bounding box, those in the tissue kept; with
@@ -402,4 +386,79 @@ fn light_monte_carlo_intervals_cover_the_truth() {
     }
     eprintln!("{inside} of 80 intervals hold the truth");
     assert!(inside >= 70.0, "{inside} of 80 intervals hold the truth");
+}
+
+/// Virtual data made on a finer mesh of the same geometry (no inverse crime): the points of the
+/// model's tissue that fall outside the finer mesh's outline (near the skin the two polygons
+/// differ) have no data and are left out, the others keep their order and noise.
+#[test]
+fn virtual_data_on_a_finer_mesh_leave_out_the_points_it_lacks() {
+    let mesh = |h: f64| {
+        let t = femu_geometry::parametric_thigh_on_raster(
+            &ThighParams {
+                element_size_mm: Some(h),
+                ..Default::default()
+            },
+            ElementKind::Cpe4h,
+            Some(0.25),
+        )
+        .unwrap();
+        let skin = t.mesh.surfaces["SKIN"].clone();
+        let mut deck = contention_deck(&t, &table1_materials(), 0.0).unwrap();
+        deck.pressures.clear();
+        loaded(
+            &Model::from_deck(deck).unwrap(),
+            &skin,
+            &Loading::seed_contention(),
+        )
+    };
+    let (model, truth) = (mesh(4.0), mesh(2.0));
+    let (free, reference) = free_parameters(&model);
+    let points = grid(&model, 80, None);
+    let outside = points
+        .iter()
+        .filter(|x| {
+            femu_mesh::locate::PointLocator::new(&truth.mesh)
+                .locate(**x)
+                .is_none()
+        })
+        .count();
+    let blocks = vec![BlockSpec::Field(FieldBlock {
+        name: "contention".into(),
+        model: &model,
+        coarse: None,
+        truth: Some(&truth),
+        segments: vec![
+            (
+                "a".into(),
+                Data::Virtual {
+                    points: &points[..2000],
+                    sigma: 0.01,
+                },
+            ),
+            (
+                "b".into(),
+                Data::Virtual {
+                    points: &points[2000..],
+                    sigma: 0.02,
+                },
+            ),
+        ],
+        travel: None,
+    })];
+    let fields = campaign::realized_fields(&model, &free, &reference, &blocks, 1, 0).unwrap();
+    let (field, segments) = &fields[0];
+    eprintln!(
+        "{outside} of {} points outside the finer mesh",
+        points.len()
+    );
+    assert!(
+        outside > 0,
+        "the case must have points the finer mesh lacks"
+    );
+    assert_eq!(field.points.len(), points.len() - outside);
+    assert_eq!(segments[1].end, field.points.len());
+    assert!(field.points[segments[1].clone()]
+        .iter()
+        .all(|p| p.weight[0] == 1.0 / 0.02f64.powi(2)));
 }

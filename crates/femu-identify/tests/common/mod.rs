@@ -1,5 +1,11 @@
-//! CalculiX for the identification tests: a deck solved by `ccx` (femu's `.inp` writer, dead
-//! loads), its nodal displacements read back. Skips with a message when ccx is absent.
+//! Helpers of the identification tests: the ten free parameters of a model, and CalculiX (a
+//! deck solved by `ccx` through femu's `.inp` writer, dead loads, its nodal displacements read
+//! back; skipped with a message when ccx is absent).
+#![allow(dead_code)] // each test binary uses its own subset
+
+use femu_identify::fit::FreeParameter;
+use femu_mech::sensitivity::all_parameters;
+use femu_mech::Model;
 
 use femu_mesh::inp::read_ccx_dat_displacements;
 use femu_mesh::{write_inp, Deck};
@@ -57,4 +63,23 @@ pub fn ccx_displacements(deck: &Deck, name: &str) -> Vec<f64> {
         let _ = std::fs::remove_dir_all(&dir);
     }
     deck.mesh.node_labels.iter().flat_map(|l| ccx[l]).collect()
+}
+
+/// Every material parameter of `model` free, bounds a factor 4 either side of its value, and
+/// those values (the references).
+pub fn free_parameters(model: &Model) -> (Vec<FreeParameter>, Vec<f64>) {
+    let free: Vec<FreeParameter> = all_parameters(model)
+        .into_iter()
+        .map(|p| {
+            let v = p.value(model);
+            FreeParameter {
+                name: p.name(model),
+                members: vec![p],
+                lower: v / 4.0,
+                upper: v * 4.0,
+            }
+        })
+        .collect();
+    let reference = free.iter().map(|f| f.members[0].value(model)).collect();
+    (free, reference)
 }

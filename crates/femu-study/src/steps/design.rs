@@ -342,9 +342,7 @@ fn findings(best: &[BestFor], ranked: &[Design]) -> Vec<String> {
 }
 
 fn write_designs_csv(path: &Path, ranked: &[Design], names: &[String]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     write!(
         w,
         "rank_a,rank_d,measurements,points,a_rms_sd,d_geometric_sd,worst_sd_by_family,not_identifiable"
@@ -379,9 +377,7 @@ fn write_designs_csv(path: &Path, ranked: &[Design], names: &[String]) -> Result
 }
 
 fn write_candidates_csv(path: &Path, c: &[CandidateSummary], names: &[String]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     write!(w, "test,side,width_mm,depth_mm,points")?;
     for n in names {
         write!(w, ",sd_{n}")?;

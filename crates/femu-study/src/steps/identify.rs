@@ -18,7 +18,7 @@ use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::{Discretization, MeasurementSource, Study};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use femu_identify::campaign::{self, CampaignOptions, Estimate, Event, StartRecord};
 use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
@@ -369,13 +369,16 @@ fn estimate_with_check(
     femu_identify::fisher::Identifiability,
     Option<DiscretizationCheck>,
 )> {
-    let (mut parameters, mut id) = campaign::estimates(
-        &fit.campaign,
-        &fit.free,
-        &fit.reference,
-        reference_known,
-        known_noise,
-    )?;
+    let estimates = |fit: &JointFit| {
+        campaign::estimates(
+            &fit.campaign,
+            &fit.free,
+            &fit.reference,
+            reference_known,
+            known_noise,
+        )
+    };
+    let (mut parameters, mut id) = estimates(fit)?;
     if study.identification.discretization == Discretization::Off {
         return Ok((parameters, id, None));
     }
@@ -396,13 +399,7 @@ fn estimate_with_check(
                 refined.cost, refined.forward_solves
             ));
             fit.campaign.best[0] = refined;
-            (parameters, id) = campaign::estimates(
-                &fit.campaign,
-                &fit.free,
-                &fit.reference,
-                reference_known,
-                known_noise,
-            )?;
+            (parameters, id) = estimates(fit)?;
             // What remains beyond the finest mesh: the bias scaled by ρ^-p.
             let remaining = checked
                 .check
@@ -673,9 +670,7 @@ fn write_measurements_csv(
     free: &[FreeParameter],
     measurements: &[MeasurementSummary],
 ) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     write!(w, "name,label,points_in_tissue,points_masked,sigma_mm")?;
     for f in free {
         write!(w, ",share_{}", f.name)?;
@@ -708,9 +703,7 @@ fn write_measurements_csv(
 }
 
 fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     write!(
         w,
         "repeat,start,cost,iterations,forward_solves,converged,error"
@@ -750,9 +743,7 @@ fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord])
 }
 
 fn write_parameters_csv(path: &Path, params: &[Estimate]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     writeln!(
         w,
         "name,reference,identified,relative_error,relative_sd,ci95_low,ci95_high,mean_relative_error,sd_relative_error"
