@@ -64,7 +64,7 @@ fn design_ranks_tests_and_windows_and_finds_the_seeds_choice() {
 
 /// A joint study of two tests, each seen through its own window, through `femu run`: one
 /// measured CSV per measurement, both fitted at once, each one's share of the information, the
-/// discretization check, the report's tables.
+/// discretization check, the report's tables; and the design step of the run.
 #[test]
 fn a_joint_study_runs_with_a_result_per_measurement() {
     let dir = scratch("joint");
@@ -78,7 +78,8 @@ fn a_joint_study_runs_with_a_result_per_measurement() {
          [[measurement]]\ntest = \"compression\"\nwindow = \"anterior\"\nwindow_mm = [60, 60]\n\
          spacing_mm = 2.0\nsigma_mm = 0.01\n\
          [identification]\ngrouped = true\nstarts = 2\n\
-         [run]\nsensitivity = false\nforward = false\n",
+         [design]\nsides = [\"anterior\", \"lateral\"]\nwindows_mm = [[60, 60]]\n\
+         [run]\nsensitivity = false\nforward = false\ndesign = true\n",
     );
     let out = dir.join("out");
     let o = femu(&[
@@ -133,6 +134,10 @@ fn a_joint_study_runs_with_a_result_per_measurement() {
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("share of the Fisher information") && html.contains("Discretization"));
+    // [run] design: the ranking in its folder and in the report.
+    let d = json(&out.join("design/summary.json"));
+    assert_eq!(d["candidates"].as_array().unwrap().len(), 2 * 2);
+    assert!(html.contains("Design of the experiment"));
     // --measured replaces the one measurement of a study, not one of several.
     let o = femu(&[
         "identify",
