@@ -2,9 +2,10 @@
 //! points of the seed's mesh validation (§2.1.2.1). The study file's `[convergence]` table
 //! (femu-study) describes it; [`ConvergenceStudy::validate`] checks its ranges.
 
-use femu_geometry::{table1_materials, ThighParams};
+use femu_geometry::{ThighParams, TABLE1};
 use femu_mech::loading::Loading;
-use femu_mesh::{ElementKind, MaterialDef};
+use femu_mech::model::NamedMaterial;
+use femu_mesh::ElementKind;
 use serde::Deserialize;
 
 /// The mesh sequence: target element counts or element sizes, coarse to fine.
@@ -95,7 +96,7 @@ pub struct ConvergenceStudy {
     /// The built-in thigh's dimensions (its mesh-size keys unset: the sequence sets them).
     pub thigh: ThighParams,
     /// Materials per region (Table 1 unless overridden).
-    pub materials: Vec<MaterialDef>,
+    pub materials: Vec<NamedMaterial>,
     /// The loading test.
     pub loading: Loading,
     /// Element types compared, in the order given.
@@ -126,7 +127,10 @@ impl Default for ConvergenceStudy {
     fn default() -> Self {
         ConvergenceStudy {
             thigh: ThighParams::default(),
-            materials: table1_materials(),
+            materials: TABLE1
+                .iter()
+                .map(|&(region, c10_kpa, d)| NamedMaterial::neo_hookean(region, c10_kpa * 1e-3, d))
+                .collect(),
             loading: Loading::seed_contention(),
             elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
             meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),

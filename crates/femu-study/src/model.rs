@@ -3,14 +3,15 @@
 //! yet; and the skin faces the loading tests act on.
 
 use crate::schema::{
-    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
-    DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
+    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError,
+    DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
 };
 use anyhow::{bail, Context, Result};
-use femu_geometry::{table1_materials, MeshOptions, ThighModel};
+use femu_geometry::{MeshOptions, ThighModel};
 use femu_mech::loading::apply_loading;
+use femu_mech::model::{ModelSpec as MechSpec, NamedMaterial};
 use femu_mech::Model;
-use femu_mesh::{Deck, ElementKind, MaterialDef};
+use femu_mesh::{Deck, ElementKind, FacePressure};
 use std::path::Path;
 
 /// A study's model before any loading.
@@ -34,9 +35,10 @@ impl StudyModel {
     }
 }
 
-/// Table 1 with the study's `[materials]` (regions checked against `regions`).
-fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialDef>> {
-    let mut materials = table1_materials();
+/// One material per region of `regions` (in that order, named as the region): Table 1 with
+/// the study's `[materials]` (regions checked against `regions`).
+fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<NamedMaterial>> {
+    let mut materials = crate::schema::table1();
     for spec in specs {
         let region = &spec.region;
         if !regions.iter().any(|r| r.eq_ignore_ascii_case(region)) {
@@ -49,18 +51,59 @@ fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialD
             .iter_mut()
             .find(|m| m.name.eq_ignore_ascii_case(region))
             .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
-        *m = spec
-            .apply(m)
+        m.law = spec
+            .apply(&*m.law)
             .with_context(|| format!("[materials.{region}]"))?;
     }
-    for r in regions {
-        if !materials.iter().any(|m| m.name.eq_ignore_ascii_case(r)) {
-            bail!(
-                "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
-            );
-        }
+    regions
+        .iter()
+        .map(|r| {
+            let m = materials.iter().find(|m| m.name.eq_ignore_ascii_case(r)).with_context(|| {
+                format!(
+                    "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
+                )
+            })?;
+            Ok(NamedMaterial {
+                name: r.clone(),
+                law: m.law.clone(),
+            })
+        })
+        .collect()
+}
+
+/// A meshed thigh as a model: `regions`' materials, the femur (node set `FEMUR`) fixed, no
+/// load, and its skin faces (surface `SKIN`).
+fn thigh_as_model(
+    thigh: &ThighModel,
+    regions: Vec<NamedMaterial>,
+) -> Result<(Model, Vec<(usize, usize)>)> {
+    let spec = MechSpec::with_regions(
+        thigh.mesh.mesh.clone(),
+        thigh.mesh.surfaces.clone(),
+        regions,
+        "FEMUR",
+    )?;
+    let model = Model::new(spec)?;
+    let skin = model.surface("SKIN").unwrap_or_default().to_vec();
+    if skin.is_empty() {
+        bail!("the model has no skin surface");
     }
-    Ok(materials)
+    Ok((model, skin))
+}
+
+/// The contention deck of a model (written for Abaqus/CalculiX): its own content with a
+/// follower pressure `pressure_mpa` on every skin face.
+pub fn contention_deck(model: &Model, skin: &[(usize, usize)], pressure_mpa: f64) -> Deck {
+    let mut deck = model.to_deck();
+    deck.pressures = skin
+        .iter()
+        .map(|&(element, face)| FacePressure {
+            element,
+            face,
+            magnitude: pressure_mpa,
+        })
+        .collect();
+    deck
 }
 
 /// The built-in thigh of `spec`'s dimensions meshed at `resolution`.
@@ -125,15 +168,10 @@ fn mesh_labels(l: &LabelsSpec, size_mm: f64, kind: ElementKind) -> Result<ThighM
 
 /// The model of a meshed thigh with the study's materials, femur fixed, no load.
 fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
-    let materials = materials(&spec.materials, &thigh.regions)?;
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    if skin.is_empty() {
-        bail!("the model has no skin surface");
-    }
-    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0)?;
-    deck.pressures.clear();
+    let regions = materials(&spec.materials, &thigh.regions)?;
+    let (model, skin) = thigh_as_model(&thigh, regions)?;
     Ok(StudyModel {
-        model: Model::from_deck(deck)?,
+        model,
         skin,
         thigh: Some(thigh),
         source,
@@ -165,30 +203,31 @@ pub fn build_refined(
 /// A deck: its materials (overridden by `[materials.NAME]`, NAME a material or a region), its
 /// boundary conditions; the skin is the set of faces its `*DLOAD` loads, then removed.
 fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
-    let mut deck = femu_mesh::read_inp(path)?;
-    if deck.pressures.is_empty() {
+    let mut spec = MechSpec::from_deck(femu_mesh::read_inp(path)?)?;
+    if spec.pressures.is_empty() {
         bail!(
             "{}: the deck has no *DLOAD: its pressure faces define the skin the tests load (write a contention deck, e.g. with femu mesh)",
             path.display()
         );
     }
-    let skin: Vec<(usize, usize)> = deck.pressures.iter().map(|p| (p.element, p.face)).collect();
-    deck.pressures.clear();
-    for spec in specs {
-        let name = &spec.region;
-        let by_material = deck
+    let skin: Vec<(usize, usize)> = spec.pressures.iter().map(|p| (p.element, p.face)).collect();
+    spec.pressures.clear();
+    spec.surfaces.insert("SKIN".into(), skin.clone());
+    for m_spec in specs {
+        let name = &m_spec.region;
+        let by_material = spec
             .materials
             .iter()
             .position(|m| m.name.eq_ignore_ascii_case(name));
-        let by_region = deck
+        let by_region = spec
             .region_names
             .iter()
             .position(|r| r.eq_ignore_ascii_case(name))
             .and_then(|r| {
-                deck.element_region
+                spec.element_region
                     .iter()
                     .position(|&e| e == r)
-                    .map(|e| deck.element_material[e])
+                    .map(|e| spec.element_material[e])
             });
         let m = by_material.or(by_region).with_context(|| {
             format!(
@@ -196,33 +235,16 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
                 path.display()
             )
         })?;
-        deck.materials[m] = spec
-            .apply(&deck.materials[m])
+        spec.materials[m].law = m_spec
+            .apply(&*spec.materials[m].law)
             .with_context(|| format!("[materials.{name}]"))?;
     }
     Ok(StudyModel {
-        model: Model::from_deck(deck)?,
+        model: Model::new(spec)?,
         skin,
         thigh: None,
         source: format!("deck {}", path.display()),
     })
-}
-
-/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a
-/// contention deck: Table 1 materials, femur fixed, 20 mmHg on the skin; and its skin faces.
-pub fn thigh_deck(elements: usize, kind: ElementKind) -> Result<(Deck, Vec<(usize, usize)>)> {
-    if !ELEMENTS_RANGE.contains(&elements) {
-        bail!("the number of elements must be in [100, 500000], got {elements}");
-    }
-    let params = femu_geometry::ThighParams {
-        target_elements: Some(elements),
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    let deck =
-        femu_geometry::contention_deck(&thigh, &table1_materials(), femu_geometry::CONTENTION_MPA)?;
-    Ok((deck, skin))
 }
 
 /// A Gmsh mesh set up by the study's Gmsh view (`[materials]` per physical surface, `[[fixed]]`,
@@ -283,9 +305,17 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
     Ok(model)
 }
 
-/// The built-in thigh as a model without loads (femur fixed), and its skin faces.
+/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind` as a
+/// model: Table 1 materials, the femur fixed, no load; and its skin faces.
 pub fn thigh_model(elements: usize, kind: ElementKind) -> Result<(Model, Vec<(usize, usize)>)> {
-    let (mut deck, skin) = thigh_deck(elements, kind)?;
-    deck.pressures.clear();
-    Ok((Model::from_deck(deck)?, skin))
+    if !ELEMENTS_RANGE.contains(&elements) {
+        bail!("the number of elements must be in [100, 500000], got {elements}");
+    }
+    let params = femu_geometry::ThighParams {
+        target_elements: Some(elements),
+        ..Default::default()
+    };
+    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
+    let regions = materials(&[], &thigh.regions)?;
+    thigh_as_model(&thigh, regions)
 }

@@ -9,7 +9,7 @@
 //! (seed §2.3). A law that is not linear in a function of each parameter (Ogden's exponents)
 //! would need a different rate; none is registered.
 
-use super::{Hyperelastic, NonPositiveJacobian};
+use super::hyperelastic::{EnergyPart, Hyperelastic, NonPositiveJacobian};
 use crate::element::{ElementGeometry, ElementResult, MAX_DOFS};
 use std::fmt;
 
@@ -59,15 +59,6 @@ pub enum Bound {
     Closed(f64),
     /// No bound on this side (besides finiteness).
     Unbounded,
-}
-
-/// Which part of the energy a parameter's term `E_k` lives in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EnergyPart {
-    /// `E_k(I1, J)` of the isochoric part (the hybrid element evaluates it at each Gauss point).
-    Isochoric,
-    /// `E_k(J)` of the volumetric part (the hybrid element evaluates it at the mean dilatation).
-    Volumetric,
 }
 
 /// A parameter as its law declares it.

@@ -4,7 +4,7 @@
 
 use super::lines::KeyLines;
 use super::raw::TestEntry;
-use super::tests::TestSpec;
+use super::loading_tests::TestSpec;
 use super::StudyError;
 use femu_mech::loading::{contention, Contention, Loading};
 use femu_mesh::MMHG_IN_MPA;

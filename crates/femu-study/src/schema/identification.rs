@@ -2,8 +2,8 @@
 
 use super::geometry::{Geometry, Resolution, DEFAULT_ELEMENTS, ELEMENTS_RANGE};
 use super::lines::KeyLines;
+use super::loading_tests::TestSpec;
 use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
-use super::tests::TestSpec;
 use super::StudyError;
 use femu_identify::campaign::Optimizer;
 

@@ -23,11 +23,11 @@ mod geometry;
 mod identification;
 mod legacy;
 mod lines;
+mod loading_tests;
 mod materials;
 mod measurement;
 mod measurements;
 mod raw;
-mod tests;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
@@ -40,10 +40,10 @@ pub use geometry::{
     ELEMENTS_RANGE,
 };
 pub use identification::{Discretization, Grouping, IdentificationSpec, Steps};
-pub use materials::MaterialSpec;
+pub use loading_tests::{seed_tests, TestSpec};
+pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
 pub use measurements::{Measurement, Region, WindowSpec};
-pub use tests::{seed_tests, TestSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
 use lines::KeyLines;
@@ -182,7 +182,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let mut tests = tests::parse(file.test.as_deref(), &lines)?;
+    let mut tests = loading_tests::parse(file.test.as_deref(), &lines)?;
     if let Geometry::Deck(deck) = &geometry {
         deck_loads::apply(deck, &mut tests, file.test.as_deref(), &lines)?;
     }

@@ -412,25 +412,19 @@ pub fn forward(
 ) -> Result<()> {
     create_dir(out)?;
     let t0 = Instant::now();
-    let (base_deck, skin) = crate::model::thigh_deck(elements, kind)?;
+    let (base, skin) = crate::model::thigh_model(elements, kind)?;
     let mesh_s = t0.elapsed().as_secs_f64();
     for loading in tests {
         let t1 = Instant::now();
         let dir = out.join(loading.name());
         create_dir(&dir)?;
-        let mut deck = base_deck.clone();
-        deck.pressures.clear();
         if let Some(pressure) = loading.skin_pressure() {
-            let mut with_pressure = base_deck.clone();
-            with_pressure
-                .pressures
-                .iter_mut()
-                .for_each(|p| p.magnitude = pressure);
             let deck_path = dir.join("model.inp");
-            femu_mesh::write_inp_file(&with_pressure, &deck_path)
+            let deck = crate::model::contention_deck(&base, &skin, pressure);
+            femu_mesh::write_inp_file(&deck, &deck_path)
                 .with_context(|| format!("cannot write {}", deck_path.display()))?;
         }
-        let mut model = Model::from_deck(deck)?;
+        let mut model = base.clone();
         femu_mech::loading::apply_loading(&mut model, &skin, loading)?;
         progress.note(&format!(
             "forward: {} on the built-in thigh ({} elements, Table 1 materials, femur fixed) -> {}",
