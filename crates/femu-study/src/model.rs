@@ -3,8 +3,8 @@
 //! yet; and the skin faces the loading tests act on.
 
 use crate::schema::{
-    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError,
-    DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
+    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
+    DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
 };
 use anyhow::{bail, Context, Result};
 use femu_geometry::{MeshOptions, ThighModel};

@@ -3,8 +3,8 @@
 //! test's default (20 mmHg). A study that sets another pressure is stopped with both values.
 
 use super::lines::KeyLines;
-use super::raw::TestEntry;
 use super::loading_tests::TestSpec;
+use super::raw::TestEntry;
 use super::StudyError;
 use femu_mech::loading::{contention, Contention, Loading};
 use femu_mesh::MMHG_IN_MPA;

@@ -14,8 +14,8 @@
 
 use super::identification::find_test;
 use super::lines::KeyLines;
-use super::raw::DesignEntry;
 use super::loading_tests::TestSpec;
+use super::raw::DesignEntry;
 use super::ultrasound::ProbeSection;
 use super::StudyError;
 use femu_identify::design::DEFAULT_IDENTIFIABLE_SD;

@@ -20,9 +20,9 @@
 
 use super::identification::find_test;
 use super::lines::KeyLines;
+use super::loading_tests::TestSpec;
 use super::measurement::{check_entry, MeasurementSource, Travel};
 use super::raw::MeasurementEntry;
-use super::loading_tests::TestSpec;
 use super::ultrasound::ProbeSection;
 use super::StudyError;
 use femu_mech::loading::Side;
