@@ -9,9 +9,10 @@ use femu_identify::fit::{
 };
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::loading::{apply_loading, Loading};
-use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::ElementKind;
+
+mod common;
 use rayon::prelude::*;
 
 fn compression_thigh(elements: usize) -> Model {
@@ -50,18 +51,7 @@ fn grid(model: &Model) -> Vec<[f64; 2]> {
 
 /// Ten free parameters, bounds a factor 4 either side of Table 1.
 fn free_parameters(model: &Model) -> Vec<FreeParameter> {
-    all_parameters(model)
-        .into_iter()
-        .map(|p| {
-            let v = p.value(model);
-            FreeParameter {
-                name: p.name(model),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect()
+    common::free_parameters(model).0
 }
 
 /// The virtual measurement: the reference field at the grid points inside the tissue.

@@ -3,7 +3,7 @@
 //! yet; and the skin faces the loading tests act on.
 
 use crate::schema::{
-    Geometry, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
+    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
     DEFAULT_LABEL_SIZE_MM,
 };
 use anyhow::{bail, Context, Result};
@@ -146,28 +146,41 @@ pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
             mesh_thigh(dims, spec.resolution, kind)?,
             "parametric thigh".to_string(),
         ),
-        Geometry::Labels(l) => {
-            let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
-                .context("[labels] map/bone/background")?;
-            let img = femu_geometry::read_label_image(&l.image, l.slice)
-                .with_context(|| format!("[labels] image {}", l.image.display()))?;
-            let options = MeshOptions {
-                element_size_mm: match spec.resolution {
-                    Resolution::SizeMm(h) => h,
-                    _ => DEFAULT_LABEL_SIZE_MM,
-                },
-                kind,
-                min_island_mm2: l.min_island_mm2,
-                ..MeshOptions::default()
-            };
-            (
-                femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
-                    .with_context(|| format!("meshing {}", l.image.display()))?,
-                format!("label image {}", l.image.display()),
-            )
-        }
+        Geometry::Labels(l) => (
+            mesh_labels(l, label_size(spec.resolution), kind)?,
+            format!("label image {}", l.image.display()),
+        ),
         Geometry::Deck(path) => return deck_model(&spec.materials, path),
     };
+    from_thigh(spec, thigh, source)
+}
+
+/// The element size of a meshed label image (mm).
+fn label_size(resolution: Resolution) -> f64 {
+    match resolution {
+        Resolution::SizeMm(h) => h,
+        _ => DEFAULT_LABEL_SIZE_MM,
+    }
+}
+
+/// The label image of `l` meshed with elements of `size_mm`.
+fn mesh_labels(l: &LabelsSpec, size_mm: f64, kind: ElementKind) -> Result<ThighModel> {
+    let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
+        .context("[labels] map/bone/background")?;
+    let img = femu_geometry::read_label_image(&l.image, l.slice)
+        .with_context(|| format!("[labels] image {}", l.image.display()))?;
+    let options = MeshOptions {
+        element_size_mm: size_mm,
+        kind,
+        min_island_mm2: l.min_island_mm2,
+        ..MeshOptions::default()
+    };
+    femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
+        .with_context(|| format!("meshing {}", l.image.display()))
+}
+
+/// The model of a meshed thigh with the study's materials, femur fixed, no load.
+fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
     let regions = materials(&spec.materials, &thigh.regions)?;
     let (model, skin) = thigh_as_model(&thigh, regions)?;
     Ok(StudyModel {
@@ -176,6 +189,28 @@ pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
         thigh: Some(thigh),
         source,
     })
+}
+
+/// The study's model `built` of `spec` on a finer mesh of the same geometry: the element size
+/// divided by `ratio` (the built-in thigh on the raster of `built`'s mesh, as the convergence
+/// study; a label image at the finer size). `None` for a deck, which femu cannot refine.
+pub fn build_refined(
+    spec: &ModelSpec,
+    built: &StudyModel,
+    ratio: f64,
+) -> Result<Option<StudyModel>> {
+    let kind = spec.element.kind();
+    let Some(h) = built.thigh.as_ref().map(|t| t.element_size_mm) else {
+        return Ok(None);
+    };
+    let thigh = match &spec.geometry {
+        Geometry::Thigh(dims) => femu_convergence::refined_thigh(dims, kind, h, ratio)
+            .context("meshing the refined parametric thigh")?,
+        Geometry::Labels(l) => mesh_labels(l, h / ratio, kind)?,
+        Geometry::Deck(_) => return Ok(None),
+    };
+    let source = format!("{} refined {ratio:.3}x", built.source);
+    from_thigh(spec, thigh, source).map(Some)
 }
 
 /// A deck: its materials (overridden by `[materials.NAME]`, NAME a material or a region), its

@@ -16,6 +16,8 @@
 
 mod boundary;
 mod convergence;
+mod deck_loads;
+mod design;
 mod error;
 mod geometry;
 mod identification;
@@ -24,12 +26,14 @@ mod lines;
 mod loading_tests;
 mod materials;
 mod measurement;
+mod measurements;
 mod raw;
 mod regions;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
+pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
 pub(crate) use geometry::thigh_elements;
@@ -37,10 +41,11 @@ pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
 };
-pub use identification::{Grouping, IdentificationSpec, Steps};
+pub use identification::{Discretization, Grouping, IdentificationSpec, Steps};
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
+pub use measurements::{Measurement, Region, WindowSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
 use lines::KeyLines;
@@ -65,7 +70,12 @@ pub struct ModelSpec {
 pub struct Study {
     pub model: ModelSpec,
     pub tests: Vec<TestSpec>,
+    /// The grid, the default noise, and the first measurement's source and actuator term (the
+    /// one `[measurement]` of a single-measurement study).
     pub measurement: MeasurementSpec,
+    /// Every measurement (one for a single `[measurement]` or none given; a joint
+    /// identification fits them all).
+    pub measurements: Vec<Measurement>,
     /// Tied parameters (`[parameters] groups`; the seed's grouping when the study names none).
     pub groups: Vec<Vec<String>>,
     pub identification: IdentificationSpec,
@@ -77,9 +87,13 @@ pub struct Study {
     pub boundary: MeshBoundary,
     /// `[convergence]`: the convergence view (see [`Study::convergence_study`]).
     pub convergence: ConvergenceSpec,
+    /// `[design]`: the candidates of `femu design`.
+    pub design: DesignSpec,
     /// Whether `[grid]`, `[[test]]` and `[parameters] groups` were written (the convergence and
     /// Gmsh views, and the check of the group names, need to know).
     grid_given: bool,
+    /// Whether the measurements were written as `[[measurement]]` (outputs per measurement).
+    measurement_list: bool,
     tests_given: bool,
     groups_given: bool,
     /// The text's key lines, for the views checked later.
@@ -181,16 +195,37 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let tests = loading_tests::parse(file.test.as_deref(), &lines)?;
-    let measurement = measurement::parse(
-        file.grid.clone(),
-        file.noise,
+    let mut tests = loading_tests::parse(file.test.as_deref(), &lines)?;
+    if let Geometry::Deck(deck) = &geometry {
+        deck_loads::apply(deck, &mut tests, file.test.as_deref(), &lines)?;
+    }
+    let identification =
+        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let (grid, sigma_mm) = measurement::parse_grid_noise(file.grid.clone(), file.noise, &lines)?;
+    let probe = file.probe.unwrap_or_default();
+    let parsed = measurements::parse(
         file.measurement,
+        &tests,
+        &measurements::Defaults {
+            sigma_mm,
+            test: identification.test,
+            probe: &probe,
+        },
         &lines,
         base,
     )?;
-    let identification =
-        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let design = design::parse(file.design, &tests, &probe, &lines)?;
+    let first = &parsed.measurements[0];
+    let measurement = MeasurementSpec {
+        grid,
+        sigma_mm: if parsed.list {
+            sigma_mm
+        } else {
+            first.sigma_mm
+        },
+        source: first.source.clone(),
+        travel: first.travel,
+    };
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
     let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
@@ -207,14 +242,17 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         },
         tests,
         measurement,
+        measurements: parsed.measurements,
         groups,
         identification,
         steps: identification::parse_steps(file.run),
-        probe: file.probe.unwrap_or_default(),
+        probe,
         ultrasound: file.ultrasound.unwrap_or_default(),
         boundary,
         convergence,
+        design,
         grid_given: file.grid.is_some(),
+        measurement_list: parsed.list,
         tests_given: file.test.is_some(),
         groups_given,
         lines: std::sync::Arc::new(lines),
@@ -259,8 +297,10 @@ impl Study {
             Geometry::Deck(p) => files.push(("model", "deck", p)),
             Geometry::Thigh(_) => {}
         }
-        if let MeasurementSource::File { path, .. } = &self.measurement.source {
-            files.push(("measurement", "file", path));
+        for m in &self.measurements {
+            if let MeasurementSource::File { path, .. } = &m.source {
+                files.push(("measurement", "file", path));
+            }
         }
         for (table, key, path) in files {
             if !path.is_file() {
@@ -310,10 +350,18 @@ impl Study {
             Geometry::Deck(p) => files.push(p.as_path()),
             Geometry::Thigh(_) => {}
         }
-        if let MeasurementSource::File { path, .. } = &self.measurement.source {
-            files.push(path.as_path());
+        for m in &self.measurements {
+            if let MeasurementSource::File { path, .. } = &m.source {
+                files.push(path.as_path());
+            }
         }
         files
+    }
+
+    /// Whether the measurements were written as a list (`[[measurement]]`, even of one): the
+    /// outputs are then per measurement.
+    pub fn measurement_list(&self) -> bool {
+        self.measurement_list
     }
 
     /// Whether the study names its tests (`[[test]]`), rather than taking the seed's three.
@@ -328,5 +376,7 @@ impl Study {
     }
 }
 
+#[cfg(test)]
+mod measurement_tests;
 #[cfg(test)]
 mod unit_tests;

@@ -90,7 +90,9 @@ fn the_example_study_is_the_default() {
     assert_eq!(e.model.geometry, d.model.geometry);
     assert_eq!(e.tests, d.tests);
     assert_eq!(e.measurement, d.measurement);
+    assert_eq!(e.measurements, d.measurements);
     assert_eq!(e.identification, d.identification);
+    assert_eq!(e.design, d.design);
     assert_eq!(e.steps, d.steps);
     assert_eq!(e.groups, seed_groups());
     assert_eq!(e.model.resolution, Resolution::Elements(6000));

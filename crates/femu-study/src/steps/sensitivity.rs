@@ -500,9 +500,7 @@ fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()
 }
 
 fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     writeln!(
         w,
         "measurement,grouping,worst_c10_relative_sd,worst_d_relative_sd,condition,parameter_relative_sd"
