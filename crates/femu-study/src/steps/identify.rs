@@ -215,33 +215,15 @@ pub fn identify(
     }
     let built = crate::model::build(&study.model)?;
     let prepared = match measured {
-        Some(p) => {
-            if study.measurements.len() > 1 {
-                anyhow::bail!(
-                    "--measured replaces the one measurement of a study, and this study has {}: name the file in its [[measurement]]",
-                    study.measurements.len()
-                );
-            }
-            let m = &study.measurements[0];
-            vec![Prepared {
-                name: m.name.clone(),
-                label: format!(
-                    "{}, file {}",
-                    study.tests[m.test].loading.name(),
-                    p.display()
-                ),
-                test: m.test,
-                data: PreparedData::Measured(Measured {
-                    field: MeasuredField::read(p)?,
-                    source: p.display().to_string(),
-                    reference_known: false,
-                }),
-                travel: m.travel.map(|t| campaign::TravelTerm {
-                    measured_mm: t.measured_mm,
-                    sigma_mm: t.sigma_mm,
-                }),
-            }]
-        }
+        Some(p) => measured_prepared(
+            study,
+            Measured {
+                field: MeasuredField::read(p)?,
+                source: p.display().to_string(),
+                reference_known: false,
+            },
+            &format!("file {}", p.display()),
+        )?,
         None => measure::prepare(study, &built, out, progress)?,
     };
     identify_on(
@@ -252,6 +234,29 @@ pub fn identify(
         out,
         progress,
     )
+}
+
+/// The study's one measurement replaced by `measured` (a field in the model frame, from
+/// `--measured CSV` or handed over by a script; `what` names it in the label): `femu identify
+/// --measured`'s data.
+pub fn measured_prepared(study: &Study, measured: Measured, what: &str) -> Result<Vec<Prepared>> {
+    if study.measurements.len() > 1 {
+        anyhow::bail!(
+            "--measured replaces the one measurement of a study, and this study has {}: name the file in its [[measurement]]",
+            study.measurements.len()
+        );
+    }
+    let m = &study.measurements[0];
+    Ok(vec![Prepared {
+        name: m.name.clone(),
+        label: format!("{}, {what}", study.tests[m.test].loading.name()),
+        test: m.test,
+        data: PreparedData::Measured(measured),
+        travel: m.travel.map(|t| campaign::TravelTerm {
+            measured_mm: t.measured_mm,
+            sigma_mm: t.sigma_mm,
+        }),
+    }])
 }
 
 /// The progress of a campaign as notes and a bar per repeat.

@@ -8,7 +8,7 @@ use crate::progress::Progress;
 use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
 use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, TravelTerm};
-use femu_identify::measured::MeasuredField;
+use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::loading::Side;
 use femu_mesh::locate::PointLocator;
 use std::path::Path;
@@ -189,17 +189,13 @@ fn ultrasound_measurement(
     })
 }
 
-/// Writes each prepared measurement's field as the identification fits it in its first repeat
-/// (a virtual one's first noise realization; a file's mapped to the model frame) to
-/// `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements (an ultrasound
-/// measurement's folder already holds its own).
-pub fn write_measured(
+/// Each prepared measurement with its field as the identification fits it in its first repeat
+/// (a virtual one's first noise realization; a file's mapped to the model frame).
+pub fn realized<'a>(
     study: &Study,
     built: &StudyModel,
-    prepared: &[Prepared],
-    dir: &Path,
-    progress: &dyn Progress,
-) -> Result<()> {
+    prepared: &'a [Prepared],
+) -> Result<Vec<(&'a Prepared, Vec<MeasuredPoint>)>> {
     let models = super::joint::TestModels::new(study, built, prepared)?;
     let (free, reference) =
         super::identify::free_parameters(study, &models.full[0], study.identification.grouped())?;
@@ -213,6 +209,21 @@ pub fn write_measured(
             fitted.push((p, fields[b].0.points[range.clone()].to_vec()));
         }
     }
+    Ok(fitted)
+}
+
+/// Writes each prepared measurement's field as the identification fits it in its first repeat
+/// ([`realized`]) to `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements
+/// (an ultrasound measurement's folder already holds its own).
+pub fn write_measured(
+    study: &Study,
+    built: &StudyModel,
+    prepared: &[Prepared],
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let seed = study.identification.seed;
+    let fitted = realized(study, built, prepared)?;
     for (p, points) in fitted {
         let path = if study.measurement_list() {
             dir.join(&p.name).join("measured.csv")
