@@ -423,14 +423,17 @@ impl PyLeastSquares {
         state.problem.counts()
     }
 
-    /// The weighted residuals at `phi` (log-parameters).
-    fn residual(&self, py: Python<'_>, phi: Vec<f64>) -> PyResult<Vec<f64>> {
-        self.at(py, phi, |c| c.r.clone())
+    /// The weighted residuals at `phi` (log-parameters), a NumPy array that owns a copy of
+    /// the kept ones (moved into NumPy, not converted number by number).
+    fn residual<'py>(&self, py: Python<'py>, phi: Vec<f64>) -> PyResult<Bound<'py, PyAny>> {
+        let r = self.at(py, phi, |c| c.r.clone())?;
+        let m = r.len();
+        convert::array(py, r, &[m])
     }
 
-    /// The Jacobian `∂r/∂φ` at `phi`, residuals x parameters (row-major, flat) with its shape.
-    fn jacobian(&self, py: Python<'_>, phi: Vec<f64>) -> PyResult<(Vec<f64>, usize, usize)> {
-        self.at(py, phi, |c| {
+    /// The Jacobian `∂r/∂φ` at `phi`, a NumPy array residuals x parameters.
+    fn jacobian<'py>(&self, py: Python<'py>, phi: Vec<f64>) -> PyResult<Bound<'py, PyAny>> {
+        let (flat, m, n) = self.at(py, phi, |c| {
             let (m, n) = (c.r.len(), c.j.len());
             let mut flat = vec![0.0; m * n];
             for (k, col) in c.j.iter().enumerate() {
@@ -439,7 +442,8 @@ impl PyLeastSquares {
                 }
             }
             (flat, m, n)
-        })
+        })?;
+        convert::array(py, flat, &[m, n])
     }
 
     /// femu's Levenberg–Marquardt from `start` (model units; default the reference), as each

@@ -168,8 +168,7 @@ class LeastSquares:
 
     def jacobian(self, phi: Sequence[float]) -> np.ndarray:
         """``∂r/∂φ`` at ``phi``: residuals x parameters."""
-        flat, m, n = self._inner.jacobian([float(v) for v in phi])
-        return np.asarray(flat).reshape(m, n)
+        return self._inner.jacobian([float(v) for v in phi])
 
     def cost(self, phi: Sequence[float]) -> float:
         """``½|r(φ)|²``, the cost femu minimizes (seed Eq. 2, weighted)."""
