@@ -135,6 +135,20 @@ fn solve(model: &Model, progress: &dyn femu_study::Progress) -> anyhow::Result<S
     Ok(solution)
 }
 
+impl PyModel {
+    /// The loading test `test` of `tests` and the checked `parameters` of a solve.
+    fn request(
+        &self,
+        tests: &PyStudy,
+        test: usize,
+        parameters: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<(Loading, Vec<(Parameter, f64)>)> {
+        let load = loading(tests, test)?;
+        let values = checked_parameters(&self.built.model, &parameter_pairs(parameters)?)?;
+        Ok((load, values))
+    }
+}
+
 #[pymethods]
 impl PyModel {
     /// Reference node coordinates (mm), nodes x 2.
@@ -220,8 +234,7 @@ impl PyModel {
         parameters: Option<&Bound<'py, PyDict>>,
         reporter: Option<Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let load = loading(&tests, test)?;
-        let values = checked_parameters(&self.built.model, &parameter_pairs(parameters)?)?;
+        let (load, values) = self.request(&tests, test, parameters)?;
         let built = &self.built;
         let (model, solution, fields) = running::run(py, reporter.as_ref(), |progress| {
             let model = loaded(built, &load, &values)?;
@@ -268,8 +281,7 @@ impl PyModel {
         parameters: Option<&Bound<'py, PyDict>>,
         reporter: Option<Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let load = loading(&tests, test)?;
-        let values = checked_parameters(&self.built.model, &parameter_pairs(parameters)?)?;
+        let (load, values) = self.request(&tests, test, parameters)?;
         let built = &self.built;
         let (model, solution, params, dstate, report) =
             running::run(py, reporter.as_ref(), |progress| {
