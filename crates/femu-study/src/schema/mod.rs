@@ -17,6 +17,7 @@
 mod boundary;
 mod convergence;
 mod error;
+pub mod files;
 mod geometry;
 mod identification;
 mod legacy;
@@ -31,6 +32,7 @@ pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
+pub use files::{absolute_file_names, is_file_key, FILE_KEYS};
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
