@@ -332,22 +332,19 @@ fn fill(text: &str, vars: &BTreeMap<&str, &str>) -> Result<String, String> {
     Ok(out)
 }
 
-/// Checks a case's study with the schema, and that the files it names exist.
+/// Checks a case's study with the schema, and what needs its files (they exist; the regions
+/// of the model have materials; the fixed and grouped parameters are the model's).
 fn check(text: &str, input: &CaseInput) -> Result<(), String> {
-    // File names are absolute by now: the base folder plays no part.
-    let study = femu_study::parse(text, Path::new("/")).map_err(|e| {
+    let named = |e: femu_study::StudyError| {
         let msg = e.to_string();
         match column_named_in(&msg, &input.keys) {
             Some(col) => format!("{msg} (the value of column {col})"),
             None => msg,
         }
-    })?;
-    for (key, path) in study.input_files() {
-        if !path.is_file() {
-            return Err(format!("{key}: no file {}", path.display()));
-        }
-    }
-    Ok(())
+    };
+    // File names are absolute by now: the base folder plays no part.
+    let study = femu_study::parse(text, Path::new("/")).map_err(named)?;
+    study.check_model_inputs().map_err(named)
 }
 
 /// The column whose key the schema's message names (`[materials.fat] c10_kpa`, `[[test]] 2
@@ -424,10 +421,7 @@ mod tests {
         assert_eq!(ischio.keys, vec![("c10_kpa".to_string(), 3.0)]);
         assert!(cases[0].text.contains("force_n_per_mm = 0.2"));
         // ${subject} filled, the file name made absolute from the template's folder.
-        assert_eq!(
-            s.input_files(),
-            vec![("[measurement] file", dir.join("fields/s01.csv").as_path())]
-        );
+        assert_eq!(s.input_files(), vec![dir.join("fields/s01.csv").as_path()]);
         // The empty cells keep the template's values.
         let s2 = femu_study::parse(&cases[1].text, Path::new("/")).unwrap();
         let fat2 = s2

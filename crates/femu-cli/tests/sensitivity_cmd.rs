@@ -86,7 +86,7 @@ fn other_laws_have_their_maps() {
     let dir = scratch("laws");
     let study = write_study(
         &dir,
-        "[model]\nelements = 400\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [materials.FAT]\nlaw = \"yeoh\"\nc10_kpa = 0.8\nc20_kpa = 0.3\nc30_kpa = 0.1\nd_per_mpa = 30.8\n\
          [materials.QUADRICEPS]\nlaw = \"mooney-rivlin\"\nc10_kpa = 1.2\nc01_kpa = 0.5\nd_per_mpa = 18\n",
     );
@@ -126,7 +126,7 @@ fn bad_studies_are_named() {
         ("[model]\nelemnts = 800\n", "elemnts"),
         ("[materials.bone]\nc10_kpa = 1.0\n", "[materials.bone]"),
         ("[parameters]\ngroups = [[\"D_FEMUR\"]]\n", "D_FEMUR"),
-        ("[grid]\norigin_mm = [1000.0, 1000.0]\nspacing_mm = 1.0\ncounts = [4, 4]\n[model]\nelements = 300\n[[test]]\nkind = \"contention\"\n", "no grid point"),
+        ("[grid]\norigin_mm = [1000.0, 1000.0]\nspacing_mm = 1.0\ncounts = [4, 4]\n[model]\nelements = 700\n[[test]]\nkind = \"contention\"\n", "no grid point"),
     ];
     for (k, (text, needle)) in cases.iter().enumerate() {
         let study = write_study(&dir, text);
@@ -137,7 +137,7 @@ fn bad_studies_are_named() {
             dir.join(format!("o{k}")).to_str().unwrap(),
             "--no-figures",
             "--elements",
-            "300",
+            "700",
         ]);
         assert!(!o.status.success(), "case {k} should fail");
         let err = String::from_utf8_lossy(&o.stderr);

@@ -21,13 +21,43 @@ impl GreyImage {
                 "frame {frame} requested, but PNG/TIFF files are read as a single frame"
             )));
         }
-        let img = image::ImageReader::open(path)
-            .map_err(|e| err(e.to_string()))?
-            .with_guessed_format()
-            .map_err(|e| err(e.to_string()))?
-            .decode()
-            .map_err(|e| err(e.to_string()))?;
-        Ok(from_dynamic(&img))
+        Ok(from_dynamic(&decode_raster(path).map_err(err)?))
+    }
+}
+
+/// Decodes a PNG or TIFF file after checking its header's size against
+/// [`femu_mesh::limits::MAX_IMAGE_PIXELS`] (a header claiming 10⁹ pixels is refused before any
+/// allocation); the errors say what is wrong with the file in the user's terms (issue 32.12: a
+/// floating-point TIFF gave "color type Unknown(32)").
+pub fn decode_raster(path: &Path) -> Result<image::DynamicImage, String> {
+    let open = || {
+        image::ImageReader::open(path)
+            .and_then(|r| r.with_guessed_format())
+            .map_err(|e| format!("cannot open the file: {e}"))
+    };
+    let (w, h) = open()?.into_dimensions().map_err(explain)?;
+    femu_mesh::limits::check_image_size(w as u64, h as u64)?;
+    open()?.decode().map_err(explain)
+}
+
+/// An image decoder's error in the user's terms.
+fn explain(e: image::ImageError) -> String {
+    use image::error::{ImageError as E, UnsupportedErrorKind as U};
+    use image::ExtendedColorType as C;
+    match &e {
+        E::Unsupported(u) => match u.kind() {
+            U::Color(C::Unknown(bits)) | U::ColorLayout(C::Unknown(bits)) => format!(
+                "its pixels are {bits}-bit samples (a floating-point or 32-bit TIFF), which femu does not read: save it as 8- or 16-bit integer grey or RGB"
+            ),
+            U::Color(c) | U::ColorLayout(c) => format!(
+                "its pixel type {c:?} is not supported: save it as 8- or 16-bit integer grey or RGB"
+            ),
+            U::Format(_) => "not an image femu reads (PNG, TIFF or DICOM)".into(),
+            _ => format!("a feature of this file is not supported: {e}"),
+        },
+        E::Decoding(_) => format!("the file is damaged or cut short: {e}"),
+        E::Limits(_) => format!("the image is too large to decode: {e}"),
+        _ => e.to_string(),
     }
 }
 

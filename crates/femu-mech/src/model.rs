@@ -38,6 +38,8 @@ pub enum ModelError {
     BadDof(i64),
     #[error("the model has no prescribed displacement: rigid-body motion is not restrained")]
     Unrestrained,
+    #[error("node {0}: a point load on a node no element uses (nothing would carry it)")]
+    LoadOnUnusedNode(i64),
     #[error("region {0}: no element set of that name in the mesh")]
     NoRegionSet(String),
     #[error("element {0} belongs to no region")]
@@ -280,6 +282,10 @@ impl Model {
                 return Err(ModelError::BadDof(mesh.node_labels[b.node]));
             }
         }
+        let used = nodes_used(&mesh);
+        if let Some(p) = point_loads.iter().find(|p| !used[p.node]) {
+            return Err(ModelError::LoadOnUnusedNode(mesh.node_labels[p.node]));
+        }
         if boundaries.is_empty() {
             return Err(ModelError::Unrestrained);
         }
@@ -307,6 +313,14 @@ impl Model {
             contacts: Vec::new(),
             step,
         })
+    }
+
+    /// The nodes no element uses (an Abaqus reference point, a node left over from a cut
+    /// mesh): they have no stiffness, so the solver holds them at zero displacement (or at
+    /// their prescribed value); a point load on one is refused when the model is built.
+    pub fn unused_nodes(&self) -> Vec<usize> {
+        let used = nodes_used(&self.mesh);
+        (0..used.len()).filter(|&n| !used[n]).collect()
     }
 
     /// Number of nodes.
@@ -366,4 +380,15 @@ impl Model {
             self.mesh.nodes[n][1] + u[2 * n + 1],
         ]
     }
+}
+
+/// Whether each node of `mesh` belongs to an element.
+fn nodes_used(mesh: &Mesh) -> Vec<bool> {
+    let mut used = vec![false; mesh.nodes.len()];
+    for el in &mesh.elements {
+        for &n in el.nodes() {
+            used[n] = true;
+        }
+    }
+    used
 }

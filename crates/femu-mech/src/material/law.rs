@@ -391,7 +391,10 @@ impl Clone for Box<dyn Material> {
 /// Two materials are equal when they are the same law with the same parameter values.
 impl PartialEq for dyn Material {
     fn eq(&self, other: &Self) -> bool {
-        std::ptr::eq(self.spec(), other.spec()) && self.parameters() == other.parameters()
+        // By the law's name, not its address: a law's spec is an associated const, which each
+        // crate that monomorphizes `spec()` may promote to its own copy (femu-study's
+        // the_example_study_is_the_default saw two FAT Neo-Hookeans compare unequal).
+        self.spec().name == other.spec().name && self.parameters() == other.parameters()
     }
 }
 

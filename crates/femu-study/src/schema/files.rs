@@ -1,14 +1,14 @@
 //! The keys of a study file that name other files (`[model] deck`, `[labels] image`,
-//! `[measurement] file`): relative names start from the study file's folder ([`super::read`]).
+//! `[measurement] file`, `file` of each `[[measurement]]`): relative names start from the study
+//! file's folder ([`super::read`]).
 //! A study copied elsewhere (the cases of `femu batch`, each written into its own folder) keeps
 //! pointing at the same files once these names are made absolute ([`absolute_file_names`]);
-//! [`Study::input_files`] lists the files a checked study will read, so that a caller can check
+//! [`super::Study::input_files`] lists the files a checked study will read, so that a caller can check
 //! they exist before anything runs.
 //!
 //! A new key that names a file is added to [`FILE_KEYS`] (and read through
 //! [`super::lines::resolve`], as the three here are).
 
-use super::{Geometry, MeasurementSource, Study};
 use std::path::{Path, PathBuf};
 
 /// `(table, key)` of every study-file key that names a file.
@@ -18,9 +18,16 @@ pub const FILE_KEYS: [(&str, &str); 3] = [
     ("measurement", "file"),
 ];
 
-/// Whether the key at `path` (`["labels", "image"]`) names a file.
+/// Whether the key at `path` (`["labels", "image"]`, `["measurement", "2", "file"]` for the
+/// second `[[measurement]]`) names a file.
 pub fn is_file_key(path: &[&str]) -> bool {
-    matches!(path, [table, key] if FILE_KEYS.contains(&(*table, *key)))
+    match path {
+        [table, key] => FILE_KEYS.contains(&(*table, *key)),
+        [table, index, key] => {
+            index.parse::<usize>().is_ok() && FILE_KEYS.contains(&(*table, *key))
+        }
+        _ => false,
+    }
 }
 
 /// `name` as a path from `base` (unchanged when absolute).
@@ -31,29 +38,24 @@ pub fn resolve_from(base: &Path, name: &str) -> PathBuf {
 /// Makes the file names of a study's TOML tables absolute, relative ones taken from `base`
 /// (the study file's folder). Values that are not strings are left for the schema to reject.
 pub fn absolute_file_names(doc: &mut toml::Table, base: &Path) {
-    for (table, key) in FILE_KEYS {
-        let Some(toml::Value::Table(t)) = doc.get_mut(table) else {
-            continue;
-        };
+    let absolute = |t: &mut toml::Table, key: &str| {
         if let Some(toml::Value::String(name)) = t.get_mut(key) {
             *name = resolve_from(base, name).to_string_lossy().into_owned();
         }
-    }
-}
-
-impl Study {
-    /// The files the study reads, each with the key that names it (`"[labels] image"`).
-    pub fn input_files(&self) -> Vec<(&'static str, &Path)> {
-        let mut files = Vec::new();
-        match &self.model.geometry {
-            Geometry::Deck(p) => files.push(("[model] deck", p.as_path())),
-            Geometry::Labels(l) => files.push(("[labels] image", l.image.as_path())),
-            Geometry::Thigh(_) => {}
+    };
+    for (table, key) in FILE_KEYS {
+        match doc.get_mut(table) {
+            Some(toml::Value::Table(t)) => absolute(t, key),
+            // A list of tables (`[[measurement]]`): the key of each entry.
+            Some(toml::Value::Array(entries)) => {
+                for e in entries {
+                    if let toml::Value::Table(t) = e {
+                        absolute(t, key);
+                    }
+                }
+            }
+            _ => {}
         }
-        if let MeasurementSource::File { path, .. } = &self.measurement.source {
-            files.push(("[measurement] file", path.as_path()));
-        }
-        files
     }
 }
 
@@ -69,7 +71,9 @@ mod tests {
                       [model]\nsize_mm = 2.0\n\
                       [measurement]\nsource = \"file\"\nfile = \"../fields/s01.csv\"\n";
         let deck = "[model]\ndeck = \"decks/thigh.inp\"\n";
-        for text in [labels, deck] {
+        let list = "[[measurement]]\nsource = \"file\"\nfile = \"a.csv\"\n\
+                    [[measurement]]\nsource = \"file\"\nfile = \"b.csv\"\n";
+        for text in [labels, deck, list] {
             let home = Path::new("/data/study");
             let at_home = super::super::parse(text, home).unwrap();
             let mut doc: toml::Table = text.parse().unwrap();
@@ -78,15 +82,12 @@ mod tests {
             let elsewhere = super::super::parse(&moved, Path::new("/tmp/case")).unwrap();
             assert_eq!(at_home.input_files(), elsewhere.input_files());
             assert!(!at_home.input_files().is_empty());
-            for (key, path) in at_home.input_files() {
-                assert!(path.starts_with(home), "{key}: {}", path.display());
-                let (table, name) = key
-                    .trim_start_matches('[')
-                    .split_once("] ")
-                    .expect("[table] key");
-                assert!(is_file_key(&[table, name]), "{key} is not in FILE_KEYS");
+            for path in at_home.input_files() {
+                assert!(path.starts_with(home), "{}", path.display());
             }
         }
+        assert!(is_file_key(&["measurement", "file"]));
         assert!(!is_file_key(&["labels", "map"]));
+        assert!(is_file_key(&["measurement", "2", "file"]));
     }
 }
