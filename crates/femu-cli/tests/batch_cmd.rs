@@ -253,6 +253,89 @@ fn bad_cases_are_refused_before_anything_runs() {
     );
 }
 
+/// The state of case `name` in `st`.
+fn state_of(st: &BatchStatus, name: &str) -> CaseState {
+    st.cases.iter().find(|c| c.name == name).unwrap().state
+}
+
+/// Waits until `cond` holds of the batch's status (at most `limit`).
+fn wait_until(out: &Path, limit: Duration, cond: impl Fn(&BatchStatus) -> bool) -> BatchStatus {
+    let t0 = Instant::now();
+    loop {
+        if out.join("batch.json").is_file() {
+            let st = status(out);
+            if cond(&st) {
+                return st;
+            }
+            assert!(t0.elapsed() < limit, "not reached in {limit:?}:\n{st}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn a_stopped_batch_keeps_its_cases_and_resume_finishes_it() {
+    let dir = scratch("stop");
+    let cases = "case,materials.fat.c10_kpa,identification.seed\na,0.8,1\nb,0.9,2\nc,1.0,3\n";
+    let batch = inputs(&dir, cases);
+    let out = dir.join("out");
+    let runner = std::process::Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args([
+            "batch",
+            "run",
+            path(&batch),
+            "--out",
+            path(&out),
+            "--jobs",
+            "1",
+            "--quiet",
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Stopped (SIGTERM, as Ctrl-C) while its first case runs.
+    wait_until(&out, Duration::from_secs(120), |st| {
+        state_of(st, "a") == CaseState::Running
+    });
+    let kill = std::process::Command::new("kill")
+        .args(["-TERM", &runner.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let o = runner.wait_with_output().unwrap();
+    assert!(!o.status.success(), "a stopped batch is not a success");
+    assert!(stderr(&o).contains("--resume"), "{}", stderr(&o));
+    let st = status(&out);
+    // The running case stopped cleanly (or had just finished), the others never started;
+    // nothing is failed or lost.
+    assert!(
+        matches!(state_of(&st, "a"), CaseState::Interrupted | CaseState::Done),
+        "{st}"
+    );
+    assert_eq!(state_of(&st, "c"), CaseState::Pending, "{st}");
+    assert!(
+        !st.cases.iter().any(|c| matches!(
+            c.state,
+            CaseState::Failed | CaseState::Lost | CaseState::Running
+        )),
+        "{st}"
+    );
+    let o = femu(&[
+        "batch",
+        "run",
+        path(&batch),
+        "--out",
+        path(&out),
+        "--resume",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(status(&out)
+        .cases
+        .iter()
+        .all(|c| c.state == CaseState::Done));
+}
+
 /// Whether a Slurm with an idle node answers here (`.ci/slurm/start.sh` starts one).
 fn slurm_ready() -> bool {
     std::process::Command::new("sinfo")
@@ -391,4 +474,68 @@ fn a_slurm_array_runs_the_cases_and_collects_the_local_table() {
     let from_here = collect(&local);
     assert_eq!(from_slurm.lines().count(), 1 + 5 * 8);
     assert_eq!(from_slurm, from_here);
+}
+
+#[test]
+fn a_cancelled_slurm_task_is_lost_and_resubmitted() {
+    if !slurm_ready() {
+        eprintln!("skipped: no Slurm answers here (sinfo shows no idle node; .ci/run starts one with .ci/slurm/start.sh)");
+        return;
+    }
+    let dir = scratch("cancel");
+    let batch = inputs(&dir, "case,materials.fat.c10_kpa\nonly,0.8\n");
+    // The task waits for `go` before femu starts: it is cancelled while it waits.
+    let go = dir.join("go");
+    let text = format!(
+        "{BATCH}setup = [\"while [ ! -e {} ]; do sleep 0.2; done\"]\n",
+        go.display()
+    );
+    std::fs::write(&batch, text).unwrap();
+    let out = dir.join("out");
+    let o = femu(&[
+        "batch",
+        "run",
+        path(&batch),
+        "--out",
+        path(&out),
+        "--slurm",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    wait_until(&out, Duration::from_secs(120), |st| {
+        state_of(st, "only") == CaseState::Running
+    });
+    let jobs: femu_batch::slurm::Submissions =
+        serde_json::from_str(&std::fs::read_to_string(out.join("slurm/jobs.json")).unwrap())
+            .unwrap();
+    let job = &jobs.submissions[0].job_id;
+    assert!(std::process::Command::new("scancel")
+        .arg(job)
+        .status()
+        .unwrap()
+        .success());
+    // Slurm ended the task before it could record anything: lost, with Slurm's state and the
+    // task's log named.
+    let st = wait_until(&out, Duration::from_secs(120), |st| {
+        state_of(st, "only") == CaseState::Lost
+    });
+    let why = st.cases[0].error.as_deref().unwrap();
+    assert!(
+        why.contains("CANCELLED") && why.contains(&format!("{job}_0.out")),
+        "{why}"
+    );
+    std::fs::write(&go, "").unwrap();
+    let o = femu(&[
+        "batch",
+        "run",
+        path(&batch),
+        "--out",
+        path(&out),
+        "--slurm",
+        "--resume",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let st = wait_for(&out, Duration::from_secs(300));
+    assert_eq!(state_of(&st, "only"), CaseState::Done, "{st}");
 }
