@@ -65,6 +65,13 @@ fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `femu batch run BATCH --out OUT ARGS...`.
+fn batch_run(batch: &Path, out: &Path, args: &[&str]) -> Output {
+    let mut all = vec!["batch", "run", path(batch), "--out", path(out)];
+    all.extend_from_slice(args);
+    femu(&all)
+}
+
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
@@ -96,16 +103,7 @@ fn a_broken_case_fails_alone_and_resume_finishes_it() {
     let dir = scratch("local");
     let batch = inputs(&dir, CASES);
     let out = dir.join("out");
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--jobs",
-        "2",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--jobs", "2", "--quiet"]);
     // The batch reports the failure (non-zero exit) and names the case and the bad line.
     assert!(!o.status.success());
     let err = stderr(&o);
@@ -163,16 +161,7 @@ fn a_broken_case_fails_alone_and_resume_finishes_it() {
     let others = ["s01-L", "s01-R", "s02-L", "s02-R", "s04-L"];
     let before = records(&others);
     fix_broken_case(&dir, &out.join("cases/s01-L"));
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--jobs",
-        "2",
-        "--resume",
-    ]);
+    let o = batch_run(&batch, &out, &["--jobs", "2", "--resume"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         stderr(&o).contains("--resume: 1 cases to run, 5 left as they are"),
@@ -183,15 +172,7 @@ fn a_broken_case_fails_alone_and_resume_finishes_it() {
     let st = status(&out);
     assert!(st.cases.iter().all(|c| c.state == CaseState::Done), "{st}");
     // Nothing left to do: a second --resume runs nothing.
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--resume",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--resume", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(records(&others), before);
     // Gathered: one row per case and parameter (eight free parameters with the seed's
@@ -223,7 +204,7 @@ fn bad_cases_are_refused_before_anything_runs() {
                  a,s01,0.8,1,\nb,s02,-0.5,2,\nc,s03,0.8,two,\nd,s04,0.8,4,mri/missing.png\na,s05,0.8,5,\n";
     let batch = inputs(&dir, cases);
     let out = dir.join("out");
-    let o = femu(&["batch", "run", path(&batch), "--out", path(&out)]);
+    let o = batch_run(&batch, &out, &[]);
     assert!(!o.status.success());
     let err = stderr(&o);
     assert!(
@@ -244,7 +225,7 @@ fn bad_cases_are_refused_before_anything_runs() {
     let good = inputs(&dir, "case,materials.fat.c10_kpa\nonly,0.8\n");
     std::fs::create_dir_all(&out).unwrap();
     std::fs::write(out.join("batch.json"), "{}").unwrap();
-    let o = femu(&["batch", "run", path(&good), "--out", path(&out)]);
+    let o = batch_run(&good, &out, &[]);
     assert!(!o.status.success());
     assert!(
         stderr(&o).contains("holds a batch already"),
@@ -320,15 +301,7 @@ fn a_stopped_batch_keeps_its_cases_and_resume_finishes_it() {
         )),
         "{st}"
     );
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--resume",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--resume", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(status(&out)
         .cases
@@ -385,16 +358,7 @@ fn a_slurm_array_runs_the_cases_and_collects_the_local_table() {
     let batch = inputs(&dir, &cases);
     let out = dir.join("slurm");
     // --dry-run prints the script and submits nothing.
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--slurm",
-        "--dry-run",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--slurm", "--dry-run", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let script = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -406,15 +370,7 @@ fn a_slurm_array_runs_the_cases_and_collects_the_local_table() {
         "{script}"
     );
     assert!(!out.exists());
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--slurm",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--slurm", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let st = wait_for(&out, Duration::from_secs(600));
     for c in &st.cases {
@@ -437,16 +393,7 @@ fn a_slurm_array_runs_the_cases_and_collects_the_local_table() {
     }
     // Fixed, --resume resubmits the failed task alone.
     fix_broken_case(&dir, &out.join("cases/s01-L"));
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--slurm",
-        "--resume",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--slurm", "--resume", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let jobs: femu_batch::slurm::Submissions =
         serde_json::from_str(&std::fs::read_to_string(out.join("slurm/jobs.json")).unwrap())
@@ -460,16 +407,7 @@ fn a_slurm_array_runs_the_cases_and_collects_the_local_table() {
     // deterministic computation on one thread (Slurm's one CPU per task; two local jobs on two
     // cores give each case one thread too).
     let local = dir.join("local");
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&local),
-        "--jobs",
-        "2",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &local, &["--jobs", "2", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let from_here = collect(&local);
     assert_eq!(from_slurm.lines().count(), 1 + 5 * 8);
@@ -492,15 +430,7 @@ fn a_cancelled_slurm_task_is_lost_and_resubmitted() {
     );
     std::fs::write(&batch, text).unwrap();
     let out = dir.join("out");
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--slurm",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--slurm", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     wait_until(&out, Duration::from_secs(120), |st| {
         state_of(st, "only") == CaseState::Running
@@ -525,16 +455,7 @@ fn a_cancelled_slurm_task_is_lost_and_resubmitted() {
         "{why}"
     );
     std::fs::write(&go, "").unwrap();
-    let o = femu(&[
-        "batch",
-        "run",
-        path(&batch),
-        "--out",
-        path(&out),
-        "--slurm",
-        "--resume",
-        "--quiet",
-    ]);
+    let o = batch_run(&batch, &out, &["--slurm", "--resume", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let st = wait_for(&out, Duration::from_secs(300));
     assert_eq!(state_of(&st, "only"), CaseState::Done, "{st}");
