@@ -367,7 +367,7 @@ mod tests {
     use super::*;
     use crate::spec::{read_table, Origin};
 
-    const TEMPLATE: &str = "[model]\nelements = 400\n[[test]]\nkind = \"contention\"\n[[test]]\nkind = \"compression\"\nside = \"anterior\"\nforce_n_per_mm = 0.1\n[materials.fat]\nc10_kpa = 0.8\n[identification]\ntest = \"compression\"\nseed = 1\n[measurement]\nsource = \"file\"\nfile = \"fields/${subject}.csv\"\n";
+    const TEMPLATE: &str = "[model]\nelements = 700\n[[test]]\nkind = \"contention\"\n[[test]]\nkind = \"compression\"\nside = \"anterior\"\nforce_n_per_mm = 0.1\n[materials.fat]\nc10_kpa = 0.8\n[identification]\ntest = \"compression\"\nseed = 1\n[measurement]\nsource = \"file\"\nfile = \"fields/${subject}.csv\"\n";
 
     /// A batch in a scratch folder: the template, a table, the measured fields it names.
     fn batch(table: &str, fields: &[&str]) -> (BatchFile, PathBuf) {
@@ -476,7 +476,7 @@ mod tests {
         );
         says(
             "nofile",
-            &["line 5", "[measurement] file", "no file", "s09.csv"],
+            &["line 5", "[measurement] file", "does not exist", "s09.csv"],
         );
         says("bad/name", &["line 6", "folder name"]);
         says("ok", &["line 7", "taken by cases.csv line 2"]);
@@ -496,6 +496,31 @@ mod tests {
             "seed",
             &["line 10", "column identification.seed", "whole number"],
         );
+        std::fs::remove_dir_all(dir).ok();
+    }
+
+    /// A `[[measurement]]` list: `measurement.2.file` sets the second entry's file, made
+    /// absolute from the table's folder.
+    #[test]
+    fn a_measurement_list_entry_takes_its_file() {
+        let dir = std::env::temp_dir().join(format!("femu-batch-list-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("fields")).unwrap();
+        std::fs::write(dir.join("fields/b.csv"), "x,y,ux,uy\n0,0,0,0\n").unwrap();
+        let template: toml::Table = "[[measurement]]\ntest = \"contention\"\n[[measurement]]\ntest = \"compression\"\nsource = \"file\"\nfile = \"a.csv\"\n".parse().unwrap();
+        let cases = read_table(
+            "case,measurement.2.file,measurement.3.file\nx,fields/b.csv,\ny,,fields/b.csv\n",
+            &dir.join("cases.csv"),
+        )
+        .unwrap();
+        let text = case_study(&template, &dir.join("study.toml"), &cases[0], "x").unwrap();
+        let doc: toml::Table = text.parse().unwrap();
+        let file = get_path(&doc, &["measurement", "2", "file"]).unwrap();
+        assert_eq!(
+            file.as_str().unwrap(),
+            dir.join("fields/b.csv").to_str().unwrap()
+        );
+        let e = case_study(&template, &dir.join("study.toml"), &cases[1], "y").unwrap_err();
+        assert!(e.contains("2 [[measurement]] entries"), "{e}");
         std::fs::remove_dir_all(dir).ok();
     }
 

@@ -346,10 +346,19 @@ pub fn accounting(job_ids: &[&str]) -> Result<BTreeMap<(String, usize), TaskStat
     if !out.status.success() {
         bail!("sacct: {}", String::from_utf8_lossy(&out.stderr).trim());
     }
-    // JobID is JOB_TASK for an array task.
+    Ok(parse_accounting(
+        &String::from_utf8_lossy(&out.stdout),
+        job_ids,
+    ))
+}
+
+/// `JobID|State|ExitCode` rows (`sacct -n -P -X`) of the array tasks of `job_ids`: JobID is
+/// `JOB_TASK` for a task that started, `JOB_[3-9]` for tasks still pending together (left out,
+/// as are other jobs); State may carry a detail (`CANCELLED by 0`).
+fn parse_accounting(text: &str, job_ids: &[&str]) -> BTreeMap<(String, usize), TaskState> {
     let mut map = BTreeMap::new();
-    for line in String::from_utf8_lossy(&out.stdout).lines() {
-        let f: Vec<&str> = line.split('|').collect();
+    for line in text.lines() {
+        let f: Vec<&str> = line.trim().split('|').collect();
         let [id, state, exit] = f[..] else { continue };
         let Some((job, task)) = id.split_once('_') else {
             continue;
@@ -366,7 +375,7 @@ pub fn accounting(job_ids: &[&str]) -> Result<BTreeMap<(String, usize), TaskStat
             },
         );
     }
-    Ok(map)
+    map
 }
 
 /// `JOB|TASK|STATE|REASON` rows of `job_ids` (rows of other jobs, and job-level rows of arrays
@@ -489,6 +498,19 @@ mod tests {
             Path::new("f")
         )
         .is_err());
+    }
+
+    /// sacct's `-P` format as its manual gives it (not checked against a real accounting
+    /// database: the CI Slurm keeps none).
+    #[test]
+    fn accounting_rows() {
+        let rows = "12_0|COMPLETED|0:0\n12_3|FAILED|1:0\n12_1|CANCELLED by 0|0:15\n12_[4-9]|PENDING|0:0\n13_0|TIMEOUT|0:0\n12|COMPLETED|0:0\n";
+        let m = parse_accounting(rows, &["12"]);
+        assert_eq!(m.len(), 3);
+        assert_eq!(m[&("12".to_string(), 3)].state, "FAILED");
+        assert_eq!(m[&("12".to_string(), 3)].detail, "exit code 1:0");
+        assert_eq!(m[&("12".to_string(), 1)].state, "CANCELLED");
+        assert!(!m[&("12".to_string(), 1)].is_active());
     }
 
     #[test]
