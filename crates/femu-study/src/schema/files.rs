@@ -70,10 +70,10 @@ mod tests {
         let labels = "[labels]\nimage = \"mri/s01.png\"\nmap = \"1=fat\"\nbone = [7]\n\
                       [model]\nsize_mm = 2.0\n\
                       [measurement]\nsource = \"file\"\nfile = \"../fields/s01.csv\"\n";
-        let deck = "[model]\ndeck = \"decks/thigh.inp\"\n";
         let list = "[[measurement]]\nsource = \"file\"\nfile = \"a.csv\"\n\
                     [[measurement]]\nsource = \"file\"\nfile = \"b.csv\"\n";
-        for text in [labels, deck, list] {
+        // (A deck is read while the study is parsed, so it is checked on the TOML alone below.)
+        for text in [labels, list] {
             let home = Path::new("/data/study");
             let at_home = super::super::parse(text, home).unwrap();
             let mut doc: toml::Table = text.parse().unwrap();
@@ -86,6 +86,13 @@ mod tests {
                 assert!(path.starts_with(home), "{}", path.display());
             }
         }
+        let mut deck: toml::Table = "[model]\ndeck = \"decks/thigh.inp\"\n".parse().unwrap();
+        absolute_file_names(&mut deck, Path::new("/data/study"));
+        assert_eq!(
+            deck["model"]["deck"].as_str(),
+            Some("/data/study/decks/thigh.inp")
+        );
+        assert!(is_file_key(&["model", "deck"]));
         assert!(is_file_key(&["measurement", "file"]));
         assert!(!is_file_key(&["labels", "map"]));
         assert!(is_file_key(&["measurement", "2", "file"]));
