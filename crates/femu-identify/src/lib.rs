@@ -7,6 +7,7 @@
 //! - [`measured`]: the measured-field CSV of conventions.md.
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
+//! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
@@ -15,4 +16,5 @@
 pub mod campaign;
 pub mod fisher;
 pub mod fit;
+pub mod idic;
 pub mod measured;
