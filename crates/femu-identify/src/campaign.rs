@@ -12,6 +12,7 @@ use crate::fit::{
     LmOptions, Problem,
 };
 use crate::measured::{MeasuredField, MeasuredPoint};
+use crate::weighted::{FieldCovariance, Loss};
 use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
@@ -221,6 +222,11 @@ pub struct CampaignOptions {
     /// Noise realizations of a virtual experiment (a measured field is fitted once).
     pub repeats: usize,
     pub travel: Option<TravelTerm>,
+    /// The measured field's full covariance (model frame, mm²; weighted FEMU, module
+    /// [`crate::weighted`]), used instead of its per-point weights; measured data only.
+    pub covariance: Option<FieldCovariance>,
+    /// The loss on the (whitened) residuals.
+    pub loss: Loss,
     /// Set by the user to stop: the starts stop at their next forward solve and the campaign
     /// returns the repeats it finished ([`CampaignError::Interrupted`]).
     pub stop: Option<Arc<AtomicBool>>,
@@ -381,8 +387,12 @@ pub fn run(
             _ => None,
         };
         let problem = |m: &Model| -> Result<Problem, FitError> {
-            let p = Problem::new(m.clone(), SolverOptions::default(), &field, free.to_vec())?
-                .with_stop(options.stop.clone());
+            let mut p = Problem::new(m.clone(), SolverOptions::default(), &field, free.to_vec())?
+                .with_stop(options.stop.clone())
+                .with_loss(options.loss);
+            if let (Some(c), Data::Measured(_)) = (&options.covariance, data) {
+                p = p.with_covariance(c)?;
+            }
             match travel {
                 Some((t, sigma)) => p.with_travel(t, sigma),
                 None => Ok(p),

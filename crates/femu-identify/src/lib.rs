@@ -8,6 +8,7 @@
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
 //! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
+//! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
@@ -18,3 +19,4 @@ pub mod fisher;
 pub mod fit;
 pub mod idic;
 pub mod measured;
+pub mod weighted;

@@ -7,10 +7,10 @@
 //! [`super::uncertainty`].
 
 use super::problem::{IdicError, IdicProblem};
-use super::uncertainty::{block_sandwich, SandwichCovariance};
+use super::uncertainty::{block_sandwich, group_jackknife, SandwichCovariance};
 use crate::campaign::StartRecord;
 use crate::fit::{
-    latin_hypercube, levenberg_marquardt, FitError, FitResult, LeastSquares, LmOptions,
+    latin_hypercube, levenberg_marquardt, FitError, FitResult, LeastSquares, LmOptions, Subset,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -44,11 +44,14 @@ impl Default for IdicSettings {
                 max_iterations: 20,
                 cost_tolerance: 1e-5,
                 step_tolerance: 1e-4,
+                significance: Some(0.2),
                 ..LmOptions::default()
             },
             fine: LmOptions {
+                max_iterations: 40,
                 cost_tolerance: 1e-8,
                 step_tolerance: 1e-5,
+                significance: Some(0.05),
                 ..LmOptions::default()
             },
         }
@@ -63,6 +66,43 @@ pub struct ScaleRecord {
     /// Residual standard deviation of each (pair, band) that weighted it (grey levels); empty
     /// on the first scale (weights from the reference's spread).
     pub band_sd: Vec<f64>,
+    /// Free parameters held on this scale (indices): those the images did not see at its start
+    /// (see [`seen_parameters`]).
+    #[serde(default)]
+    pub held: Vec<usize>,
+}
+
+/// A parameter whose relative standard deviation (block sandwich) exceeds this is not seen by
+/// the images: its 95 % interval spans more than a factor 2 either way.
+pub const SEEN_SD: f64 = 0.35;
+
+/// The free parameters the images see at `phi` (sandwich sd below [`SEEN_SD`], not at a bound):
+/// the others are held while the seen ones converge on a scale. Gauss–Newton crawls along the
+/// directions the data hardly constrain (each step shrinks by a few per cent), and the
+/// parameters the window cannot see would keep it crawling; their uncertainty still enters the
+/// seen ones' through the full covariance at the end.
+pub fn seen_parameters(problem: &mut IdicProblem, phi: &[f64]) -> Result<Vec<usize>, FitError> {
+    let (r, j) = problem.evaluate(phi, true)?;
+    let j = j.expect("asked");
+    let pixels = problem.pixels();
+    let n_pix = pixels.len();
+    let cov = block_sandwich(&j, &r, &|k| pixels.block[k % n_pix], pixels.blocks);
+    let free = problem.free();
+    let seen: Vec<usize> = (0..free.len())
+        .filter(|&k| {
+            let at_bound =
+                phi[k] <= free[k].lower.ln() + 1e-9 || phi[k] >= free[k].upper.ln() - 1e-9;
+            cov.sd[k] < SEEN_SD && !at_bound
+        })
+        .collect();
+    // Never hold everything: keep the best-seen parameter free.
+    if seen.is_empty() {
+        let best = (0..free.len())
+            .min_by(|&a, &b| cov.sd[a].total_cmp(&cov.sd[b]))
+            .unwrap_or(0);
+        return Ok(vec![best]);
+    }
+    Ok(seen)
 }
 
 /// What the identification found.
@@ -76,6 +116,9 @@ pub struct IdicOutcome {
     pub theta: Vec<f64>,
     /// The covariance of `ln θ` from the residual of the last scale.
     pub covariance: SandwichCovariance,
+    /// `sd(ln θ)` of the delete-one-group jackknife over regions of the image, and the groups.
+    pub jackknife_sd: Vec<f64>,
+    pub jackknife_groups: usize,
     /// Forward solves of all steps, summed over starts and scales.
     pub forward_solves: usize,
     pub wall_time_s: f64,
@@ -133,7 +176,10 @@ pub fn identify(
                 },
             };
             p.set_scale(widest);
-            let r = levenberg_marquardt(&mut p, s, &settings.coarse);
+            let phi: Vec<f64> = s.iter().map(|t| t.ln()).collect();
+            let r = p
+                .freeze_mask(&phi)
+                .and_then(|_| levenberg_marquardt(&mut p, s, &settings.coarse));
             (r, Some(p))
         })
         .collect();
@@ -201,15 +247,29 @@ pub fn identify(
         };
         let solves0 = problem.counts().0;
         problem.set_scale(scale_px);
+        // exp(ln θ) of a parameter at its bound may land an ulp outside it.
+        for (t, f) in theta.iter_mut().zip(&free) {
+            *t = t.clamp(f.lower, f.upper);
+        }
         let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
         let band_sd = problem.reweight(&phi).map_err(err)?;
-        let result = levenberg_marquardt(&mut problem, &theta, lm).map_err(err)?;
+        let seen = seen_parameters(&mut problem, &phi).map_err(err)?;
+        let start: Vec<f64> = seen.iter().map(|&k| theta[k]).collect();
+        let mut sub = Subset::new(&mut problem, seen.clone(), phi);
+        let mut result = levenberg_marquardt(&mut sub, &start, lm).map_err(err)?;
+        let full: Vec<f64> = sub
+            .full(&result.theta.iter().map(|t| t.ln()).collect::<Vec<_>>())
+            .iter()
+            .map(|p| p.exp())
+            .collect();
+        result.theta = full.clone();
         solves += problem.counts().0 - solves0;
-        theta = result.theta.clone();
+        theta = full;
         let rec = ScaleRecord {
             scale_px,
             result,
             band_sd,
+            held: (0..free.len()).filter(|k| !seen.contains(k)).collect(),
         };
         on_event(IdicEvent::Scale(&rec));
         scales.push(rec);
@@ -227,6 +287,8 @@ pub fn identify(
     let pixels = problem.pixels();
     let n_pix = pixels.len();
     let covariance = block_sandwich(&j, &r, &|k| pixels.block[k % n_pix], pixels.blocks);
+    let (jackknife_sd, jackknife_groups) =
+        group_jackknife(&j, &r, &|k| pixels.group[k % n_pix], pixels.groups);
     Ok((
         problem,
         IdicOutcome {
@@ -234,6 +296,8 @@ pub fn identify(
             scales,
             theta,
             covariance,
+            jackknife_sd,
+            jackknife_groups,
             forward_solves: solves,
             wall_time_s: t0.elapsed().as_secs_f64(),
         },

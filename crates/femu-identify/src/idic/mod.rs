@@ -33,7 +33,10 @@ pub mod problem;
 pub mod uncertainty;
 
 pub use frame::ImageFrame;
-pub use identify::{identify, IdicEvent, IdicOutcome, IdicRunError, IdicSettings, ScaleRecord};
+pub use identify::{
+    identify, seen_parameters, IdicEvent, IdicOutcome, IdicRunError, IdicSettings, ScaleRecord,
+    SEEN_SD,
+};
 pub use pixels::{PixelOptions, PixelSet};
 pub use problem::{IdicError, IdicOptions, IdicProblem, Pairing};
-pub use uncertainty::{block_sandwich, gauss_newton_shift, SandwichCovariance};
+pub use uncertainty::{block_sandwich, gauss_newton_shift, group_jackknife, SandwichCovariance};

@@ -28,6 +28,14 @@ pub struct PixelOptions {
     /// Side of the square blocks of the covariance estimator (px): larger than the residual's
     /// correlation length (the speckle), small enough to give many blocks.
     pub block_px: usize,
+    /// Side of the square groups of the jackknife (px): regions over which a model error may
+    /// pull the estimate one way ([`super::uncertainty::group_jackknife`]).
+    #[serde(default = "default_group_px")]
+    pub group_px: usize,
+}
+
+fn default_group_px() -> usize {
+    100
 }
 
 impl Default for PixelOptions {
@@ -37,6 +45,7 @@ impl Default for PixelOptions {
             stride: 1,
             band_px: Some(64),
             block_px: 32,
+            group_px: default_group_px(),
         }
     }
 }
@@ -56,6 +65,9 @@ pub struct PixelSet {
     /// Covariance block of each pixel (`0..blocks`).
     pub block: Vec<usize>,
     pub blocks: usize,
+    /// Jackknife group of each pixel (`0..groups`).
+    pub group: Vec<usize>,
+    pub groups: usize,
     /// Pixels of the image that are in the tissue, in the shadow, out of the tissue.
     pub counts: MaskCounts,
 }
@@ -125,7 +137,11 @@ impl PixelSet {
         height: usize,
         options: &PixelOptions,
     ) -> Result<PixelSet, String> {
-        if options.stride == 0 || options.block_px == 0 || options.band_px == Some(0) {
+        if options.stride == 0
+            || options.block_px == 0
+            || options.group_px == 0
+            || options.band_px == Some(0)
+        {
             return Err("stride, block and band sizes must be at least 1 px".into());
         }
         let (kind, loc) = classify(mesh, frame, width, height);
@@ -139,10 +155,13 @@ impl PixelSet {
             bands: 0,
             block: Vec::new(),
             blocks: 0,
+            group: Vec::new(),
+            groups: 0,
             counts: MaskCounts::default(),
         };
         let band_px = options.band_px.unwrap_or(height.max(1));
         let blocks_x = width.div_ceil(options.block_px);
+        let groups_x = width.div_ceil(options.group_px);
         for y in 0..height {
             for x in 0..width {
                 let k = y * width + x;
@@ -163,6 +182,8 @@ impl PixelSet {
                         set.band.push(y / band_px);
                         set.block
                             .push((y / options.block_px) * blocks_x + x / options.block_px);
+                        set.group
+                            .push((y / options.group_px) * groups_x + x / options.group_px);
                     }
                 }
             }
@@ -175,6 +196,7 @@ impl PixelSet {
         }
         set.bands = renumber(&mut set.band);
         set.blocks = renumber(&mut set.block);
+        set.groups = renumber(&mut set.group);
         Ok(set)
     }
 

@@ -44,6 +44,11 @@ use std::sync::Arc;
 /// three-parameter law, tied or not, is 15).
 pub const MAX_DIRECTIONS: usize = 32;
 
+/// Pixels whose displaced position comes closer than this to an image edge (px) are left out
+/// (see [`IdicProblem::freeze_mask`]): 8 px leaves the B-spline's 2-px support and 6 px of
+/// motion during one minimization.
+pub const FROZEN_MARGIN_PX: f64 = 8.0;
+
 /// Which frames are compared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -110,6 +115,9 @@ pub struct IdicProblem {
     options: IdicOptions,
     /// `√w` per (pair, band).
     sqrt_w: Vec<f64>,
+    /// 1 for the pixels in use, 0 for those the model moves out of a frame (see
+    /// [`IdicProblem::freeze_mask`]).
+    active: Vec<f64>,
     /// The frame pairs `(a, b)`.
     pairs: Vec<(usize, usize)>,
     /// Pixel displacements `d_i` (px) of each frame `i ≥ 1` at the last evaluation.
@@ -118,6 +126,9 @@ pub struct IdicProblem {
     stop: Option<Arc<AtomicBool>>,
     forward_solves: usize,
     jacobians: usize,
+    /// Wall time in the forward solves and sensitivities, and in the image work (s).
+    solve_s: f64,
+    image_s: f64,
 }
 
 /// Why an integrated-DIC problem cannot be set up.
@@ -218,6 +229,7 @@ impl IdicProblem {
             .collect();
         let mut p = IdicProblem {
             sqrt_w: vec![1.0; pairs.len() * pixels.bands],
+            active: vec![1.0; pixels.len()],
             samples: vec![PairSamples::default(); pairs.len()],
             displacement: vec![vec![[0.0; 2]; pixels.len()]; images.len()],
             splines: Vec::new(),
@@ -233,6 +245,8 @@ impl IdicProblem {
             stop: None,
             forward_solves: 0,
             jacobians: 0,
+            solve_s: 0.0,
+            image_s: 0.0,
         };
         p.set_scale(0.0);
         Ok(p)
@@ -281,13 +295,17 @@ impl IdicProblem {
     /// levels², with the brightness fit's two degrees of freedom removed), so that noisier
     /// pairs (more decorrelated frames) and darker bands count less.
     pub fn reweight(&mut self, phi: &[f64]) -> Result<Vec<f64>, FitError> {
+        self.freeze_mask(phi)?;
         self.sqrt_w.fill(1.0);
-        let (r, _) = self.evaluate(phi, false)?;
+        let r = self.residual_vector();
         let n_pix = self.pixels.len();
         let nb = self.pixels.bands;
         let mut ss = vec![(0.0f64, 0.0f64); self.sqrt_w.len()];
         for (k, ri) in r.iter().enumerate() {
             let (pair, p) = (k / n_pix, k % n_pix);
+            if self.active[p] == 0.0 {
+                continue;
+            }
             let e = &mut ss[pair * nb + self.pixels.band[p]];
             e.0 += ri * ri;
             e.1 += 1.0;
@@ -300,6 +318,40 @@ impl IdicProblem {
             *w = if *s > 0.0 { 1.0 / s } else { 1.0 };
         }
         Ok(sd)
+    }
+
+    /// Solves at `phi` and keeps the pixels that every frame's displacement leaves at least
+    /// [`FROZEN_MARGIN_PX`] px inside the image (beyond, the interpolation reads the mirror
+    /// image); the others are left out until the next call. The set is frozen so that the cost
+    /// stays a smooth function of the parameters during one minimization; the driver calls
+    /// this at the start of each. Returns the pixels kept.
+    pub fn freeze_mask(&mut self, phi: &[f64]) -> Result<usize, FitError> {
+        self.active.fill(1.0);
+        self.evaluate(phi, false)?;
+        let (w, h) = (self.pixels.width as f64, self.pixels.height as f64);
+        let m = (self.options.pixels.border_px as f64).max(FROZEN_MARGIN_PX);
+        for (p, a) in self.active.iter_mut().enumerate() {
+            let x = [self.pixels.px[p][0] as f64, self.pixels.px[p][1] as f64];
+            let inside = self.displacement.iter().all(|d| {
+                let (u, v) = (x[0] + d[p][0], x[1] + d[p][1]);
+                u >= m && v >= m && u <= w - 1.0 - m && v <= h - 1.0 - m
+            });
+            *a = if inside { 1.0 } else { 0.0 };
+        }
+        // The brightness fits of the evaluation above counted every pixel: redo them.
+        self.sample_pairs();
+        Ok(self.active.iter().filter(|a| **a > 0.0).count())
+    }
+
+    /// Pixels in use (see [`IdicProblem::freeze_mask`]).
+    pub fn active_pixels(&self) -> usize {
+        self.active.iter().filter(|a| **a > 0.0).count()
+    }
+
+    /// Wall time spent in the forward solves with their sensitivities, and in the image work
+    /// (sampling, brightness, residuals, Jacobian columns), since the problem was built (s).
+    pub fn timings(&self) -> (f64, f64) {
+        (self.solve_s, self.image_s)
     }
 
     pub fn pixels(&self) -> &PixelSet {
@@ -429,8 +481,10 @@ impl IdicProblem {
                 })
                 .collect();
             let mut sums = vec![BandSums::default(); nb];
-            for (v, &band) in values.iter().zip(&self.pixels.band) {
-                sums[band].add(v[0], v[3]);
+            for ((v, &band), &a) in values.iter().zip(&self.pixels.band).zip(&self.active) {
+                if a > 0.0 {
+                    sums[band].add(v[0], v[3]);
+                }
             }
             self.samples[k] = PairSamples {
                 fits: sums
@@ -454,7 +508,9 @@ impl IdicProblem {
                 .for_each(|(p, out)| {
                     let band = self.pixels.band[p];
                     let v = &s.values[p];
-                    *out = self.sqrt_w[k * nb + band] * s.fits[band].residual(v[0], v[3]);
+                    *out = self.active[p]
+                        * self.sqrt_w[k * nb + band]
+                        * s.fits[band].residual(v[0], v[3]);
                 });
         }
         r
@@ -502,6 +558,9 @@ impl IdicProblem {
             // Band sums Σ G v, Σ v, Σ δG r per direction.
             let mut sums = vec![[0.0; 3]; nb * n_dir];
             for p in 0..n {
+                if self.active[p] == 0.0 {
+                    continue;
+                }
                 let band = self.pixels.band[p];
                 let v = &s.values[p];
                 let r = s.fits[band].residual(v[0], v[3]);
@@ -527,7 +586,8 @@ impl IdicProblem {
                         let band = self.pixels.band[p];
                         let qj = q[band * n_dir + j];
                         let g = s.values[p][3];
-                        *out = self.sqrt_w[k * nb + band]
+                        *out = self.active[p]
+                            * self.sqrt_w[k * nb + band]
                             * (rows[p * n_dir + j] - (g * qj[0] + qj[1]));
                     });
             }
@@ -662,6 +722,9 @@ impl IdicProblem {
             .map(|s| {
                 let mut m = vec![f64::NAN; w * h];
                 for (p, px) in self.pixels.px.iter().enumerate() {
+                    if self.active[p] == 0.0 {
+                        continue;
+                    }
                     let v = &s.values[p];
                     m[px[1] * w + px[0]] = s.fits[self.pixels.band[p]].residual(v[0], v[3]);
                 }
@@ -682,11 +745,16 @@ impl LeastSquares for IdicProblem {
         jacobian: bool,
     ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
         self.check_stop()?;
-        self.solve_steps(phi, jacobian)?;
+        let t0 = std::time::Instant::now();
+        let solved = self.solve_steps(phi, jacobian);
+        self.solve_s += t0.elapsed().as_secs_f64();
+        solved?;
+        let t1 = std::time::Instant::now();
         self.update_displacements();
         self.sample_pairs();
         let r = self.residual_vector();
         let j = jacobian.then(|| self.jacobian_columns());
+        self.image_s += t1.elapsed().as_secs_f64();
         Ok((r, j))
     }
 

@@ -108,6 +108,78 @@ pub fn block_sandwich(
     }
 }
 
+/// The delete-one-group jackknife of the estimate (Quenouille–Tukey; for spatial data, large
+/// contiguous groups): for each group `g` of residual rows, the estimate without it, one
+/// Gauss–Newton step from `φ̂`,
+///
+/// ```text
+///   δ_(g) = −(H − H_g)⁻¹ (Jᵀr − J_gᵀ r_g)                                                   (4)
+/// ```
+///
+/// and the variance `(G − 1)/G Σ_g (δ_(g) − δ̄)(δ_(g) − δ̄)ᵀ`. Groups much larger than the
+/// speckle see the spatial variation of the misfit on their own scale: a model error that
+/// pulls the estimate one way in one region and another way elsewhere widens it, where blocks
+/// of the sandwich (2) see only the pixel-scale noise. Returns `sd(ln θ_j)` and the groups used.
+pub fn group_jackknife(
+    jacobian: &Columns,
+    residual: &[f64],
+    group: &dyn Fn(usize) -> usize,
+    groups: usize,
+) -> (Vec<f64>, usize) {
+    let n = jacobian.len();
+    let mut hg = vec![vec![vec![0.0; n]; n]; groups];
+    let mut gg = vec![vec![0.0; n]; groups];
+    let mut rows_in = vec![0usize; groups];
+    for (k, r) in residual.iter().enumerate() {
+        let b = group(k);
+        let col: Vec<f64> = jacobian.iter().map(|c| c[k]).collect();
+        if col.iter().all(|v| *v == 0.0) {
+            continue;
+        }
+        rows_in[b] += 1;
+        for i in 0..n {
+            gg[b][i] += col[i] * r;
+            for j in 0..n {
+                hg[b][i][j] += col[i] * col[j];
+            }
+        }
+    }
+    let used: Vec<usize> = (0..groups).filter(|&b| rows_in[b] > 0).collect();
+    let g_count = used.len();
+    if g_count < 2 {
+        return (vec![f64::INFINITY; n], g_count);
+    }
+    let mut h = vec![vec![0.0; n]; n];
+    let mut g = vec![0.0; n];
+    for &b in &used {
+        for i in 0..n {
+            g[i] += gg[b][i];
+            for j in 0..n {
+                h[i][j] += hg[b][i][j];
+            }
+        }
+    }
+    let deltas: Vec<Vec<f64>> = used
+        .iter()
+        .map(|&b| {
+            let hb: Vec<Vec<f64>> = (0..n)
+                .map(|i| (0..n).map(|j| h[i][j] - hg[b][i][j]).collect())
+                .collect();
+            let (inv, _, _) = pseudo_inverse(&hb);
+            let gb: Vec<f64> = (0..n).map(|i| g[i] - gg[b][i]).collect();
+            (0..n).map(|i| -dot(&inv[i], &gb)).collect()
+        })
+        .collect();
+    let gf = g_count as f64;
+    let sd = (0..n)
+        .map(|j| {
+            let mean = deltas.iter().map(|d| d[j]).sum::<f64>() / gf;
+            ((gf - 1.0) / gf * deltas.iter().map(|d| (d[j] - mean).powi(2)).sum::<f64>()).sqrt()
+        })
+        .collect();
+    (sd, g_count)
+}
+
 /// The one-step Gauss–Newton shift (3) of the log-parameters for a residual change `dr`.
 pub fn gauss_newton_shift(jacobian: &Columns, dr: &[f64]) -> Vec<f64> {
     let n = jacobian.len();
@@ -199,6 +271,27 @@ mod tests {
                 "{}",
                 independent[j].sqrt()
             );
+        }
+    }
+
+    /// For independent noise the jackknife over 20 groups agrees with the least-squares
+    /// standard deviation within 40 % (a jackknife over 20 groups has about 19 degrees of
+    /// freedom: its sd scatters by ~16 %; asserted loosely, measured below).
+    #[test]
+    fn jackknife_matches_least_squares_for_independent_noise() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let m = 4000;
+        let jac: Columns = vec![
+            (0..m).map(|k| (k as f64 * 0.01).sin()).collect(),
+            (0..m).map(|k| 1.0 + (k as f64 * 0.003).cos()).collect(),
+        ];
+        let e: Vec<f64> = (0..m).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let cov = block_sandwich(&jac, &e, &|k| k / 40, m / 40);
+        let (sd, g) = group_jackknife(&jac, &e, &|k| k / 200, m / 200);
+        assert_eq!(g, 20);
+        for j in 0..2 {
+            let ratio = sd[j] / cov.sd_independent[j];
+            assert!((ratio - 1.0).abs() < 0.4, "parameter {j}: ratio {ratio}");
         }
     }
 

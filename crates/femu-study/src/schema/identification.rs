@@ -36,6 +36,8 @@ pub struct IdentificationSpec {
     /// Multilevel: run the starts on the built-in thigh with this many elements and refine the
     /// best on the study's mesh.
     pub coarse_elements: Option<usize>,
+    /// The loss on the (whitened) residuals of a measured field (`loss = "squared" | "huber"`).
+    pub loss: femu_identify::weighted::Loss,
 }
 
 impl IdentificationSpec {
@@ -167,7 +169,20 @@ pub(crate) fn parse(
             Some(n)
         }
     };
+    let loss = match e.loss.as_deref().map(str::to_ascii_lowercase).as_deref() {
+        None | Some("squared") => femu_identify::weighted::Loss::Squared,
+        Some("huber") => femu_identify::weighted::Loss::Huber {
+            k: femu_identify::weighted::HUBER_K,
+        },
+        Some(other) => {
+            return Err(err(
+                "loss",
+                format!("unknown loss '{other}' (squared, huber)"),
+            ))
+        }
+    };
     Ok(IdentificationSpec {
+        loss,
         test,
         fixed: e.fixed,
         bounds_factor,

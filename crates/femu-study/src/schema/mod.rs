@@ -180,6 +180,8 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
+    let ultrasound_section = file.ultrasound.unwrap_or_default();
+    ultrasound::check(&ultrasound_section, &lines)?;
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
         _ => seed_groups(),
@@ -197,7 +199,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification,
         steps: identification::parse_steps(file.run),
         probe: file.probe.unwrap_or_default(),
-        ultrasound: file.ultrasound.unwrap_or_default(),
+        ultrasound: ultrasound_section,
         boundary,
         convergence,
         grid_given: file.grid.is_some(),

@@ -16,6 +16,7 @@ use femu_identify::campaign::{
 };
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::weighted::FieldCovariance;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_plot::{bar_chart_png, line_plot_png, BarChart, LinePlot, LineStyle, Series};
@@ -52,6 +53,12 @@ pub struct IdentificationSummary {
     pub forward_solves_per_start: Vec<usize>,
     pub starts: Vec<StartRecord>,
     pub wall_time_s: f64,
+    /// How the misfit was weighted: "one sigma" (virtual), "per point" (the file's sx, sy or
+    /// w), "full covariance" (weighted FEMU).
+    #[serde(default)]
+    pub weighting: String,
+    #[serde(default)]
+    pub loss: femu_identify::weighted::Loss,
     /// Set when the user stopped the run: what was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
@@ -98,6 +105,10 @@ pub struct Measured {
     pub source: String,
     /// Whether the reference parameters of the model are the truth (a simulated experiment).
     pub reference_known: bool,
+    /// The full covariance of the field's components (model frame, mm²): the misfit is then
+    /// weighted by it (weighted FEMU, `femu_identify::weighted`) instead of the per-point
+    /// weights.
+    pub covariance: Option<FieldCovariance>,
 }
 
 /// The study's model loaded with its identification test, and the test's name.
@@ -204,12 +215,39 @@ pub fn study_measurement(study: &Study) -> Result<Option<Measured>> {
         MeasurementSource::Ultrasound => anyhow::bail!(
             "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
         ),
-        MeasurementSource::File { path, frame } => {
+        MeasurementSource::File {
+            path,
+            frame,
+            covariance,
+        } => {
             let f = MeasuredField::read(path)?;
+            let covariance = match covariance {
+                None => None,
+                Some(c) => {
+                    // U = s (u_x e_x + u_y e_y): the columns of T are s e_x and s e_y.
+                    let s = frame.scale;
+                    let t = [
+                        [s * frame.x_axis[0], s * frame.y_axis[0]],
+                        [s * frame.x_axis[1], s * frame.y_axis[1]],
+                    ];
+                    let cov = FieldCovariance::read_mtx(c)?.mapped(t);
+                    if cov.points != f.points.len() {
+                        anyhow::bail!(
+                            "[measurement] covariance {}: {} points, the field {} has {}",
+                            c.display(),
+                            cov.points,
+                            path.display(),
+                            f.points.len()
+                        );
+                    }
+                    Some(cov)
+                }
+            };
             Ok(Some(Measured {
                 field: f.to_model_frame(frame.scale, frame.origin, frame.x_axis, frame.y_axis),
                 source: path.display().to_string(),
                 reference_known: false,
+                covariance,
             }))
         }
     }
@@ -229,6 +267,7 @@ pub fn identify(
             field: MeasuredField::read(p)?,
             source: p.display().to_string(),
             reference_known: false,
+            covariance: None,
         }),
         None => study_measurement(study)?,
     };
@@ -327,6 +366,9 @@ pub fn identify_on(
     let spec = &study.identification;
     let (free, reference) = free_parameters(study, model, grouped)?;
     let virtual_experiment = measured.is_none();
+    // Whitened residuals have unit variance: the intervals need no residual scaling.
+    let weighted = measured.is_some_and(|m| m.covariance.is_some());
+    let known_noise = virtual_experiment || weighted;
     let reference_known = measured.is_none_or(|m| m.reference_known);
     let repeats = if virtual_experiment { spec.repeat } else { 1 };
     progress.note(&format!(
@@ -363,6 +405,8 @@ pub fn identify_on(
             sigma_mm: t.sigma_mm,
         }),
         stop: progress.stop_flag(),
+        covariance: measured.and_then(|m| m.covariance.clone()),
+        loss: spec.loss,
     };
     let on_event = show_events(progress, repeats);
     let result = campaign::run(
@@ -407,7 +451,7 @@ pub fn identify_on(
     };
     write_starts_csv(&out.join("starts.csv"), &free, &c.starts)?;
     let (parameters, id) =
-        campaign::estimates(&c, &free, &reference, reference_known, virtual_experiment)?;
+        campaign::estimates(&c, &free, &reference, reference_known, known_noise)?;
     let repeats = c.best.len();
     let best = &c.best[0];
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
@@ -452,6 +496,14 @@ pub fn identify_on(
             .collect(),
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
+        weighting: if weighted {
+            "full covariance".into()
+        } else if virtual_experiment {
+            "one sigma".into()
+        } else {
+            "per point".into()
+        },
+        loss: spec.loss,
         interrupted: interrupted
             .map(|n| format!("interrupted: {repeats} of {n} repeats finished and kept")),
     };

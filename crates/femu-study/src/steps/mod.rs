@@ -11,6 +11,7 @@
 //! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
 
 pub mod identify;
+pub mod images;
 pub mod model;
 pub mod record;
 pub mod run;

@@ -276,15 +276,26 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
             &format!("identification ({name})"),
             Some(&folder),
         )?;
-        identify::identify_on(
-            study,
-            grouped,
-            &measured_model,
-            &test.name(),
-            measured.as_ref(),
-            &out.join(&folder),
-            progress,
-        )?;
+        if study.measurement.source == MeasurementSource::Ultrasound {
+            // Images: integrated DIC, beside DIC -> FEMU plain and weighted.
+            super::images::identify_image_measurement(
+                study,
+                grouped,
+                &out.join("measurement"),
+                &out.join(&folder),
+                progress,
+            )?;
+        } else {
+            identify::identify_on(
+                study,
+                grouped,
+                &measured_model,
+                &test.name(),
+                measured.as_ref(),
+                &out.join(&folder),
+                progress,
+            )?;
+        }
         finish(record, out, t)?;
     }
     Ok(())
@@ -418,6 +429,7 @@ fn write_measurement(
                 field,
                 source: "DIC of simulated B-mode images (femu us-sim)".to_string(),
                 reference_known: true,
+                covariance: None,
             }))
         }
         MeasurementSource::File { .. } => {
