@@ -48,10 +48,10 @@ impl Default for IdicSettings {
                 ..LmOptions::default()
             },
             fine: LmOptions {
-                max_iterations: 40,
+                max_iterations: 30,
                 cost_tolerance: 1e-8,
                 step_tolerance: 1e-5,
-                significance: Some(0.05),
+                significance: Some(0.1),
                 ..LmOptions::default()
             },
         }
@@ -76,8 +76,9 @@ pub struct ScaleRecord {
 /// the images: its 95 % interval spans more than a factor 2 either way.
 pub const SEEN_SD: f64 = 0.35;
 
-/// The free parameters the images see at `phi` (sandwich sd below [`SEEN_SD`], not at a bound):
-/// the others are held while the seen ones converge on a scale. Gauss–Newton crawls along the
+/// The free parameters the images see at `phi` (sandwich sd below [`SEEN_SD`]; one at a bound
+/// stays free, the optimizer's bounds handle it): the others are held while the seen ones
+/// converge on a scale. Gauss–Newton crawls along the
 /// directions the data hardly constrain (each step shrinks by a few per cent), and the
 /// parameters the window cannot see would keep it crawling; their uncertainty still enters the
 /// seen ones' through the full covariance at the end.
@@ -160,7 +161,13 @@ pub fn identify(
     let first = make()?;
     let free = first.free().to_vec();
     let mut starts = latin_hypercube(&free, settings.starts, settings.seed.wrapping_mul(7919));
-    starts.extend(settings.extra_starts.iter().cloned());
+    // Given starts (read back from files, exp(ln θ) of a bound) are clamped into the bounds.
+    starts.extend(settings.extra_starts.iter().map(|s| {
+        s.iter()
+            .zip(&free)
+            .map(|(v, f)| v.clamp(f.lower, f.upper))
+            .collect::<Vec<f64>>()
+    }));
     let widest = settings.scales_px.first().copied().unwrap_or(0.0);
     let mut problems: Vec<Option<IdicProblem>> = (0..starts.len()).map(|_| None).collect();
     problems[0] = Some(first);

@@ -213,7 +213,7 @@ pub fn study_measurement(study: &Study) -> Result<Option<Measured>> {
     match &study.measurement.source {
         MeasurementSource::Virtual => Ok(None),
         MeasurementSource::Ultrasound => anyhow::bail!(
-            "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
+            "[measurement] source = \"ultrasound\": `femu run` identifies from the images (integrated DIC, beside DIC -> FEMU); for DIC -> FEMU alone, simulate the images with `femu us-sim` and pass its measured.csv with --measured (its measured_covariance.mtx as [measurement] covariance for the weighted fit)"
         ),
         MeasurementSource::File {
             path,
