@@ -9,14 +9,23 @@
 //!   log-parameters with bounds, Latin-hypercube starts.
 //! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
 //! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
+//! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
+//!   the free parameters, stacked into one problem; each measurement's share of the information.
+//! - [`discretization`]: the model's own error: the parameter bias its mesh implies, from
+//!   refined meshes of the same geometry (one Gauss–Newton step, Richardson extrapolation).
+//! - [`design`]: the experiment's design: candidate measurements ranked by the parameter
+//!   uncertainty they predict (A- and D-optimal criteria), alone and combined.
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
 #![forbid(unsafe_code)]
 
 pub mod campaign;
+pub mod design;
+pub mod discretization;
 pub mod fisher;
 pub mod fit;
 pub mod idic;
+pub mod joint;
 pub mod measured;
 pub mod weighted;

@@ -24,8 +24,10 @@ pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 
 pub mod decimal;
 pub mod deck;
+pub mod folder;
 pub mod generate;
 pub mod inp;
+pub mod limits;
 pub mod locate;
 pub mod mesh;
 pub mod msh;

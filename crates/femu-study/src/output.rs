@@ -9,6 +9,13 @@ pub fn create_dir(dir: &Path) -> Result<()> {
         .with_context(|| format!("cannot create output folder {}", dir.display()))
 }
 
+/// A buffered file at `path`, created (or truncated) for writing.
+pub fn create_file(path: &Path) -> Result<std::io::BufWriter<std::fs::File>> {
+    Ok(std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+    ))
+}
+
 /// Writes `text` to `path`.
 pub fn write_text(path: &Path, text: &str) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))

@@ -688,20 +688,32 @@ pub fn identify_image_measurement(
     crate::steps::identify::IdentificationSummary,
     ImageIdentificationSummary,
 )> {
-    use crate::steps::identify::{identify_on, measured_model, Measured};
+    use crate::steps::identify::{identify_on, Measured};
+    use crate::steps::measure::{Prepared, PreparedData};
     use femu_identify::measured::MeasuredField;
     use femu_identify::weighted::{Loss, HUBER_K};
     let field = MeasuredField::read(&measurement.join("measured.csv"))?;
     let covariance = femu_identify::weighted::FieldCovariance::read_mtx(
         &measurement.join("measured_covariance.mtx"),
     )?;
-    let (model, test) = measured_model(study)?;
+    let built = crate::model::build(&study.model)?;
+    let m = &study.measurements[0];
     let source = "DIC of the simulated B-mode images (incremental, composed)".to_string();
-    let plain = Measured {
-        field: field.clone(),
-        source: source.clone(),
-        reference_known: true,
-        covariance: None,
+    let prepared = |covariance: Option<femu_identify::weighted::FieldCovariance>| Prepared {
+        name: m.name.clone(),
+        label: m.label(&study.tests),
+        test: m.test,
+        data: PreparedData::Measured(Measured {
+            field: field.clone(),
+            source: if covariance.is_some() {
+                format!("{source}, weighted by its covariance")
+            } else {
+                source.clone()
+            },
+            reference_known: true,
+            covariance,
+        }),
+        travel: None,
     };
     let mut squared = study.clone();
     squared.identification.loss = Loss::Squared;
@@ -709,26 +721,19 @@ pub fn identify_image_measurement(
     let a = identify_on(
         &squared,
         grouped,
-        &model,
-        &test,
-        Some(&plain),
+        &built,
+        &[prepared(None)],
         &out.join("dic"),
         progress,
     )?;
-    let weighted = Measured {
-        covariance: Some(covariance),
-        source: format!("{source}, weighted by its covariance"),
-        ..plain
-    };
     let mut huber = study.clone();
     huber.identification.loss = Loss::Huber { k: HUBER_K };
     progress.note("DIC -> FEMU, weighted by the DIC's covariance, Huber's loss:");
     let b = identify_on(
         &huber,
         grouped,
-        &model,
-        &test,
-        Some(&weighted),
+        &built,
+        &[prepared(Some(covariance))],
         &out.join("dic-weighted"),
         progress,
     )?;

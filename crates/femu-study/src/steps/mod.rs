@@ -10,8 +10,12 @@
 //! | identification | [`identify::identify`] | `identify/GROUPING/` |
 //! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
 
+pub mod design;
+pub mod discretization;
 pub mod identify;
 pub mod images;
+pub mod joint;
+pub mod measure;
 pub mod model;
 pub mod record;
 pub mod run;

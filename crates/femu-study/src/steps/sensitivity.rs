@@ -101,6 +101,7 @@ pub fn run(
     options: &SensitivityOptions,
     progress: &dyn Progress,
 ) -> Result<SensitivitySummary> {
+    femu_mesh::folder::refuse_inputs_in(&options.out, &study.input_files())?;
     let built = crate::model::build(&study.model)?;
     run_on(
         study,
@@ -499,9 +500,7 @@ fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()
 }
 
 fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     writeln!(
         w,
         "measurement,grouping,worst_c10_relative_sd,worst_d_relative_sd,condition,parameter_relative_sd"
