@@ -220,6 +220,25 @@ pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
     from_covariance(&cov, &unseen, singular, names)
 }
 
+/// The correlation matrix `C_ij / √(C_ii C_jj)` of a covariance (NaN where a variance is 0).
+pub fn correlation(cov: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let n = cov.len();
+    (0..n)
+        .map(|i| {
+            (0..n)
+                .map(|j| {
+                    let d = (cov[i][i] * cov[j][j]).sqrt();
+                    if d > 0.0 {
+                        cov[i][j] / d
+                    } else {
+                        f64::NAN
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// The standard deviations and correlations of a covariance of log-parameters (`unseen`
 /// parameters get infinite standard deviations), with the singular values of the information
 /// it came from.
@@ -239,20 +258,7 @@ pub fn from_covariance(
             }
         })
         .collect();
-    let correlation = (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| {
-                    let d = (cov[i][i] * cov[j][j]).sqrt();
-                    if d > 0.0 {
-                        cov[i][j] / d
-                    } else {
-                        f64::NAN
-                    }
-                })
-                .collect()
-        })
-        .collect();
+    let correlation = correlation(cov);
     let smin = singular.last().copied().unwrap_or(0.0);
     let condition = if smin > 0.0 {
         singular[0] / smin

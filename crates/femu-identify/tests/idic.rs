@@ -8,6 +8,8 @@
 //!   finite differences of the residuals themselves.
 //! - The parameters under the window recovered from the images, with intervals that hold them.
 
+mod common;
+
 use femu_dic::lab::{self, Speckle};
 use femu_dic::GreyImage;
 use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
@@ -16,7 +18,6 @@ use femu_identify::idic::{
     self, IdicOptions, IdicProblem, IdicSettings, ImageFrame, Pairing, PixelOptions,
 };
 use femu_mech::loading::{apply_loading, Loading};
-use femu_mech::sensitivity::Parameter;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
 use femu_mesh::ElementKind;
@@ -102,22 +103,10 @@ fn images(elements: usize, fractions: &[f64], seed: u64) -> Vec<GreyImage> {
 
 /// C10 and D of fat and quadriceps free (bounds x/÷ 4), the others held.
 fn free(model: &Model) -> (Vec<FreeParameter>, Vec<f64>) {
-    let names = ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"];
-    let free: Vec<FreeParameter> = names
-        .iter()
-        .map(|n| {
-            let p = Parameter::named(model, n).unwrap();
-            let v = p.value(model);
-            FreeParameter {
-                name: n.to_string(),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect();
-    let reference = free.iter().map(|f| f.members[0].value(model)).collect();
-    (free, reference)
+    common::named_free(
+        model,
+        &["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"],
+    )
 }
 
 fn problem(
@@ -176,7 +165,7 @@ fn jacobian_matches_finite_differences() {
             energy_tolerance: 1e-20,
             ..SolverOptions::default()
         };
-        let mut p = problem(500, imgs.clone(), &fractions, pairing, tight, 1e-12);
+        let mut p = problem(700, imgs.clone(), &fractions, pairing, tight, 1e-12);
         p.set_scale(scale);
         let (_, reference) = free(p.model(0));
         let phi: Vec<f64> = reference

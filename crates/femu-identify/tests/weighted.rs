@@ -9,12 +9,13 @@
 //!   less than the plain least squares with one σ, and its errors stay within its own
 //!   intervals.
 
+mod common;
+
 use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_identify::fit::{levenberg_marquardt, FreeParameter, LeastSquares, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_identify::weighted::{FieldCovariance, Loss, HUBER_K};
 use femu_mech::loading::{apply_loading, Loading};
-use femu_mech::sensitivity::Parameter;
 use femu_mech::{Model, SolverOptions};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
@@ -37,19 +38,11 @@ fn thigh() -> Model {
 }
 
 fn free(model: &Model) -> Vec<FreeParameter> {
-    ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"]
-        .iter()
-        .map(|n| {
-            let p = Parameter::named(model, n).unwrap();
-            let v = p.value(model);
-            FreeParameter {
-                name: n.to_string(),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect()
+    common::named_free(
+        model,
+        &["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"],
+    )
+    .0
 }
 
 const SIGMA: f64 = 0.02;

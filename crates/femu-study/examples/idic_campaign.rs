@@ -239,7 +239,7 @@ fn main() -> Result<()> {
                 idic_error: p.relative_error.unwrap_or(f64::NAN),
                 idic_sd: p.relative_sd,
                 idic_sd_statistical: p.sd_statistical,
-                idic_shift: p.discretization_shift.unwrap_or(f64::NAN),
+                idic_shift: p.discretization_bias.unwrap_or(f64::NAN),
                 idic_covered: covers(p.ci95),
                 idic_seen: p.seen,
                 dic: q.identified,

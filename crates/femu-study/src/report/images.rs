@@ -64,8 +64,8 @@ pub fn section(
          the tissue, {} in the bone's shadow, {} outside the tissue, masked by the model). \
          Brightness and contrast per depth band; coarse to fine over Gaussian smoothings of {} px. \
          Intervals: the larger of the block sandwich ({} blocks: the residual's own correlation) \
-         and the jackknife over {} image regions, with the shift a refined mesh of {} elements \
-         implies added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
+         and the jackknife over {} image regions, with the bias a refined mesh of {} elements \
+         implies (extrapolated at the first-order rate) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
          {:.1} s) against {:.1} s for the DIC → FEMU route (DIC {:.1} s, FEMU {:.1} s): ratio {:.2}.",
         idic.load_fractions.len() + 1,
         esc(&idic.source),

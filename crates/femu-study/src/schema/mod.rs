@@ -300,8 +300,14 @@ impl Study {
             Geometry::Thigh(_) => {}
         }
         for m in &self.measurements {
-            if let MeasurementSource::File { path, .. } = &m.source {
+            if let MeasurementSource::File {
+                path, covariance, ..
+            } = &m.source
+            {
                 files.push(("measurement", "file", path));
+                if let Some(c) = covariance {
+                    files.push(("measurement", "covariance", c));
+                }
             }
         }
         for (table, key, path) in files {
@@ -353,8 +359,12 @@ impl Study {
             Geometry::Thigh(_) => {}
         }
         for m in &self.measurements {
-            if let MeasurementSource::File { path, .. } = &m.source {
+            if let MeasurementSource::File {
+                path, covariance, ..
+            } = &m.source
+            {
                 files.push(path.as_path());
+                files.extend(covariance.as_deref());
             }
         }
         files

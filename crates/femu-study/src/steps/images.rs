@@ -2,8 +2,9 @@
 //! (`femu_identify::idic`) of the study's free parameters from the image sequence of the
 //! measurement step — the unloaded frame and one frame per load step, correlated against the
 //! finite-element state of each step — with the same starts, bounds, groups and fixed parameters
-//! as `identify`, intervals from the grey-level residual's own correlation and the shift a
-//! refined mesh implies. Written as
+//! as `identify`, intervals from the grey-level residual's own correlation, the bias a refined
+//! mesh implies (extrapolated as in `femu_identify::discretization`) and the change from the
+//! last smoothed scale. Written as
 //!
 //! - `parameters.csv` — identified values, errors (simulated images), standard deviations
 //!   (statistical, discretization, total), 95 % intervals, whether the window sees each;
@@ -21,6 +22,7 @@ use crate::steps::ultrasound::SimSummary;
 use anyhow::{bail, Context, Result};
 use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
+use femu_identify::discretization;
 use femu_identify::fit::FreeParameter;
 use femu_identify::idic::pixels::MaskCounts;
 use femu_identify::idic::{
@@ -128,8 +130,9 @@ pub struct ImageEstimate {
     pub sd_jackknife: f64,
     /// `sd(ln θ)` if the pixels' residuals were independent (for comparison: too narrow).
     pub sd_independent: f64,
-    /// The shift of `ln θ` a refined mesh implies (one Gauss–Newton step), if computed.
-    pub discretization_shift: Option<f64>,
+    /// The bias of `ln θ` the mesh implies (one Gauss–Newton step to a refined mesh,
+    /// extrapolated: `femu_identify::discretization::extrapolated_bias`), if computed.
+    pub discretization_bias: Option<f64>,
     /// The change of `ln θ` from the last smoothed scale to the images as recorded (see
     /// [`estimates`]).
     pub scale_change: Option<f64>,
@@ -240,7 +243,8 @@ fn refined_spec(spec: &crate::schema::ModelSpec) -> Option<crate::schema::ModelS
 ///
 /// - the noise: the larger of the block sandwich (the residual's own correlation) and the
 ///   jackknife over image regions (`femu_identify::idic::uncertainty`);
-/// - the discretization: the shift a refined mesh implies (one Gauss–Newton step);
+/// - the discretization: the bias a refined mesh implies (one Gauss–Newton step to the mesh
+///   of element size / √2, extrapolated by Richardson at the first-order rate);
 /// - the resolution: the change of the estimate from the last smoothed scale to the images as
 ///   recorded (`scale_change`). A model that described the images would give the same
 ///   optimum on both, each a consistent estimate; their disagreement measures what the
@@ -297,7 +301,7 @@ fn estimates(
                 sd_sandwich: cov.sd[k],
                 sd_jackknife: jackknife[k],
                 sd_independent: cov.sd_independent[k],
-                discretization_shift: s,
+                discretization_bias: s,
                 scale_change: c,
                 relative_sd: sd,
                 ci95: if seen { ci } else { [f.lower, f.upper] },
@@ -401,8 +405,18 @@ pub fn identify_images(
             let rb = crate::model::build(&rs)?;
             let refined = step_models(study, &rb, &seq.load_fractions)?;
             let n = refined[0].mesh.elements.len();
+            // One refined level observes no rate: the bias is extrapolated at the cautious
+            // first-order rate of the general check (`femu_identify::discretization`), from
+            // the shift to the mesh of element size / √2.
             match problem.discretization_shift(refined) {
-                Ok(s) => (Some(s), Some(n)),
+                Ok(s) => (
+                    Some(discretization::extrapolated_bias(
+                        &s,
+                        std::f64::consts::SQRT_2,
+                        discretization::ASSUMED_RATE,
+                    )),
+                    Some(n),
+                ),
                 Err(e) => {
                     notes.push(format!(
                         "the discretization check on {n} elements failed: {e}"
@@ -454,7 +468,7 @@ pub fn identify_images(
         jackknife_groups: outcome.jackknife_groups,
         pairing: options.pairing,
         free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
-        correlation: correlation(&outcome.covariance.covariance),
+        correlation: femu_identify::fisher::correlation(&outcome.covariance.covariance),
         parameters,
         scales: outcome
             .scales
@@ -487,7 +501,7 @@ pub fn identify_images(
     write_json(&out.join("summary.json"), &summary)?;
     progress.note(&format!(
         "{:<36} {:>12} {:>12} {:>10} {:>9} {:>9}",
-        "parameter", "reference", "identified", "error", "sd", "shift"
+        "parameter", "reference", "identified", "error", "sd", "mesh bias"
     ));
     for p in &summary.parameters {
         progress.note(&format!(
@@ -498,7 +512,7 @@ pub fn identify_images(
             p.relative_error
                 .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
             100.0 * p.relative_sd,
-            p.discretization_shift
+            p.discretization_bias
                 .map_or("-".into(), |s| format!("{:.2}%", 100.0 * s)),
             if p.seen { "" } else { "  (not seen)" }
         ));
@@ -519,7 +533,10 @@ fn scale_change(outcome: &idic::IdicOutcome) -> Option<Vec<f64>> {
     if n < 2 {
         return None;
     }
-    let (a, b) = (&outcome.scales[n - 2].result.theta, &outcome.scales[n - 1].result.theta);
+    let (a, b) = (
+        &outcome.scales[n - 2].result.theta,
+        &outcome.scales[n - 1].result.theta,
+    );
     Some(a.iter().zip(b).map(|(x, y)| (y / x).ln()).collect())
 }
 
@@ -542,31 +559,13 @@ fn rest_residual(problem: &IdicProblem) -> Vec<f64> {
     m
 }
 
-fn correlation(cov: &[Vec<f64>]) -> Vec<Vec<f64>> {
-    let n = cov.len();
-    (0..n)
-        .map(|i| {
-            (0..n)
-                .map(|j| {
-                    let d = (cov[i][i] * cov[j][j]).sqrt();
-                    if d > 0.0 {
-                        cov[i][j] / d
-                    } else {
-                        f64::NAN
-                    }
-                })
-                .collect()
-        })
-        .collect()
-}
-
 fn write_parameters_csv(path: &Path, params: &[ImageEstimate]) -> Result<()> {
     let mut w = std::io::BufWriter::new(
         std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
     );
     writeln!(
         w,
-        "name,reference,identified,relative_error,sd_statistical,sd_independent,discretization_shift,scale_change,relative_sd,ci95_low,ci95_high,seen"
+        "name,reference,identified,relative_error,sd_statistical,sd_independent,discretization_bias,scale_change,relative_sd,ci95_low,ci95_high,seen"
     )?;
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
     for p in params {
@@ -579,7 +578,7 @@ fn write_parameters_csv(path: &Path, params: &[ImageEstimate]) -> Result<()> {
             opt(p.relative_error),
             p.sd_statistical,
             p.sd_independent,
-            opt(p.discretization_shift),
+            opt(p.discretization_bias),
             opt(p.scale_change),
             p.relative_sd,
             p.ci95[0],
