@@ -101,6 +101,10 @@ struct PairSamples {
     fits: Vec<BandFit>,
 }
 
+/// `dir(i, p, out)`: the pixel displacement derivatives of frame `i` at pixel `p`, one per
+/// direction ([`IdicProblem::directional`]).
+type PixelDirections = dyn Fn(usize, usize, &mut [[f64; 2]]) + Sync;
+
 /// The integrated-DIC problem (module documentation).
 pub struct IdicProblem {
     steps: Vec<Step>,
@@ -520,11 +524,7 @@ impl IdicProblem {
     /// displacements: `dir(i, p, out)` writes `∂d_i/∂t_j` at pixel `p` of frame `i ≥ 1` for
     /// every direction `j` (frame 0 never moves). Returns one column per direction, pair-major,
     /// with the projection term of the brightness fit (module [`super::brightness`]).
-    pub(crate) fn directional(
-        &self,
-        n_dir: usize,
-        dir: &(dyn Fn(usize, usize, &mut [[f64; 2]]) + Sync),
-    ) -> Columns {
+    pub(crate) fn directional(&self, n_dir: usize, dir: &PixelDirections) -> Columns {
         debug_assert!(
             n_dir <= MAX_DIRECTIONS,
             "{n_dir} directions, at most {MAX_DIRECTIONS}"
