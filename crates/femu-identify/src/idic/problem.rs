@@ -103,7 +103,7 @@ struct PairSamples {
 
 /// `dir(i, p, out)`: the pixel displacement derivatives of frame `i` at pixel `p`, one per
 /// direction ([`IdicProblem::directional`]).
-type PixelDirections = dyn Fn(usize, usize, &mut [[f64; 2]]) + Sync;
+type PixelDirections<'a> = dyn Fn(usize, usize, &mut [[f64; 2]]) + Sync + 'a;
 
 /// The integrated-DIC problem (module documentation).
 pub struct IdicProblem {
