@@ -340,10 +340,13 @@ fn init_writes_a_study_that_runs_and_will_not_overwrite() {
         .exists());
 }
 
-/// The full virtual experiment with images (issue 8 through `femu run`): B-mode images of the
-/// unloaded and compressed thigh under an anterior probe, the DIC field, the identification.
-/// The 40 x 40 mm window sees mostly quadriceps: its C10 comes back within 3 % (measured 0.8 %,
-/// predicted sd 0.9 %); the DIC's own error against the FE field is reported.
+/// The full virtual experiment with images (issues 8 and 25 through `femu run`): B-mode images
+/// of the unloaded and compressed thigh under an anterior probe, rendered on a mesh of half the
+/// element size with 5 % of the scatterers renewed per load step, identified by integrated DIC
+/// beside DIC -> FEMU (plain and weighted by the DIC's covariance). The 40 x 40 mm window sees
+/// mostly quadriceps: its C10 comes back within 3 % by every route (3 %: the seed's noisy Fig. 9
+/// level for C10), inside I-DIC's 95 % interval; the DIC's own error against the FE field is
+/// reported.
 #[test]
 fn femu_run_identifies_from_simulated_ultrasound_images() {
     let (o, out) = run(
@@ -356,20 +359,43 @@ fn femu_run_identifies_from_simulated_ultrasound_images() {
     let s = json(&out.join("summary.json"));
     let rms = s["measurement"]["dic_error"]["rms_mm"][1].as_f64().unwrap();
     assert!(rms < 0.2, "DIC uy error {rms} mm");
-    let quad = s["identification"]["grouped"]["parameters"]
+    let quad = s["images"]["grouped"]["parameters"]
         .as_array()
         .unwrap()
         .iter()
         .find(|p| p["name"] == "C10_QUADRICEPS")
         .unwrap()
         .clone();
-    let e = quad["relative_error"].as_f64().unwrap();
-    assert!(e < 0.03, "C10_QUADRICEPS error {e}");
-    for f in ["ref.png", "def.png", "measured.csv", "error_uy.png"] {
+    for route in ["idic", "dic", "weighted"] {
+        let e = quad[format!("{route}_error")].as_f64().unwrap();
+        assert!(e.abs() < 0.03, "C10_QUADRICEPS error by {route}: {e}");
+    }
+    let (t, ci) = (quad["reference"].as_f64().unwrap(), &quad["idic_ci95"]);
+    assert!(
+        ci[0].as_f64().unwrap() <= t && t <= ci[1].as_f64().unwrap(),
+        "I-DIC interval {ci} misses {t}"
+    );
+    for f in [
+        "ref.png",
+        "def.png",
+        "measured.csv",
+        "measured_covariance.mtx",
+        "error_uy.png",
+    ] {
         assert!(out.join("measurement").join(f).exists(), "{f}");
+    }
+    let grouped = out.join("identify/grouped");
+    for f in [
+        "summary.json",
+        "parameters.csv",
+        "dic/summary.json",
+        "dic-weighted/summary.json",
+    ] {
+        assert!(grouped.join(f).exists(), "{f}");
     }
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Measurement: simulated ultrasound and DIC"));
+    assert!(html.contains("Identification from images"));
 }
 
 /// `femu demo` itself (on 2 000 elements to stay quick): every step of the seed's numerical

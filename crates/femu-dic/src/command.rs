@@ -13,6 +13,7 @@
 //! | `covariance.mtx` | the nodal covariance `C = A⁻¹ M_σ A⁻¹` (px²) on the pattern of `A` (nodal 2 x 2 blocks and the pairs of nodes sharing an element or a regularization row), Matrix Market, lower triangle, equation `2 (node − 1) + c + 1` |
 //! | `hessian.mtx` | `A = M + λK`, the Gauss–Newton matrix of the iterations (grey levels² / px²) |
 //! | `hessian_noise.mtx` | `M_σ`, the covariance of the right-hand side under the residual's noise (grey levels⁴ / px²): with `A`, the factors of `C` |
+//! | `field_covariance.mtx` | the full covariance of `field.csv`'s components (mm², dense symmetric Matrix Market array, ux and uy of each row in its order), `N C Nᵀ` at the grid points; written up to [`output::MAX_COVARIANCE_POINTS`] points: `[measurement] covariance` of a study reads it for weighted FEMU |
 //! | `result.vtu` | mesh with displacement, standard deviations, strain, residual, trust |
 //! | `ux.png` … `residual.png`, `sd.png`, `zncc.png`, `trust.png` | maps over the reference image |
 //! | `summary.json` | [`DicReport`]: inputs, the choice of the options and every attempt, the result, the quality |
@@ -250,6 +251,13 @@ pub fn run_dic_on(
     };
     let points = output::grid_with_quality(&m.res, Some(&q), &frame, step)?;
     let mut warnings = Vec::new();
+    if points.len() > output::MAX_COVARIANCE_POINTS {
+        warnings.push(format!(
+            "{} grid points: field_covariance.mtx (dense) is written up to {} points; give a larger --grid-step for weighted FEMU with the full covariance (sx, sy are in field.csv)",
+            points.len(),
+            output::MAX_COVARIANCE_POINTS
+        ));
+    }
     if pixel_size.is_none() {
         warnings.push(
             "pixel size unknown (no DICOM header, no --pixel-size): the mm columns are in pixels"
@@ -257,6 +265,21 @@ pub fn run_dic_on(
         );
     }
     write_tables(job, &m, &choice, &frame, pixel_size, &points)?;
+    // The field's full covariance for weighted FEMU (`[measurement] covariance`), when the
+    // grid is small enough to write it densely.
+    let covariance_written = points.len() <= output::MAX_COVARIANCE_POINTS;
+    if covariance_written {
+        let c = output::grid_covariance(&m.res, &points, &frame)?;
+        output::write_dense_symmetric(
+            &job.out.join("field_covariance.mtx"),
+            2 * points.len(),
+            &c,
+            &[
+                "femu dic: covariance of field.csv's components (ux, uy per row, in its order), mm^2 in its frame".into(),
+                "N A^-1 M_sigma A^-1 N^T: the nodal covariance (covariance.mtx) at the grid points".into(),
+            ],
+        )?;
+    }
     let mut outputs = vec![
         "field.csv",
         "nodes.csv",
@@ -267,6 +290,9 @@ pub fn run_dic_on(
         "result.vtu",
         "summary.json",
     ];
+    if covariance_written {
+        outputs.push("field_covariance.mtx");
+    }
     if job.figures {
         crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some())?;
         outputs.extend(crate::figures::MAPS);

@@ -84,6 +84,62 @@ impl GreyImage {
         }
     }
 
+    /// The image convolved with a Gaussian of standard deviation `sigma` px (separable,
+    /// truncated at 3.5 σ and renormalized, mirror-symmetric borders as the B-splines use);
+    /// `sigma = 0` returns a copy. Coarse-to-fine correlation smooths the speckle this way to
+    /// widen its capture range: a displacement error `δ` changes the grey levels of a blurred
+    /// image by about `∇f δ`, with `|∇f|` falling as `1/√(σ_speckle² + σ²)`.
+    pub fn gaussian_blur(&self, sigma: f64) -> GreyImage {
+        if !(sigma > 0.0) {
+            return self.clone();
+        }
+        let r = (3.5 * sigma).ceil() as isize;
+        let mut k: Vec<f64> = (-r..=r)
+            .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+            .collect();
+        let sum: f64 = k.iter().sum();
+        k.iter_mut().for_each(|v| *v /= sum);
+        let (w, h) = (self.width, self.height);
+        let mirror = |i: isize, n: usize| -> usize {
+            let n = n as isize;
+            if n == 1 {
+                return 0;
+            }
+            let period = 2 * (n - 1);
+            let mut i = i.rem_euclid(period);
+            if i >= n {
+                i = period - i;
+            }
+            i as usize
+        };
+        let mut rows = vec![0.0; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                rows[y * w + x] = k
+                    .iter()
+                    .enumerate()
+                    .map(|(m, kv)| kv * self.data[y * w + mirror(x as isize + m as isize - r, w)])
+                    .sum();
+            }
+        }
+        let mut data = vec![0.0; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                data[y * w + x] = k
+                    .iter()
+                    .enumerate()
+                    .map(|(m, kv)| kv * rows[mirror(y as isize + m as isize - r, h) * w + x])
+                    .sum();
+            }
+        }
+        GreyImage {
+            width: w,
+            height: h,
+            data,
+            pixel_size: self.pixel_size,
+        }
+    }
+
     /// Writes the image as an 8-bit grey PNG (values clamped to 0–255).
     pub fn save_png(&self, path: &Path) -> Result<(), DicError> {
         let buf: Vec<u8> = self
@@ -142,6 +198,28 @@ mod tests {
         let e = GreyImage::open(&dir.join("missing.png"), 0).unwrap_err();
         assert!(e.to_string().contains("missing.png"));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// The blur keeps a constant image, conserves the grey levels and spreads a point as a
+    /// Gaussian of the asked width (second moment σ² to 1 %: the truncation at 3.5 σ removes
+    /// 0.6 % of it at most; measured 0.2 %).
+    #[test]
+    fn gaussian_blur_spreads_a_point_by_sigma() {
+        let (w, h) = (41, 41);
+        let mut d = vec![0.0; w * h];
+        d[20 * w + 20] = 1.0;
+        let b = GreyImage::new(w, h, d).unwrap().gaussian_blur(2.5);
+        let total: f64 = b.data.iter().sum();
+        let m2: f64 = (0..w * h)
+            .map(|k| b.data[k] * (((k % w) as f64 - 20.0).powi(2)))
+            .sum();
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+        assert!((m2 / 2.5f64.powi(2) - 1.0).abs() < 1e-2, "{m2}");
+        let flat = GreyImage::new(9, 7, vec![42.0; 63])
+            .unwrap()
+            .gaussian_blur(3.0);
+        assert!(flat.data.iter().all(|v| (v - 42.0).abs() < 1e-12));
+        assert_eq!(b.gaussian_blur(0.0).data, b.data);
     }
 
     #[test]

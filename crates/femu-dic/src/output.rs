@@ -289,6 +289,150 @@ pub fn write_matrix_market(
     f.flush().map_err(&e)
 }
 
+/// Writes a dense symmetric `m x m` matrix (row-major `values`) as a Matrix Market array: the
+/// lower triangle column by column, with comment lines.
+pub fn write_dense_symmetric(
+    path: &Path,
+    m: usize,
+    values: &[f64],
+    comments: &[String],
+) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    writeln!(f, "%%MatrixMarket matrix array real symmetric").map_err(&e)?;
+    for c in comments {
+        writeln!(f, "% {c}").map_err(&e)?;
+    }
+    writeln!(f, "{m} {m}").map_err(&e)?;
+    for j in 0..m {
+        for i in j..m {
+            writeln!(f, "{:.9e}", values[i * m + j]).map_err(&e)?;
+        }
+    }
+    f.flush().map_err(&e)
+}
+
+/// Largest grid of `field.csv` whose full covariance `femu dic` writes (`field_covariance.mtx`,
+/// dense: 600 points are 1 200 x 1 200, about 10 MB of text).
+pub const MAX_COVARIANCE_POINTS: usize = 600;
+
+/// The covariance of the grid points' displacements in the model frame (mm², `[ux, uy]` per
+/// point, row-major): the nodal covariance `A⁻¹ M_σ A⁻¹` of `res` carried to each point by its
+/// element's shape functions ([`crate::quality::combined_covariance`]), scaled and flipped as
+/// the frame maps pixels to mm.
+pub fn grid_covariance(
+    res: &DicResult,
+    points: &[GridPoint],
+    frame: &ModelFrame,
+) -> Result<Vec<f64>, DicError> {
+    let rows: Vec<Vec<(usize, f64)>> = points
+        .iter()
+        .flat_map(|p| {
+            let (e, xi, eta) = res
+                .mesh
+                .locate(p.x_px[0], p.x_px[1])
+                .expect("grid points lie in the mesh");
+            let n = crate::DicMesh::shape(xi, eta);
+            let c = res.mesh.conn[e];
+            (0..2).map(move |comp| (0..4).map(|a| (2 * c[a] + comp, n[a])).collect())
+        })
+        .collect();
+    let sys = &res.system;
+    let mut c = crate::quality::combined_covariance(
+        &sys.pattern,
+        &sys.a_values(),
+        &crate::quality::noise_matrix(res),
+        &rows,
+    )?;
+    let scale = frame.displacement([1.0, 1.0]);
+    let m = rows.len();
+    for i in 0..m {
+        for j in 0..m {
+            c[i * m + j] *= scale[i % 2] * scale[j % 2];
+        }
+    }
+    Ok(c)
+}
+
+/// Reads a symmetric real Matrix Market file as [`write_matrix_market`] writes it (the lower
+/// triangle, 1-based): the pattern (both triangles) and the values on it. A malformed line is
+/// an error naming the file and the line.
+pub fn read_matrix_market(path: &Path) -> Result<(crate::sparse::CscPattern, Vec<f64>), DicError> {
+    let bad = |line: usize, message: String| DicError::ImageRead {
+        path: path.to_path_buf(),
+        message: format!("line {line}: {message}"),
+    };
+    let text = std::fs::read_to_string(path).map_err(|e| DicError::ImageRead {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, h))
+            if h.to_ascii_lowercase()
+                .starts_with("%%matrixmarket matrix coordinate real symmetric") => {}
+        _ => {
+            return Err(bad(
+                1,
+                "not a symmetric real Matrix Market coordinate file".into(),
+            ))
+        }
+    }
+    let mut size: Option<(usize, usize)> = None;
+    let mut entries: Vec<(usize, usize, f64)> = Vec::new();
+    for (k, l) in lines {
+        let t = l.trim();
+        if t.is_empty() || t.starts_with('%') {
+            continue;
+        }
+        let f: Vec<&str> = t.split_whitespace().collect();
+        match size {
+            None => {
+                let n: usize = f
+                    .first()
+                    .and_then(|v| v.parse().ok())
+                    .ok_or_else(|| bad(k + 1, "size line".into()))?;
+                let nnz: usize = f
+                    .get(2)
+                    .and_then(|v| v.parse().ok())
+                    .ok_or_else(|| bad(k + 1, "size line".into()))?;
+                size = Some((n, nnz));
+                entries.reserve(nnz);
+            }
+            Some((n, _)) => {
+                let (r, c, v) = match (f.first(), f.get(1), f.get(2)) {
+                    (Some(r), Some(c), Some(v)) => {
+                        (r.parse::<usize>(), c.parse::<usize>(), v.parse::<f64>())
+                    }
+                    _ => return Err(bad(k + 1, format!("'{t}' is not 'row col value'"))),
+                };
+                let (Ok(r), Ok(c), Ok(v)) = (r, c, v) else {
+                    return Err(bad(k + 1, format!("'{t}' is not 'row col value'")));
+                };
+                if r == 0 || c == 0 || r > n || c > n || !v.is_finite() {
+                    return Err(bad(
+                        k + 1,
+                        format!("entry ({r}, {c}) = {v} outside a {n} x {n} matrix or not finite"),
+                    ));
+                }
+                entries.push((r - 1, c - 1, v));
+            }
+        }
+    }
+    let (n, _) = size.ok_or_else(|| bad(1, "no size line".into()))?;
+    let pairs: Vec<(usize, usize)> = entries
+        .iter()
+        .flat_map(|&(r, c, _)| [(r, c), (c, r)])
+        .collect();
+    let pattern = crate::sparse::CscPattern::from_pairs(n, pairs);
+    let mut values = vec![0.0; pattern.nnz()];
+    for &(r, c, v) in &entries {
+        values[pattern.position(r, c).expect("entry in the pattern")] = v;
+        values[pattern.position(c, r).expect("entry in the pattern")] = v;
+    }
+    Ok((pattern, values))
+}
+
 /// Element table: `element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged,zncc,grey_std,
 /// texture_small,texture_large` (strain in the model frame, residual RMS and grey-level
 /// standard deviation in grey levels, structure-tensor eigenvalues in grey levels²/px²), and

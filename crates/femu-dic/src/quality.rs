@@ -194,6 +194,66 @@ fn sandwich_with(
     })
 }
 
+/// The covariance `P C Pᵀ` of linear combinations of the nodal values, `C = A⁻¹ M_σ A⁻¹`
+/// (eq. 4) in full (not restricted to the pattern of `A`): `rows` are `m` row vectors over the
+/// equations, each a sparse list of `(equation, weight)` (a grid point's component is the four
+/// shape-function weights of its element's nodes; a node's component is one entry). Returns
+/// the `m x m` matrix row-major (pixels²). Costs two block solves with `m` columns and `m`
+/// products by `M_σ`.
+pub fn combined_covariance(
+    pattern: &crate::sparse::CscPattern,
+    a_values: &[f64],
+    m_sigma: &[f64],
+    rows: &[Vec<(usize, f64)>],
+) -> Result<Vec<f64>, DicError> {
+    let n = pattern.n;
+    let m = rows.len();
+    let chol = Cholesky::factorize(pattern, a_values)?;
+    // Z = A⁻¹ Pᵀ, Y = M_σ Z, then (P C Pᵀ)_ij = (A⁻¹ P_iᵀ)ᵀ M_σ (A⁻¹ P_jᵀ) = Z_iᵀ Y_j.
+    const BLOCK: usize = 64;
+    let blocks: Vec<(Vec<f64>, Vec<f64>)> = (0..m.div_ceil(BLOCK))
+        .into_par_iter()
+        .map(|blk| {
+            let j0 = blk * BLOCK;
+            let nc = BLOCK.min(m - j0);
+            let mut z = vec![0.0; n * nc];
+            for c in 0..nc {
+                for &(q, w) in &rows[j0 + c] {
+                    z[c * n + q] += w;
+                }
+            }
+            chol.solve_columns_in_place(&mut z, nc);
+            let mut y = vec![0.0; n * nc];
+            for c in 0..nc {
+                pattern.mul_vec(m_sigma, &z[c * n..(c + 1) * n], &mut y[c * n..(c + 1) * n]);
+            }
+            (z, y)
+        })
+        .collect();
+    let z: Vec<f64> = blocks.iter().flat_map(|b| b.0.iter().copied()).collect();
+    let y: Vec<f64> = blocks.iter().flat_map(|b| b.1.iter().copied()).collect();
+    let mut out = vec![0.0; m * m];
+    out.par_chunks_mut(m).enumerate().for_each(|(i, row)| {
+        let zi = &z[i * n..(i + 1) * n];
+        for (j, o) in row.iter_mut().enumerate() {
+            *o = zi
+                .iter()
+                .zip(&y[j * n..(j + 1) * n])
+                .map(|(a, b)| a * b)
+                .sum();
+        }
+    });
+    // Symmetrize the round-off.
+    for i in 0..m {
+        for j in 0..i {
+            let v = 0.5 * (out[i * m + j] + out[j * m + i]);
+            out[i * m + j] = v;
+            out[j * m + i] = v;
+        }
+    }
+    Ok(out)
+}
+
 impl NodalCovariance {
     /// Standard deviations of ux, uy (pixels) at `(x, y)` inside the mesh: `u = Σ N_a a_a`, so
     /// `var u_x = Σ_ab N_a N_b C[2a, 2b]` over the element's nodes.

@@ -13,6 +13,7 @@ use crate::fit::{
 };
 use crate::joint::{self, Block, JointProblem, Segments};
 use crate::measured::{MeasuredField, MeasuredPoint};
+use crate::weighted::{FieldCovariance, Loss};
 use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
@@ -295,6 +296,11 @@ pub struct CampaignOptions {
     pub repeats: usize,
     /// The actuator term of [`run`]'s single measurement ([`run_joint`] takes one per block).
     pub travel: Option<TravelTerm>,
+    /// The measured field's full covariance (model frame, mm²; weighted FEMU, module
+    /// [`crate::weighted`]), used instead of its per-point weights; measured data only.
+    pub covariance: Option<FieldCovariance>,
+    /// The loss on the (whitened) residuals.
+    pub loss: Loss,
     /// Set by the user to stop: the starts stop at their next forward solve and the campaign
     /// returns the repeats it finished ([`CampaignError::Interrupted`]).
     pub stop: Option<Arc<AtomicBool>>,
@@ -559,18 +565,24 @@ pub fn realized_fields(
 }
 
 /// The FEMU block of `block` on `model` (the block's model or its coarse one) with the data of
-/// one repeat.
+/// one repeat, under the campaign's loss; `covariance` (weighted FEMU) whitens a block of one
+/// measured segment.
 fn field_problem(
     block: &FieldBlock,
     data: &Realized,
     model: &Model,
     free: &[FreeParameter],
     free_model: &Model,
-    stop: Option<Arc<AtomicBool>>,
+    options: &CampaignOptions,
+    covariance: Option<&FieldCovariance>,
 ) -> Result<Block, FitError> {
     let (bfree, map) = joint::block_free(free, free_model, model);
-    let mut p =
-        Problem::new(model.clone(), SolverOptions::default(), &data.field, bfree)?.with_stop(stop);
+    let mut p = Problem::new(model.clone(), SolverOptions::default(), &data.field, bfree)?
+        .with_stop(options.stop.clone())
+        .with_loss(options.loss);
+    if let (Some(c), [(_, Data::Measured(_))]) = (covariance, block.segments.as_slice()) {
+        p = p.with_covariance(c)?;
+    }
     if let Some((t, sigma)) = data.travel {
         p = p.with_travel(t, sigma)?;
     }
@@ -664,6 +676,9 @@ pub fn run_joint(
         let problem = |coarse: bool| -> Result<JointProblem, FitError> {
             let mut stacked = Vec::with_capacity(blocks.len());
             let mut data = realized.iter();
+            // The measured field's covariance belongs to the first field block (the study's
+            // single [measurement]).
+            let mut covariance = options.covariance.as_ref();
             for spec in blocks {
                 stacked.push(match spec {
                     BlockSpec::Field(f) => {
@@ -673,7 +688,8 @@ pub fn run_joint(
                             f.model
                         };
                         let d = data.next().expect("one realization per field block");
-                        field_problem(f, d, model, free, free_model, options.stop.clone())?
+                        let c = covariance.take();
+                        field_problem(f, d, model, free, free_model, options, c)?
                     }
                     BlockSpec::Custom { build, .. } => build(coarse)?,
                 });

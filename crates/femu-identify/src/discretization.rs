@@ -191,6 +191,14 @@ fn gauss_newton_step(j: &Columns, d: &[f64]) -> Result<Vec<f64>, CheckError> {
     }
 }
 
+/// The bias of the log-parameters on the model's mesh (model's minus converged) from the
+/// Gauss–Newton `shift` to a mesh refined by `ratio = h / h_f`, for a discretization error
+/// converging at `rate` (Richardson): `b = -δ_f / (1 - ratio^-rate)`.
+pub fn extrapolated_bias(shift: &[f64], ratio: f64, rate: f64) -> Vec<f64> {
+    let factor = 1.0 / (1.0 - ratio.powf(-rate));
+    shift.iter().map(|s| -s * factor).collect()
+}
+
 /// The check at the identified parameters `theta` (model units) with relative sds `sd`, from
 /// `levels`: the model's own mesh first (ratio 1), then meshes of the same geometry refined by
 /// increasing ratios, all with the same measured points (see the module documentation).
@@ -251,8 +259,7 @@ pub fn check(
     // nominal rate.
     let rate = observed.map_or(ASSUMED_RATE, |p| p.min(NOMINAL_RATE));
     let finest = &records[records.len() - 1];
-    let factor = 1.0 / (1.0 - finest.ratio.powf(-rate));
-    let bias: Vec<f64> = shift.iter().map(|s| -s * factor).collect();
+    let bias = extrapolated_bias(&shift, finest.ratio, rate);
     let bias_over_sd: Vec<f64> = bias
         .iter()
         .zip(sd)

@@ -170,9 +170,11 @@ pub struct Identifiability {
     pub condition: f64,
 }
 
-/// Inverts the information (symmetric eigen-decomposition; directions with eigenvalue below
-/// 1e-14 of the largest are unidentifiable and give infinite standard deviations).
-pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
+/// The pseudo-inverse of a symmetric positive semi-definite matrix by its eigen-decomposition:
+/// directions with an eigenvalue below 1e-14 of the largest are dropped. Returns the inverse,
+/// which rows touch a dropped direction (`unseen`), and the square roots of the eigenvalues,
+/// descending.
+pub fn pseudo_inverse(f: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<bool>, Vec<f64>) {
     let n = f.len();
     let m = faer::Mat::<f64>::from_fn(n, n, |i, j| f[i][j]);
     let (vals, vecs) = match m.self_adjoint_eigen(faer::Side::Lower) {
@@ -188,19 +190,18 @@ pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
     };
     let lmax = vals.iter().cloned().fold(0.0f64, f64::max);
     let cutoff = 1e-14 * lmax;
-    let mut cov = vec![vec![0.0; n]; n];
+    let mut inv = vec![vec![0.0; n]; n];
     let mut singular = vec![];
     for (k, &l) in vals.iter().enumerate() {
         singular.push(l.sqrt());
         if l > cutoff && l > 0.0 {
             for i in 0..n {
                 for j in 0..n {
-                    cov[i][j] += vecs[(i, k)] * vecs[(j, k)] / l;
+                    inv[i][j] += vecs[(i, k)] * vecs[(j, k)] / l;
                 }
             }
         }
     }
-    // A parameter with a component on a dropped direction is not identifiable.
     let unseen: Vec<bool> = (0..n)
         .map(|i| {
             vals.iter()
@@ -208,16 +209,21 @@ pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
                 .any(|(k, &l)| !(l > cutoff && l > 0.0) && vecs[(i, k)].abs() > 1e-8)
         })
         .collect();
-    let relative_sd: Vec<f64> = (0..n)
-        .map(|i| {
-            if unseen[i] {
-                f64::INFINITY
-            } else {
-                cov[i][i].sqrt()
-            }
-        })
-        .collect();
-    let correlation = (0..n)
+    singular.sort_by(|a, b| b.total_cmp(a));
+    (inv, unseen, singular)
+}
+
+/// Inverts the information (symmetric eigen-decomposition; directions with eigenvalue below
+/// 1e-14 of the largest are unidentifiable and give infinite standard deviations).
+pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
+    let (cov, unseen, singular) = pseudo_inverse(f);
+    from_covariance(&cov, &unseen, singular, names)
+}
+
+/// The correlation matrix `C_ij / √(C_ii C_jj)` of a covariance (NaN where a variance is 0).
+pub fn correlation(cov: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let n = cov.len();
+    (0..n)
         .map(|i| {
             (0..n)
                 .map(|j| {
@@ -230,8 +236,29 @@ pub fn identifiability(f: &[Vec<f64>], names: &[String]) -> Identifiability {
                 })
                 .collect()
         })
+        .collect()
+}
+
+/// The standard deviations and correlations of a covariance of log-parameters (`unseen`
+/// parameters get infinite standard deviations), with the singular values of the information
+/// it came from.
+pub fn from_covariance(
+    cov: &[Vec<f64>],
+    unseen: &[bool],
+    singular: Vec<f64>,
+    names: &[String],
+) -> Identifiability {
+    let n = cov.len();
+    let relative_sd: Vec<f64> = (0..n)
+        .map(|i| {
+            if unseen[i] {
+                f64::INFINITY
+            } else {
+                cov[i][i].max(0.0).sqrt()
+            }
+        })
         .collect();
-    singular.sort_by(|a, b| b.total_cmp(a));
+    let correlation = correlation(cov);
     let smin = singular.last().copied().unwrap_or(0.0);
     let condition = if smin > 0.0 {
         singular[0] / smin

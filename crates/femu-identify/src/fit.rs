@@ -15,6 +15,7 @@
 //! failures. [`latin_hypercube`] draws the starts of the seed's multi-start.
 
 use crate::measured::MeasuredField;
+use crate::weighted::{FieldCovariance, Loss, Whitening};
 use femu_mech::sensitivity::{DirectSensitivity, Parameter};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::locate::{PointLocation, PointLocator};
@@ -72,6 +73,8 @@ pub enum FitError {
     /// The user asked to stop (see [`Problem::with_stop`]).
     #[error("interrupted")]
     Interrupted,
+    #[error("measurement covariance: {0}")]
+    Covariance(String),
 }
 
 /// A weighted least-squares problem in log-parameters `φ = ln θ`: what the optimizers
@@ -93,6 +96,65 @@ pub trait LeastSquares {
     fn counts(&self) -> (usize, usize);
 }
 
+/// Some free parameters of a problem held at given values, the others free: a
+/// [`LeastSquares`] over the subset `keep` (indices into `inner.free()`), the held ones at their
+/// log-values in `phi`.
+pub struct Subset<'a, P: LeastSquares + ?Sized> {
+    inner: &'a mut P,
+    keep: Vec<usize>,
+    phi: Vec<f64>,
+    free: Vec<FreeParameter>,
+}
+
+impl<'a, P: LeastSquares + ?Sized> Subset<'a, P> {
+    /// `phi`: log-values of every free parameter of `inner` (those of `keep` are overwritten by
+    /// each evaluation).
+    pub fn new(inner: &'a mut P, keep: Vec<usize>, phi: Vec<f64>) -> Self {
+        let free = keep.iter().map(|&k| inner.free()[k].clone()).collect();
+        Subset {
+            inner,
+            keep,
+            phi,
+            free,
+        }
+    }
+
+    /// The log-values of every free parameter for subset log-values `sub`.
+    pub fn full(&self, sub: &[f64]) -> Vec<f64> {
+        let mut phi = self.phi.clone();
+        for (&k, &v) in self.keep.iter().zip(sub) {
+            phi[k] = v;
+        }
+        phi
+    }
+}
+
+impl<P: LeastSquares + ?Sized> LeastSquares for Subset<'_, P> {
+    fn free(&self) -> &[FreeParameter] {
+        &self.free
+    }
+
+    fn evaluate(
+        &mut self,
+        phi: &[f64],
+        jacobian: bool,
+    ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
+        let full = self.full(phi);
+        let (r, j) = self.inner.evaluate(&full, jacobian)?;
+        let j = j.map(|mut cols| {
+            self.keep
+                .iter()
+                .map(|&k| std::mem::take(&mut cols[k]))
+                .collect()
+        });
+        Ok((r, j))
+    }
+
+    fn counts(&self) -> (usize, usize) {
+        self.inner.counts()
+    }
+}
+
 /// The model, its solver and the measurement, ready for repeated evaluations.
 pub struct Problem {
     model: Model,
@@ -103,6 +165,12 @@ pub struct Problem {
     locations: Vec<PointLocation>,
     measured: Vec<f64>,
     sqrt_w: Vec<f64>,
+    /// Index in the measured field of each located point, and the field's point count.
+    field_index: Vec<usize>,
+    field_points: usize,
+    /// The full covariance's whitening and the located points it covers.
+    whitening: Option<(Whitening, Vec<usize>)>,
+    loss: Loss,
     masked: usize,
     /// Whether each point of the field lies in the tissue (its residual rows follow).
     located: Vec<bool>,
@@ -144,14 +212,16 @@ impl Problem {
         let mut locations = Vec::new();
         let mut measured = Vec::new();
         let mut sqrt_w = Vec::new();
+        let mut field_index = Vec::new();
         let mut masked = 0;
         let mut located = Vec::with_capacity(field.points.len());
-        for p in &field.points {
+        for (i, p) in field.points.iter().enumerate() {
             let loc = locator.locate(p.x);
             located.push(loc.is_some());
             match loc {
                 Some(loc) => {
                     locations.push(loc);
+                    field_index.push(i);
                     measured.extend_from_slice(&p.u);
                     sqrt_w.extend(p.weight.iter().map(|w| w.sqrt()));
                 }
@@ -178,6 +248,10 @@ impl Problem {
             locations,
             measured,
             sqrt_w,
+            field_index,
+            field_points: field.points.len(),
+            whitening: None,
+            loss: Loss::Squared,
             masked,
             located,
             travel: None,
@@ -293,16 +367,17 @@ impl Problem {
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
             .map_err(|e| FitError::Solve(e.to_string()))?;
-        let mut r = Vec::with_capacity(self.measured.len());
-        self.project(&sol.u, &mut r);
-        for ((ri, m), w) in r.iter_mut().zip(&self.measured).zip(&self.sqrt_w) {
-            *ri = w * (*ri - m);
+        let mut diff = Vec::with_capacity(self.measured.len());
+        self.project(&sol.u, &mut diff);
+        for (d, m) in diff.iter_mut().zip(&self.measured) {
+            *d -= m;
         }
+        let mut r = self.weigh(&diff);
         let travel_dof = 2 * self.model.node_count();
         if let Some((t, sigma)) = self.travel {
             r.push((sol.state[travel_dof] - t) / sigma);
         }
-        let jac = if jacobian {
+        let mut jac = if jacobian {
             self.jacobians += 1;
             let members: Vec<Parameter> = self
                 .free
@@ -322,27 +397,80 @@ impl Problem {
             let mut k = 0;
             let mut col = Vec::new();
             for f in &self.free {
-                let mut sum = vec![0.0; r.len()];
+                let mut sum = vec![0.0; diff.len()];
+                let mut travel = 0.0;
                 for m in &f.members {
                     let theta = m.value(&self.model);
                     self.project(&self.dstate[k], &mut col);
-                    for ((s, c), w) in sum.iter_mut().zip(&col).zip(&self.sqrt_w) {
-                        *s += w * theta * c;
+                    for (s, c) in sum.iter_mut().zip(&col) {
+                        *s += theta * c;
                     }
                     if let Some((_, sigma)) = self.travel {
-                        let last = sum.len() - 1;
-                        sum[last] += theta * self.dstate[k][travel_dof] / sigma;
+                        travel += theta * self.dstate[k][travel_dof] / sigma;
                     }
                     k += 1;
                 }
-                cols.push(sum);
+                let mut c = self.weigh(&sum);
+                if self.travel.is_some() {
+                    c.push(travel);
+                }
+                cols.push(c);
             }
             Some(cols)
         } else {
             None
         };
+        self.loss.apply(&mut r, jac.as_mut());
         self.warm = Some(sol.state);
         Ok((r, jac))
+    }
+
+    /// The weighted residual of a difference over the located points' components: `√w d`, or
+    /// with a covariance, `L⁻¹ d` over the components it covers.
+    fn weigh(&self, d: &[f64]) -> Vec<f64> {
+        match &self.whitening {
+            None => d.iter().zip(&self.sqrt_w).map(|(v, w)| w * v).collect(),
+            Some((w, kept)) => {
+                let mut v: Vec<f64> = kept
+                    .iter()
+                    .flat_map(|&l| [d[2 * l], d[2 * l + 1]])
+                    .collect();
+                w.apply(&mut v);
+                v
+            }
+        }
+    }
+
+    /// Weights the misfit by the measured field's full covariance (module
+    /// [`crate::weighted`]): `cov` covers every point of the field given to [`Problem::new`];
+    /// the points kept are those in the tissue with a non-zero weight (the others are
+    /// marginalized: their rows and columns of `cov` dropped). Replaces the per-point weights.
+    pub fn with_covariance(mut self, cov: &FieldCovariance) -> Result<Problem, FitError> {
+        if cov.points != self.field_points {
+            return Err(FitError::Covariance(format!(
+                "a covariance of {} points for a field of {}",
+                cov.points, self.field_points
+            )));
+        }
+        let kept: Vec<usize> = (0..self.locations.len())
+            .filter(|&l| self.sqrt_w[2 * l] > 0.0 || self.sqrt_w[2 * l + 1] > 0.0)
+            .collect();
+        if 2 * kept.len() < self.free.len() {
+            return Err(FitError::TooFewData {
+                data: 2 * kept.len(),
+                free: self.free.len(),
+            });
+        }
+        let field: Vec<usize> = kept.iter().map(|&l| self.field_index[l]).collect();
+        self.whitening = Some((Whitening::new(&cov.sub(&field))?, kept));
+        Ok(self)
+    }
+
+    /// Minimizes the loss `loss` of the (whitened) residuals instead of their squares (module
+    /// [`crate::weighted`]).
+    pub fn with_loss(mut self, loss: Loss) -> Problem {
+        self.loss = loss;
+        self
     }
 
     /// The model field `[ux, uy, ...]` at the located measured points for `theta` (model
@@ -391,6 +519,13 @@ pub struct LmOptions {
     pub cost_tolerance: f64,
     /// Initial damping, relative to the diagonal of JᵀJ.
     pub initial_damping: f64,
+    /// Stop when every parameter's Gauss–Newton step is below this fraction of its standard
+    /// deviation `s √(JᵀJ)⁻¹_pp` (`s²` the residual variance): further steps would move the
+    /// estimate by less than its uncertainty can tell. `None`: not used. Gauss–Newton converges
+    /// linearly when the residual stays large (grey levels of decorrelated speckle), and the
+    /// parameters the data hardly see keep drifting: this stops it on what matters.
+    #[serde(default)]
+    pub significance: Option<f64>,
 }
 
 impl Default for LmOptions {
@@ -400,6 +535,7 @@ impl Default for LmOptions {
             step_tolerance: 1e-8,
             cost_tolerance: 1e-10,
             initial_damping: 1e-3,
+            significance: None,
         }
     }
 }
@@ -471,6 +607,55 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// The trial point of a damped Gauss–Newton step `(A + λ diag A) δ = −g` within the bounds
+/// `lo..hi` (log-parameters): a parameter at a bound whose step would leave it is held there
+/// (its row and column dropped) and the others solved for again, until no held parameter is
+/// added (at most one pass per parameter); the result is clamped. Projecting the full step
+/// instead would let one parameter pressing on its bound shrink every other step to nothing.
+fn bounded_step(
+    a: &[Vec<f64>],
+    g: &[f64],
+    lambda: f64,
+    phi: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+) -> Vec<f64> {
+    use faer::linalg::solvers::Solve;
+    let n = phi.len();
+    let mut held = vec![false; n];
+    let mut delta = vec![0.0; n];
+    for _ in 0..=n {
+        let free: Vec<usize> = (0..n).filter(|&p| !held[p]).collect();
+        delta.fill(0.0);
+        if free.is_empty() {
+            break;
+        }
+        let m = faer::Mat::<f64>::from_fn(free.len(), free.len(), |i, j| {
+            let (p, q) = (free[i], free[j]);
+            a[p][q] + if p == q { lambda * a[p][p] } else { 0.0 }
+        });
+        let rhs = faer::Mat::<f64>::from_fn(free.len(), 1, |i, _| -g[free[i]]);
+        let x = m.partial_piv_lu().solve(&rhs);
+        for (i, &p) in free.iter().enumerate() {
+            delta[p] = x[(i, 0)];
+        }
+        let mut added = false;
+        for &p in &free {
+            let leaves = (phi[p] <= lo[p] && delta[p] < 0.0) || (phi[p] >= hi[p] && delta[p] > 0.0);
+            if leaves {
+                held[p] = true;
+                added = true;
+            }
+        }
+        if !added {
+            break;
+        }
+    }
+    (0..n)
+        .map(|p| (phi[p] + delta[p]).clamp(lo[p], hi[p]))
+        .collect()
+}
+
 /// Minimizes the cost of `problem` from `start` (model units, one per free parameter).
 pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
     problem: &mut P,
@@ -514,18 +699,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                 norm: a[p][p].max(0.0).sqrt(),
             });
         }
-        let m = faer::Mat::<f64>::from_fn(n, n, |p, q| {
-            a[p][q] + if p == q { lambda * a[p][p] } else { 0.0 }
-        });
-        let rhs = faer::Mat::<f64>::from_fn(n, 1, |p, _| -g[p]);
-        let delta = {
-            use faer::linalg::solvers::Solve;
-            m.partial_piv_lu().solve(&rhs)
-        };
-        let mut trial = phi.clone();
-        for p in 0..n {
-            trial[p] = (phi[p] + delta[(p, 0)]).clamp(lo[p], hi[p]);
-        }
+        let trial = bounded_step(&a, &g, lambda, &phi, &lo, &hi);
         let max_step = (0..n)
             .map(|p| (trial[p] - phi[p]).abs())
             .fold(0.0f64, f64::max);
@@ -546,12 +720,22 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                     .map(|p| d[p] * (0..n).map(|q| a[p][q] * d[q]).sum::<f64>())
                     .sum::<f64>());
         let negligible = predicted <= opts.cost_tolerance * cost;
-        if max_step < opts.step_tolerance || negligible {
+        let insignificant = opts.significance.is_some_and(|f| {
+            let (inv, _, _) = crate::fisher::pseudo_inverse(&a);
+            let s2 = 2.0 * cost / (r.len().saturating_sub(n)).max(1) as f64;
+            (0..n).all(|p| d[p].abs() <= f * (s2 * inv[p][p]).sqrt())
+        });
+        if max_step < opts.step_tolerance || negligible || insignificant {
             converged = true;
             reason = if negligible {
                 format!(
                     "predicted decrease below {:.0e} of the cost",
                     opts.cost_tolerance
+                )
+            } else if insignificant {
+                format!(
+                    "every step below {} of its parameter's standard deviation",
+                    opts.significance.unwrap_or(0.0)
                 )
             } else {
                 format!("step below {:.0e}", opts.step_tolerance)

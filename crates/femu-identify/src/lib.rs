@@ -7,6 +7,8 @@
 //! - [`measured`]: the measured-field CSV of conventions.md.
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
+//! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
+//! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
 //! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
 //!   the free parameters, stacked into one problem; each measurement's share of the information.
 //! - [`discretization`]: the model's own error: the parameter bias its mesh implies, from
@@ -23,5 +25,7 @@ pub mod design;
 pub mod discretization;
 pub mod fisher;
 pub mod fit;
+pub mod idic;
 pub mod joint;
 pub mod measured;
+pub mod weighted;

@@ -181,6 +181,8 @@ fn a_joint_of_one_is_the_single_identification() {
         repeats: 1,
         travel: None,
         stop: None,
+        covariance: None,
+        loss: Default::default(),
     };
     let c = campaign::run(
         &model,
@@ -266,6 +268,8 @@ fn noise_free_joint_fit_recovers_every_parameter() {
         repeats: 1,
         travel: None,
         stop: None,
+        covariance: None,
+        loss: Default::default(),
     };
     let c = campaign::run_joint(&base, &free, &reference, &blocks, &options, &|_| {}).unwrap();
     for s in &c.starts {
@@ -362,6 +366,8 @@ fn light_monte_carlo_intervals_cover_the_truth() {
         repeats: 8,
         travel: None,
         stop: None,
+        covariance: None,
+        loss: Default::default(),
     };
     let c = campaign::run_joint(&base, &free, &reference, &blocks, &options, &|_| {}).unwrap();
     assert_eq!(c.best.len(), 8);

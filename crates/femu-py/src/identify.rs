@@ -181,6 +181,7 @@ pub fn identify_field(
         field,
         source: source.clone(),
         reference_known: false,
+        covariance: None,
     };
     let study = &study.study;
     let summary = running::run(py, reporter.as_ref(), |progress| {
@@ -294,6 +295,7 @@ pub fn least_squares(
                     field: f,
                     source: "NumPy arrays (x, y, ux, uy)".into(),
                     reference_known: false,
+                    covariance: None,
                 };
                 identify::measured_prepared(study, measured, "NumPy arrays")?
             }

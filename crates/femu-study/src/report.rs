@@ -3,6 +3,8 @@
 //! of every finished step. Built from the files the steps wrote, so it can be rewritten at any
 //! time (`femu report DIR`), also for a run that stopped midway.
 
+mod images;
+
 use crate::html::{esc, g, Page as Html};
 use crate::output::{read_json, write_json, write_text};
 use crate::steps::identify::IdentificationSummary;
@@ -98,6 +100,9 @@ pub struct RunSummary {
     pub measurement: Option<MeasurementOverview>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub identification: Option<BTreeMap<String, IdentificationOverview>>,
+    /// The identification from images, per grouping: integrated DIC beside DIC → FEMU.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub images: Option<BTreeMap<String, images::ImageOverview>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub design: Option<Vec<String>>,
 }
@@ -120,6 +125,7 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
         sensitivity: sensitivity_section(&mut html, &dir.join("sensitivity")),
         measurement: measurement_section(&mut html, &dir.join("measurement")),
         identification: identification_section(&mut html, dir)?,
+        images: image_sections(&mut html, dir),
         design: design_section(&mut html, &dir.join("design")),
     };
     html.convergence(dir);
@@ -550,12 +556,17 @@ fn measurement_section(html: &mut Html, dir: &Path) -> Option<MeasurementOvervie
     let e = &s.error;
     html.p(&format!(
         "B-mode images of the unloaded and loaded thigh ({} x {} px, {} scatterers moved by the FE \
-         field, {} MHz, gain {} dB, dynamic {} dB) correlated by the global Q4 DIC in {} load \
-         steps. DIC against the FE field over {} points in the tissue: RMS ({}, {}) px = ({}, {}) \
-         mm, largest ({}, {}) px, for displacements up to {} px.",
+         field of a mesh of {} elements (render_refine {}: finer than the one identified), {} of \
+         the scatterers renewed per load step (decorrelation), {} MHz, gain {} dB, dynamic {} dB) \
+         correlated by the global Q4 DIC in {} load steps. DIC against the FE field over {} points \
+         in the tissue: RMS ({}, {}) px = ({}, {}) mm, largest ({}, {}) px, for displacements up \
+         to {} px.",
         s.image_px.0,
         s.image_px.1,
         s.scatterers,
+        s.render_elements,
+        s.render_refine,
+        pct(s.decorrelation),
         g(s.transducer.frequency_mhz),
         g(s.scanner.gain_db),
         g(s.scanner.dynamic_db),
@@ -591,12 +602,37 @@ fn measurement_section(html: &mut Html, dir: &Path) -> Option<MeasurementOvervie
     })
 }
 
+/// The identification from images of each grouping (`identify/GROUPING/` holding the routes).
+fn image_sections(html: &mut Html, dir: &Path) -> Option<BTreeMap<String, images::ImageOverview>> {
+    let groupings: Vec<&str> = ["ungrouped", "grouped"]
+        .into_iter()
+        .filter(|g| images::is_image_route(&dir.join("identify").join(g)))
+        .collect();
+    if groupings.is_empty() {
+        return None;
+    }
+    html.h2("Identification from images");
+    let mut out = BTreeMap::new();
+    for g in groupings {
+        if let Some(o) = images::section(
+            html,
+            g,
+            &dir.join("identify").join(g),
+            &dir.join("measurement"),
+        ) {
+            out.insert(g.to_string(), o);
+        }
+    }
+    Some(out)
+}
+
 fn identification_section(
     html: &mut Html,
     dir: &Path,
 ) -> Result<Option<BTreeMap<String, IdentificationOverview>>> {
     let results: Vec<(String, IdentificationSummary)> = ["ungrouped", "grouped"]
         .iter()
+        .filter(|g| !images::is_image_route(&dir.join("identify").join(g)))
         .filter_map(|g| {
             html.read(&dir.join("identify").join(g).join("summary.json"))
                 .map(|s| (g.to_string(), s))

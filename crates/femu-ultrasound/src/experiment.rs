@@ -27,6 +27,9 @@ pub struct ExperimentOptions {
     pub max_net_attenuation_db: f64,
     /// Seed of the electronic noise of the reference image (the deformed one uses seed + 1).
     pub noise_seed: u64,
+    /// Fraction of the scatterers renewed between successive load steps (out-of-plane motion;
+    /// [`Phantom::renewed`]): 0 keeps every scatterer, as before this option existed.
+    pub decorrelation: f64,
 }
 
 impl Default for ExperimentOptions {
@@ -38,6 +41,7 @@ impl Default for ExperimentOptions {
             grid_step_px: 16.0,
             max_net_attenuation_db: 35.0,
             noise_seed: 1,
+            decorrelation: 0.0,
         }
     }
 }
@@ -82,9 +86,16 @@ pub struct Experiment {
     pub roi: Vec<bool>,
     /// Number of DIC steps (1: directly from the unloaded to the loaded image).
     pub steps: usize,
+    /// The 8-bit image of every state: the unloaded one first, then one per load step.
+    pub frames: Vec<femu_dic::GreyImage>,
     /// The DIC of the first step.
     pub dic: DicResult,
+    /// The DIC of every step (the first is [`Experiment::dic`]).
+    pub increments: Vec<DicResult>,
     pub points: Vec<ComparedPoint>,
+    /// Where each point lay in the reference image of each step (px): the material path the
+    /// increments were composed along.
+    pub paths: Vec<Vec<[f64; 2]>>,
     pub error: FieldError,
     pub phantom_scatterers: usize,
 }
@@ -134,20 +145,7 @@ fn run_states(
             format!("{} px must be at least 1", opts.grid_step_px),
         ));
     }
-    let frames = states
-        .iter()
-        .enumerate()
-        .map(|(k, st)| {
-            render(
-                phantom,
-                st,
-                probe,
-                &opts.transducer,
-                &opts.scanner,
-                opts.noise_seed + k as u64,
-            )
-        })
-        .collect::<Result<Vec<Frame>, UsError>>()?;
+    let frames = render_sequence(phantom, states, probe, opts)?;
     let (w, h) = (frames[0].width, frames[0].height);
     let locator = PointLocator::new(&phantom.mesh);
     // True displacement (px) at a pixel position of the reference image.
@@ -206,33 +204,39 @@ fn run_states(
         &femu_dic::output::ModelFrame::default(),
         opts.grid_step_px,
     )?;
-    let points: Vec<ComparedPoint> = grid
+    let (points, paths): (Vec<ComparedPoint>, Vec<Vec<[f64; 2]>>) = grid
         .iter()
         .filter_map(|g| {
             let t = truth(g.x_px)?;
             let mut p = g.x_px;
             let mut wgt = g.w;
+            let mut path = Vec::with_capacity(dics.len());
             for d in &dics {
                 let (e, _, _) = d.mesh.locate(p[0], p[1])?;
                 let inc = d.mesh.interpolate(&d.displacement, p[0], p[1])?;
                 if d.flagged[e] {
                     wgt = 0.0;
                 }
+                path.push(p);
                 p = [p[0] + inc[0], p[1] + inc[1]];
             }
             let u_px = [p[0] - g.x_px[0], p[1] - g.x_px[1]];
-            Some(ComparedPoint {
-                x_px: g.x_px,
-                x_mm: probe.pixel_to_model(g.x_px),
-                dic_px: u_px,
-                true_px: t,
-                dic_mm: probe.displacement_to_model(u_px),
-                true_mm: probe.displacement_to_model(t),
-                w: wgt,
-            })
+            Some((
+                ComparedPoint {
+                    x_px: g.x_px,
+                    x_mm: probe.pixel_to_model(g.x_px),
+                    dic_px: u_px,
+                    true_px: t,
+                    dic_mm: probe.displacement_to_model(u_px),
+                    true_mm: probe.displacement_to_model(t),
+                    w: wgt,
+                },
+                path,
+            ))
         })
-        .collect();
+        .unzip();
     let error = field_error(&points, probe.px_per_mm);
+    let images = frames.iter().map(|f| f.image.clone()).collect();
     let mut frames = frames;
     let deformed = frames.pop().expect("two frames at least");
     let reference = frames.swap_remove(0);
@@ -242,11 +246,56 @@ fn run_states(
         deformed,
         roi,
         steps: dics.len(),
-        dic: dics.swap_remove(0),
+        frames: images,
+        dic: dics[0].clone(),
+        increments: dics,
+        paths,
         error,
         points,
         phantom_scatterers: phantom.scatterers.len(),
     })
+}
+
+/// The frames of `states` (the unloaded state first): frame `k` images the phantom with
+/// `opts.decorrelation` of its scatterers renewed at each of the `k` load steps before it
+/// (seeded by `opts.noise_seed` and `k`), with electronic noise seeded by `noise_seed + k`.
+/// Frames render in parallel.
+pub fn render_sequence(
+    phantom: &Phantom,
+    states: &[PhantomState],
+    probe: &Probe,
+    opts: &ExperimentOptions,
+) -> Result<Vec<Frame>, UsError> {
+    let mut phantoms = vec![std::borrow::Cow::Borrowed(phantom)];
+    for k in 1..states.len() {
+        if opts.decorrelation == 0.0 {
+            phantoms.push(std::borrow::Cow::Borrowed(phantom));
+            continue;
+        }
+        let renewed = phantoms[k - 1].renewed(
+            opts.decorrelation,
+            opts.noise_seed
+                .wrapping_mul(1_000_003)
+                .wrapping_add(k as u64),
+        )?;
+        phantoms.push(std::borrow::Cow::Owned(renewed));
+    }
+    use rayon::prelude::*;
+    states
+        .par_iter()
+        .zip(phantoms.par_iter())
+        .enumerate()
+        .map(|(k, (st, ph))| {
+            render(
+                ph,
+                st,
+                probe,
+                &opts.transducer,
+                &opts.scanner,
+                opts.noise_seed + k as u64,
+            )
+        })
+        .collect()
 }
 
 /// Runs the experiment for an analytic displacement `x ↦ u(x)` (mm) applied to the scatterers
@@ -260,6 +309,65 @@ pub fn run_analytic(
     let u: Vec<f64> = phantom.mesh.nodes.iter().flat_map(|&x| field(x)).collect();
     let states = [phantom.reference(), phantom.moved_by(field)];
     run_states(phantom, &states, &u, probe, opts)
+}
+
+/// The covariance of the composed DIC displacement at `points` (indices into
+/// [`Experiment::points`]), in the model frame (mm², `[ux, uy]` per point, row-major): each
+/// increment's nodal covariance `A⁻¹ M_σ A⁻¹` (`femu_dic::quality`, the Gauss–Newton matrix and
+/// the grey-level residual's own variance and correlation) carried to the points by the shape
+/// functions at their position in that step, the increments independent (each correlates a new
+/// pair of frames), summed; then rotated and scaled by the probe's pose.
+pub fn grid_covariance(
+    exp: &Experiment,
+    points: &[usize],
+    probe: &Probe,
+) -> Result<Vec<f64>, UsError> {
+    let m = 2 * points.len();
+    let mut c = vec![0.0; m * m];
+    for (k, d) in exp.increments.iter().enumerate() {
+        let rows: Vec<Vec<(usize, f64)>> = points
+            .iter()
+            .flat_map(|&i| {
+                let p = exp.paths[i][k];
+                let (e, xi, eta) = d.mesh.locate(p[0], p[1]).expect("located when composed");
+                let n = femu_dic::DicMesh::shape(xi, eta);
+                let conn = d.mesh.conn[e];
+                (0..2).map(move |comp| (0..4).map(|a| (2 * conn[a] + comp, n[a])).collect())
+            })
+            .collect();
+        let sys = &d.system;
+        let ck = femu_dic::quality::combined_covariance(
+            &sys.pattern,
+            &sys.a_values(),
+            &femu_dic::quality::noise_matrix(d),
+            &rows,
+        )
+        .map_err(|e| UsError::Geometry(format!("covariance of DIC step {}: {e}", k + 1)))?;
+        c.iter_mut().zip(&ck).for_each(|(a, b)| *a += b);
+    }
+    // Model frame: u_mm = T u_px blockwise, C_mm = T C Tᵀ.
+    let t = [
+        probe.displacement_to_model([1.0, 0.0]),
+        probe.displacement_to_model([0.0, 1.0]),
+    ];
+    let tm = |r: usize, col: usize| t[col][r]; // T[r][col]
+    let mut out = vec![0.0; m * m];
+    for bi in 0..points.len() {
+        for bj in 0..points.len() {
+            for r in 0..2 {
+                for s in 0..2 {
+                    let mut v = 0.0;
+                    for a in 0..2 {
+                        for b in 0..2 {
+                            v += tm(r, a) * c[(2 * bi + a) * m + 2 * bj + b] * tm(s, b);
+                        }
+                    }
+                    out[(2 * bi + r) * m + 2 * bj + s] = v;
+                }
+            }
+        }
+    }
+    Ok(out)
 }
 
 /// Error statistics over the points of weight 1.

@@ -292,6 +292,34 @@ impl Phantom {
         }
     }
 
+    /// The same tissue with a fraction of its scatterers renewed: each scatterer, with
+    /// probability `fraction`, gets a new amplitude (standard normal), the others keep theirs.
+    /// Out-of-plane motion under load (the slice is thin: the tissue bulges out of it as it is
+    /// compressed) carries scatterers out of the imaged plane and others in; between two load
+    /// steps that renew a fraction `q`, the complex echo of a resolution cell keeps a
+    /// correlation `1 − q`. Seeded.
+    pub fn renewed(&self, fraction: f64, seed: u64) -> Result<Phantom, UsError> {
+        if !(0.0..=1.0).contains(&fraction) {
+            return Err(UsError::param(
+                "decorrelation",
+                format!("{fraction} is outside [0, 1]"),
+            ));
+        }
+        let mut out = self.clone();
+        if fraction == 0.0 {
+            return Ok(out);
+        }
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        for s in out.scatterers.iter_mut() {
+            let renew = rng.gen::<f64>() < fraction;
+            let z: f64 = rng.sample(StandardNormal);
+            if renew {
+                s.z = z;
+            }
+        }
+        Ok(out)
+    }
+
     /// A new acquisition of the same tissue with partially renewed amplitudes:
     /// `z' = ρ z + √(1 − ρ²) ζ`, `ζ` standard normal. Out-of-plane motion between repeated
     /// acquisitions (breathing, the probe's hold on the skin) replaces part of the scatterers

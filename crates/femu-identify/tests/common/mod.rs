@@ -4,7 +4,7 @@
 #![allow(dead_code)] // each test binary uses its own subset
 
 use femu_identify::fit::FreeParameter;
-use femu_mech::sensitivity::all_parameters;
+use femu_mech::sensitivity::{all_parameters, Parameter};
 use femu_mech::Model;
 
 use femu_mesh::inp::read_ccx_dat_displacements;
@@ -74,6 +74,26 @@ pub fn free_parameters(model: &Model) -> (Vec<FreeParameter>, Vec<f64>) {
             let v = p.value(model);
             FreeParameter {
                 name: p.name(model),
+                members: vec![p],
+                lower: v / 4.0,
+                upper: v * 4.0,
+            }
+        })
+        .collect();
+    let reference = free.iter().map(|f| f.members[0].value(model)).collect();
+    (free, reference)
+}
+
+/// The parameters `names` of `model` free, bounds a factor 4 either side of their values, and
+/// those values (the references).
+pub fn named_free(model: &Model, names: &[&str]) -> (Vec<FreeParameter>, Vec<f64>) {
+    let free: Vec<FreeParameter> = names
+        .iter()
+        .map(|n| {
+            let p = Parameter::named(model, n).unwrap();
+            let v = p.value(model);
+            FreeParameter {
+                name: n.to_string(),
                 members: vec![p],
                 lower: v / 4.0,
                 upper: v * 4.0,

@@ -1,5 +1,5 @@
 //! The keys of a study file that name other files (`[model] deck`, `[labels] image`,
-//! `[measurement] file`, `file` of each `[[measurement]]`): relative names start from the study
+//! `[measurement] file` and `covariance`, the same keys of each `[[measurement]]`): relative names start from the study
 //! file's folder ([`super::read`]).
 //! A study copied elsewhere (the cases of `femu batch`, each written into its own folder) keeps
 //! pointing at the same files once these names are made absolute ([`absolute_file_names`]);
@@ -7,15 +7,16 @@
 //! they exist before anything runs.
 //!
 //! A new key that names a file is added to [`FILE_KEYS`] (and read through
-//! [`super::lines::resolve`], as the three here are).
+//! [`super::lines::resolve`], as the four here are).
 
 use std::path::{Path, PathBuf};
 
 /// `(table, key)` of every study-file key that names a file.
-pub const FILE_KEYS: [(&str, &str); 3] = [
+pub const FILE_KEYS: [(&str, &str); 4] = [
     ("model", "deck"),
     ("labels", "image"),
     ("measurement", "file"),
+    ("measurement", "covariance"),
 ];
 
 /// Whether the key at `path` (`["labels", "image"]`, `["measurement", "2", "file"]` for the

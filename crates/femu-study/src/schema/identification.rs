@@ -36,6 +36,8 @@ pub struct IdentificationSpec {
     /// Multilevel: run the starts on the built-in thigh with this many elements and refine the
     /// best on the study's mesh.
     pub coarse_elements: Option<usize>,
+    /// The loss on the (whitened) residuals of a measured field (`loss = "squared" | "huber"`).
+    pub loss: femu_identify::weighted::Loss,
     /// What to do about the model's discretization error.
     pub discretization: Discretization,
     /// The virtual data are made on a mesh of the same geometry with the element size divided
@@ -161,6 +163,18 @@ pub(crate) fn parse(
             Some(n)
         }
     };
+    let loss = match e.loss.as_deref().map(str::to_ascii_lowercase).as_deref() {
+        None | Some("squared") => femu_identify::weighted::Loss::Squared,
+        Some("huber") => femu_identify::weighted::Loss::Huber {
+            k: femu_identify::weighted::HUBER_K,
+        },
+        Some(other) => {
+            return Err(err(
+                "loss",
+                format!("unknown loss '{other}' (squared, huber)"),
+            ))
+        }
+    };
     let discretization = match e
         .discretization
         .as_deref()
@@ -191,6 +205,7 @@ pub(crate) fn parse(
         ));
     }
     Ok(IdentificationSpec {
+        loss,
         test,
         discretization,
         data_refinement,

@@ -26,8 +26,14 @@ pub enum MeasurementSource {
     /// The virtual experiment (seed §2.4.1): the FE field of the reference parameters on the
     /// grid plus the study's noise.
     Virtual,
-    /// A measured-field CSV (conventions.md) in its own frame, mapped to the model's.
-    File { path: PathBuf, frame: Frame },
+    /// A measured-field CSV (conventions.md) in its own frame, mapped to the model's, and
+    /// optionally the full covariance of its components (a dense symmetric Matrix Market
+    /// array in the file's units², as `femu dic` writes `field_covariance.mtx`).
+    File {
+        path: PathBuf,
+        frame: Frame,
+        covariance: Option<PathBuf>,
+    },
     /// The virtual experiment with images (`femu us-sim`): B-mode images of the unloaded and
     /// loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by the DIC; the
     /// identification fits the DIC field.
@@ -241,7 +247,11 @@ fn check_source(
         .to_ascii_lowercase();
     match source.as_str() {
         "ultrasound" => {
-            if m.file.is_some() || m.units.is_some() || m.origin_mm.is_some() {
+            if m.file.is_some()
+                || m.units.is_some()
+                || m.origin_mm.is_some()
+                || m.covariance.is_some()
+            {
                 return Err(err(
                     "source",
                     "the ultrasound experiment writes its own field in the model frame",
@@ -252,6 +262,12 @@ fn check_source(
         "virtual" => {
             if m.file.is_some() {
                 return Err(err("file", "a virtual measurement reads no file"));
+            }
+            if m.covariance.is_some() {
+                return Err(err(
+                    "covariance",
+                    "a virtual measurement has the noise of [noise]",
+                ));
             }
             Ok(MeasurementSource::Virtual)
         }
@@ -303,6 +319,7 @@ fn check_source(
                     x_axis,
                     y_axis,
                 },
+                covariance: m.covariance.as_deref().map(|c| resolve(base, c)),
             })
         }
         other => Err(err(

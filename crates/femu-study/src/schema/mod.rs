@@ -230,6 +230,8 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
     };
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
+    let ultrasound_section = file.ultrasound.unwrap_or_default();
+    ultrasound::check(&ultrasound_section, &lines)?;
     let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
@@ -249,7 +251,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification,
         steps: identification::parse_steps(file.run),
         probe,
-        ultrasound: file.ultrasound.unwrap_or_default(),
+        ultrasound: ultrasound_section,
         boundary,
         convergence,
         design,
@@ -300,8 +302,14 @@ impl Study {
             Geometry::Thigh(_) => {}
         }
         for m in &self.measurements {
-            if let MeasurementSource::File { path, .. } = &m.source {
+            if let MeasurementSource::File {
+                path, covariance, ..
+            } = &m.source
+            {
                 files.push(("measurement", "file", path));
+                if let Some(c) = covariance {
+                    files.push(("measurement", "covariance", c));
+                }
             }
         }
         for (table, key, path) in files {
@@ -353,8 +361,12 @@ impl Study {
             Geometry::Thigh(_) => {}
         }
         for m in &self.measurements {
-            if let MeasurementSource::File { path, .. } = &m.source {
+            if let MeasurementSource::File {
+                path, covariance, ..
+            } = &m.source
+            {
                 files.push(path.as_path());
+                files.extend(covariance.as_deref());
             }
         }
         files

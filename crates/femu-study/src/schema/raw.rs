@@ -118,6 +118,7 @@ pub(crate) struct MeasurementEntry {
     pub y_axis: Option<[f64; 2]>,
     pub travel_mm: Option<f64>,
     pub travel_sigma_mm: Option<f64>,
+    pub covariance: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -140,6 +141,7 @@ pub(crate) struct IdentificationEntry {
     pub grouped: Option<GroupedEntry>,
     pub optimizer: Option<String>,
     pub coarse_elements: Option<usize>,
+    pub loss: Option<String>,
     pub discretization: Option<String>,
     pub data_refinement: Option<f64>,
 }

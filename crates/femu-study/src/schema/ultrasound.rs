@@ -12,6 +12,8 @@
 //! gain_db = 34           # also dynamic_db, black_level_db, tgc_db_per_cm_mhz, tgc_max_db, noise_db
 //! dynamic_db = 42
 //! seed = 1
+//! render_refine = 2      # images rendered on a mesh of element size / 2 (no inverse crime)
+//! decorrelation = 0.05   # fraction of the scatterers renewed per load step
 //! ```
 
 use femu_ultrasound::{Scanner, Transducer};
@@ -52,7 +54,15 @@ pub struct UltrasoundSection {
     pub tgc_max_db: f64,
     pub noise_db: Option<f64>,
     pub seed: u64,
+    /// The images are rendered from the FE solution on a mesh whose element size is that of
+    /// `[model]` divided by this (1: the same mesh, an inverse crime for the identification).
+    pub render_refine: usize,
+    /// Fraction of the scatterers renewed between successive load steps (out-of-plane motion).
+    pub decorrelation: f64,
 }
+
+/// Largest `render_refine`: 4 makes 16 times the elements of `[model]`.
+pub const MAX_RENDER_REFINE: usize = 4;
 
 impl Default for UltrasoundSection {
     fn default() -> Self {
@@ -68,6 +78,8 @@ impl Default for UltrasoundSection {
             tgc_max_db: s.tgc_max_db,
             noise_db: s.noise_db,
             seed: 1,
+            render_refine: 2,
+            decorrelation: 0.05,
         }
     }
 }
@@ -93,4 +105,35 @@ impl UltrasoundSection {
             noise_db: self.noise_db,
         }
     }
+}
+
+/// Checks the ranges of `[ultrasound]` that the simulator does not check itself, naming the key
+/// and its line.
+pub(crate) fn check(
+    section: &UltrasoundSection,
+    lines: &super::lines::KeyLines,
+) -> Result<(), super::StudyError> {
+    if !(1..=MAX_RENDER_REFINE).contains(&section.render_refine) {
+        return Err(lines.err(
+            "ultrasound",
+            0,
+            "render_refine",
+            format!(
+                "must be an integer in [1, {MAX_RENDER_REFINE}], got {}",
+                section.render_refine
+            ),
+        ));
+    }
+    if !(0.0..=0.9).contains(&section.decorrelation) {
+        return Err(lines.err(
+            "ultrasound",
+            0,
+            "decorrelation",
+            format!(
+                "the fraction of scatterers renewed per load step must be in [0, 0.9], got {}",
+                section.decorrelation
+            ),
+        ));
+    }
+    Ok(())
 }

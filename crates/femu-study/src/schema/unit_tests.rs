@@ -202,7 +202,7 @@ fn measurement_frame_and_files_are_relative_to_the_study() {
         Path::new("/data/s"),
     )
     .unwrap();
-    let MeasurementSource::File { path, frame } = &p.measurement.source else {
+    let MeasurementSource::File { path, frame, .. } = &p.measurement.source else {
         panic!("a file measurement");
     };
     assert_eq!(path, &PathBuf::from("/data/s/dic/field.csv"));
@@ -283,6 +283,32 @@ fn the_convergence_layout_is_a_view_of_the_schema() {
     assert!(e.contains("origin_mm and spacing_mm"), "{e}");
     let e = err("[convergence]\nelement_types = [\"CPE9\"]\n");
     assert!(e.contains("CPE9"), "{e}");
+}
+
+/// `[ultrasound] render_refine` and `decorrelation`: defaults (element size halved, 5 % of the
+/// scatterers renewed per load step), values read, out-of-range values named with their line.
+#[test]
+fn ultrasound_render_keys() {
+    let p = Study::default();
+    assert_eq!(p.ultrasound.render_refine, 2);
+    assert_eq!(p.ultrasound.decorrelation, 0.05);
+    let p = parse(
+        "[ultrasound]\nrender_refine = 1\ndecorrelation = 0.0\n",
+        Path::new("."),
+    )
+    .unwrap();
+    assert_eq!(
+        (p.ultrasound.render_refine, p.ultrasound.decorrelation),
+        (1, 0.0)
+    );
+    let e = err("[ultrasound]\nfrequency_mhz = 9\nrender_refine = 0\n");
+    assert!(e.contains("render_refine") && e.contains("line 3"), "{e}");
+    let e = err("[ultrasound]\nrender_refine = 9\n");
+    assert!(e.contains("[1, 4]") && e.contains("line 2"), "{e}");
+    let e = err("[ultrasound]\n\ndecorrelation = 1.5\n");
+    assert!(e.contains("decorrelation") && e.contains("line 3"), "{e}");
+    let e = err("[ultrasound]\nrender_refine = 1.5\n");
+    assert!(e.contains("render_refine") && e.contains("line 2"), "{e}");
 }
 
 /// Issues 32.11 and 32.13: what needs the files and the model's regions is checked before

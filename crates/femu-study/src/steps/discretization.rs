@@ -27,11 +27,12 @@ pub fn refined(study: &Study, built: &StudyModel, ratio: f64) -> Result<Option<S
 }
 
 /// Whether the data were made by the model's own mesh: virtual data without
-/// `data_refinement`, or images simulated on it. Their intervals need no widening.
+/// `data_refinement`, or images simulated on it (`[ultrasound] render_refine = 1`; the default
+/// 2 renders them from a finer mesh). Their intervals need no widening.
 pub fn data_from_model(study: &Study, prepared: &[Prepared]) -> bool {
     prepared.iter().all(|p| match &p.data {
         PreparedData::Virtual { .. } => study.identification.data_refinement == 1.0,
-        PreparedData::Measured(m) => m.reference_known,
+        PreparedData::Measured(m) => m.reference_known && study.ultrasound.render_refine == 1,
     })
 }
 

@@ -24,6 +24,7 @@ use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
 use femu_identify::joint::{block_free, information_shares};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::weighted::FieldCovariance;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_plot::{bar_chart_png, line_plot_png, BarChart, LinePlot, LineStyle, Series};
@@ -65,6 +66,12 @@ pub struct IdentificationSummary {
     /// at a bound, an infinite sd): `femu_identify::campaign::warnings`.
     #[serde(default)]
     pub warnings: Vec<String>,
+    /// How the misfit was weighted: "one sigma" (virtual), "per point" (the file's sx, sy or
+    /// w), "full covariance" (weighted FEMU).
+    #[serde(default)]
+    pub weighting: String,
+    #[serde(default)]
+    pub loss: femu_identify::weighted::Loss,
     /// Set when the user stopped the run: what was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
@@ -152,6 +159,10 @@ pub struct Measured {
     pub source: String,
     /// Whether the reference parameters of the model are the truth (a simulated experiment).
     pub reference_known: bool,
+    /// The full covariance of the field's components (model frame, mm²): the misfit is then
+    /// weighted by it (weighted FEMU, `femu_identify::weighted`) instead of the per-point
+    /// weights.
+    pub covariance: Option<FieldCovariance>,
 }
 
 /// The free parameters of `study` on `model` (its groups tied when `grouped`).
@@ -210,7 +221,7 @@ pub fn identify(
         && measured.is_none()
     {
         anyhow::bail!(
-            "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
+            "[measurement] source = \"ultrasound\": `femu run` identifies from the images (integrated DIC, beside DIC -> FEMU); for DIC -> FEMU alone, simulate the images with `femu us-sim` and pass its measured.csv with --measured (its measured_covariance.mtx as [measurement] covariance for the weighted fit)"
         );
     }
     let built = crate::model::build(&study.model)?;
@@ -221,6 +232,7 @@ pub fn identify(
                 field: MeasuredField::read(p)?,
                 source: p.display().to_string(),
                 reference_known: false,
+                covariance: None,
             },
             &format!("file {}", p.display()),
         )?,
@@ -334,6 +346,15 @@ fn fit_or_keep(
         repeats,
         travel: None,
         stop: progress.stop_flag(),
+        // The study's single measured field may bring its full covariance (weighted FEMU).
+        covariance: match prepared {
+            [Prepared {
+                data: PreparedData::Measured(m),
+                ..
+            }] => m.covariance.clone(),
+            _ => None,
+        },
+        loss: spec.loss,
     };
     let on_event = show_events(progress, repeats);
     match joint::fit(study, grouped, models, prepared, &options, &on_event) {
@@ -493,6 +514,11 @@ pub fn identify_on(
         PreparedData::Virtual { .. } => true,
         PreparedData::Measured(m) => m.reference_known,
     });
+    // Whitened residuals have unit variance: the intervals need no residual scaling.
+    let weighted = prepared
+        .iter()
+        .any(|p| matches!(&p.data, PreparedData::Measured(m) if m.covariance.is_some()));
+    let known_noise = virtual_experiment || weighted;
     let tests: Vec<String> = models
         .tests
         .iter()
@@ -532,7 +558,7 @@ pub fn identify_on(
         prepared,
         &mut fit,
         reference_known,
-        virtual_experiment,
+        known_noise,
         progress,
     )?;
     let warnings = campaign::warnings(&fit.campaign, &fit.free, &parameters);
@@ -609,6 +635,14 @@ pub fn identify_on(
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
         warnings,
+        weighting: if weighted {
+            "full covariance".into()
+        } else if virtual_experiment {
+            "one sigma".into()
+        } else {
+            "per point".into()
+        },
+        loss: spec.loss,
         interrupted: interrupted.map(|n| {
             format!(
                 "interrupted: {} of {n} repeats finished and kept",

@@ -9,6 +9,7 @@ use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
 use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, TravelTerm};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::Side;
 use femu_mesh::locate::PointLocator;
 use std::path::Path;
@@ -126,8 +127,16 @@ pub fn prepare(
                         sigma: m.sigma_mm,
                     }
                 }
-                MeasurementSource::File { path, frame } => {
+                MeasurementSource::File {
+                    path,
+                    frame,
+                    covariance,
+                } => {
                     let f = MeasuredField::read(path)?;
+                    let covariance = match covariance {
+                        Some(c) => Some(file_covariance(c, path, frame, f.points.len())?),
+                        None => None,
+                    };
                     PreparedData::Measured(Measured {
                         field: f.to_model_frame(
                             frame.scale,
@@ -137,6 +146,7 @@ pub fn prepare(
                         ),
                         source: path.display().to_string(),
                         reference_known: false,
+                        covariance,
                     })
                 }
                 MeasurementSource::Ultrasound => {
@@ -160,6 +170,32 @@ pub fn prepare(
             })
         })
         .collect()
+}
+
+/// The full covariance of the field in `path` (`[measurement] covariance`, Matrix Market, in
+/// the file's frame) mapped to the model frame: `U = s (u_x e_x + u_y e_y)`, the columns of the
+/// map are `s e_x` and `s e_y`.
+fn file_covariance(
+    c: &Path,
+    path: &Path,
+    frame: &crate::schema::Frame,
+    points: usize,
+) -> Result<FieldCovariance> {
+    let s = frame.scale;
+    let t = [
+        [s * frame.x_axis[0], s * frame.y_axis[0]],
+        [s * frame.x_axis[1], s * frame.y_axis[1]],
+    ];
+    let cov = FieldCovariance::read_mtx(c)?.mapped(t);
+    if cov.points != points {
+        bail!(
+            "[measurement] covariance {}: {} points, the field {} has {points}",
+            c.display(),
+            cov.points,
+            path.display(),
+        );
+    }
+    Ok(cov)
 }
 
 /// The DIC field of simulated B-mode images of `m`'s test under its window (or `[probe]`),
@@ -186,6 +222,7 @@ fn ultrasound_measurement(
             path.display()
         ),
         reference_known: true,
+        covariance: None,
     })
 }
 

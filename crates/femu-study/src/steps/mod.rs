@@ -13,6 +13,7 @@
 pub mod design;
 pub mod discretization;
 pub mod identify;
+pub mod images;
 pub mod joint;
 pub mod measure;
 pub mod model;

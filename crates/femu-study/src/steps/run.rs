@@ -26,7 +26,7 @@ use super::solve::{write_solved, SolveContext};
 use crate::model::{build, StudyModel};
 use crate::output::{create_dir, write_text};
 use crate::progress::Progress;
-use crate::schema::{self, Grouping, Study, EXAMPLE_STUDY};
+use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
 use anyhow::{bail, Result};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use std::path::Path;
@@ -294,6 +294,20 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
             &format!("identification ({name})"),
             Some(&folder),
         )?;
+        if let [m] = study.measurements.as_slice() {
+            if m.source == MeasurementSource::Ultrasound {
+                // Images: integrated DIC, beside DIC -> FEMU plain and weighted.
+                super::images::identify_image_measurement(
+                    study,
+                    grouped,
+                    &out.join("measurement"),
+                    &out.join(&folder),
+                    progress,
+                )?;
+                finish(record, out, t)?;
+                continue;
+            }
+        }
         identify::identify_on(
             study,
             grouped,

@@ -4,9 +4,12 @@
 
 use crate::output::create_dir;
 use crate::progress::Progress;
-use crate::schema::{ProbeSection, Study};
+use crate::schema::{
+    Geometry, ModelSpec, ProbeSection, Resolution, Study, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
+};
 use anyhow::{bail, Context, Result};
 use femu_dic::{Brightness, DicOptions};
+use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::{apply_loading, Side};
 use femu_mech::{SolverOptions, StaticSolver};
 use femu_ultrasound::manifest::fmt_num;
@@ -80,6 +83,35 @@ pub fn bone_faces(mesh: &femu_mesh::Mesh, skin: &[(usize, usize)]) -> Vec<(usize
         .collect()
 }
 
+/// The model the images are rendered from: `spec` with its element size divided by `refine`
+/// (`refine²` times the elements of the built-in thigh), so that the identification does not
+/// fit the very mesh that made its data. A deck cannot be refined here: its own mesh is used,
+/// with a note saying so.
+pub fn render_model_spec(spec: &ModelSpec, refine: usize) -> (ModelSpec, Option<String>) {
+    let r = refine.max(1);
+    let resolution = match (&spec.geometry, spec.resolution) {
+        (Geometry::Deck(_), _) => {
+            let note = (r > 1).then(|| {
+                format!(
+                    "[ultrasound] render_refine = {r}: a deck's mesh cannot be refined here; the images are rendered from the deck's own mesh, the one identified (an inverse crime: errors will look smaller than on real images)"
+                )
+            });
+            return (spec.clone(), note);
+        }
+        (_, Resolution::Elements(n)) => Resolution::Elements(n * r * r),
+        (_, Resolution::SizeMm(h)) => Resolution::SizeMm(h / r as f64),
+        (Geometry::Thigh(_), Resolution::Default) => Resolution::Elements(DEFAULT_ELEMENTS * r * r),
+        (_, Resolution::Default) => Resolution::SizeMm(DEFAULT_LABEL_SIZE_MM / r as f64),
+    };
+    (
+        ModelSpec {
+            resolution,
+            ..spec.clone()
+        },
+        None,
+    )
+}
+
 /// `summary.json` of `femu us-sim`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct SimSummary {
@@ -103,6 +135,25 @@ pub struct SimSummary {
     pub error: experiment::FieldError,
     pub max_fe_displacement_mm: f64,
     pub timings_s: SimTimings,
+    /// Elements of the mesh the images were rendered from (`[ultrasound] render_refine`
+    /// times finer than `[model]`; absent in summaries written before it existed).
+    #[serde(default)]
+    pub render_elements: usize,
+    #[serde(default = "one")]
+    pub render_refine: usize,
+    /// Fraction of the scatterers renewed per load step.
+    #[serde(default)]
+    pub decorrelation: f64,
+    /// The image sequence: one file per state, the unloaded one first (`frame_00.png`, ...),
+    /// and the load fraction of each loaded frame.
+    #[serde(default)]
+    pub frames: Vec<String>,
+    #[serde(default)]
+    pub load_fractions: Vec<f64>,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// Where the time of `femu us-sim` went (s).
@@ -112,7 +163,11 @@ pub struct SimTimings {
     pub phantom: f64,
     pub render_reference: f64,
     pub render_deformed: f64,
+    /// Every DIC increment.
     pub dic: f64,
+    /// The measured field's covariance (`measured_covariance.mtx`).
+    #[serde(default)]
+    pub covariance: f64,
     pub total: f64,
 }
 
@@ -132,22 +187,30 @@ pub fn sim(
         bail!("--steps {} must be in [1, 20]", args.steps);
     }
     let test = study.identification_test().loading.clone();
-    let built = crate::model::build(&study.model)?;
+    let (render_spec, render_note) = render_model_spec(&study.model, us.render_refine);
+    if let Some(note) = &render_note {
+        progress.warn(note);
+    }
+    let built = crate::model::build(&render_spec)?;
     // The loaded state and `steps - 1` intermediate loads (incremental DIC).
+    let fractions: Vec<f64> = (1..=args.steps)
+        .map(|k| k as f64 / args.steps as f64)
+        .collect();
     let mut stages: Vec<Vec<f64>> = Vec::new();
     let mut model = None;
     let mut skin = Vec::new();
-    for k in 1..=args.steps {
+    for (k, &fraction) in fractions.iter().enumerate() {
         let (mut m, sk) = (built.model.clone(), built.skin.clone());
-        let load = test.scaled(k as f64 / args.steps as f64);
+        let load = test.scaled(fraction);
         apply_loading(&mut m, &sk, &load).with_context(|| format!("test {}", test.name()))?;
         let mut solver = StaticSolver::new(&m, SolverOptions::default())?;
         let sol = solver
             .solve_with(&m, stages.last().map(|v| v.as_slice()), &mut |_| {})
             .map_err(|e| {
                 anyhow::anyhow!(
-                    "test {} at {k}/{} of the load: {e}",
+                    "test {} at {}/{} of the load: {e}",
                     test.name(),
+                    k + 1,
                     args.steps
                 )
             })?;
@@ -163,9 +226,10 @@ pub fn sim(
         ..Default::default()
     };
     progress.note(&format!(
-        "{}: {} elements solved in {:.2} s, largest displacement {:.3} mm",
+        "{}: images rendered from {} elements (render_refine {}) solved in {:.2} s, largest displacement {:.3} mm",
         test.name(),
         model.mesh.elements.len(),
+        us.render_refine,
         timings.mesh_and_solve,
         umax
     ));
@@ -187,18 +251,26 @@ pub fn sim(
         },
         grid_step_px: args.grid_step,
         noise_seed: us.seed,
+        decorrelation: us.decorrelation,
         ..Default::default()
     };
     let exp = experiment::run_incremental(&phantom, &stages, &probe, &opts)?;
     timings.render_reference = exp.reference.seconds;
     timings.render_deformed = exp.deformed.seconds;
-    timings.dic = exp.dic.timings.total_s;
+    // Every increment's correlation (the first alone was reported before: 1/4 of the time).
+    timings.dic = exp.increments.iter().map(|d| d.timings.total_s).sum();
     let save = |img: &femu_dic::GreyImage, name: &str| -> Result<()> {
         img.save_png(&out.join(name))
             .with_context(|| format!("cannot write {}", out.join(name).display()))
     };
     save(&exp.reference.image, "ref.png")?;
     save(&exp.deformed.image, "def.png")?;
+    let frames: Vec<String> = (0..exp.frames.len())
+        .map(|k| format!("frame_{k:02}.png"))
+        .collect();
+    for (img, name) in exp.frames.iter().zip(&frames) {
+        save(img, name)?;
+    }
     let comments = vec![
         format!(
             "femu us-sim {}: DIC of simulated B-mode images, {} test, {} MHz, gain {} dB, dynamic {} dB",
@@ -220,6 +292,23 @@ pub fn sim(
         true,
         &["FE displacement at the DIC grid points (mm, model frame)".into()],
     )?;
+    // The composed field's covariance (weighted FEMU reads it beside measured.csv).
+    let t = Instant::now();
+    let all: Vec<usize> = (0..exp.points.len()).collect();
+    let cov = FieldCovariance::new(all.len(), experiment::grid_covariance(&exp, &all, &probe)?)?;
+    let cov_path = out.join("measured_covariance.mtx");
+    cov.write_mtx(
+        &cov_path,
+        &[
+            format!(
+                "femu us-sim {}: covariance of measured.csv's components (ux, uy per point, in its order), mm^2, model frame",
+                env!("CARGO_PKG_VERSION")
+            ),
+            "sum over the DIC increments of N A^-1 M_sigma A^-1 N^T at each point's position in that increment (femu_dic::quality)".into(),
+        ],
+    )
+    .with_context(|| format!("cannot write {}", cov_path.display()))?;
+    timings.covariance = t.elapsed().as_secs_f64();
     // Maps over the reference image.
     let maps = experiment::pixel_maps(&exp, &phantom, u, &probe, args.grid_step);
     let (w, h) = (exp.reference.width, exp.reference.height);
@@ -303,6 +392,11 @@ pub fn sim(
         error: e,
         max_fe_displacement_mm: umax,
         timings_s: timings,
+        render_elements: model.mesh.elements.len(),
+        render_refine: us.render_refine,
+        decorrelation: us.decorrelation,
+        frames,
+        load_fractions: fractions,
     };
     settings::write_json(&out.join("summary.json"), &summary)?;
     progress.note(&format!(

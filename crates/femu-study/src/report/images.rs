@@ -1,0 +1,199 @@
+//! The identification from images in the report: integrated DIC beside DIC → FEMU (plain and
+//! weighted by the DIC's covariance) on the same frames, errors and intervals side by side, the
+//! frames, the grey-level residual before and after, the identified and the measured
+//! displacement over the image.
+
+use super::{esc, g, pct, Html};
+use crate::steps::identify::IdentificationSummary;
+use crate::steps::images::ImageIdentificationSummary;
+use crate::steps::ultrasound::SimSummary;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// One grouping's identification from images in the run's summary.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ImageOverview {
+    pub parameters: Vec<RouteRow>,
+    pub idic_s: f64,
+    pub dic_femu_s: f64,
+    pub dic_weighted_s: f64,
+    pub notes: Vec<String>,
+}
+
+/// One parameter by the three routes.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct RouteRow {
+    pub name: String,
+    pub reference: Option<f64>,
+    pub idic: f64,
+    pub idic_error: Option<f64>,
+    pub idic_ci95: [f64; 2],
+    pub idic_seen: bool,
+    pub dic: f64,
+    pub dic_error: Option<f64>,
+    pub dic_ci95: [f64; 2],
+    pub weighted: f64,
+    pub weighted_error: Option<f64>,
+    pub weighted_ci95: [f64; 2],
+}
+
+/// Whether `dir` holds an identification from images (the routes' folders).
+pub fn is_image_route(dir: &Path) -> bool {
+    dir.join("dic").join("summary.json").is_file() && dir.join("dic-weighted").is_dir()
+}
+
+/// The section of one grouping (`identify/GROUPING/`); `measurement` is the run's measurement
+/// folder (frames, DIC maps).
+pub fn section(
+    html: &mut Html,
+    grouping: &str,
+    dir: &Path,
+    measurement: &Path,
+) -> Option<ImageOverview> {
+    let idic: ImageIdentificationSummary = html.read(&dir.join("summary.json"))?;
+    let dic: IdentificationSummary = html.read(&dir.join("dic").join("summary.json"))?;
+    let weighted: IdentificationSummary =
+        html.read(&dir.join("dic-weighted").join("summary.json"))?;
+    let sim: Option<SimSummary> = html.read(&measurement.join("summary.json"));
+    html.h3(&format!("{grouping}: integrated DIC beside DIC → FEMU"));
+    let dic_route = sim.as_ref().map_or(0.0, |s| s.timings_s.dic) + dic.wall_time_s;
+    html.p(&format!(
+        "Integrated DIC (I-DIC, Leclerc et al. 2009): the parameters from the grey levels of the {} \
+         frames ({}) directly, each load step's frame compared with the one before it at the \
+         material points the finite-element model of that step moves ({} elements; {} pixels in \
+         the tissue, {} in the bone's shadow, {} outside the tissue, masked by the model). \
+         Brightness and contrast per depth band; coarse to fine over Gaussian smoothings of {} px. \
+         Intervals: the larger of the block sandwich ({} blocks: the residual's own correlation) \
+         and the jackknife over {} image regions, with the bias a refined mesh of {} elements \
+         implies (extrapolated at the first-order rate) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
+         {:.1} s) against {:.1} s for the DIC → FEMU route (DIC {:.1} s, FEMU {:.1} s): ratio {:.2}.",
+        idic.load_fractions.len() + 1,
+        esc(&idic.source),
+        idic.elements,
+        idic.pixels,
+        idic.mask.shadow,
+        idic.mask.outside,
+        idic.scales
+            .iter()
+            .map(|s| g(s.scale_px))
+            .collect::<Vec<_>>()
+            .join(", "),
+        idic.sandwich_blocks,
+        idic.jackknife_groups,
+        idic.refined_elements
+            .map_or("(none)".to_string(), |n| n.to_string()),
+        idic.wall_time_s,
+        idic.identification_s,
+        idic.discretization_s,
+        dic_route,
+        sim.as_ref().map_or(0.0, |s| s.timings_s.dic),
+        dic.wall_time_s,
+        idic.wall_time_s / dic_route.max(1e-9),
+    ));
+    let rows: Vec<RouteRow> = idic
+        .parameters
+        .iter()
+        .zip(&dic.parameters)
+        .zip(&weighted.parameters)
+        .map(|((p, q), w)| RouteRow {
+            name: p.name.clone(),
+            reference: p.reference,
+            idic: p.identified,
+            idic_error: p.relative_error,
+            idic_ci95: p.ci95,
+            idic_seen: p.seen,
+            dic: q.identified,
+            dic_error: q.relative_error,
+            dic_ci95: q.ci95,
+            weighted: w.identified,
+            weighted_error: w.relative_error,
+            weighted_ci95: w.ci95,
+        })
+        .collect();
+    let cell = |v: f64, e: Option<f64>, ci: [f64; 2]| {
+        format!(
+            "{}{} [{}, {}]",
+            g(v),
+            e.map_or(String::new(), |e| format!(" ({})", pct(e))),
+            g(ci[0]),
+            g(ci[1])
+        )
+    };
+    let table: Vec<Vec<String>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                format!("{}{}", r.name, if r.idic_seen { "" } else { " *" }),
+                r.reference.map(g).unwrap_or("-".into()),
+                cell(r.idic, r.idic_error, r.idic_ci95),
+                cell(r.dic, r.dic_error, r.dic_ci95),
+                cell(r.weighted, r.weighted_error, r.weighted_ci95),
+            ]
+        })
+        .collect();
+    html.table(
+        &[
+            "parameter (C10 MPa, D 1/MPa)",
+            "reference",
+            "I-DIC (error) [95 % interval]",
+            "DIC → FEMU, one weight per point",
+            "DIC → FEMU, DIC covariance + Huber",
+        ],
+        &table,
+    );
+    if !idic.notes.is_empty() {
+        html.p(&format!(
+            "* {}",
+            idic.notes
+                .iter()
+                .map(|n| esc(n))
+                .collect::<Vec<_>>()
+                .join(" ")
+        ));
+    }
+    let last = idic.load_fractions.len();
+    for (path, caption) in [
+        (
+            measurement.join("frame_00.png"),
+            "Unloaded frame.".to_string(),
+        ),
+        (
+            measurement.join(format!("frame_{last:02}.png")),
+            "Frame at the full load.".to_string(),
+        ),
+        (
+            dir.join("residual_before.png"),
+            "Grey-level residual of the last load step before correlation (tissue at rest)."
+                .to_string(),
+        ),
+        (
+            dir.join("residual_after.png"),
+            "Grey-level residual of the last load step at the I-DIC optimum.".to_string(),
+        ),
+        (
+            dir.join("displacement_uy.png"),
+            "Identified model (I-DIC): displacement uy over the unloaded image.".to_string(),
+        ),
+        (
+            measurement.join("uy_dic.png"),
+            "Measured by the incremental DIC: uy over the unloaded image.".to_string(),
+        ),
+        (
+            dir.join("displacement_ux.png"),
+            "Identified model (I-DIC): displacement ux over the unloaded image.".to_string(),
+        ),
+        (
+            measurement.join("ux_dic.png"),
+            "Measured by the incremental DIC: ux over the unloaded image.".to_string(),
+        ),
+    ] {
+        html.figure(&path, &format!("{grouping}: {caption}"));
+    }
+    Some(ImageOverview {
+        parameters: rows,
+        idic_s: idic.wall_time_s,
+        dic_femu_s: dic_route,
+        dic_weighted_s: weighted.wall_time_s,
+        notes: idic.notes,
+    })
+}

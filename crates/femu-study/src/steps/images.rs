@@ -1,0 +1,758 @@
+//! The identification from images (`[measurement] source = "ultrasound"`): integrated DIC
+//! (`femu_identify::idic`) of the study's free parameters from the image sequence of the
+//! measurement step — the unloaded frame and one frame per load step, correlated against the
+//! finite-element state of each step — with the same starts, bounds, groups and fixed parameters
+//! as `identify`, intervals from the grey-level residual's own correlation, the bias a refined
+//! mesh implies (extrapolated as in `femu_identify::discretization`) and the change from the
+//! last smoothed scale. Written as
+//!
+//! - `parameters.csv` — identified values, errors (simulated images), standard deviations
+//!   (statistical, discretization, total), 95 % intervals, whether the window sees each;
+//! - `residual_before.png`, `residual_after.png` — the grey-level residual of the last load
+//!   step with the tissue at rest and moved by the identified model;
+//! - `displacement_ux.png`, `displacement_uy.png` — the identified model's displacement over
+//!   the unloaded image;
+//! - `summary.json` — [`ImageIdentificationSummary`].
+
+use crate::output::{create_dir, read_json, write_json};
+use crate::progress::Progress;
+use crate::schema::Study;
+use crate::steps::identify::{free_parameters, FreeParameterSummary};
+use crate::steps::ultrasound::SimSummary;
+use anyhow::{bail, Context, Result};
+use femu_dic::GreyImage;
+use femu_identify::campaign::StartRecord;
+use femu_identify::discretization;
+use femu_identify::fit::FreeParameter;
+use femu_identify::idic::pixels::MaskCounts;
+use femu_identify::idic::{
+    self, IdicEvent, IdicOptions, IdicProblem, IdicSettings, ImageFrame, Pairing, PixelOptions,
+};
+use femu_mech::Model;
+use femu_ultrasound::Probe;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::Path;
+use std::time::Instant;
+
+/// An image sequence and where it lies in the model.
+#[derive(Debug, Clone)]
+pub struct ImageSequence {
+    /// The unloaded frame first, then one frame per load step.
+    pub frames: Vec<GreyImage>,
+    /// Fraction of the test's load of each loaded frame.
+    pub load_fractions: Vec<f64>,
+    pub frame: ImageFrame,
+    /// Where the frames come from (files, or the simulator).
+    pub source: String,
+}
+
+/// The image frame of a linear probe: pixel `(i, j)` at `c + ((i + ½)/p − W/2) t + ((j + ½)/p) n`
+/// (`femu_ultrasound::probe`), an affine map with axes `t` (along the array) and `n` (the beam).
+pub fn image_frame(probe: &Probe) -> ImageFrame {
+    ImageFrame {
+        origin_mm: probe.pixel_to_model([0.0, 0.0]),
+        mm_per_px: 1.0 / probe.px_per_mm,
+        x_axis: probe.lateral(),
+        y_axis: probe.direction,
+    }
+}
+
+/// The sequence the measurement step wrote into `dir` (its `summary.json` and frames).
+pub fn read_sequence(dir: &Path) -> Result<ImageSequence> {
+    let s: SimSummary = read_json(&dir.join("summary.json"))?;
+    if s.frames.len() < 2 || s.frames.len() != s.load_fractions.len() + 1 {
+        bail!(
+            "{}: no image sequence ({} frames for {} load fractions); rerun the measurement",
+            dir.display(),
+            s.frames.len(),
+            s.load_fractions.len()
+        );
+    }
+    let frames = s
+        .frames
+        .iter()
+        .map(|f| GreyImage::open(&dir.join(f), 0).with_context(|| format!("frame {f}")))
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ImageSequence {
+        frames,
+        load_fractions: s.load_fractions,
+        frame: image_frame(&s.probe),
+        source: format!(
+            "{} B-mode frames simulated at {} MHz from {} elements (render_refine {}, decorrelation {})",
+            s.frames.len(),
+            s.transducer.frequency_mhz,
+            s.render_elements,
+            s.render_refine,
+            s.decorrelation
+        ),
+    })
+}
+
+/// How the images are compared (the integrated correlation's options and its scales).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ImageRouteOptions {
+    pub correlation: IdicOptions,
+    /// Gaussian smoothing of each scale (px), widest first.
+    pub scales_px: Vec<f64>,
+    /// Whether to estimate the discretization shift on a refined mesh.
+    pub discretization_check: bool,
+}
+
+impl Default for ImageRouteOptions {
+    fn default() -> Self {
+        ImageRouteOptions {
+            correlation: IdicOptions {
+                pairing: Pairing::Consecutive,
+                brightness: true,
+                pixels: PixelOptions::default(),
+                solver: femu_mech::SolverOptions::default(),
+            },
+            scales_px: IdicSettings::default().scales_px,
+            discretization_check: true,
+        }
+    }
+}
+
+/// One identified parameter with its uncertainty.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ImageEstimate {
+    pub name: String,
+    /// The true value for simulated images, else `None`.
+    pub reference: Option<f64>,
+    pub identified: f64,
+    pub relative_error: Option<f64>,
+    /// `sd(ln θ)` of the noise: the larger of the block sandwich (the residual's own
+    /// correlation) and the jackknife over image regions.
+    pub sd_statistical: f64,
+    /// The two: block sandwich and jackknife over image regions.
+    pub sd_sandwich: f64,
+    pub sd_jackknife: f64,
+    /// `sd(ln θ)` if the pixels' residuals were independent (for comparison: too narrow).
+    pub sd_independent: f64,
+    /// The bias of `ln θ` the mesh implies (one Gauss–Newton step to a refined mesh,
+    /// extrapolated: `femu_identify::discretization::extrapolated_bias`), if computed.
+    pub discretization_bias: Option<f64>,
+    /// The change of `ln θ` from the last smoothed scale to the images as recorded (see
+    /// [`estimates`]).
+    pub scale_change: Option<f64>,
+    /// `√(sd_statistical² + shift² + scale_change²)`: the interval's.
+    pub relative_sd: f64,
+    /// 95 % interval `θ exp(±1.96 sd)`, clipped to the bounds.
+    pub ci95: [f64; 2],
+    pub at_bound: bool,
+    /// Whether the window sees the parameter (relative sd below [`SEEN_SD`], not at a bound).
+    pub seen: bool,
+    /// A sentence when it does not.
+    pub note: Option<String>,
+}
+
+pub use femu_identify::idic::SEEN_SD;
+
+/// One scale of the coarse-to-fine identification.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ScaleSummary {
+    pub scale_px: f64,
+    pub cost: f64,
+    pub iterations: usize,
+    pub forward_solves: usize,
+    pub theta: Vec<f64>,
+    /// Residual standard deviation of each (frame pair, band) that weighted it (grey levels).
+    pub band_sd: Vec<f64>,
+    /// Parameters held on this scale (not seen by the images at its start).
+    pub held: Vec<String>,
+    /// Why the optimizer stopped, and every step it tried.
+    pub reason: String,
+    pub history: Vec<femu_identify::fit::LmStep>,
+}
+
+/// `summary.json` of an identification from images.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct ImageIdentificationSummary {
+    pub command: String,
+    pub version: String,
+    pub method: String,
+    pub test: String,
+    pub grouped: bool,
+    pub elements: usize,
+    /// Elements of the refined mesh of the discretization check.
+    pub refined_elements: Option<usize>,
+    pub source: String,
+    pub load_fractions: Vec<f64>,
+    pub image_px: (usize, usize),
+    pub pixels: usize,
+    pub mask: MaskCounts,
+    /// Blocks of the sandwich and groups of the jackknife.
+    pub sandwich_blocks: usize,
+    pub jackknife_groups: usize,
+    pub pairing: Pairing,
+    pub free_parameters: Vec<FreeParameterSummary>,
+    pub parameters: Vec<ImageEstimate>,
+    pub correlation: Vec<Vec<f64>>,
+    pub scales: Vec<ScaleSummary>,
+    pub starts: Vec<StartRecord>,
+    /// Grey-level residual RMS of the last pair with the tissue at rest and at the optimum.
+    pub residual_rms_before: f64,
+    pub residual_rms_after: f64,
+    pub forward_solves: usize,
+    /// Identification (starts and scales), discretization check, whole step (s).
+    pub identification_s: f64,
+    pub discretization_s: f64,
+    /// Of the best start's problem: time in the forward solves and sensitivities, and in the
+    /// image work (s).
+    pub solve_s: f64,
+    pub image_s: f64,
+    pub wall_time_s: f64,
+    pub notes: Vec<String>,
+}
+
+/// The study's test at each load fraction on `model` (a copy each).
+fn step_models(
+    study: &Study,
+    built: &crate::model::StudyModel,
+    fractions: &[f64],
+) -> Result<Vec<Model>> {
+    let test = study.identification_test().loading.clone();
+    fractions
+        .iter()
+        .map(|&f| built.loaded(&test.scaled(f)))
+        .collect()
+}
+
+/// The mesh of the discretization check: the study's with twice the elements (element size
+/// divided by √2); `None` for a deck, which femu cannot refine.
+fn refined_spec(spec: &crate::schema::ModelSpec) -> Option<crate::schema::ModelSpec> {
+    use crate::schema::{Geometry, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM};
+    let resolution = match (&spec.geometry, spec.resolution) {
+        (Geometry::Deck(_), _) => return None,
+        (_, Resolution::Elements(n)) => Resolution::Elements(2 * n),
+        (_, Resolution::SizeMm(h)) => Resolution::SizeMm(h / std::f64::consts::SQRT_2),
+        (Geometry::Thigh(_), Resolution::Default) => Resolution::Elements(2 * DEFAULT_ELEMENTS),
+        (_, Resolution::Default) => {
+            Resolution::SizeMm(DEFAULT_LABEL_SIZE_MM / std::f64::consts::SQRT_2)
+        }
+    };
+    Some(crate::schema::ModelSpec {
+        resolution,
+        ..spec.clone()
+    })
+}
+
+/// The estimates from the identified `theta` and their uncertainty budget, three terms added
+/// in quadrature:
+///
+/// - the noise: the larger of the block sandwich (the residual's own correlation) and the
+///   jackknife over image regions (`femu_identify::idic::uncertainty`);
+/// - the discretization: the bias a refined mesh implies (one Gauss–Newton step to the mesh
+///   of element size / √2, extrapolated by Richardson at the first-order rate);
+/// - the resolution: the change of the estimate from the last smoothed scale to the images as
+///   recorded (`scale_change`). A model that described the images would give the same
+///   optimum on both, each a consistent estimate; their disagreement measures what the
+///   grey-level model misses (speckle that does not follow the tissue under strain: the
+///   envelope decorrelates by ~20 % per load step of the built-in compression at 9 MHz even
+///   with no scatterer renewed, measured), which no residual statistic sees because the
+///   parameters absorb it.
+#[allow(clippy::too_many_arguments)]
+fn estimates(
+    free: &[FreeParameter],
+    reference: &[f64],
+    reference_known: bool,
+    theta: &[f64],
+    cov: &idic::SandwichCovariance,
+    jackknife: &[f64],
+    shift: Option<&[f64]>,
+    scale_change: Option<&[f64]>,
+) -> Vec<ImageEstimate> {
+    free.iter()
+        .enumerate()
+        .map(|(k, f)| {
+            let t = theta[k];
+            let sd_stat = cov.sd[k].max(jackknife[k]);
+            let s = shift.map(|s| s[k]);
+            let c = scale_change.map(|c| c[k]);
+            let sd = sd_stat.hypot(s.unwrap_or(0.0)).hypot(c.unwrap_or(0.0));
+            let ci = [
+                (t * (-1.96 * sd).exp()).max(f.lower),
+                (t * (1.96 * sd).exp()).min(f.upper),
+            ];
+            let at_bound = (t / f.lower).ln() < 1e-3 || (f.upper / t).ln() < 1e-3;
+            let seen = sd < SEEN_SD && !at_bound;
+            let note = (!seen).then(|| {
+                if sd.is_finite() {
+                    format!(
+                        "{} is not seen from this window: relative sd {:.0} %{}; its value is the optimizer's, not a measurement (fix it, or add a window or test that sees it)",
+                        f.name,
+                        100.0 * sd,
+                        if at_bound { ", at a bound" } else { "" }
+                    )
+                } else {
+                    format!(
+                        "{} does not change the grey levels of this window at all: fix it, or add a window or test that sees it",
+                        f.name
+                    )
+                }
+            });
+            ImageEstimate {
+                name: f.name.clone(),
+                reference: reference_known.then_some(reference[k]),
+                identified: t,
+                relative_error: reference_known.then(|| t / reference[k] - 1.0),
+                sd_statistical: sd_stat,
+                sd_sandwich: cov.sd[k],
+                sd_jackknife: jackknife[k],
+                sd_independent: cov.sd_independent[k],
+                discretization_bias: s,
+                scale_change: c,
+                relative_sd: sd,
+                ci95: if seen { ci } else { [f.lower, f.upper] },
+                at_bound,
+                seen,
+                note,
+            }
+        })
+        .collect()
+}
+
+/// The integrated-DIC identification of `study` (groups tied when `grouped`) from `seq`;
+/// `extra_starts` join the Latin-hypercube starts (e.g. the DIC → FEMU optimum). Writes `out`.
+#[allow(clippy::too_many_arguments)]
+pub fn identify_images(
+    study: &Study,
+    grouped: bool,
+    seq: &ImageSequence,
+    reference_known: bool,
+    extra_starts: Vec<Vec<f64>>,
+    route: &ImageRouteOptions,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<ImageIdentificationSummary> {
+    let t0 = Instant::now();
+    create_dir(out)?;
+    let spec = &study.identification;
+    let built = crate::model::build(&study.model)?;
+    let models = step_models(study, &built, &seq.load_fractions)?;
+    let last = models.last().context("no load step")?;
+    let (free, reference) = free_parameters(study, last, grouped)?;
+    let options = route.correlation;
+    let stop = progress.stop_flag();
+    let make = || {
+        IdicProblem::new(
+            models.clone(),
+            seq.frames.clone(),
+            seq.frame,
+            free.clone(),
+            options,
+        )
+        .map(|p| p.with_stop(stop.clone()))
+    };
+    let settings = IdicSettings {
+        starts: spec.starts,
+        seed: spec.seed,
+        extra_starts,
+        scales_px: route.scales_px.clone(),
+        ..IdicSettings::default()
+    };
+    progress.note(&format!(
+        "identify from images (integrated DIC): {}, {} elements, {} free parameters, {} frames, {} starts + {} given, scales {:?} px",
+        study.identification_test().loading.name(),
+        last.mesh.elements.len(),
+        free.len(),
+        seq.frames.len(),
+        settings.starts,
+        settings.extra_starts.len(),
+        settings.scales_px
+    ));
+    let on_event = |e: IdicEvent| match e {
+        IdicEvent::Start { index, outcome } => match outcome {
+            Ok(r) => progress.note(&format!(
+                "  start {index}: cost {:.4e}, {} iterations, {} forward solves, {:.1} s ({})",
+                r.cost, r.iterations, r.forward_solves, r.wall_time_s, r.reason
+            )),
+            Err(why) => progress.note(&format!("  start {index}: failed: {why}")),
+        },
+        IdicEvent::Scale(r) => progress.note(&format!(
+            "  scale {} px: cost {:.4e}, {} iterations, {} forward solves, {:.1} s ({}); θ = {:?}",
+            r.scale_px,
+            r.result.cost,
+            r.result.iterations,
+            r.result.forward_solves,
+            r.result.wall_time_s,
+            r.result.reason,
+            r.result.theta
+        )),
+    };
+    let (problem, outcome) = idic::identify(&make, &settings, &on_event).map_err(|e| match e {
+        idic::IdicRunError::Interrupted => {
+            anyhow::Error::new(crate::progress::Interrupted).context("identification from images")
+        }
+        e => anyhow::Error::new(e).context("identification from images"),
+    })?;
+    let identification_s = t0.elapsed().as_secs_f64();
+    // The discretization check on a refined mesh.
+    let t1 = Instant::now();
+    let mut notes = Vec::new();
+    let refined = if route.discretization_check {
+        refined_spec(&study.model)
+    } else {
+        notes.push(
+            "the discretization check was not asked for: the intervals leave the mesh's error out"
+                .into(),
+        );
+        None
+    };
+    let (shift, refined_elements) = match refined {
+        Some(rs) => {
+            let rb = crate::model::build(&rs)?;
+            let refined = step_models(study, &rb, &seq.load_fractions)?;
+            let n = refined[0].mesh.elements.len();
+            // One refined level observes no rate: the bias is extrapolated at the cautious
+            // first-order rate of the general check (`femu_identify::discretization`), from
+            // the shift to the mesh of element size / √2.
+            match problem.discretization_shift(refined) {
+                Ok(s) => (
+                    Some(discretization::extrapolated_bias(
+                        &s,
+                        std::f64::consts::SQRT_2,
+                        discretization::ASSUMED_RATE,
+                    )),
+                    Some(n),
+                ),
+                Err(e) => {
+                    notes.push(format!(
+                        "the discretization check on {n} elements failed: {e}"
+                    ));
+                    (None, None)
+                }
+            }
+        }
+        None if !route.discretization_check => (None, None),
+        None => {
+            notes.push(
+                "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
+            );
+            (None, None)
+        }
+    };
+    let discretization_s = t1.elapsed().as_secs_f64();
+    let parameters = estimates(
+        &free,
+        &reference,
+        reference_known,
+        &outcome.theta,
+        &outcome.covariance,
+        &outcome.jackknife_sd,
+        shift.as_deref(),
+        scale_change(&outcome).as_deref(),
+    );
+    notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
+    let maps = problem.residual_maps();
+    let rms = |m: &[f64]| {
+        let v: Vec<f64> = m.iter().copied().filter(|x| x.is_finite()).collect();
+        (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+    };
+    let before = rest_residual(&problem);
+    let summary = ImageIdentificationSummary {
+        command: "identify (images)".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        method: "integrated DIC".into(),
+        test: study.identification_test().loading.name(),
+        grouped,
+        elements: last.mesh.elements.len(),
+        refined_elements,
+        source: seq.source.clone(),
+        load_fractions: seq.load_fractions.clone(),
+        image_px: (seq.frames[0].width, seq.frames[0].height),
+        pixels: problem.pixels().len(),
+        mask: problem.pixels().counts,
+        sandwich_blocks: outcome.covariance.blocks,
+        jackknife_groups: outcome.jackknife_groups,
+        pairing: options.pairing,
+        free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
+        correlation: femu_identify::fisher::correlation(&outcome.covariance.covariance),
+        parameters,
+        scales: outcome
+            .scales
+            .iter()
+            .map(|s| ScaleSummary {
+                scale_px: s.scale_px,
+                cost: s.result.cost,
+                iterations: s.result.iterations,
+                forward_solves: s.result.forward_solves,
+                theta: s.result.theta.clone(),
+                band_sd: s.band_sd.clone(),
+                held: s.held.iter().map(|&k| free[k].name.clone()).collect(),
+                reason: s.result.reason.clone(),
+                history: s.result.history.clone(),
+            })
+            .collect(),
+        starts: outcome.starts.clone(),
+        residual_rms_before: rms(&before),
+        residual_rms_after: rms(maps.last().map_or(&[][..], |m| m.as_slice())),
+        forward_solves: outcome.forward_solves,
+        identification_s,
+        discretization_s,
+        solve_s: problem.timings().0,
+        image_s: problem.timings().1,
+        wall_time_s: t0.elapsed().as_secs_f64(),
+        notes,
+    };
+    write_parameters_csv(&out.join("parameters.csv"), &summary.parameters)?;
+    write_figures(out, &problem, &before, maps.last())?;
+    write_json(&out.join("summary.json"), &summary)?;
+    progress.note(&format!(
+        "{:<36} {:>12} {:>12} {:>10} {:>9} {:>9}",
+        "parameter", "reference", "identified", "error", "sd", "mesh bias"
+    ));
+    for p in &summary.parameters {
+        progress.note(&format!(
+            "{:<36} {:>12} {:>12.5e} {:>10} {:>8.2}% {:>8}{}",
+            p.name,
+            p.reference.map_or("-".into(), |v| format!("{v:.5e}")),
+            p.identified,
+            p.relative_error
+                .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
+            100.0 * p.relative_sd,
+            p.discretization_bias
+                .map_or("-".into(), |s| format!("{:.2}%", 100.0 * s)),
+            if p.seen { "" } else { "  (not seen)" }
+        ));
+    }
+    progress.note(&format!(
+        "wrote {} ({:.1} s: identification {:.1} s, discretization check {:.1} s)",
+        out.display(),
+        summary.wall_time_s,
+        identification_s,
+        discretization_s
+    ));
+    Ok(summary)
+}
+
+/// `ln θ` of the last scale minus that of the one before (None with a single scale).
+fn scale_change(outcome: &idic::IdicOutcome) -> Option<Vec<f64>> {
+    let n = outcome.scales.len();
+    if n < 2 {
+        return None;
+    }
+    let (a, b) = (
+        &outcome.scales[n - 2].result.theta,
+        &outcome.scales[n - 1].result.theta,
+    );
+    Some(a.iter().zip(b).map(|(x, y)| (y / x).ln()).collect())
+}
+
+/// The residual of the last pair with the tissue at rest (no displacement), the same
+/// brightness correction per band: how much the images differ before any correlation.
+fn rest_residual(problem: &IdicProblem) -> Vec<f64> {
+    let px = problem.pixels();
+    let (w, h) = (px.width, px.height);
+    let f = &problem.images()[0];
+    let g = problem.images().last().expect("frames");
+    let mut sums = vec![femu_identify::idic::brightness::BandSums::default(); px.bands];
+    for (k, p) in px.px.iter().enumerate() {
+        sums[px.band[k]].add(f.at(p[0], p[1]), g.at(p[0], p[1]));
+    }
+    let fits: Vec<_> = sums.iter().map(|s| s.fit(true)).collect();
+    let mut m = vec![f64::NAN; w * h];
+    for (k, p) in px.px.iter().enumerate() {
+        m[p[1] * w + p[0]] = fits[px.band[k]].residual(f.at(p[0], p[1]), g.at(p[0], p[1]));
+    }
+    m
+}
+
+fn write_parameters_csv(path: &Path, params: &[ImageEstimate]) -> Result<()> {
+    let mut w = std::io::BufWriter::new(
+        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
+    );
+    writeln!(
+        w,
+        "name,reference,identified,relative_error,sd_statistical,sd_independent,discretization_bias,scale_change,relative_sd,ci95_low,ci95_high,seen"
+    )?;
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
+    for p in params {
+        writeln!(
+            w,
+            "{},{},{:.9e},{},{:.6e},{:.6e},{},{},{:.6e},{:.9e},{:.9e},{}",
+            p.name,
+            opt(p.reference),
+            p.identified,
+            opt(p.relative_error),
+            p.sd_statistical,
+            p.sd_independent,
+            opt(p.discretization_bias),
+            opt(p.scale_change),
+            p.relative_sd,
+            p.ci95[0],
+            p.ci95[1],
+            p.seen
+        )?;
+    }
+    Ok(())
+}
+
+/// The residual maps before and after, and the identified displacement over the unloaded
+/// image.
+fn write_figures(
+    out: &Path,
+    problem: &IdicProblem,
+    before: &[f64],
+    after: Option<&Vec<f64>>,
+) -> Result<()> {
+    let px = problem.pixels();
+    let (w, h) = (px.width, px.height);
+    let grey = &problem.images()[0].data;
+    let limit = before
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let residual = |name: &str, map: &[f64], title: &str| -> Result<()> {
+        let p = out.join(name);
+        femu_plot::image_field_png(
+            &p,
+            grey,
+            w,
+            h,
+            map,
+            &femu_plot::ImageField {
+                title: title.into(),
+                value_label: "grey levels".into(),
+                diverging: true,
+                range: (limit > 0.0).then_some((-limit, limit)),
+                ..Default::default()
+            },
+        )
+        .with_context(|| format!("cannot write {}", p.display()))
+    };
+    residual(
+        "residual_before.png",
+        before,
+        "Grey-level residual of the last load step, tissue at rest",
+    )?;
+    if let Some(a) = after {
+        residual(
+            "residual_after.png",
+            a,
+            "Grey-level residual of the last load step, tissue moved by the identified model",
+        )?;
+    }
+    let last = problem.steps();
+    let d = problem.displacement(last);
+    for (c, name, title) in [
+        (0, "displacement_ux.png", "ux (along the probe)"),
+        (1, "displacement_uy.png", "uy (depth, down)"),
+    ] {
+        let mut map = vec![f64::NAN; w * h];
+        for (k, p) in px.px.iter().enumerate() {
+            map[p[1] * w + p[0]] = d[k][c];
+        }
+        let p = out.join(name);
+        femu_plot::image_field_png(
+            &p,
+            grey,
+            w,
+            h,
+            &map,
+            &femu_plot::ImageField {
+                title: format!("Identified model displacement {title}, last load step"),
+                value_label: "displacement (px)".into(),
+                diverging: true,
+                ..Default::default()
+            },
+        )
+        .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    Ok(())
+}
+
+/// The three routes from the same images, side by side (`femu run` with `[measurement] source =
+/// "ultrasound"`), each in its folder under `out`:
+///
+/// - `dic/` — DIC → FEMU, plain: the composed incremental DIC field (`measured.csv`) with one
+///   weight per point, as `identify --measured` fits it;
+/// - `dic-weighted/` — DIC → FEMU weighted by the field's full covariance
+///   (`measured_covariance.mtx`) with Huber's loss;
+/// - `.` (the folder itself) — integrated DIC from the frames, started from the two optima
+///   above (the incremental DIC brings the capture range the grey levels alone lack: from the
+///   Latin-hypercube starts themselves, 25–75 % off, the widest smoothing does not capture the
+///   motion and the optimizer stops where it began).
+///
+/// Returns the three summaries.
+pub fn identify_image_measurement(
+    study: &Study,
+    grouped: bool,
+    measurement: &Path,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<(
+    crate::steps::identify::IdentificationSummary,
+    crate::steps::identify::IdentificationSummary,
+    ImageIdentificationSummary,
+)> {
+    use crate::steps::identify::{identify_on, Measured};
+    use crate::steps::measure::{Prepared, PreparedData};
+    use femu_identify::measured::MeasuredField;
+    use femu_identify::weighted::{Loss, HUBER_K};
+    let field = MeasuredField::read(&measurement.join("measured.csv"))?;
+    let covariance = femu_identify::weighted::FieldCovariance::read_mtx(
+        &measurement.join("measured_covariance.mtx"),
+    )?;
+    let built = crate::model::build(&study.model)?;
+    let m = &study.measurements[0];
+    let source = "DIC of the simulated B-mode images (incremental, composed)".to_string();
+    let prepared = |covariance: Option<femu_identify::weighted::FieldCovariance>| Prepared {
+        name: m.name.clone(),
+        label: m.label(&study.tests),
+        test: m.test,
+        data: PreparedData::Measured(Measured {
+            field: field.clone(),
+            source: if covariance.is_some() {
+                format!("{source}, weighted by its covariance")
+            } else {
+                source.clone()
+            },
+            reference_known: true,
+            covariance,
+        }),
+        travel: None,
+    };
+    let mut squared = study.clone();
+    squared.identification.loss = Loss::Squared;
+    progress.note("DIC -> FEMU, one weight per point:");
+    let a = identify_on(
+        &squared,
+        grouped,
+        &built,
+        &[prepared(None)],
+        &out.join("dic"),
+        progress,
+    )?;
+    let mut huber = study.clone();
+    huber.identification.loss = Loss::Huber { k: HUBER_K };
+    progress.note("DIC -> FEMU, weighted by the DIC's covariance, Huber's loss:");
+    let b = identify_on(
+        &huber,
+        grouped,
+        &built,
+        &[prepared(Some(covariance))],
+        &out.join("dic-weighted"),
+        progress,
+    )?;
+    let seq = read_sequence(measurement)?;
+    let starts = vec![
+        a.parameters.iter().map(|p| p.identified).collect(),
+        b.parameters.iter().map(|p| p.identified).collect(),
+    ];
+    let mut study_idic = study.clone();
+    // The integrated DIC's starts are the two optima (see above).
+    study_idic.identification.starts = 0;
+    let c = identify_images(
+        &study_idic,
+        grouped,
+        &seq,
+        true,
+        starts,
+        &ImageRouteOptions::default(),
+        out,
+        progress,
+    )?;
+    Ok((a, b, c))
+}
