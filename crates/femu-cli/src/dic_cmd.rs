@@ -265,7 +265,21 @@ pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
         figures: !a.no_figures,
         out: a.out.clone(),
     };
-    let r = run_dic(&job)?;
+    let t0 = Instant::now();
+    let r = match run_dic(&job) {
+        Err(femu_dic::DicError::Interrupted(stop)) => {
+            let note = "stopped by the user during the correlation: nothing was measured";
+            femu_study::output::write_stopped(
+                &a.out,
+                "dic",
+                note,
+                &[],
+                t0.elapsed().as_secs_f64(),
+            )?;
+            return Err(anyhow::Error::new(stop).context(note));
+        }
+        r => r?,
+    };
     if !quiet {
         let s = &r.result;
         println!(
@@ -442,7 +456,8 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         ));
     }
     let path = a.out.join("noise.csv");
-    std::fs::write(&path, csv).with_context(|| format!("cannot write {}", path.display()))?;
+    femu_mesh::atomic::write(&path, csv)
+        .with_context(|| format!("cannot write {}", path.display()))?;
     let groups = vec![
         (
             "std ux".to_string(),
@@ -480,7 +495,7 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
     let path = a.out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+    femu_mesh::atomic::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     if !quiet {
         for (k, p) in pairs.iter().enumerate() {

@@ -302,7 +302,7 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Dic
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    std::fs::write(path, text).map_err(|e| DicError::Write {
+    femu_mesh::atomic::write(path, text).map_err(|e| DicError::Write {
         path: path.to_path_buf(),
         message: e.to_string(),
     })

@@ -409,11 +409,25 @@ pub fn run(
                 r
             })
             .collect();
-        let stopped = options
-            .stop
-            .as_ref()
-            .is_some_and(|f| f.load(Ordering::Relaxed));
+        let stopped = femu_mesh::stop::requested()
+            || options
+                .stop
+                .as_ref()
+                .is_some_and(|f| f.load(Ordering::Relaxed));
         if stopped {
+            // The starts that finished before the stop are kept; the stopped ones are not
+            // results.
+            for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
+                if let Ok(r) = o {
+                    out.starts.push(StartRecord {
+                        repeat: rep,
+                        start: k,
+                        theta_start: s.clone(),
+                        result: Some(r),
+                        error: None,
+                    });
+                }
+            }
             return Err(CampaignError::Interrupted {
                 finished: Box::new(out),
                 repeats,

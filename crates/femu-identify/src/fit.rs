@@ -212,10 +212,16 @@ impl Problem {
         self
     }
 
+    /// Also stops once the process was asked to stop ([`femu_mesh::stop`]).
     fn check_stop(&self) -> Result<(), FitError> {
-        match &self.stop {
-            Some(f) if f.load(Ordering::Relaxed) => Err(FitError::Interrupted),
-            _ => Ok(()),
+        let flagged = self
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
+        if flagged || femu_mesh::stop::requested() {
+            Err(FitError::Interrupted)
+        } else {
+            Ok(())
         }
     }
 
@@ -266,7 +272,7 @@ impl Problem {
         let sol = self
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
-            .map_err(|e| FitError::Solve(e.to_string()))?;
+            .map_err(FitError::from_solve)?;
         let mut r = Vec::with_capacity(self.measured.len());
         self.project(&sol.u, &mut r);
         for ((ri, m), w) in r.iter_mut().zip(&self.measured).zip(&self.sqrt_w) {
@@ -328,11 +334,21 @@ impl Problem {
         let sol = self
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
-            .map_err(|e| FitError::Solve(e.to_string()))?;
+            .map_err(FitError::from_solve)?;
         let mut out = Vec::new();
         self.project(&sol.u, &mut out);
         self.warm = Some(sol.state);
         Ok(out)
+    }
+}
+
+impl FitError {
+    /// A forward solve's failure; a solve stopped by the user is [`FitError::Interrupted`].
+    fn from_solve(e: femu_mech::SolveError) -> FitError {
+        match e {
+            femu_mech::SolveError::Interrupted(_) => FitError::Interrupted,
+            e => FitError::Solve(e.to_string()),
+        }
     }
 }
 

@@ -161,7 +161,7 @@ impl MeasuredField {
     /// Writes the field as `x,y,ux,uy` (and `sx,sy` when every weight is `1/s²` of a common
     /// `sigma`, given here), full precision, with the comment lines.
     pub fn write(&self, path: &Path, sigma: Option<f64>) -> std::io::Result<()> {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut w = femu_mesh::atomic::AtomicFile::create(path)?;
         for c in &self.comments {
             writeln!(w, "# {c}")?;
         }
@@ -180,7 +180,7 @@ impl MeasuredField {
             }
             writeln!(w)?;
         }
-        w.flush()
+        w.commit()
     }
 
     /// The field in the model frame, from a file frame (image pixels or mm): positions

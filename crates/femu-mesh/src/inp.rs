@@ -38,7 +38,7 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::Path;
 
 use crate::deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
@@ -1885,9 +1885,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
 
 /// Writes `deck` to the file `path` with [`write_inp`].
 pub fn write_inp_file(deck: &Deck, path: &Path) -> io::Result<()> {
-    let mut w = BufWriter::new(fs::File::create(path)?);
-    write_inp(deck, &mut w)?;
-    w.flush()
+    crate::atomic::write_with(path, |w| write_inp(deck, w))
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -224,6 +224,35 @@ pub fn identify(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<IdentificationSummary> {
+    let t0 = Instant::now();
+    let result = identify_measured(study, measured, out, progress);
+    if let Err(e) = &result {
+        if crate::progress::is_interrupted(e) {
+            // Stopped before a summary was written: one that says so.
+            let kept: &[&str] = match e.downcast_ref::<Stopped>() {
+                Some(Stopped::RepeatsKept(_)) => return result,
+                Some(Stopped::BeforeARepeat(_)) => &["starts.csv"],
+                None => &[],
+            };
+            crate::output::write_stopped(
+                out,
+                "identify",
+                &format!("{e:#}"),
+                kept,
+                t0.elapsed().as_secs_f64(),
+            )?;
+        }
+    }
+    result
+}
+
+/// [`identify`] without the account of a stop.
+fn identify_measured(
+    study: &Study,
+    measured: Option<&Path>,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<IdentificationSummary> {
     let measured = match measured {
         Some(p) => Some(Measured {
             field: MeasuredField::read(p)?,
@@ -379,8 +408,13 @@ pub fn identify_on(
         Err(campaign::CampaignError::Interrupted { finished, repeats }) => {
             if finished.best.is_empty() {
                 write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
-                return Err(anyhow::Error::new(crate::progress::Interrupted)
-                    .context("identification: no repeat finished"));
+                return Err(anyhow::Error::new(crate::progress::Interrupted).context(
+                    Stopped::BeforeARepeat(format!(
+                        "identification: no repeat finished ({} finished starts in {})",
+                        finished.starts.len(),
+                        out.join("starts.csv").display()
+                    )),
+                ));
             }
             (*finished, Some(repeats))
         }
@@ -411,8 +445,11 @@ pub fn identify_on(
     let repeats = c.best.len();
     let best = &c.best[0];
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
-    write_figures(out, &parameters, best, reference_known, repeats)?;
-    write_field_figures(out, model, &free, &c.first_field, &best.theta)?;
+    // What finished is written even after a stop (the field figure needs one more solve).
+    femu_mesh::stop::shielded(|| {
+        write_figures(out, &parameters, best, reference_known, repeats)?;
+        write_field_figures(out, model, &free, &c.first_field, &best.theta)
+    })?;
     let points_masked = if virtual_experiment {
         // The virtual field holds only the grid points in the tissue; the rest are masked.
         grid_total - c.points_in_tissue
@@ -477,16 +514,26 @@ pub fn identify_on(
         summary.wall_time_s
     ));
     if let Some(note) = &summary.interrupted {
-        return Err(anyhow::Error::new(crate::progress::Interrupted)
-            .context(format!("identification: {note} in {}", out.display())));
+        return Err(anyhow::Error::new(crate::progress::Interrupted).context(
+            Stopped::RepeatsKept(format!("identification: {note} in {}", out.display())),
+        ));
     }
     Ok(summary)
 }
 
+/// How an identification stopped by the user ended (the context of its error).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum Stopped {
+    /// Before a repeat finished: `starts.csv` holds the starts that finished.
+    #[error("{0}")]
+    BeforeARepeat(String),
+    /// After some repeats: their results are written (summary.json says so).
+    #[error("{0}")]
+    RepeatsKept(String),
+}
+
 fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     write!(
         w,
         "repeat,start,cost,iterations,forward_solves,converged,error"
@@ -522,13 +569,11 @@ fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord])
         }
         writeln!(w)?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 fn write_parameters_csv(path: &Path, params: &[Estimate]) -> Result<()> {
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(path)?;
     writeln!(
         w,
         "name,reference,identified,relative_error,relative_sd,ci95_low,ci95_high,mean_relative_error,sd_relative_error"
@@ -549,7 +594,7 @@ fn write_parameters_csv(path: &Path, params: &[Estimate]) -> Result<()> {
             opt(p.sd_relative_error)
         )?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 /// `errors.png` (Eq. 4 per parameter, mean ± sd over the repeats: the seed's Fig. 9) for a
