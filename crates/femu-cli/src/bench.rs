@@ -130,7 +130,9 @@ pub fn run(
     }
 
     std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
-    let (deck, _) = femu_study::model::thigh_deck(target_elements, femu_mesh::ElementKind::Cpe4)?;
+    let (model, skin) =
+        femu_study::model::thigh_model(target_elements, femu_mesh::ElementKind::Cpe4)?;
+    let deck = femu_study::model::contention_deck(&model, &skin, femu_geometry::CONTENTION_MPA);
     let (elements, nodes) = (deck.mesh.elements.len(), deck.mesh.nodes.len());
     let deck_path = out.join("model.inp");
     femu_mesh::write_inp_file(&deck, &deck_path)?;

@@ -27,7 +27,8 @@ pub enum BrightnessArg {
 /// Options shared by `dic` and `dic-noise`: where and how to correlate.
 #[derive(Args, Debug, Clone)]
 pub struct CorrelationArgs {
-    /// Region of interest x,y,w,h (pixels of the reference image).
+    /// Region of interest x,y,WxH (pixels of the reference image: the top-left corner, then the
+    /// width and height, e.g. 16,16,160x128).
     #[arg(long, conflicts_with = "mask")]
     pub roi: Option<String>,
     /// Region of interest as a mask image (same size; pixels brighter than half its maximum
@@ -421,6 +422,9 @@ struct NoiseSummary<'a> {
 /// `femu dic-noise`.
 pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
     let t0 = Instant::now();
+    let mut inputs: Vec<&Path> = a.images.iter().map(PathBuf::as_path).collect();
+    inputs.extend(a.corr.mask.as_deref());
+    femu_mesh::folder::refuse_inputs_in(&a.out, &inputs)?;
     let images: Vec<GreyImage> = a
         .images
         .iter()

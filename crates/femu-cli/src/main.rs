@@ -12,7 +12,7 @@ mod progress;
 mod us_cmd;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use femu_study::steps::{identify, run, sensitivity, solve};
+use femu_study::steps::{design, identify, run, sensitivity, solve};
 use progress::Terminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -203,6 +203,20 @@ enum Command {
         /// Latin-hypercube starts (overrides the study).
         #[arg(long)]
         starts: Option<usize>,
+    },
+    /// Design of the experiment: the study's tests seen through probe windows on each side of
+    /// the thigh ([design]: tests x sides x window sizes, with the study's noise), alone and
+    /// combined, ranked by the predicted parameter sd (A- and D-optimal); which parameters
+    /// each design can and cannot identify; designs.csv, figures, report.html.
+    Design {
+        /// Study file (TOML; see README). Without it: the built-in thigh, the seed's three
+        /// tests, four sides, 40 x 40 and 60 x 40 mm windows, sigma = 1.76e-2 mm.
+        study: Option<PathBuf>,
+        #[arg(long, default_value = "out/design")]
+        out: PathBuf,
+        /// Target number of elements of the built-in thigh (overrides the study).
+        #[arg(long)]
+        elements: Option<usize>,
     },
     /// Build a thigh model: `mesh thigh` (the built-in parametric thigh) or `mesh labels IMAGE`
     /// (a segmented MRI slice); writes mesh.inp, mesh.vtu, regions.png, quality.csv/json and
@@ -396,6 +410,12 @@ fn main() -> ExitCode {
                 ),
             }
         }),
+        Command::Design {
+            study,
+            out,
+            elements,
+        } => study_with(study.as_deref(), elements, None, None)
+            .and_then(|s| design::run(&s, &out, &progress).map(|_| ())),
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
         Command::Dic(args) => dic_cmd::run(&args, quiet),
         Command::DicNoise(args) => dic_cmd::run_noise(&args, quiet),

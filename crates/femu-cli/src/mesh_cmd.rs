@@ -41,10 +41,16 @@ pub enum MeshCommand {
         /// Pixel size (mm); required unless the file gives it (NIfTI header).
         #[arg(long)]
         pixel_size: Option<f64>,
-        /// Label to region table, e.g. 1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=ischio
-        /// (several labels may share a region; regions need a Table 1 material).
+        /// Label to region table, e.g. 1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=adductor
+        /// (several labels may share a region; a region outside Table 1 needs its material in
+        /// --materials).
         #[arg(long)]
         map: String,
+        /// A TOML file of [materials.REGION] tables, the study file's form (a study file will
+        /// do): c10_kpa, d_per_mpa, or law = "..." and its keys. Table 1 regions may be
+        /// overridden; a region outside Table 1 takes its table whole.
+        #[arg(long)]
+        materials: Option<PathBuf>,
         /// Bone label(s), comma-separated: a hole whose edge is fixed.
         #[arg(long, value_delimiter = ',', required = true)]
         bone: Vec<u32>,
@@ -106,8 +112,14 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
             min_island,
             element,
             out,
+            materials,
         } => {
+            let materials = match &materials {
+                Some(f) => femu_study::read(f)?.model.materials,
+                None => Vec::new(),
+            };
             let req = LabelMeshRequest {
+                materials,
                 image,
                 pixel_size_mm: pixel_size,
                 map,

@@ -7,12 +7,13 @@ use crate::progress::Terminal;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use femu_dic::DicOptions;
+use femu_mesh::folder::refuse_inputs_in;
 use femu_study::steps::ultrasound::{self, ScanOptions, SimOptions};
 use femu_ultrasound::manifest::{fmt_num, Manifest};
 use femu_ultrasound::noise;
 use femu_ultrasound::settings::{self, Region, SettingsOptions};
 use serde::Serialize;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// `femu us-sim`.
@@ -106,8 +107,8 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
 /// Region options shared by us-settings and us-noise.
 #[derive(Debug, Args)]
 pub struct RegionArgs {
-    /// Region of interest: a rectangle x0,y0,x1,y1 (pixels, corners) — leave burned-in text
-    /// and scales out.
+    /// Region of interest x,y,WxH (pixels: the top-left corner, then the width and height, e.g.
+    /// 115,65,570x450) — leave burned-in text and scales out.
     #[arg(long, conflicts_with = "mask")]
     pub roi: Option<String>,
     /// Region of interest as a mask image (pixels brighter than half its maximum are inside).
@@ -116,6 +117,12 @@ pub struct RegionArgs {
 }
 
 impl RegionArgs {
+    /// `files` and the mask image, if any.
+    fn with_mask<'a>(&'a self, mut files: Vec<&'a Path>) -> Vec<&'a Path> {
+        files.extend(self.mask.as_deref());
+        files
+    }
+
     fn region(&self) -> Result<Region> {
         Ok(match (&self.roi, &self.mask) {
             (Some(r), _) => Region::parse_rect(r)?,
@@ -149,6 +156,7 @@ pub struct UsSettingsArgs {
 pub fn run_settings(args: &UsSettingsArgs, quiet: bool) -> Result<()> {
     let t0 = Instant::now();
     let manifest = Manifest::read(&args.manifest)?;
+    refuse_inputs_in(&args.out, &args.region.with_mask(manifest.input_files()))?;
     if let Some(d) = args.pixel_size {
         if !(d > 0.0 && d.is_finite()) {
             bail!("--pixel-size {d} must be positive");
@@ -241,6 +249,7 @@ pub struct UsNoiseArgs {
 pub fn run_noise(args: &UsNoiseArgs, quiet: bool) -> Result<()> {
     let t0 = Instant::now();
     let manifest = Manifest::read(&args.manifest)?;
+    refuse_inputs_in(&args.out, &args.region.with_mask(manifest.input_files()))?;
     let dic = DicOptions {
         element_size: args.element,
         regularization_length: args.regularization,

@@ -209,6 +209,49 @@ fn solve_a_deck_and_report_bad_decks() {
     }
 }
 
+/// Issue 32.1: a node no element uses (a reference point, as Abaqus decks often carry) is held
+/// at zero, named in a warning and in summary.json; the solve and the VTU are as without it
+/// (it used to give NaN in displacements.csv and fail at the VTU writer).
+#[test]
+fn a_node_no_element_uses_is_held_and_reported() {
+    let dir = scratch("unused-node");
+    let deck = dir.join("ref.inp");
+    std::fs::write(
+        &deck,
+        DECK.replace("6, 2.0, 1.0\n", "6, 2.0, 1.0\n99, 5.0, 5.0\n"),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let o = femu(&[
+        "solve",
+        deck.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("1 node(s) belong to no element (99)"), "{err}");
+    let rows = read_csv(&out.join("displacements.csv"));
+    assert_eq!(rows.len(), 7);
+    assert_eq!(rows[6], vec![99.0, 5.0, 5.0, 0.0, 0.0]);
+    assert!(rows.iter().flatten().all(|v| v.is_finite()));
+    assert!(out.join("result.vtu").exists());
+    assert_eq!(summary(&out)["unused_nodes"], serde_json::json!([99]));
+    // Issue 32.2: the deck's own folder as --out is refused, the deck untouched.
+    let o = femu(&[
+        "solve",
+        deck.to_str().unwrap(),
+        "--out",
+        dir.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success() && err.contains("holds the input"),
+        "{err}"
+    );
+    assert!(!dir.join("summary.json").exists());
+}
+
 #[test]
 fn solve_a_gmsh_mesh_with_a_study_file() {
     // A mesh written by Gmsh 4.8 (quads and triangles), physical surfaces "Fat" and an unnamed

@@ -4,7 +4,7 @@
 mod common;
 use common::{femu, scratch};
 
-/// Three small meshes (300 to 1 200 quads), contention, CPE4H and CPE4, no locking study; the
+/// Three small meshes (700 to 2 400 quads), contention, CPE4H and CPE4, no locking study; the
 /// tolerance is the DIC noise (2e-2 mm) since the meshes are far coarser than the seed's.
 #[test]
 fn convergence_writes_table_figure_and_recommendation() {
@@ -12,7 +12,7 @@ fn convergence_writes_table_figure_and_recommendation() {
     let study = dir.join("study.toml");
     std::fs::write(
         &study,
-        "elements = [\"CPE4H\", \"CPE4\"]\ntarget_elements = [300, 600, 1200]\ntolerance_mm = 2e-2\nlocking = false\n[contention]\nmmhg = 20.0\n",
+        "elements = [\"CPE4H\", \"CPE4\"]\ntarget_elements = [700, 1200, 2400]\ntolerance_mm = 2e-2\nlocking = false\n[contention]\nmmhg = 20.0\n",
     )
     .unwrap();
     let out = dir.join("out");
@@ -54,7 +54,7 @@ fn bad_study_file_names_the_key() {
     let study = dir.join("bad.toml");
     std::fs::write(
         &study,
-        "target_elements = [300, 600, 1200]\ntolerence_mm = 1e-3\n",
+        "target_elements = [700, 1200, 2400]\ntolerence_mm = 1e-3\n",
     )
     .unwrap();
     let o = femu(&[

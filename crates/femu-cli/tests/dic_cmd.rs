@@ -31,7 +31,7 @@ fn dic_writes_the_output_folder() {
         s(&f),
         s(&g),
         "--roi",
-        "16,16,160,128",
+        "16,16,160x128",
         "--element",
         "16",
         "--pixel-size",
@@ -140,7 +140,7 @@ fn dic_check_writes_pairs_checks_and_maps() {
     let out = dir.join("out");
     let mut args = vec!["dic-check"];
     args.extend(paths.iter().map(|p| s(p)));
-    args.extend(["--roi", "16,16,128,112", "--out", s(&out), "--quiet"]);
+    args.extend(["--roi", "16,16,128x112", "--out", s(&out), "--quiet"]);
     let o = femu(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let pairs = std::fs::read_to_string(out.join("pairs.csv")).unwrap();
@@ -178,7 +178,7 @@ fn dic_noise_writes_csv_and_box_plot() {
     let out = dir.join("out");
     let mut args = vec!["dic-noise"];
     args.extend(paths.iter().map(|p| s(p)));
-    args.extend(["--roi", "16,16,96,96", "--out", s(&out), "--quiet"]);
+    args.extend(["--roi", "16,16,96x96", "--out", s(&out), "--quiet"]);
     let o = femu(&args);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = std::fs::read_to_string(out.join("noise.csv")).unwrap();
@@ -204,13 +204,18 @@ fn bad_input_gets_a_clear_error() {
     let missing = dir.join("missing.png");
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec![s(&f), s(&small)], "differ in size"),
-        (vec![s(&f), s(&g), "--roi", "150,10,100,50"], "outside"),
+        (vec![s(&f), s(&g), "--roi", "150,10,100x50"], "outside"),
         (
-            vec![s(&f), s(&g), "--roi", "0,0,40,40", "--element", "64"],
+            vec![s(&f), s(&g), "--roi", "0,0,40x40", "--element", "64"],
             "larger than the region of interest",
         ),
         (vec![s(&flat), s(&g)], "no texture"),
-        (vec![s(&f), s(&g), "--roi", "1,2,3"], "x,y,w,h"),
+        (vec![s(&f), s(&g), "--roi", "1,2,3"], "x,y,WxH"),
+        // Issue 32.12: four plain numbers are refused with both readings.
+        (
+            vec![s(&f), s(&g), "--roi", "10,10,150,120"],
+            "10,10,150x120 if 150,120 are the width and height, or 10,10,140x110",
+        ),
         (vec![s(&f), s(&missing)], "missing.png"),
     ];
     for (args, expect) in cases {
@@ -223,4 +228,45 @@ fn bad_input_gets_a_clear_error() {
         assert!(err.contains(expect), "{a:?}: '{err}' lacks '{expect}'");
         assert!(!err.contains("panicked"), "{err}");
     }
+}
+
+/// Issue 32.2: `femu dic ux.png uy.png --out .` replaced both images with its maps and exited
+/// 0; an output folder holding an input is now refused before anything is written (`.`, or the
+/// folder by its path), and the inputs are untouched.
+#[test]
+fn an_output_folder_holding_an_input_is_refused() {
+    let dir = scratch("inputs-in-out");
+    let (f, g) = pair(&dir);
+    let (ux, uy) = (dir.join("ux.png"), dir.join("uy.png"));
+    std::fs::rename(&f, &ux).unwrap();
+    std::fs::rename(&g, &uy).unwrap();
+    let before = (std::fs::read(&ux).unwrap(), std::fs::read(&uy).unwrap());
+    let in_dir = std::process::Command::new(env!("CARGO_BIN_EXE_femu"))
+        .current_dir(&dir)
+        .args(["dic", "ux.png", "uy.png", "--out", ".", "--quiet"])
+        .output()
+        .unwrap();
+    let by_path = femu(&["dic", s(&ux), s(&uy), "--out", s(&dir), "--quiet"]);
+    let noise = femu(&["dic-noise", s(&ux), s(&uy), "--out", s(&dir), "--quiet"]);
+    for o in [in_dir, by_path, noise] {
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{err}");
+        assert!(
+            err.contains("holds the input") && err.contains("ux.png"),
+            "{err}"
+        );
+    }
+    assert_eq!(std::fs::read(&ux).unwrap(), before.0);
+    assert_eq!(std::fs::read(&uy).unwrap(), before.1);
+    assert!(!dir.join("field.csv").exists() && !dir.join("summary.json").exists());
+    // A sub-folder is fine.
+    let o = femu(&[
+        "dic",
+        s(&ux),
+        s(&uy),
+        "--out",
+        s(&dir.join("dic")),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 }

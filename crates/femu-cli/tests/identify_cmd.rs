@@ -4,7 +4,7 @@
 mod common;
 use common::{femu, scratch, write};
 
-/// Compression on a 600-quad thigh, noise 1e-9 mm, D of ischio, sartorius and gracilis tied:
+/// Compression on a 700-quad thigh, noise 1e-9 mm, D of ischio, sartorius and gracilis tied:
 /// identified back from the CSV to 0.1 % (the noise is far below the model's sensitivity).
 #[test]
 fn synth_then_identify_recovers_table1() {
@@ -12,7 +12,7 @@ fn synth_then_identify_recovers_table1() {
     let study = write(
         &dir,
         "study.toml",
-        "[model]\nelements = 600\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 2\n",
     );
     let synth = dir.join("synth");
@@ -116,8 +116,8 @@ fn synth_then_identify_recovers_table1() {
     }
 }
 
-/// Multilevel: three starts on a coarse (~450-quad) thigh, the best refined on 1 200 quads, noise-free data
-/// of the 1 200-quad model: the refined optimum is the fine model's (Table 1 to 1e-4), in a
+/// Multilevel: three starts on a coarse (~800-quad) thigh, the best refined on 1 800 quads, noise-free data
+/// of the 1 800-quad model: the refined optimum is the fine model's (Table 1 to 1e-4), in a
 /// handful of fine forward solves.
 #[test]
 fn multilevel_identification_refines_on_the_fine_mesh() {
@@ -125,8 +125,8 @@ fn multilevel_identification_refines_on_the_fine_mesh() {
     let study = write(
         &dir,
         "study.toml",
-        "[model]\nelements = 1200\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
-         [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 3\ncoarse_elements = 300\n",
+        "[model]\nelements = 1800\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+         [noise]\nsigma_mm = 1e-9\n[identification]\nstarts = 3\ncoarse_elements = 700\n",
     );
     let out = dir.join("identify");
     let o = femu(&[
@@ -155,7 +155,7 @@ fn multilevel_identification_refines_on_the_fine_mesh() {
 #[test]
 fn the_travel_term_adds_information() {
     let dir = scratch("travel");
-    let base = "[model]\nelements = 500\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+    let base = "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
                 [grid]\ncounts = [16, 16]\n[identification]\nstarts = 1\n";
     let run = |name: &str, extra: &str| -> serde_json::Value {
         let study = write(&dir, &format!("{name}.toml"), &format!("{base}{extra}"));
@@ -215,7 +215,7 @@ fn bad_inputs_are_named() {
     let study = write(
         &dir,
         "s.toml",
-        "[model]\nelements = 300\n[identification]\nstarts = 1\n",
+        "[model]\nelements = 700\n[identification]\nstarts = 1\n",
     );
     let nan = write(&dir, "m.csv", "x,y,ux,uy\n0,40,0.1,0.1\n0,41,NaN,0.1\n");
     let o = femu(&[
@@ -231,7 +231,7 @@ fn bad_inputs_are_named() {
     let fixed = write(
         &dir,
         "f.toml",
-        "[model]\nelements = 300\n[identification]\nfixed = [\"C10_BONE\"]\n",
+        "[model]\nelements = 700\n[identification]\nfixed = [\"C10_BONE\"]\n",
     );
     let o = femu(&[
         "identify",
@@ -250,4 +250,105 @@ fn bad_inputs_are_named() {
     ]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("stretch"));
+}
+
+/// Issue 32.6 (and the unit of 32.12): a field that cannot identify the model (all zero) ends
+/// with warnings in the console, the summary and the report — parameters at their bounds — and
+/// a point repeated in the CSV is refused naming both lines (it weighed 2 500 times and shrank
+/// the sd); the console table shows C10 in kPa, D in MPa⁻¹. Before: exit 0, `inf %` and no word.
+#[test]
+fn unusable_fits_are_warned_and_duplicates_refused() {
+    let dir = scratch("unusable");
+    let study = write(
+        &dir,
+        "study.toml",
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+         [grid]\ncounts = [16, 16]\n[identification]\nstarts = 1\ngrouped = true\n",
+    );
+    let synth = dir.join("synth");
+    let o = femu(&[
+        "synth",
+        study.to_str().unwrap(),
+        "--out",
+        synth.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(synth.join("measured.csv")).unwrap();
+    let rows: Vec<&str> = text.lines().filter(|l| !l.starts_with('#')).collect();
+    // Every displacement zero.
+    let mut zero = format!("{}\n", rows[0]);
+    for r in &rows[1..] {
+        let mut c: Vec<&str> = r.split(',').collect();
+        c[2] = "0";
+        c[3] = "0";
+        zero.push_str(&format!("{}\n", c.join(",")));
+    }
+    write(&dir, "zero.csv", &zero);
+    let out = dir.join("zero");
+    let o = femu(&[
+        "identify",
+        study.to_str().unwrap(),
+        "--measured",
+        dir.join("zero.csv").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning: identification:") && err.contains("bound"),
+        "{err}"
+    );
+    assert!(
+        err.contains("C10_FAT") && err.contains("kPa") && err.contains("MPa⁻¹"),
+        "{err}"
+    );
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let warnings = s["warnings"].as_array().unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("bound")),
+        "{warnings:?}"
+    );
+    // The same field through femu run: the report says so.
+    let run_study = write(
+        &dir,
+        "run.toml",
+        &format!(
+            "{}[run]\nsensitivity = false\n[measurement]\nsource = \"file\"\nfile = \"zero.csv\"\n",
+            std::fs::read_to_string(&study).unwrap()
+        ),
+    );
+    let run_out = dir.join("run");
+    let o = femu(&[
+        "run",
+        run_study.to_str().unwrap(),
+        "--out",
+        run_out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = std::fs::read_to_string(run_out.join("report.html")).unwrap();
+    assert!(html.contains("<b>Warning</b>") && html.contains("bound"));
+    assert!(html.contains("kPa"));
+
+    // One point repeated: refused with both lines.
+    let dup = format!("{}\n{}\n{}\n{}\n", rows[0], rows[1], rows[2], rows[1]);
+    write(&dir, "dup.csv", &dup);
+    let o = femu(&[
+        "identify",
+        study.to_str().unwrap(),
+        "--measured",
+        dir.join("dup.csv").to_str().unwrap(),
+        "--out",
+        dir.join("dup").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("dup.csv:4") && err.contains("also on line 2"),
+        "{err}"
+    );
 }

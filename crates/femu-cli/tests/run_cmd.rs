@@ -11,7 +11,7 @@ use common::{femu, json, scratch};
 /// A small thigh (400 quads), contention and compression, a 24 x 24 grid, two starts.
 const TINY: &str = r#"
 [model]
-elements = 400
+elements = 700
 [[test]]
 kind = "contention"
 [[test]]
@@ -202,7 +202,7 @@ fn png_decoder(path: &Path) -> (u32, u32, Vec<u8>) {
 
 #[test]
 fn broken_study_files_name_the_key_and_write_nothing() {
-    let cases: [(&str, &str); 6] = [
+    let cases: [(&str, &str); 14] = [
         ("[model]\nelemnts = 400\n", "elemnts"),
         ("[noise]\nsigma_mm = -0.01\n", "[noise] sigma_mm (line 2)"),
         (
@@ -218,6 +218,34 @@ fn broken_study_files_name_the_key_and_write_nothing() {
             "[identification] test (line 2)",
         ),
         ("[model]\nelement = \"c3d8\"\n", "[model] element (line 2)"),
+        // Issue 32.11: found before anything runs (they used to stop the run after the model,
+        // the tests or the sensitivity step; or to pass).
+        (
+            "[measurement]\nsource = \"file\"\nfile = \"nope.csv\"\n",
+            "[measurement] file (line 3): ",
+        ),
+        (
+            "[labels]\nimage = \"nope.png\"\nmap = \"1=fat\"\nbone = [7]\n",
+            "[labels] image (line 2): ",
+        ),
+        ("[model]\ndeck = \"nope.inp\"\n", "[model] deck (line 2): "),
+        (
+            "[identification]\nfixed = [\"C10_NOPE\"]\n",
+            "[identification] fixed (line 2): unknown parameter 'C10_NOPE'",
+        ),
+        (
+            "[identification]\ngrouped = false\n[parameters]\ngroups = [[\"D_NOPE\", \"D_ISCHIO\"]]\n",
+            "[parameters] groups (line 4): group 1 names the unknown parameter 'D_NOPE'",
+        ),
+        (
+            "[materials.ADDUCTOR]\nc10_kpa = 2\nd_per_mpa = 18\n",
+            "no region ADDUCTOR in the built-in thigh",
+        ),
+        ("test = []\n", "give at least one [[test]]"),
+        (
+            "[[test]]\nkind = \"compression\"\nside = \"1e300\"\nforce_n_per_mm = 0.1\n",
+            "[[test]] 1 side (line 3)",
+        ),
     ];
     for (k, (text, expect)) in cases.iter().enumerate() {
         let (o, out) = run(text, &format!("broken{k}"));
@@ -246,7 +274,7 @@ fn a_run_that_fails_midway_keeps_its_finished_steps() {
     let study = dir.join("study.toml");
     std::fs::write(
         &study,
-        "[model]\nelements = 300\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [run]\nsensitivity = false\n[measurement]\nfile = \"field.csv\"\n",
     )
     .unwrap();

@@ -28,7 +28,7 @@ fn steps(out: &Path) -> Vec<(String, String)> {
 /// (20 N/mm on a 2 mm indenter: no equilibrium without inverting elements).
 const ONE_TEST_FAILS: &str = r#"
 [model]
-elements = 400
+elements = 700
 [[test]]
 kind = "compression"
 force_n_per_mm = 0.1
@@ -100,7 +100,7 @@ fn a_test_that_cannot_be_solved_stops_only_what_needs_it() {
 }
 
 const FORWARD_ONLY: &str =
-    "[model]\nelements = 300\n[run]\nsensitivity = false\nidentification = false\n";
+    "[model]\nelements = 700\n[run]\nsensitivity = false\nidentification = false\n";
 
 #[test]
 fn a_run_owns_its_folder() {
@@ -186,7 +186,7 @@ fn an_interrupted_run_keeps_its_finished_steps_and_says_so() {
     let study = write(
         &dir,
         "study.toml",
-        "[model]\nelements = 600\n[grid]\ncounts = [16, 16]\n[identification]\nstarts = 2\nrepeat = 3\n",
+        "[model]\nelements = 700\n[grid]\ncounts = [16, 16]\n[identification]\nstarts = 2\nrepeat = 3\n",
     );
     // Seeded moments across the run (meshing, the tests, the identification).
     let mut x = 0x2545_f491_4f6c_dd1du64;
@@ -234,7 +234,7 @@ fn an_interrupted_monte_carlo_keeps_its_finished_repeats() {
         &[
             "identify",
             "--elements",
-            "400",
+            "700",
             "--repeat",
             "200",
             "--starts",

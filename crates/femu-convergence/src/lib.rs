@@ -26,11 +26,13 @@
 #![forbid(unsafe_code)]
 
 pub mod rate;
+pub mod refine;
 pub mod report;
 pub mod run;
 pub mod study;
 
 pub use rate::{fit_rate, fit_rate_against_finest, RateFit};
+pub use refine::refined_thigh;
 pub use run::{run_study, ElementSummary, LockingSummary, MeshRun, StudyResult};
 pub use study::{ConvergenceStudy, DicGrid, MeshSequence};
 

@@ -264,11 +264,7 @@ fn write_figures_and_summary(
         "inputs": {
             "thigh": study.thigh,
             "materials": study.materials.iter().map(|m| {
-                let law = femu_mech::material::material_from_def(m).ok();
-                let value = |name: &str| {
-                    let law = law.as_ref()?;
-                    law.parameter_index(name).map(|k| law.parameter(k))
-                };
+                let value = |name: &str| m.law.parameter_index(name).map(|k| m.law.parameter(k));
                 json!({
                     "region": m.name,
                     "c10_kpa": value("C10").map(|c| c * 1e3),

@@ -6,10 +6,9 @@ use crate::study::{ConvergenceStudy, MeshSequence};
 use crate::ConvergenceError;
 use femu_geometry::{parametric_thigh_on_raster, ThighModel};
 use femu_mech::loading::{apply_loading, Loading};
-use femu_mech::material::{material_def, material_from_def, MaterialError};
+use femu_mech::model::{ModelSpec, NamedMaterial};
 use femu_mech::output::peak_memory_mb;
 use femu_mech::{Model, SolverOptions, StaticSolver};
-use femu_mesh::MaterialDef;
 use femu_mesh::{ElementKind, PointInterpolation};
 use serde::Serialize;
 use std::time::Instant;
@@ -202,19 +201,19 @@ fn meshed_area(thigh: &ThighModel) -> f64 {
 
 /// Materials with every D (the volumetric compliance every registered law has) multiplied by
 /// `d_scale`.
-fn scaled_materials(
-    materials: &[MaterialDef],
-    d_scale: f64,
-) -> Result<Vec<MaterialDef>, MaterialError> {
+fn scaled_materials(materials: &[NamedMaterial], d_scale: f64) -> Vec<NamedMaterial> {
     materials
         .iter()
         .map(|m| {
-            let mut law = material_from_def(m)?;
+            let mut law = m.law.clone();
             if let Some(k) = law.parameter_index("D") {
                 let d = law.parameter(k);
                 law.set_parameter(k, d * d_scale);
             }
-            Ok(material_def(&m.name, &*law))
+            NamedMaterial {
+                name: m.name.clone(),
+                law,
+            }
         })
         .collect()
 }
@@ -240,23 +239,37 @@ fn solve_run(
         k + 1,
         thigh.mesh.mesh.elements.len()
     );
-    let materials =
-        scaled_materials(&study.materials, d_scale).map_err(|e| ConvergenceError::Model {
+    // One material per region (named as the region), the femur fixed, no load; then the test
+    // on the skin.
+    let regions = thigh
+        .regions
+        .iter()
+        .map(|r| {
+            scaled_materials(&study.materials, d_scale)
+                .into_iter()
+                .find(|m| m.name.eq_ignore_ascii_case(r))
+                .map(|m| NamedMaterial {
+                    name: r.clone(),
+                    law: m.law,
+                })
+                .ok_or_else(|| ConvergenceError::Model {
+                    what: what.clone(),
+                    message: format!("region {r} has no material"),
+                })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let spec = ModelSpec::with_regions(
+        thigh.mesh.mesh.clone(),
+        thigh.mesh.surfaces.clone(),
+        regions,
+        "FEMUR",
+    );
+    let mut model = spec
+        .and_then(Model::new)
+        .map_err(|e| ConvergenceError::Model {
             what: what.clone(),
             message: e.to_string(),
         })?;
-    // The femur fixed, no load; then the test on the skin.
-    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0).map_err(|e| {
-        ConvergenceError::Model {
-            what: what.clone(),
-            message: e.to_string(),
-        }
-    })?;
-    deck.pressures.clear();
-    let mut model = Model::from_deck(deck).map_err(|e| ConvergenceError::Model {
-        what: what.clone(),
-        message: e.to_string(),
-    })?;
     let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
     apply_loading(&mut model, &skin, loading).map_err(|e| ConvergenceError::Model {
         what: what.clone(),
@@ -637,11 +650,7 @@ fn locking_summary(
         let v: Vec<f64> = study
             .materials
             .iter()
-            .map(|m| {
-                material_from_def(m).map_or(f64::NAN, |law| {
-                    law.bulk_modulus() / (law.shear_modulus() * scale)
-                })
-            })
+            .map(|m| m.law.bulk_modulus() / (m.law.shear_modulus() * scale))
             .collect();
         [
             v.iter().copied().fold(f64::INFINITY, f64::min),

@@ -2,9 +2,10 @@
 //! points of the seed's mesh validation (§2.1.2.1). The study file's `[convergence]` table
 //! (femu-study) describes it; [`ConvergenceStudy::validate`] checks its ranges.
 
-use femu_geometry::{table1_materials, ThighParams};
+use femu_geometry::{ThighParams, TABLE1};
 use femu_mech::loading::Loading;
-use femu_mesh::{ElementKind, MaterialDef};
+use femu_mech::model::NamedMaterial;
+use femu_mesh::ElementKind;
 use serde::Deserialize;
 
 /// The mesh sequence: target element counts or element sizes, coarse to fine.
@@ -95,7 +96,7 @@ pub struct ConvergenceStudy {
     /// The built-in thigh's dimensions (its mesh-size keys unset: the sequence sets them).
     pub thigh: ThighParams,
     /// Materials per region (Table 1 unless overridden).
-    pub materials: Vec<MaterialDef>,
+    pub materials: Vec<NamedMaterial>,
     /// The loading test.
     pub loading: Loading,
     /// Element types compared, in the order given.
@@ -126,7 +127,10 @@ impl Default for ConvergenceStudy {
     fn default() -> Self {
         ConvergenceStudy {
             thigh: ThighParams::default(),
-            materials: table1_materials(),
+            materials: TABLE1
+                .iter()
+                .map(|&(region, c10_kpa, d)| NamedMaterial::neo_hookean(region, c10_kpa * 1e-3, d))
+                .collect(),
             loading: Loading::seed_contention(),
             elements: vec![ElementKind::Cpe4h, ElementKind::Cpe4, ElementKind::Cpe3],
             meshes: MeshSequence::TargetElements(vec![1500, 3000, 6000, 12_000, 25_000, 50_000]),
@@ -158,6 +162,13 @@ impl ConvergenceStudy {
                 if let Some(n) = v.iter().find(|n| !(100..=500_000).contains(*n)) {
                     return key("target_elements", format!("{n} is outside [100, 500000]"));
                 }
+                let min = self.thigh.min_target_elements();
+                if let Some(n) = v.iter().find(|n| **n < min) {
+                    return key(
+                        "target_elements",
+                        format!("{n} is too few for the thigh: at least {min} keep every region"),
+                    );
+                }
                 if v.windows(2).any(|w| w[1] <= w[0]) {
                     return key("target_elements", "must increase (coarse to fine)".into());
                 }
@@ -171,6 +182,13 @@ impl ConvergenceStudy {
                 }
                 if let Some(h) = v.iter().find(|h| !(**h >= 0.2 && **h <= 20.0)) {
                     return key("element_size_mm", format!("{h} is outside [0.2, 20] mm"));
+                }
+                let h_max = self.thigh.max_element_size_mm();
+                if let Some(h) = v.iter().find(|h| **h > h_max) {
+                    return key(
+                        "element_size_mm",
+                        format!("{h} mm is too coarse for the thigh: at most {h_max:.2} mm keeps every region"),
+                    );
                 }
                 if v.windows(2).any(|w| w[1] >= w[0]) {
                     return key("element_size_mm", "must decrease (coarse to fine)".into());
@@ -216,14 +234,17 @@ impl ConvergenceStudy {
         if !(g.origin_mm[0].is_finite() && g.origin_mm[1].is_finite()) {
             return key("grid.origin_mm", "must be finite".into());
         }
-        if g.counts[0] == 0 || g.counts[1] == 0 || g.counts[0] * g.counts[1] > 1_000_000 {
+        if g.counts[0] == 0
+            || g.counts[1] == 0
+            || g.counts[0].saturating_mul(g.counts[1]) > 1_000_000
+        {
             return key(
                 "grid.counts",
                 format!("{:?}: between 1 and 1e6 points", g.counts),
             );
         }
         let mut t = self.thigh.clone();
-        t.target_elements = Some(1000);
+        t.target_elements = Some(t.min_target_elements().max(1000));
         t.validate()
             .map_err(|e| ("thigh".to_string(), e.to_string()))?;
         Ok(())

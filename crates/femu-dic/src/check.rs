@@ -171,6 +171,9 @@ fn pair(spec: &CorrelationSpec, a: &Frame, b: &Frame, pairs: &mut Vec<PairReport
 /// reported (and the checks that need them skipped), not fatal.
 pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
     let t0 = Instant::now();
+    let mut inputs: Vec<&Path> = job.frames.iter().map(PathBuf::as_path).collect();
+    inputs.extend(job.correlation.roi.mask_file());
+    femu_mesh::folder::refuse_inputs_in(&job.out, &inputs)?;
     let frames = load_frames(&job.frames)?;
     std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),

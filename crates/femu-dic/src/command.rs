@@ -39,6 +39,14 @@ pub enum RoiSpec {
 }
 
 impl RoiSpec {
+    /// The mask file, if the region of interest is one.
+    pub fn mask_file(&self) -> Option<&Path> {
+        match self {
+            RoiSpec::Mask(p) => Some(p),
+            _ => None,
+        }
+    }
+
     /// The ROI over an image of `width x height`.
     pub fn resolve(&self, width: usize, height: usize) -> Result<Roi, DicError> {
         match self {
@@ -198,6 +206,9 @@ pub fn quality_summary(m: &Measured, criteria: &TrustCriteria) -> QualitySummary
 /// false); the caller decides how to exit.
 pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
     let t0 = Instant::now();
+    let mut inputs = vec![job.reference.as_path(), job.deformed.as_path()];
+    inputs.extend(job.correlation.roi.mask_file());
+    femu_mesh::folder::refuse_inputs_in(&job.out, &inputs)?;
     let f = GreyImage::open(&job.reference, job.frame_ref)?;
     let g = GreyImage::open(&job.deformed, job.frame_def)?;
     let pixel_size = job.pixel_size.or(f.pixel_size);

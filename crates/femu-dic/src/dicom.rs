@@ -115,7 +115,72 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
             )
         })?;
     transfer_syntax_name(path, meta.transfer_syntax())?;
-    open_file(path).map_err(|e| err(path, format!("cannot read the DICOM file: {e}")))
+    open_file(path).map_err(|e| {
+        // Issue 32.12: "Could not read data set token" says nothing to a user; a data set
+        // that cannot be read to its end is nearly always a file cut short.
+        let size = std::fs::metadata(path).map_or(0, |m| m.len());
+        err(
+            path,
+            format!(
+                "the DICOM data set cannot be read to its end ({size} bytes): the file is cut short or damaged (the reader said: {e})"
+            ),
+        )
+    })
+}
+
+/// Native (uncompressed) transfer syntaxes, whose Pixel Data length follows from the header.
+const NATIVE: [&str; 3] = [
+    "1.2.840.10008.1.2",
+    "1.2.840.10008.1.2.1",
+    "1.2.840.10008.1.2.1.99",
+];
+
+/// Checks the header's image size against the limit (before decoding) and, for native pixel
+/// data, against the bytes the file holds: a wrong Rows value used to give "Frame #0 is out of
+/// range" from the decoder (issue 32.12).
+fn check_pixel_data(
+    path: &Path,
+    obj: &DefaultDicomObject,
+    info: &DicomInfo,
+) -> Result<(), DicError> {
+    femu_mesh::limits::check_image_size(info.width as u64, info.height as u64).map_err(|m| {
+        err(
+            path,
+            format!("Rows (0028,0010) and Columns (0028,0011) say {m}"),
+        )
+    })?;
+    if !NATIVE.contains(&info.transfer_syntax.as_str()) {
+        return Ok(());
+    }
+    let Some(held) = obj
+        .element(tags::PIXEL_DATA)
+        .ok()
+        .and_then(|e| e.value().primitive())
+        .map(|p| p.calculate_byte_len() as u64)
+    else {
+        return Err(err(path, "no Pixel Data (7FE0,0010)"));
+    };
+    // YBR_FULL_422 stores two samples per pixel (Y for each, Cb and Cr shared by two).
+    let samples = match (info.photometric.as_str(), info.samples_per_pixel) {
+        ("YBR_FULL_422", 3) => 2,
+        (_, s) => s as u64,
+    };
+    let needed = (info.width as u64)
+        .saturating_mul(info.height as u64)
+        .saturating_mul(samples)
+        .saturating_mul(info.bits_allocated as u64)
+        .saturating_mul(info.frames as u64)
+        .div_ceil(8);
+    if held < needed {
+        return Err(err(
+            path,
+            format!(
+                "the header says {} frame(s) of {} rows x {} columns x {} sample(s) of {} bits, {needed} bytes, but the Pixel Data holds {held}: Rows (0028,0010), Columns (0028,0011), Samples per Pixel, Bits Allocated or Number of Frames is wrong, or the file is cut short",
+                info.frames, info.height, info.width, info.samples_per_pixel, info.bits_allocated
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The name of a supported transfer syntax, or the error naming an unsupported one.
@@ -351,6 +416,7 @@ fn palette(
 pub fn read_dicom(path: &Path, frame: usize) -> Result<GreyImage, DicError> {
     let obj = open(path)?;
     let info = info_of(path, &obj)?;
+    check_pixel_data(path, &obj, &info)?;
     if frame >= info.frames {
         return Err(DicError::Frame {
             path: path.to_path_buf(),

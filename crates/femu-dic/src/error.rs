@@ -46,6 +46,9 @@ pub enum DicError {
     /// Writing an output file failed.
     #[error("{path}: cannot write: {message}")]
     Write { path: PathBuf, message: String },
+    /// The output folder holds an input file (it could be overwritten).
+    #[error(transparent)]
+    Folder(#[from] femu_mesh::folder::InputInOutput),
 }
 
 impl DicError {

@@ -3,7 +3,7 @@
 //! field over a region of interest, as Correli-Q4 does in the seed study (§2.1.1), independent
 //! of the FE solver.
 //!
-//! - [`image`]: PNG/TIFF/DICOM input as grey levels ([`GreyImage`]), pixel size.
+//! - [`image`]: grey-level images ([`GreyImage`]), pixel size; [`read`]: PNG/TIFF/DICOM input.
 //! - [`dicom`]: DICOM ultrasound (uncompressed, JPEG baseline, RLE; multi-frame; palette
 //!   colour; Sequence of Ultrasound Regions / Pixel Spacing).
 //! - [`mesh`]: ROI (rectangle or mask) and the structured Q4 mesh ([`DicMesh`]).
@@ -32,6 +32,7 @@ pub mod mesh;
 pub mod noise;
 pub mod output;
 pub mod quality;
+pub mod read;
 pub mod solver;
 pub mod sparse;
 

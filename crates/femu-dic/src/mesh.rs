@@ -30,27 +30,46 @@ pub struct Rect {
 }
 
 impl Rect {
-    /// Parses `x,y,w,h` (pixels).
+    /// Parses the `--roi` of every command: `x,y,WxH` in pixels, the top-left corner then the
+    /// size (`115,65,570x450`: columns 115..685, rows 65..515). Four plain numbers, which
+    /// `femu dic` once read as `x,y,w,h` and `us-settings`/`us-noise` as corners
+    /// `x0,y0,x1,y1`, are refused with both readings written in this form (issue 32.12: either
+    /// command took the other's form without a word).
     pub fn parse(s: &str) -> Result<Self, DicError> {
+        let bad = |why: String| DicError::Roi(format!("--roi '{s}': {why}"));
+        let form = "give x,y,WxH in pixels (the top-left corner, then the width and height, e.g. 115,65,570x450)";
         let v: Vec<&str> = s.split(',').map(str::trim).collect();
-        let bad = || {
-            DicError::Roi(format!(
-                "'{s}' is not x,y,w,h (four non-negative integers, pixels)"
-            ))
-        };
-        if v.len() != 4 {
-            return Err(bad());
+        let int = |t: &str| t.parse::<usize>().ok();
+        if let [a, b, c, d] = v[..] {
+            if let (Some(a), Some(b), Some(c), Some(d)) = (int(a), int(b), int(c), int(d)) {
+                let corners = if c > a && d > b {
+                    format!(
+                        ", or {a},{b},{}x{} if {c},{d} is the opposite corner",
+                        c - a,
+                        d - b
+                    )
+                } else {
+                    String::new()
+                };
+                return Err(bad(format!(
+                    "four numbers are ambiguous (width and height, or the opposite corner): write {a},{b},{c}x{d} if {c},{d} are the width and height{corners}"
+                )));
+            }
         }
-        let n: Vec<usize> = v
-            .iter()
-            .map(|t| t.parse::<usize>().map_err(|_| bad()))
-            .collect::<Result<_, _>>()?;
-        Ok(Rect {
-            x: n[0],
-            y: n[1],
-            w: n[2],
-            h: n[3],
-        })
+        let [x, y, size] = v[..] else {
+            return Err(bad(form.into()));
+        };
+        let (w, h) = size
+            .split_once(['x', 'X'])
+            .map(|(w, h)| (int(w.trim()), int(h.trim())))
+            .unwrap_or((None, None));
+        match (int(x), int(y), w, h) {
+            (Some(x), Some(y), Some(w), Some(h)) if w > 0 && h > 0 => Ok(Rect { x, y, w, h }),
+            (Some(_), Some(_), Some(_), Some(_)) => {
+                Err(bad("the width and height must be positive".into()))
+            }
+            _ => Err(bad(form.into())),
+        }
     }
 }
 
@@ -122,7 +141,7 @@ impl Roi {
                 }
                 if r.x + r.w > width || r.y + r.h > height {
                     return Err(DicError::Roi(format!(
-                        "x={} y={} w={} h={} reaches ({}, {}), outside the {width} x {height} image",
+                        "{},{},{}x{} reaches column {} and row {}, outside the {width} x {height} px image",
                         r.x,
                         r.y,
                         r.w,
@@ -448,8 +467,15 @@ mod tests {
             "{e}"
         );
         assert!(Rect::parse("1,2,3").is_err());
+        assert!(Rect::parse("1,2,0x4").is_err());
+        // Issue 32.12: the four-number forms are refused with both readings.
+        let e = Rect::parse("115,65,685,515").unwrap_err().to_string();
+        assert!(
+            e.contains("115,65,685x515") && e.contains("115,65,570x450"),
+            "{e}"
+        );
         assert_eq!(
-            Rect::parse("1, 2,3,4").unwrap(),
+            Rect::parse("1, 2,3X4").unwrap(),
             Rect {
                 x: 1,
                 y: 2,

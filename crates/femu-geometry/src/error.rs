@@ -47,7 +47,7 @@ pub enum GeometryError {
         region: String,
         scaled_jacobian: f64,
     },
-    #[error("no material for region '{0}': the default materials are the seed's Table 1 (FAT, QUADRICEPS, ISCHIO, GRACILIS, SARTORIUS); map the label to one of them")]
+    #[error("no material for region '{0}': give it one ([materials.{0}] in a study, or femu mesh labels --materials FILE), or map its label to a Table 1 region (FAT, QUADRICEPS, ISCHIO, GRACILIS, SARTORIUS)")]
     NoMaterial(String),
     #[error("{path}: {source}")]
     Io {

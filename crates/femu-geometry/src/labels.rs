@@ -82,21 +82,26 @@ fn read_picture(path: &Path) -> Result<LabelImage, GeometryError> {
         path: path.to_path_buf(),
         reason,
     };
-    let img = image::ImageReader::open(path)
-        .map_err(|e| GeometryError::ImageRead {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?
-        .with_guessed_format()
-        .map_err(|e| GeometryError::ImageRead {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?
-        .decode()
-        .map_err(|e| GeometryError::ImageRead {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })?;
+    let read_err = |message: String| GeometryError::ImageRead {
+        path: path.to_path_buf(),
+        message,
+    };
+    let open = || {
+        image::ImageReader::open(path)
+            .and_then(|r| r.with_guessed_format())
+            .map_err(|e| read_err(e.to_string()))
+    };
+    // The header's size checked before the pixels are decoded (issue 28.4).
+    let (w, h) = open()?
+        .into_dimensions()
+        .map_err(|e| read_err(e.to_string()))?;
+    femu_mesh::limits::check_image_size(w as u64, h as u64).map_err(bad)?;
+    let img = open()?.decode().map_err(|e| match e {
+        image::ImageError::Unsupported(_) => bad(format!(
+            "{e} (label images are 8- or 16-bit integer grey: a floating-point TIFF is not one)"
+        )),
+        e => read_err(e.to_string()),
+    })?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     use image::DynamicImage as D;
     let rows: Vec<u32> = match &img {
@@ -150,7 +155,30 @@ fn grey_from_rgb(px: impl Iterator<Item = [u32; 3]>) -> Result<Vec<u32>, String>
 }
 
 fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryError> {
-    use nifti::{NiftiObject, NiftiVolume, RandomAccessNiftiVolume, ReaderOptions};
+    use nifti::{NiftiHeader, NiftiObject, NiftiVolume, RandomAccessNiftiVolume, ReaderOptions};
+    // The header's size checked before the volume is read (issue 28.4).
+    let header = NiftiHeader::from_file(path).map_err(|e| GeometryError::ImageRead {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let d = header.dim;
+    let n = (d[0] as usize).clamp(1, 7);
+    let slice_px = [d[1], d[2]].map(|v| v.max(1) as u64);
+    let voxels = d[1..=n]
+        .iter()
+        .fold(1u64, |acc, &v| acc.saturating_mul(v.max(1) as u64));
+    let too_big = |reason: String| GeometryError::NotALabelImage {
+        path: path.to_path_buf(),
+        reason,
+    };
+    femu_mesh::limits::check_image_size(slice_px[0], slice_px[1]).map_err(too_big)?;
+    if voxels > femu_mesh::limits::MAX_VOLUME_VOXELS {
+        return Err(too_big(format!(
+            "the header's dimensions {:?} make {voxels:.1e} voxels, above the limit of {} (the volume is read whole): cut out the slices you need",
+            &d[1..=n],
+            femu_mesh::limits::MAX_VOLUME_VOXELS
+        )));
+    }
     let obj = ReaderOptions::new()
         .read_file(path)
         .map_err(|e| GeometryError::ImageRead {

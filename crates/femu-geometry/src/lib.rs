@@ -47,7 +47,7 @@ pub use export::{
     contention_deck, table1_materials, write_inp_with_surfaces, write_regions_vtu, TABLE1,
 };
 pub use labels::{parse_label_map, read_label_image, LabelImage, LabelSpec};
-pub use mesher::{mesh_label_image, MeshOptions, ThighModel};
+pub use mesher::{mesh_label_image, MeshOptions, ThighModel, MAX_ELEMENTS};
 pub use parametric::{parametric_thigh, parametric_thigh_on_raster, MeshSize, ThighParams};
 pub use picture::write_regions_png;
 pub use quality::{quality_report, QualityReport, RegionQuality};

@@ -212,15 +212,16 @@ impl ThighParams {
             range("element_size_mm", h, 0.2, 20.0)?;
         }
         if let Some(n) = self.target_elements {
-            if !(100..=500_000).contains(&n) {
+            if !(100..=crate::MAX_ELEMENTS).contains(&n) {
                 return Err(GeometryError::param(
                     "target_elements",
                     n,
-                    "must be in [100, 500000]",
+                    &format!("must be in [100, {}]", crate::MAX_ELEMENTS),
                 ));
             }
         }
         self.mesh_size()?;
+        self.check_resolves_every_region()?;
         // The femur 5 mm inside the fat boundary.
         let (ai, bi) = (a - self.fat_thickness_mm, b - self.fat_thickness_mm);
         let r = 0.5 * self.femur_diameter_mm + 5.0;
@@ -268,6 +269,62 @@ impl ThighParams {
             ));
         }
         Ok(())
+    }
+
+    /// The largest element size (mm) that keeps every region of this thigh: half the smaller
+    /// `across` semi-axis of sartorius and gracilis (about 2.6 elements across the part the
+    /// fat leaves of the muscle, 1.3 semi-axes), a third of the femur radius, and the fat
+    /// thickness. Coarser meshes lose the small muscles and the femur hole: with the default
+    /// dimensions 8 mm elements left the gracilis 35 % short of its area, 11-41 mm ones (the
+    /// 100-400-element targets before this limit) no femur at all (issue 32.7); at the limit,
+    /// 4.5 mm, every region is within 8 % of its area and the femur within 3 %.
+    pub fn max_element_size_mm(&self) -> f64 {
+        let across = self.sartorius_semi_axes_mm[1].min(self.gracilis_semi_axes_mm[1]);
+        (0.5 * across)
+            .min(self.femur_diameter_mm / 6.0)
+            .min(self.fat_thickness_mm)
+    }
+
+    /// Area of the tissue (mm²): the skin ellipse without the femur.
+    fn tissue_area_mm2(&self) -> f64 {
+        let [a, b] = self.skin_semi_axes_mm;
+        let rf = 0.5 * self.femur_diameter_mm;
+        std::f64::consts::PI * (a * b - rf * rf)
+    }
+
+    /// The smallest target element count this thigh accepts: the count whose element size
+    /// (`sqrt(area / n)`) is [`ThighParams::max_element_size_mm`] (621 with the default
+    /// dimensions). The mesh then has somewhat more quads than asked (the split of the
+    /// triangles along the curves adds some), never fewer.
+    pub fn min_target_elements(&self) -> usize {
+        let h = self.max_element_size_mm();
+        (self.tissue_area_mm2() / (h * h)).ceil() as usize
+    }
+
+    /// The mesh size asked for is fine enough for every region (see
+    /// [`ThighParams::max_element_size_mm`]).
+    fn check_resolves_every_region(&self) -> Result<(), GeometryError> {
+        let h_max = self.max_element_size_mm();
+        match self.mesh_size()? {
+            MeshSize::ElementSize(h) if h > h_max => Err(GeometryError::param(
+                "element_size_mm",
+                h,
+                &format!(
+                    "must be at most {h_max:.2} mm for this thigh (half the smaller across semi-axis of sartorius and gracilis, a third of the femur radius, the fat thickness): coarser elements lose the small muscles and the femur hole"
+                ),
+            )),
+            MeshSize::TargetElements(n) if n < self.min_target_elements() => {
+                Err(GeometryError::param(
+                    "target_elements",
+                    n,
+                    &format!(
+                        "must be at least {} for this thigh (elements of at most {h_max:.2} mm): fewer lose the small muscles and the femur hole",
+                        self.min_target_elements()
+                    ),
+                ))
+            }
+            _ => Ok(()),
+        }
     }
 
     /// The ellipse of a muscle at direction `angle_deg` from the skin centre.
@@ -438,9 +495,8 @@ pub fn parametric_thigh_on_raster(
         }
     }
     let names: Vec<String> = SEED_REGIONS.iter().map(|s| s.to_string()).collect();
-    let [a, b] = params.skin_semi_axes_mm;
-    let rf = 0.5 * params.femur_diameter_mm;
-    let tissue_area = std::f64::consts::PI * (a * b - rf * rf);
+    let tissue_area = params.tissue_area_mm2();
+    let h_max = params.max_element_size_mm();
     let run = |h: f64| -> Result<ThighModel, GeometryError> {
         let px = raster_mm.unwrap_or((h / 4.0).clamp(0.1, 0.25));
         let options = MeshOptions {
@@ -460,7 +516,9 @@ pub fn parametric_thigh_on_raster(
             if (got / n as f64 - 1.0).abs() <= 0.05 {
                 return Ok(first);
             }
-            run(h0 * (got / n as f64).sqrt())
+            // The corrected size stays within the limit (near the smallest target the mesher
+            // makes more quads than asked; a coarser retry would lose regions).
+            run((h0 * (got / n as f64).sqrt()).min(h_max))
         }
     }
 }

@@ -454,6 +454,32 @@ fn bad_inputs_are_clear_errors() {
         mesh_label_image(&img, &spec, Some(0.25), &bad),
         Err(GeometryError::InvalidParameter { .. })
     ));
+    // Issue 28.4: NIfTI headers claiming a huge slice or volume (a few bytes of data) are
+    // refused from the header, with the size and the limit.
+    for (name, (nx, ny, nz), expect) in [
+        ("slice.nii", (30000, 30000, 1), "30000 x 30000 pixels"),
+        ("volume.nii", (5000, 5000, 30000), "7.5e11 voxels"),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, nifti_bytes(nx, ny, nz, 1.0, &[0; 16], false)).unwrap();
+        let e = read_label_image(&p, Some(0)).unwrap_err().to_string();
+        assert!(e.contains(expect) && e.contains("above the limit"), "{e}");
+    }
+    // Issue 32.8: an element size whose mesh would be absurd is refused at once, with the
+    // estimate and the limit (0.01 mm on the MRI slice ran 40 s to 3.6 GB and aborted).
+    let t = std::time::Instant::now();
+    let tiny = MeshOptions {
+        element_size_mm: 0.01,
+        ..opts
+    };
+    let e = mesh_label_image(&img, &spec, Some(0.25), &tiny)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("element_size_mm = 0.01") && e.contains("quads") && e.contains("500000"),
+        "{e}"
+    );
+    assert!(t.elapsed().as_secs_f64() < 2.0, "{:?}", t.elapsed());
     // A region without a Table 1 material cannot make a deck.
     let odd = LabelSpec::new("1=adductor", &[7], &[0]).unwrap();
     let m = mesh_label_image(&img, &odd, Some(0.25), &options(4.0)).unwrap();
@@ -539,6 +565,86 @@ fn coarse_parametric_thigh_is_valid_and_solves() {
         q.total.min_scaled_jacobian, q.total.max_scaled_jacobian
     );
     assert!(umax > 0.1 && umax < 20.0, "{umax}");
+}
+
+/// Issue 32.7: every accepted size gives a whole thigh — the five regions within 10 % of their
+/// sampled areas, the femur hole within 5 % — with element counts that grow with the target;
+/// fewer elements than the smallest that keeps every region, or coarser elements, are refused
+/// naming the limit. (Before, 100 elements gave 639 quads with no femur, no gracilis and no
+/// sartorius; 200 gave 1 032 and 300 gave 519.)
+#[test]
+fn every_accepted_size_is_a_whole_thigh() {
+    let p = ThighParams::default();
+    let min = p.min_target_elements();
+    let h_max = p.max_element_size_mm();
+    assert_eq!(h_max, 4.5, "half the gracilis' 9 mm across semi-axis");
+    assert_eq!(min, 622);
+    let mut last = 0;
+    for n in [min, 700, 800, 1000, 1300, 1600] {
+        let params = ThighParams {
+            target_elements: Some(n),
+            ..p.clone()
+        };
+        let model = parametric_thigh(&params, ElementKind::Cpe4h).unwrap();
+        assert_eq!(model.regions, SEED_REGIONS.map(String::from), "{n}");
+        let areas = model.region_areas();
+        for (r, s) in &model.source_areas_mm2 {
+            // 10 %: the few boundary faces of the small muscles at the coarsest size (8 %).
+            assert!(
+                (areas[r] / s - 1.0).abs() < 0.10,
+                "{n}: {r} {} vs {s}",
+                areas[r]
+            );
+        }
+        let rf = 0.5 * p.femur_diameter_mm;
+        assert!(
+            (model.hole_area() / (PI * rf * rf) - 1.0).abs() < 0.05,
+            "{n}"
+        );
+        assert!(!model.mesh.mesh.node_set("FEMUR").unwrap().is_empty());
+        let got = model.mesh.mesh.elements.len();
+        // Never fewer than asked (5 %: the retry's tolerance), and growing with the target.
+        assert!(
+            got as f64 >= 0.95 * n as f64 && got >= last,
+            "{n} -> {got} (previous {last})"
+        );
+        eprintln!(
+            "target {n}: {got} quads, h = {:.2} mm",
+            model.element_size_mm
+        );
+        last = got;
+    }
+    for (bad, key, limit) in [
+        (
+            ThighParams {
+                target_elements: Some(min - 1),
+                ..p.clone()
+            },
+            "target_elements",
+            "at least 622",
+        ),
+        (
+            ThighParams {
+                target_elements: Some(100),
+                ..p.clone()
+            },
+            "target_elements",
+            "at least 622",
+        ),
+        (
+            ThighParams {
+                element_size_mm: Some(5.0),
+                ..p.clone()
+            },
+            "element_size_mm",
+            "at most 4.50 mm",
+        ),
+    ] {
+        let e = parametric_thigh(&bad, ElementKind::Cpe4h)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(key) && e.contains(limit), "{e}");
+    }
 }
 
 /// The default thigh: about 25 000 quads (the seed's scale) within 5 %, quality kept.

@@ -9,8 +9,9 @@
 use crate::fisher::{self, FisherError, Identifiability, Tied};
 use crate::fit::{
     bfgs, latin_hypercube, levenberg_marquardt, FitError, FitResult, FreeParameter, Gradient,
-    LmOptions, Problem,
+    LeastSquares, LmOptions, Problem,
 };
+use crate::joint::{self, Block, JointProblem, Segments};
 use crate::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -19,6 +20,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -156,14 +158,41 @@ pub fn virtual_field(
     sigma: f64,
     seed: u64,
 ) -> Result<MeasuredField, CampaignError> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut parts = virtual_segments(model, free, reference, &[(points, sigma)], &mut rng)?;
+    Ok(parts.pop().unwrap_or_default())
+}
+
+/// The virtual measurement of several point sets of one model (probe windows of one test): one
+/// solve at the reference parameters, each set with the noise of its own standard deviation,
+/// drawn in order from `rng` (two per point); one field per set. A point outside `model`'s
+/// mesh (the data's mesh may be another of the same geometry, whose polygonal outline differs
+/// near the skin) has no data and is left out.
+fn virtual_segments(
+    model: &Model,
+    free: &[FreeParameter],
+    reference: &[f64],
+    segments: &[(&[[f64; 2]], f64)],
+    rng: &mut rand::rngs::StdRng,
+) -> Result<Vec<MeasuredField>, CampaignError> {
+    let points: Vec<[f64; 2]> = segments
+        .iter()
+        .flat_map(|(p, _)| p.iter().copied())
+        .collect();
     if points.is_empty() {
         return Err(CampaignError::NoGridPoint);
     }
-    let noise = Normal::new(0.0, sigma).map_err(|_| CampaignError::BadNoise(sigma))?;
+    let locator = PointLocator::new(&model.mesh);
+    let inside: Vec<bool> = points
+        .iter()
+        .map(|x| locator.locate(*x).is_some())
+        .collect();
     let all = MeasuredField {
         points: points
             .iter()
-            .map(|&x| MeasuredPoint {
+            .zip(&inside)
+            .filter(|(_, i)| **i)
+            .map(|(&x, _)| MeasuredPoint {
                 x,
                 u: [0.0; 2],
                 weight: [1.0; 2],
@@ -173,22 +202,31 @@ pub fn virtual_field(
     };
     let mut p = Problem::new(model.clone(), SolverOptions::default(), &all, free.to_vec())?;
     let u = p.field_at(reference)?;
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    Ok(MeasuredField {
-        points: points
-            .iter()
-            .enumerate()
-            .map(|(k, &x)| MeasuredPoint {
-                x,
-                u: [
-                    u[2 * k] + noise.sample(&mut rng),
-                    u[2 * k + 1] + noise.sample(&mut rng),
-                ],
-                weight: [1.0 / (sigma * sigma); 2],
-            })
-            .collect(),
-        comments: vec![],
-    })
+    let mut out = Vec::with_capacity(segments.len());
+    let (mut k, mut row) = (0, 0);
+    for &(pts, sigma) in segments {
+        if !(sigma > 0.0) {
+            return Err(CampaignError::BadNoise(sigma));
+        }
+        let noise = Normal::new(0.0, sigma).map_err(|_| CampaignError::BadNoise(sigma))?;
+        let mut field = MeasuredField::default();
+        for &x in pts {
+            if inside[k] {
+                field.points.push(MeasuredPoint {
+                    x,
+                    u: [
+                        u[2 * row] + noise.sample(rng),
+                        u[2 * row + 1] + noise.sample(rng),
+                    ],
+                    weight: [1.0 / (sigma * sigma); 2],
+                });
+                row += 1;
+            }
+            k += 1;
+        }
+        out.push(field);
+    }
+    Ok(out)
 }
 
 /// The data an identification fits.
@@ -210,6 +248,41 @@ pub struct TravelTerm {
     pub sigma_mm: f64,
 }
 
+/// A measured block of a joint identification ([`run_joint`]): one loading test's model and the
+/// parts of its field that are measured (probe windows, grids, files), fitted by FEMU. The
+/// parts share one forward solve per evaluation.
+#[derive(Debug, Clone)]
+pub struct FieldBlock<'a> {
+    /// The block's name (its test).
+    pub name: String,
+    /// The model loaded with the block's test.
+    pub model: &'a Model,
+    /// Multilevel: the same test on a coarse model, where the starts run.
+    pub coarse: Option<&'a Model>,
+    /// The model whose field at the reference parameters is the virtual data (e.g. a finer mesh
+    /// of the same geometry, so that the identification does not fit data its own mesh made);
+    /// `model` when `None`.
+    pub truth: Option<&'a Model>,
+    /// The measured parts, named, in the order of the block's residuals.
+    pub segments: Vec<(String, Data<'a>)>,
+    pub travel: Option<TravelTerm>,
+}
+
+/// Builds a block that is not a measured field (grey levels, say) for the coarse model of a
+/// multilevel identification (`true`) or the full one (`false`); its data must not change over
+/// the repeats.
+pub type BuildBlock<'a> = dyn Fn(bool) -> Result<Block, FitError> + Sync + 'a;
+
+/// A block of a joint identification.
+pub enum BlockSpec<'a> {
+    Field(FieldBlock<'a>),
+    /// Any other least-squares block with an exact Jacobian.
+    Custom {
+        name: String,
+        build: &'a BuildBlock<'a>,
+    },
+}
+
 /// How an identification runs.
 #[derive(Debug, Clone)]
 pub struct CampaignOptions {
@@ -220,6 +293,7 @@ pub struct CampaignOptions {
     pub seed: u64,
     /// Noise realizations of a virtual experiment (a measured field is fitted once).
     pub repeats: usize,
+    /// The actuator term of [`run`]'s single measurement ([`run_joint`] takes one per block).
     pub travel: Option<TravelTerm>,
     /// Set by the user to stop: the starts stop at their next forward solve and the campaign
     /// returns the repeats it finished ([`CampaignError::Interrupted`]).
@@ -259,7 +333,28 @@ pub struct StartRecord {
     pub error: Option<String>,
 }
 
-/// The outcome of [`run`].
+/// A measured part of a field block, as fitted in the first repeat.
+#[derive(Debug, Clone)]
+pub struct SegmentRecord {
+    pub name: String,
+    /// Its points in the block's field.
+    pub points: Range<usize>,
+    pub points_in_tissue: usize,
+    pub points_masked: usize,
+}
+
+/// A field block as fitted in the first repeat.
+#[derive(Debug, Clone)]
+pub struct BlockRecord {
+    pub name: String,
+    /// The block's field (its segments one after the other).
+    pub first_field: MeasuredField,
+    pub segments: Vec<SegmentRecord>,
+    /// The reference (or measured) travel of its actuator term (mm).
+    pub reference_travel: Option<f64>,
+}
+
+/// The outcome of [`run`] and [`run_joint`].
 #[derive(Debug, Clone)]
 pub struct Campaign {
     /// The best optimum of each repeat (refined on the full model when multilevel).
@@ -268,20 +363,27 @@ pub struct Campaign {
     pub starts: Vec<StartRecord>,
     /// Forward solves of each repeat's refinement (multilevel).
     pub refinement_forward_solves: Vec<usize>,
-    /// The field of the first repeat (the measured one, or the first noise realization).
+    /// The field of the first block in the first repeat (the measured one, or the first noise
+    /// realization).
     pub first_field: MeasuredField,
+    /// Points in the tissue and masked, over every field block.
     pub points_in_tissue: usize,
-    /// Points of the field outside the tissue (for a virtual experiment: of the grid).
+    /// Points of the fields outside the tissue (for a virtual experiment: of its points).
     pub points_masked: usize,
-    /// The reference (or measured) travel of the actuator term (mm).
+    /// The reference (or measured) travel of the first block's actuator term (mm).
     pub reference_travel: Option<f64>,
+    /// The field blocks (custom blocks have no record).
+    pub blocks: Vec<BlockRecord>,
+    /// The named parts of the stacked residual of the full model (see
+    /// [`JointProblem::segments`]), for each measurement's share of the information.
+    pub layout: Segments,
 }
 
 /// One start of the optimizer; `coarse`: the first level of a multilevel identification,
 /// where an approximate optimum is enough (20 iterations, 1e-6 relative cost).
-fn fit_start(
+fn fit_start<P: LeastSquares + ?Sized>(
     optimizer: Optimizer,
-    p: &mut Problem,
+    p: &mut P,
     start: &[f64],
     coarse: bool,
 ) -> Result<FitResult, FitError> {
@@ -316,7 +418,8 @@ fn reference_travel(model: &Model) -> Result<f64, CampaignError> {
 
 /// Identifies the free parameters of `model` (loaded with the measured test, carrying the
 /// reference parameters) from `data` (see the module documentation); with `coarse`, the starts
-/// run on that model and the best is refined on `model`. `on_event` sees the progress.
+/// run on that model and the best is refined on `model`. `on_event` sees the progress. A joint
+/// identification of one measurement ([`run_joint`]).
 pub fn run(
     model: &Model,
     coarse: Option<&Model>,
@@ -326,21 +429,210 @@ pub fn run(
     options: &CampaignOptions,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<Campaign, CampaignError> {
-    let repeats = match data {
-        Data::Virtual { .. } => options.repeats.max(1),
-        Data::Measured(_) => 1,
+    let block = FieldBlock {
+        name: "measurement".into(),
+        model,
+        coarse,
+        truth: None,
+        segments: vec![("measurement".into(), data)],
+        travel: options.travel,
     };
-    let reference_travel = match options.travel {
-        Some(TravelTerm {
-            measured_mm: None, ..
-        }) => Some(reference_travel(model)?),
-        Some(TravelTerm {
-            measured_mm: Some(t),
-            ..
-        }) => Some(t),
-        None => None,
+    run_joint(
+        model,
+        free,
+        reference,
+        &[BlockSpec::Field(block)],
+        options,
+        on_event,
+    )
+}
+
+/// A field block's data in one repeat: the field (its segments one after the other), each
+/// segment's points, and the actuator term `(travel, σ)`.
+struct Realized {
+    field: MeasuredField,
+    segments: Vec<Range<usize>>,
+    travel: Option<(f64, f64)>,
+}
+
+/// The noise stream of block `b` in repeat `rep`: the first block's is the single-measurement
+/// identification's (`seed + rep`), so that a joint study of one reproduces it.
+fn block_seed(seed: u64, b: usize, rep: usize) -> u64 {
+    (seed + rep as u64).wrapping_add((b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// Realizes a field block's data for repeat `rep`: measured segments as given, virtual ones
+/// made by the block's truth model at the reference plus seeded noise; the travel measured, or
+/// the reference travel plus seeded noise.
+#[allow(clippy::too_many_arguments)]
+fn realize(
+    block: &FieldBlock,
+    b: usize,
+    rep: usize,
+    free: &[FreeParameter],
+    free_model: &Model,
+    reference: &[f64],
+    seed: u64,
+    reference_travel: Option<f64>,
+) -> Result<Realized, CampaignError> {
+    let truth = block.truth.unwrap_or(block.model);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(block_seed(seed, b, rep));
+    let virtual_parts: Vec<(&[[f64; 2]], f64)> = block
+        .segments
+        .iter()
+        .filter_map(|(_, d)| match d {
+            Data::Virtual { points, sigma } => Some((*points, *sigma)),
+            Data::Measured(_) => None,
+        })
+        .collect();
+    let mut virtual_fields = if virtual_parts.is_empty() {
+        Vec::new()
+    } else {
+        let (tfree, map) = joint::block_free(free, free_model, truth);
+        let tref: Vec<f64> = map.iter().map(|&k| reference[k]).collect();
+        virtual_segments(truth, &tfree, &tref, &virtual_parts, &mut rng)?
+    }
+    .into_iter();
+    let mut field = MeasuredField::default();
+    let mut segments = Vec::new();
+    for (_, d) in &block.segments {
+        let start = field.points.len();
+        match d {
+            Data::Measured(f) => field.points.extend_from_slice(&f.points),
+            Data::Virtual { .. } => field
+                .points
+                .extend(virtual_fields.next().unwrap_or_default().points),
+        }
+        segments.push(start..field.points.len());
+    }
+    let travel = match (block.travel, reference_travel) {
+        (Some(term), Some(t)) => {
+            let noise = if term.measured_mm.is_none() {
+                let mut rng = rand::rngs::StdRng::seed_from_u64(
+                    seed.wrapping_mul(104_729) + rep as u64 + (b as u64).wrapping_mul(7_654_321),
+                );
+                Normal::new(0.0, term.sigma_mm)
+                    .map_err(|_| CampaignError::BadNoise(term.sigma_mm))?
+                    .sample(&mut rng)
+            } else {
+                0.0
+            };
+            Some((t + noise, term.sigma_mm))
+        }
+        _ => None,
     };
-    let locator = PointLocator::new(&model.mesh);
+    Ok(Realized {
+        field,
+        segments,
+        travel,
+    })
+}
+
+/// A field block's data: its field and each segment's points in it.
+pub type RealizedField = (MeasuredField, Vec<Range<usize>>);
+
+/// The data of every field block of `blocks` in repeat `rep` as [`run_joint`] fits them: per
+/// block, its field (virtual segments realized with their noise) and each segment's points in
+/// it — what `femu synth` writes.
+pub fn realized_fields(
+    free_model: &Model,
+    free: &[FreeParameter],
+    reference: &[f64],
+    blocks: &[BlockSpec],
+    seed: u64,
+    rep: usize,
+) -> Result<Vec<RealizedField>, CampaignError> {
+    blocks
+        .iter()
+        .filter_map(|b| match b {
+            BlockSpec::Field(f) => Some(f),
+            BlockSpec::Custom { .. } => None,
+        })
+        .enumerate()
+        .map(|(b, f)| {
+            let mut f = f.clone();
+            f.travel = None;
+            realize(&f, b, rep, free, free_model, reference, seed, None)
+                .map(|r| (r.field, r.segments))
+        })
+        .collect()
+}
+
+/// The FEMU block of `block` on `model` (the block's model or its coarse one) with the data of
+/// one repeat.
+fn field_problem(
+    block: &FieldBlock,
+    data: &Realized,
+    model: &Model,
+    free: &[FreeParameter],
+    free_model: &Model,
+    stop: Option<Arc<AtomicBool>>,
+) -> Result<Block, FitError> {
+    let (bfree, map) = joint::block_free(free, free_model, model);
+    let mut p =
+        Problem::new(model.clone(), SolverOptions::default(), &data.field, bfree)?.with_stop(stop);
+    if let Some((t, sigma)) = data.travel {
+        p = p.with_travel(t, sigma)?;
+    }
+    let mut segments: Vec<(String, Range<usize>)> = block
+        .segments
+        .iter()
+        .zip(&data.segments)
+        .map(|((name, _), pts)| (name.clone(), p.rows_of(pts.clone())))
+        .collect();
+    if let Some(row) = p.travel_row() {
+        segments.push((format!("{} travel", block.name), row..row + 1));
+    }
+    Ok(Block {
+        name: block.name.clone(),
+        problem: Box::new(p),
+        map,
+        segments,
+    })
+}
+
+/// Identifies the free parameters (`free`, defined on `free_model`, with their reference
+/// values) from several measured blocks at once ([`crate::joint`]): the same starts, bounds,
+/// multilevel refinement and repeats as [`run`], over the stacked residuals of every block.
+/// Each field block's model carries the reference parameters; its virtual data get their own
+/// noise stream (the first block's is [`run`]'s).
+pub fn run_joint(
+    free_model: &Model,
+    free: &[FreeParameter],
+    reference: &[f64],
+    blocks: &[BlockSpec],
+    options: &CampaignOptions,
+    on_event: &(dyn Fn(Event) + Sync),
+) -> Result<Campaign, CampaignError> {
+    let fields = || {
+        blocks.iter().filter_map(|b| match b {
+            BlockSpec::Field(f) => Some(f),
+            BlockSpec::Custom { .. } => None,
+        })
+    };
+    let any_virtual = fields().any(|f| {
+        f.segments
+            .iter()
+            .any(|(_, d)| matches!(d, Data::Virtual { .. }))
+    });
+    let repeats = if any_virtual {
+        options.repeats.max(1)
+    } else {
+        1
+    };
+    let multilevel = fields().any(|f| f.coarse.is_some());
+    let travels: Vec<Option<f64>> = fields()
+        .map(|f| match f.travel {
+            Some(TravelTerm {
+                measured_mm: None, ..
+            }) => reference_travel(f.truth.unwrap_or(f.model)).map(Some),
+            Some(TravelTerm {
+                measured_mm: Some(t),
+                ..
+            }) => Ok(Some(t)),
+            None => Ok(None),
+        })
+        .collect::<Result<_, _>>()?;
     let mut out = Campaign {
         best: Vec::new(),
         starts: Vec::new(),
@@ -348,151 +640,57 @@ pub fn run(
         first_field: MeasuredField::default(),
         points_in_tissue: 0,
         points_masked: 0,
-        reference_travel,
+        reference_travel: travels.first().copied().flatten(),
+        blocks: Vec::new(),
+        layout: Vec::new(),
     };
     for rep in 0..repeats {
-        let field = match data {
-            Data::Measured(f) => f.clone(),
-            Data::Virtual { points, sigma } => virtual_field(
-                model,
-                free,
-                reference,
-                points,
-                sigma,
-                options.seed + rep as u64,
-            )?,
-        };
-        // The actuator term of this repeat: the measured travel, or the reference travel plus
-        // seeded noise.
-        let travel = match (options.travel, reference_travel) {
-            (Some(term), Some(t)) => {
-                let noise = if term.measured_mm.is_none() {
-                    let mut rng = rand::rngs::StdRng::seed_from_u64(
-                        options.seed.wrapping_mul(104_729) + rep as u64,
-                    );
-                    Normal::new(0.0, term.sigma_mm)
-                        .map_err(|_| CampaignError::BadNoise(term.sigma_mm))?
-                        .sample(&mut rng)
-                } else {
-                    0.0
-                };
-                Some((t + noise, term.sigma_mm))
-            }
-            _ => None,
-        };
-        let problem = |m: &Model| -> Result<Problem, FitError> {
-            let p = Problem::new(m.clone(), SolverOptions::default(), &field, free.to_vec())?
-                .with_stop(options.stop.clone());
-            match travel {
-                Some((t, sigma)) => p.with_travel(t, sigma),
-                None => Ok(p),
-            }
-        };
-        let starts = latin_hypercube(
-            free,
-            options.starts,
-            options.seed.wrapping_mul(7919) + rep as u64,
-        );
-        on_event(Event::Repeat {
-            repeat: rep,
-            starts: starts.len(),
-        });
-        // The starts run on the coarse model when there is one (multilevel): the same data,
-        // the same free parameters, a cheaper forward model.
-        let start_model = coarse.unwrap_or(model);
-        let outcomes: Vec<Result<FitResult, FitError>> = starts
-            .par_iter()
-            .map(|s| {
-                let r = problem(start_model)
-                    .and_then(|mut p| fit_start(options.optimizer, &mut p, s, coarse.is_some()));
-                on_event(Event::StartFinished);
-                r
+        let realized: Vec<Realized> = fields()
+            .enumerate()
+            .map(|(b, f)| {
+                realize(
+                    f,
+                    b,
+                    rep,
+                    free,
+                    free_model,
+                    reference,
+                    options.seed,
+                    travels[b],
+                )
             })
-            .collect();
-        let stopped = femu_mesh::stop::requested()
-            || options
-                .stop
-                .as_ref()
-                .is_some_and(|f| f.load(Ordering::Relaxed));
-        if stopped {
-            // The starts that finished before the stop are kept; the stopped ones are not
-            // results.
-            for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
-                if let Ok(r) = o {
-                    out.starts.push(StartRecord {
-                        repeat: rep,
-                        start: k,
-                        theta_start: s.clone(),
-                        result: Some(r),
-                        error: None,
-                    });
-                }
+            .collect::<Result<_, _>>()?;
+        // The joint problem of this repeat's data on the coarse or the full models.
+        let problem = |coarse: bool| -> Result<JointProblem, FitError> {
+            let mut stacked = Vec::with_capacity(blocks.len());
+            let mut data = realized.iter();
+            for spec in blocks {
+                stacked.push(match spec {
+                    BlockSpec::Field(f) => {
+                        let model = if coarse {
+                            f.coarse.unwrap_or(f.model)
+                        } else {
+                            f.model
+                        };
+                        let d = data.next().expect("one realization per field block");
+                        field_problem(f, d, model, free, free_model, options.stop.clone())?
+                    }
+                    BlockSpec::Custom { build, .. } => build(coarse)?,
+                });
             }
-            return Err(CampaignError::Interrupted {
-                finished: Box::new(out),
-                repeats,
-            });
-        }
-        out.points_in_tissue = field
-            .points
-            .iter()
-            .filter(|p| locator.locate(p.x).is_some())
-            .count();
-        out.points_masked = field.points.len() - out.points_in_tissue;
-        if rep == 0 {
-            out.first_field = field.clone();
-        }
-        let mut best: Option<FitResult> = None;
-        let mut reasons: Vec<(String, usize)> = Vec::new();
-        for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
-            let (result, error) = match o {
-                Ok(r) => {
-                    on_event(Event::Start {
-                        repeat: rep,
-                        start: k,
-                        outcome: Ok(&r),
-                    });
-                    if best.as_ref().is_none_or(|b| r.cost < b.cost) {
-                        best = Some(r.clone());
-                    }
-                    (Some(r), None)
-                }
-                Err(e) => {
-                    let why = e.to_string();
-                    on_event(Event::Start {
-                        repeat: rep,
-                        start: k,
-                        outcome: Err(&why),
-                    });
-                    match reasons.iter_mut().find(|(r, _)| *r == why) {
-                        Some(entry) => entry.1 += 1,
-                        None => reasons.push((why.clone(), 1)),
-                    }
-                    (None, Some(why))
-                }
-            };
-            out.starts.push(StartRecord {
-                repeat: rep,
-                start: k,
-                theta_start: s.clone(),
-                result,
-                error,
-            });
-        }
-        let Some(mut best) = best else {
-            reasons.sort_by_key(|r| std::cmp::Reverse(r.1));
-            return Err(CampaignError::AllStartsFailed {
-                repeat: rep,
-                reasons,
-                starts: out.starts,
-            });
+            JointProblem::new(free.to_vec(), stacked).map_err(|e| FitError::Joint(e.to_string()))
         };
-        // Multilevel: the best coarse optimum continued on the study's model.
-        if coarse.is_some() {
+        let best = run_repeat(&problem, free, multilevel, rep, options, on_event, &mut out)?;
+        if rep == 0 {
+            record_blocks(&mut out, fields(), &realized, &travels)?;
+        }
+        if multilevel {
             on_event(Event::Refining { repeat: rep });
-            let refined = problem(model)
-                .and_then(|mut p| fit_start(options.optimizer, &mut p, &best.theta, false));
-            best = match refined {
+            let refined = problem(false).and_then(|mut p| {
+                let r = fit_start(options.optimizer, &mut p, &best.theta, false)?;
+                Ok((r, p.segments()))
+            });
+            let (best, layout) = match refined {
                 Ok(r) => r,
                 Err(FitError::Interrupted) => {
                     return Err(CampaignError::Interrupted {
@@ -504,14 +702,167 @@ pub fn run(
             };
             on_event(Event::Refined {
                 repeat: rep,
-                elements: model.mesh.elements.len(),
+                elements: fields().map(|f| f.model.mesh.elements.len()).sum(),
                 result: &best,
             });
             out.refinement_forward_solves.push(best.forward_solves);
+            out.layout = layout;
+            out.best.push(best);
+        } else {
+            out.best.push(best);
         }
-        out.best.push(best);
     }
     Ok(out)
+}
+
+/// The starts of one repeat in parallel (on the coarse models when `multilevel`); every start
+/// recorded in `out`; returns the best (its layout kept in `out` on one level).
+fn run_repeat(
+    problem: &(dyn Fn(bool) -> Result<JointProblem, FitError> + Sync),
+    free: &[FreeParameter],
+    multilevel: bool,
+    rep: usize,
+    options: &CampaignOptions,
+    on_event: &(dyn Fn(Event) + Sync),
+    out: &mut Campaign,
+) -> Result<FitResult, CampaignError> {
+    let starts = latin_hypercube(
+        free,
+        options.starts,
+        options.seed.wrapping_mul(7919) + rep as u64,
+    );
+    on_event(Event::Repeat {
+        repeat: rep,
+        starts: starts.len(),
+    });
+    type Outcome = Result<(FitResult, Segments), FitError>;
+    let outcomes: Vec<Outcome> = starts
+        .par_iter()
+        .map(|s| {
+            let r = problem(multilevel).and_then(|mut p| {
+                let r = fit_start(options.optimizer, &mut p, s, multilevel)?;
+                Ok((r, p.segments()))
+            });
+            on_event(Event::StartFinished);
+            r
+        })
+        .collect();
+    let stopped = femu_mesh::stop::requested()
+        || options
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
+    if stopped {
+        // The starts that finished before the stop are kept; the stopped ones are not
+        // results.
+        for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
+            if let Ok((mut r, _)) = o {
+                r.jacobian = Vec::new();
+                out.starts.push(StartRecord {
+                    repeat: rep,
+                    start: k,
+                    theta_start: s.clone(),
+                    result: Some(r),
+                    error: None,
+                });
+            }
+        }
+        return Err(CampaignError::Interrupted {
+            finished: Box::new(out.clone()),
+            repeats: options.repeats.max(1),
+        });
+    }
+    let mut best: Option<(FitResult, Segments)> = None;
+    let mut reasons: Vec<(String, usize)> = Vec::new();
+    for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
+        let (result, error) = match o {
+            Ok((r, layout)) => {
+                on_event(Event::Start {
+                    repeat: rep,
+                    start: k,
+                    outcome: Ok(&r),
+                });
+                if best.as_ref().is_none_or(|b| r.cost < b.0.cost) {
+                    best = Some((r.clone(), layout));
+                }
+                // The record keeps no Jacobian (only the best needs it, for the intervals):
+                // 20 repeats of 2 starts on 10^5 residuals would hold 300 MB of them.
+                let mut r = r;
+                r.jacobian = Vec::new();
+                (Some(r), None)
+            }
+            Err(e) => {
+                let why = e.to_string();
+                on_event(Event::Start {
+                    repeat: rep,
+                    start: k,
+                    outcome: Err(&why),
+                });
+                match reasons.iter_mut().find(|(r, _)| *r == why) {
+                    Some(entry) => entry.1 += 1,
+                    None => reasons.push((why.clone(), 1)),
+                }
+                (None, Some(why))
+            }
+        };
+        out.starts.push(StartRecord {
+            repeat: rep,
+            start: k,
+            theta_start: s.clone(),
+            result,
+            error,
+        });
+    }
+    let Some((best, layout)) = best else {
+        reasons.sort_by_key(|r| std::cmp::Reverse(r.1));
+        return Err(CampaignError::AllStartsFailed {
+            repeat: rep,
+            reasons,
+            starts: out.starts.clone(),
+        });
+    };
+    if !multilevel {
+        out.layout = layout;
+    }
+    Ok(best)
+}
+
+/// Records the field blocks of the first repeat in `out`: fields, points in the tissue of the
+/// full models, travels.
+fn record_blocks<'a>(
+    out: &mut Campaign,
+    fields: impl Iterator<Item = &'a FieldBlock<'a>>,
+    realized: &[Realized],
+    travels: &[Option<f64>],
+) -> Result<(), CampaignError> {
+    for ((f, r), travel) in fields.zip(realized).zip(travels) {
+        let locator = PointLocator::new(&f.model.mesh);
+        let mut segments = Vec::new();
+        for ((name, _), pts) in f.segments.iter().zip(&r.segments) {
+            let inside = r.field.points[pts.clone()]
+                .iter()
+                .filter(|p| locator.locate(p.x).is_some())
+                .count();
+            out.points_in_tissue += inside;
+            out.points_masked += pts.len() - inside;
+            segments.push(SegmentRecord {
+                name: name.clone(),
+                points: pts.clone(),
+                points_in_tissue: inside,
+                points_masked: pts.len() - inside,
+            });
+        }
+        out.blocks.push(BlockRecord {
+            name: f.name.clone(),
+            first_field: r.field.clone(),
+            segments,
+            reference_travel: *travel,
+        });
+    }
+    if let Some(b) = out.blocks.first() {
+        out.first_field = b.first_field.clone();
+    }
+    Ok(())
 }
 
 /// An identified parameter with its uncertainty.
@@ -524,18 +875,87 @@ pub struct Estimate {
     pub relative_error: Option<f64>,
     /// Relative standard deviation from the Jacobian at the optimum.
     pub relative_sd: f64,
+    /// The 95 % interval: from the Jacobian at the optimum, widened by the estimated
+    /// discretization bias when that is not negligible ([`widen`]).
     pub ci95: [f64; 2],
     /// Over the repeats: mean and standard deviation of Eq. 4 and of the identified value.
     pub mean_relative_error: Option<f64>,
     pub sd_relative_error: Option<f64>,
     pub sd_identified_relative: Option<f64>,
+    /// Over the repeats: the largest Eq. 4 error.
+    #[serde(default)]
+    pub max_relative_error: Option<f64>,
+    /// Over the repeats: the fraction whose 95 % interval (each from its own Jacobian, widened
+    /// like `ci95`) holds the reference.
+    #[serde(default)]
+    pub coverage95: Option<f64>,
+    /// The estimated discretization bias of the log-parameter (identified on the model's mesh
+    /// minus on a converged mesh; see `crate::discretization`), when it widened the interval.
+    #[serde(default)]
+    pub discretization_bias: Option<f64>,
+    /// The interval of the noise alone, when `ci95` was widened.
+    #[serde(default)]
+    pub ci95_noise: Option<[f64; 2]>,
+}
+
+/// The 95 % interval of `theta` with relative (log) standard deviation `sd` and an estimated
+/// bias `bias` of its logarithm: the hull of the intervals around `theta` and around the
+/// corrected `theta·e^(-bias)`.
+fn interval(theta: f64, sd: f64, bias: f64) -> [f64; 2] {
+    let corrected = theta * (-bias).exp();
+    [
+        theta.min(corrected) * (-1.96 * sd).exp(),
+        theta.max(corrected) * (1.96 * sd).exp(),
+    ]
+}
+
+/// The relative standard deviations of every repeat's optimum (whitened residuals when
+/// `known_noise`, else scaled by each repeat's residual variance).
+fn repeat_sds(
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    known_noise: bool,
+) -> Result<Vec<Vec<f64>>, CampaignError> {
+    let names: Vec<String> = free.iter().map(|f| f.name.clone()).collect();
+    campaign
+        .best
+        .iter()
+        .map(|b| {
+            let dof = b.data.saturating_sub(free.len()).max(1);
+            let s = if known_noise {
+                1.0
+            } else {
+                (2.0 * b.cost / dof as f64).sqrt()
+            };
+            let info = fisher::information(&b.jacobian, s.max(1e-300), &Tied::none(&names))?;
+            Ok(fisher::identifiability(&info, &names).relative_sd)
+        })
+        .collect()
+}
+
+/// Per parameter, the fraction of repeats whose interval (with `bias`) holds the reference.
+fn coverage(campaign: &Campaign, sds: &[Vec<f64>], reference: &[f64], bias: &[f64]) -> Vec<f64> {
+    (0..reference.len())
+        .map(|k| {
+            let hits = campaign
+                .best
+                .iter()
+                .zip(sds)
+                .filter(|(b, sd)| {
+                    let [lo, hi] = interval(b.theta[k], sd[k], bias[k]);
+                    lo <= reference[k] && reference[k] <= hi
+                })
+                .count();
+            hits as f64 / campaign.best.len().max(1) as f64
+        })
+        .collect()
 }
 
 /// The estimates of a campaign: identified values (first repeat), their relative standard
 /// deviations and 95 % intervals from the Jacobian at the optimum (the residuals have unit
 /// variance when the data are whitened, `known_noise`; otherwise the residual variance scales
-/// them), Eq. 4 errors when the references are the truth (`reference_known`), and the spread
-/// over the repeats.
+/// them), Eq. 4 errors when the references are the truth (`reference_known`), and the spread,
+/// the worst error and the interval coverage over the repeats.
 pub fn estimates(
     campaign: &Campaign,
     free: &[FreeParameter],
@@ -559,6 +979,14 @@ pub fn estimates(
         let m = mean(v);
         (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64).sqrt()
     };
+    let several = repeats > 1;
+    let statistics = reference_known && known_noise && several;
+    let covered = if statistics {
+        let sds = repeat_sds(campaign, free, known_noise)?;
+        Some(coverage(campaign, &sds, reference, &vec![0.0; free.len()]))
+    } else {
+        None
+    };
     let out = free
         .iter()
         .enumerate()
@@ -571,21 +999,117 @@ pub fn estimates(
                 .map(|b| ((b.theta[k] - reference[k]) / reference[k]).abs())
                 .collect();
             let logs: Vec<f64> = campaign.best.iter().map(|b| b.theta[k].ln()).collect();
-            let several = repeats > 1;
             Estimate {
                 name: f.name.clone(),
                 reference: reference_known.then_some(reference[k]),
                 identified: t,
                 relative_error: reference_known.then_some(errors[0]),
                 relative_sd: sd,
-                ci95: [t * (-1.96 * sd).exp(), t * (1.96 * sd).exp()],
-                mean_relative_error: (reference_known && known_noise && several)
-                    .then(|| mean(&errors)),
-                sd_relative_error: (reference_known && known_noise && several)
-                    .then(|| sd_of(&errors)),
+                ci95: interval(t, sd, 0.0),
+                mean_relative_error: statistics.then(|| mean(&errors)),
+                sd_relative_error: statistics.then(|| sd_of(&errors)),
                 sd_identified_relative: several.then(|| sd_of(&logs)),
+                max_relative_error: statistics.then(|| errors.iter().copied().fold(0.0, f64::max)),
+                coverage95: covered.as_ref().map(|c| c[k]),
+                discretization_bias: None,
+                ci95_noise: None,
             }
         })
         .collect();
     Ok((out, id))
+}
+
+/// What makes an identification's values or intervals meaningless, one sentence each, for
+/// the console, the summary and the report (issue 32.6: such fits used to end with exit 0,
+/// `inf %` standard deviations and no word): a best start that did not converge, a parameter
+/// at one of its bounds (the data do not hold it inside), an infinite or undefined standard
+/// deviation (the field does not determine it).
+pub fn warnings(
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    estimates: &[Estimate],
+) -> Vec<String> {
+    let mut out = Vec::new();
+    let unconverged: Vec<&FitResult> = campaign.best.iter().filter(|b| !b.converged).collect();
+    if let Some(b) = unconverged.first() {
+        let of = if campaign.best.len() > 1 {
+            format!(
+                " in {} of {} repeats",
+                unconverged.len(),
+                campaign.best.len()
+            )
+        } else {
+            String::new()
+        };
+        out.push(format!(
+            "the best start did not converge{of} ({} after {} iterations): its values are not an optimum; see starts.csv",
+            b.reason, b.iterations
+        ));
+    }
+    let best = &campaign.best[0];
+    let mut at_bounds = Vec::new();
+    for (f, &t) in free.iter().zip(&best.theta) {
+        // The optimizers clamp ln θ to the log-bounds: at a bound to rounding.
+        let side = if (t / f.lower).ln().abs() < 1e-9 {
+            Some(("lower", f.lower))
+        } else if (t / f.upper).ln().abs() < 1e-9 {
+            Some(("upper", f.upper))
+        } else {
+            None
+        };
+        if let Some((side, b)) = side {
+            let (unit, factor) = f.members[0].spec().unit.report();
+            at_bounds.push(format!("{} ({side}, {} {unit})", f.name, b * factor));
+        }
+    }
+    if !at_bounds.is_empty() {
+        out.push(format!(
+            "{} of {} parameters stopped at a bound: {}; the data do not hold them inside the bounds, so their values and intervals mean nothing (fix or tie them, widen [identification] bounds_factor, or measure a test that moves them)",
+            at_bounds.len(),
+            free.len(),
+            at_bounds.join(", ")
+        ));
+    }
+    let undetermined: Vec<&str> = estimates
+        .iter()
+        .filter(|e| !e.relative_sd.is_finite())
+        .map(|e| e.name.as_str())
+        .collect();
+    if !undetermined.is_empty() {
+        out.push(format!(
+            "no finite standard deviation for {}: the measured field does not determine them (their Jacobian columns are zero or combinations of the others); fix or tie them",
+            undetermined.join(", ")
+        ));
+    }
+    out
+}
+
+/// Widens the intervals of `estimates` by the estimated discretization bias of each
+/// log-parameter (`bias[k]`: identified on the model's mesh minus converged; see
+/// `crate::discretization`): each interval becomes the hull of the intervals around the
+/// identified and around the bias-corrected value, the noise-only interval kept in
+/// `ci95_noise`; the coverage over the repeats is recounted with the widened intervals.
+pub fn widen(
+    estimates: &mut [Estimate],
+    bias: &[f64],
+    campaign: &Campaign,
+    free: &[FreeParameter],
+    reference: &[f64],
+    known_noise: bool,
+) -> Result<(), CampaignError> {
+    let covered = if estimates.iter().any(|e| e.coverage95.is_some()) {
+        let sds = repeat_sds(campaign, free, known_noise)?;
+        Some(coverage(campaign, &sds, reference, bias))
+    } else {
+        None
+    };
+    for (k, e) in estimates.iter_mut().enumerate() {
+        e.ci95_noise = Some(e.ci95);
+        e.ci95 = interval(e.identified, e.relative_sd, bias[k]);
+        e.discretization_bias = Some(bias[k]);
+        if let Some(c) = &covered {
+            e.coverage95 = Some(c[k]);
+        }
+    }
+    Ok(())
 }

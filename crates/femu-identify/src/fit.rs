@@ -66,6 +66,9 @@ pub enum FitError {
     Travel(String),
     #[error("the Jacobian is singular: parameter {name} does not change the measured field (column norm {norm:.3e}); fix it or tie it")]
     Unidentifiable { name: String, norm: f64 },
+    /// A joint problem that cannot be set up (see [`crate::joint`]).
+    #[error("joint problem: {0}")]
+    Joint(String),
     /// The user asked to stop (see [`Problem::with_stop`]).
     #[error("interrupted")]
     Interrupted,
@@ -101,6 +104,8 @@ pub struct Problem {
     measured: Vec<f64>,
     sqrt_w: Vec<f64>,
     masked: usize,
+    /// Whether each point of the field lies in the tissue (its residual rows follow).
+    located: Vec<bool>,
     /// The actuator term: the measured travel of the force-controlled rigid body (mm) and its
     /// standard deviation, one more residual `(T_model - T_measured) / σ_T`.
     travel: Option<(f64, f64)>,
@@ -140,8 +145,11 @@ impl Problem {
         let mut measured = Vec::new();
         let mut sqrt_w = Vec::new();
         let mut masked = 0;
+        let mut located = Vec::with_capacity(field.points.len());
         for p in &field.points {
-            match locator.locate(p.x) {
+            let loc = locator.locate(p.x);
+            located.push(loc.is_some());
+            match loc {
                 Some(loc) => {
                     locations.push(loc);
                     measured.extend_from_slice(&p.u);
@@ -171,6 +179,7 @@ impl Problem {
             measured,
             sqrt_w,
             masked,
+            located,
             travel: None,
             warm: None,
             dstate: Vec::new(),
@@ -235,6 +244,23 @@ impl Problem {
     /// Measured points inside the tissue, and masked ones.
     pub fn points(&self) -> (usize, usize) {
         (self.locations.len(), self.masked)
+    }
+
+    /// The residual rows of the field's points `points` (two per point in the tissue, in field
+    /// order; masked points have none).
+    pub fn rows_of(&self, points: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let before = |k: usize| {
+            2 * self.located[..k.min(self.located.len())]
+                .iter()
+                .filter(|l| **l)
+                .count()
+        };
+        before(points.start)..before(points.end)
+    }
+
+    /// The row of the actuator term (the last), if there is one.
+    pub fn travel_row(&self) -> Option<usize> {
+        self.travel.map(|_| 2 * self.locations.len())
     }
 
     pub fn model(&self) -> &Model {

@@ -7,12 +7,21 @@
 //! - [`measured`]: the measured-field CSV of conventions.md.
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
+//! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
+//!   the free parameters, stacked into one problem; each measurement's share of the information.
+//! - [`discretization`]: the model's own error: the parameter bias its mesh implies, from
+//!   refined meshes of the same geometry (one Gauss–Newton step, Richardson extrapolation).
+//! - [`design`]: the experiment's design: candidate measurements ranked by the parameter
+//!   uncertainty they predict (A- and D-optimal criteria), alone and combined.
 //! - [`campaign`]: a whole identification: free parameters (groups, fixed, bounds), the
 //!   virtual experiment, multi-start (multilevel), Monte Carlo repeats, estimates with intervals.
 
 #![forbid(unsafe_code)]
 
 pub mod campaign;
+pub mod design;
+pub mod discretization;
 pub mod fisher;
 pub mod fit;
+pub mod joint;
 pub mod measured;

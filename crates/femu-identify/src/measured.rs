@@ -8,7 +8,7 @@
 //!
 //! `x,y` reference coordinates in the model frame (mm), `ux,uy` the measured displacement (mm),
 //! optional standard deviations `sx,sy` (mm) or a weight `w`. A non-finite or non-numeric cell is
-//! an error naming its line.
+//! an error naming its line, and so is a point given twice (same `x,y`).
 
 use std::io::Write;
 use std::path::Path;
@@ -63,6 +63,8 @@ impl MeasuredField {
             message,
         };
         let mut field = MeasuredField::default();
+        // The line of each point, by its coordinates' bits (0.0 and -0.0 as one).
+        let mut seen: std::collections::HashMap<[u64; 2], usize> = Default::default();
         let mut columns: Option<Vec<String>> = None;
         let mut idx = [usize::MAX; 7];
         for (k, raw) in text.lines().enumerate() {
@@ -144,8 +146,18 @@ impl MeasuredField {
             } else {
                 [1.0, 1.0]
             };
+            let x = [get(0)?, get(1)?];
+            if let Some(first) = seen.insert(x.map(|c| (c + 0.0).to_bits()), line) {
+                return Err(bad(
+                    line,
+                    format!(
+                        "the point ({}, {}) is also on line {first}: a point measured twice counts twice in the fit and shrinks its standard deviations; keep one (or average them)",
+                        x[0], x[1]
+                    ),
+                ));
+            }
             field.points.push(MeasuredPoint {
-                x: [get(0)?, get(1)?],
+                x,
                 u: [get(2)?, get(3)?],
                 weight,
             });
@@ -245,6 +257,11 @@ mod tests {
         assert!(err("x,y,ux,uy\n1,2,3\n").contains("m.csv:2"));
         assert!(err("x,y,ux,uy\n").contains("no data"));
         assert!(err("x,y,ux,uy,q\n").contains("unknown column 'q'"));
+        // Issue 32.6: a point repeated (2 500 times in the audit) would weigh 2 500 times and
+        // shrink the reported sd; refused naming both lines.
+        let e = err("x,y,ux,uy\n1,2,3,4\n5,6,7,8\n1.0,2,3,4\n");
+        assert!(e.contains("m.csv:4") && e.contains("also on line 2"), "{e}");
+        assert!(err("x,y,ux,uy\n0,2,3,4\n-0,2,3,4\n").contains("also on line 2"));
     }
 
     #[test]

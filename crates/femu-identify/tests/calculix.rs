@@ -5,37 +5,14 @@
 //! back without noise. Skips with a message when ccx is absent.
 
 use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
-use femu_identify::fit::{levenberg_marquardt, FreeParameter, LmOptions, Problem};
+use femu_identify::fit::{levenberg_marquardt, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
-use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions};
-use femu_mesh::inp::read_ccx_dat_displacements;
 use femu_mesh::locate::PointLocator;
-use femu_mesh::{write_inp, Deck, ElementKind};
-use std::collections::HashMap;
-use std::process::Command;
+use femu_mesh::ElementKind;
 
-fn ccx_installed() -> bool {
-    let found = Command::new("ccx").arg("-v").output().is_ok();
-    if !found {
-        println!("SKIPPED: ccx not installed (apt-get install calculix-ccx)");
-    }
-    found
-}
-
-/// Rounds the deck's numbers to 14 significant digits (ccx reads 20 characters per field); both
-/// codes solve the rounded deck.
-fn ccx_ready(deck: &mut Deck) {
-    let r = |v: &mut f64| *v = format!("{v:.13e}").parse().unwrap();
-    deck.mesh.nodes.iter_mut().flatten().for_each(r);
-    for m in &mut deck.materials {
-        m.constants.iter_mut().for_each(r);
-    }
-    deck.boundaries.iter_mut().for_each(|b| r(&mut b.value));
-    deck.point_loads
-        .iter_mut()
-        .for_each(|p| r(&mut p.magnitude));
-}
+mod common;
+use common::{ccx_displacements, ccx_installed, ccx_ready, free_parameters};
 
 #[test]
 fn ccx_field_is_identified_back_without_noise() {
@@ -44,7 +21,7 @@ fn ccx_field_is_identified_back_without_noise() {
     }
     let t = parametric_thigh(
         &ThighParams {
-            target_elements: Some(600),
+            target_elements: Some(700),
             ..Default::default()
         },
         ElementKind::Cpe4,
@@ -53,31 +30,7 @@ fn ccx_field_is_identified_back_without_noise() {
     let mut deck = contention_deck(&t, &table1_materials(), 20.0 * femu_mesh::MMHG_IN_MPA).unwrap();
     deck.pressures_to_dead_loads();
     ccx_ready(&mut deck);
-
-    let dir = std::env::temp_dir().join(format!("femu-identify-ccx-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    let mut text = Vec::new();
-    write_inp(&deck, &mut text).unwrap();
-    std::fs::write(dir.join("job.inp"), &text).unwrap();
-    let out = Command::new("ccx")
-        .args(["-i", "job"])
-        .current_dir(&dir)
-        .env("OMP_NUM_THREADS", "1")
-        .output()
-        .expect("ccx runs");
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success() && !stdout.contains("*ERROR"),
-        "ccx failed; deck kept in {}",
-        dir.display()
-    );
-    let ccx: HashMap<i64, [f64; 2]> = read_ccx_dat_displacements(&dir.join("job.dat"))
-        .unwrap()
-        .into_iter()
-        .collect();
-    let u: Vec<f64> = deck.mesh.node_labels.iter().flat_map(|l| ccx[l]).collect();
-    let _ = std::fs::remove_dir_all(&dir);
+    let u = ccx_displacements(&deck, "ccx");
 
     // The ccx field at the 64 x 64 grid points in the tissue.
     let (lo, hi) = deck.mesh.bounding_box();
@@ -98,19 +51,7 @@ fn ccx_field_is_identified_back_without_noise() {
     }
 
     let model = Model::from_deck(deck).unwrap();
-    let free: Vec<FreeParameter> = all_parameters(&model)
-        .into_iter()
-        .map(|p| {
-            let v = p.value(&model);
-            FreeParameter {
-                name: p.name(&model),
-                members: vec![p],
-                lower: v / 4.0,
-                upper: v * 4.0,
-            }
-        })
-        .collect();
-    let reference: Vec<f64> = free.iter().map(|f| f.members[0].value(&model)).collect();
+    let (free, reference) = free_parameters(&model);
     let start: Vec<f64> = reference
         .iter()
         .enumerate()

@@ -11,7 +11,9 @@
 //! ```
 //!
 //! with the penalty ε and the multiplier estimate λ̂ (Uzawa updates `λ̂ ← λ` until the
-//! penetration is below 1e-3 of the element size). Under force control the travel `t` is an
+//! penetration is below both `penetration_tolerance` of the element size and the gap at which
+//! the penalty's force is the Newton residual tolerance; see `solver::contact_state`). Under
+//! force control the travel `t` is an
 //! unknown of the Newton system, with the equation `∂/∂t (Σ ψ) - F = 0`: the contact force on
 //! the body along `d` equals the applied force `F`. The whole system derives from the potential
 //! `Π_int + Σ ψ - F t` (plus the loads), so the bordered tangent stays symmetric.
@@ -254,7 +256,9 @@ pub struct RigidContact {
     /// (default 10: stiff enough that few Uzawa updates are needed, soft enough that Newton's
     /// first iterations, when contact spreads from one node, stay well conditioned).
     pub penalty_factor: f64,
-    /// Allowed penetration at convergence as a fraction of `element_size`.
+    /// Allowed penetration at convergence as a fraction of `element_size` (an upper bound: the
+    /// solver also converges the multipliers until another Uzawa update would change the
+    /// contact forces by less than its residual tolerance, which is far tighter by default).
     pub penetration_tolerance: f64,
 }
 
@@ -360,7 +364,8 @@ pub struct BodyState {
     pub force: f64,
     /// Largest penetration of a node into the body (mm, ≥ 0).
     pub max_penetration: f64,
-    /// The allowed penetration (mm).
+    /// The allowed penetration (mm): the smaller of the penetration tolerance and the gap at
+    /// which the penalty's force is the residual tolerance.
     pub penetration_limit: f64,
     pub active_nodes: usize,
     /// Penalty ε used (N/mm per node).

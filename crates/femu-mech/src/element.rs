@@ -12,7 +12,7 @@
 //! Local dof `2a + i` is component `i` of local node `a`. Node order and faces are drawn in the
 //! `femu-mesh` crate documentation.
 
-use crate::material::{
+use crate::material::hyperelastic::{
     cauchy_from_derivatives, cof2, det2, log_strain, EnergyPart, Hyperelastic,
     InvariantDerivatives, NonPositiveJacobian, Tensor2,
 };
@@ -566,7 +566,7 @@ impl SolidElement for MeanDilatationElement {
 /// The internal forces of the energies `E_k` (`k < count`, each given with the part of the
 /// energy it lives in by `term(k)`) at local displacements `u`, in one pass over the Gauss
 /// points: `forces[k * MAX_DOFS..][..2 n]`. With `W = Σ c_k E_k` these are `∂f_int/∂c_k`
-/// (parameter sensitivities, seed §2.3; see [`crate::material::law`]).
+/// (parameter sensitivities, seed §2.3; see [`law`](mod@crate::material::law)).
 ///
 /// CPE4 and CPE3: an isochoric term adds `w P_k:∇N` at each point (P_k of `E_k`'s isochoric
 /// part), a volumetric one `w E_k'(J) cof F:∇N`. CPE4H: the isochoric terms as for CPE4, a

@@ -19,7 +19,10 @@
 //! Solving ([`solver`], one file per part under `solver/`):
 //! - `assembly`: dof numbering, sparse pattern built once, element slots, residual and tangent
 //!   gathered in element order (bitwise equal to a serial scatter), point and pressure loads;
-//! - `contact_state`: penalties, multipliers and their Uzawa updates, active sets, step limit;
+//! - `contact_state`: penalties, multipliers and their Uzawa updates, active sets, step limit,
+//!   the second-order correction of trial states on curved bodies;
+//! - `active_set`: the contact set of each Newton correction (primal-dual active-set
+//!   iterations, low-rank updates of the factorized tangent);
 //! - `factor`: the tangent's factorization (LDLᵀ, by halves on two cores for large models, or
 //!   LU; from [`femu_sparse`]), analysed once per model;
 //! - `newton`: increments, Newton–Raphson with line search and cut-back, the solve reports;

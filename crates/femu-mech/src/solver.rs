@@ -18,6 +18,7 @@
 //! The sensitivities read a converged state through [`Linearization`] (`linearization`):
 //! the state, its tangent, the factors and the active contact constraints.
 
+mod active_set;
 mod assembly;
 mod contact_state;
 mod factor;
@@ -142,6 +143,8 @@ pub struct StaticSolver {
     pub options: SolverOptions,
     assembly: Assembly,
     contact: ContactState,
+    /// The contact set of each Newton correction (see [`active_set`]).
+    active_set: active_set::ActiveSetSolver,
     factor: TangentFactor,
     work: NewtonWork,
     setup_time_s: f64,
@@ -186,6 +189,7 @@ impl StaticSolver {
             work: NewtonWork::new(assembly.dofs.n_eq, model.state_len()),
             assembly,
             contact,
+            active_set: Default::default(),
             factor,
             setup_time_s: t0.elapsed().as_secs_f64(),
         })
@@ -355,6 +359,43 @@ mod tests {
         assert!(
             diff <= 1e-10 * scale,
             "sensitivities differ by {diff:e} of {scale:e}"
+        );
+    }
+
+    /// A node no element uses (an Abaqus reference point) is held at zero and changes nothing
+    /// else (issue 32.1: it used to make a singular row, NaN in `displacements.csv` and a VTU
+    /// writer error); a point load on it is refused when the model is built.
+    #[test]
+    fn a_node_no_element_uses_is_held_at_zero() {
+        let deck = |extra_node: &str, extra_load: &str| {
+            format!(
+                "*NODE\n1, 0, 0\n2, 1, 0\n3, 1, 1\n4, 0, 1\n{extra_node}\
+                 *ELEMENT, TYPE=CPE4, ELSET=A\n1, 1, 2, 3, 4\n\
+                 *MATERIAL, NAME=M\n*HYPERELASTIC, NEO HOOKE\n0.01, 1.0\n\
+                 *SOLID SECTION, ELSET=A, MATERIAL=M\n*BOUNDARY\n1, 1, 2\n2, 2, 2\n\
+                 *STEP, NLGEOM\n*STATIC\n1.0, 1.0\n*CLOAD\n3, 1, 1e-3\n{extra_load}*END STEP\n"
+            )
+        };
+        let solve = |text: &str| {
+            let model =
+                Model::from_deck(femu_mesh::inp::parse_inp(text, "t.inp").unwrap()).unwrap();
+            let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+            let sol = solver.solve(&model).unwrap();
+            (model, sol)
+        };
+        let (plain, without) = solve(&deck("", ""));
+        let (model, with) = solve(&deck("9, 5, 5\n", ""));
+        assert!(plain.unused_nodes().is_empty());
+        assert_eq!(model.unused_nodes(), vec![4]);
+        assert_eq!(&with.u[8..10], &[0.0, 0.0]);
+        // The same equations in the same order: the same state to the bit.
+        assert_eq!(&with.u[..8], &without.u[..]);
+        let loaded =
+            femu_mesh::inp::parse_inp(&deck("9, 5, 5\n", "9, 2, 1e-3\n"), "t.inp").unwrap();
+        let e = Model::from_deck(loaded).unwrap_err();
+        assert!(
+            matches!(e, crate::model::ModelError::LoadOnUnusedNode(9)),
+            "{e}"
         );
     }
 }

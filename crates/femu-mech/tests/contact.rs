@@ -152,17 +152,23 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
 }
 
 /// The last increment updates the contact multipliers inside its Newton iterations: with the
-/// default tolerances the plate's penalty alone leaves a penetration above the limit, so at
-/// least one Uzawa update is made, yet no iteration before the increment's last one reaches the
-/// residual tolerance (the old converge, update, converge again sequence would show one), and
-/// the converged state meets the penetration limit and the force balance.
+/// default tolerances the plate's penalty alone leaves the contact forces off by more than the
+/// residual tolerance allows (the multipliers are converged with the equilibrium, see
+/// `penetration_limit`), so several Uzawa updates are made, yet at most one iteration follows
+/// the first that meets the residual tolerance (the old converge, update, converge again
+/// sequence spends at least two per update after the first), and the converged state meets
+/// the penetration limit and the force balance.
 #[test]
 fn last_increment_updates_multipliers_inside_newton() {
     let model = plate_on_block(TravelControl::Force(0.1));
     let options = SolverOptions::default();
     let sol = solve(&model, options);
     let body = &sol.bodies[0];
-    assert!(body.augmentations >= 1, "no Uzawa update was needed");
+    assert!(
+        body.augmentations >= 2,
+        "{} Uzawa updates",
+        body.augmentations
+    );
     assert!(
         body.max_penetration <= body.penetration_limit,
         "penetration {} > {}",
@@ -177,16 +183,18 @@ fn last_increment_updates_multipliers_inside_newton() {
     let last = sol.report.increments.last().unwrap();
     assert!(last.converged && last.lambda == 1.0);
     let its = &last.iterations;
-    for it in &its[..its.len() - 1] {
-        assert!(
-            it.residual_norm > options.residual_tolerance * it.reference_force,
-            "iteration {} of the last increment had converged already: {:?}",
-            it.iteration,
-            its.iter()
-                .map(|i| i.residual_norm / i.reference_force)
-                .collect::<Vec<_>>()
-        );
-    }
+    let first_converged = its
+        .iter()
+        .position(|it| it.residual_norm <= options.residual_tolerance * it.reference_force)
+        .expect("the last iteration converged");
+    assert!(
+        its.len() - first_converged <= 2,
+        "{} iterations after the first converged one: {:?}",
+        its.len() - first_converged - 1,
+        its.iter()
+            .map(|i| i.residual_norm / i.reference_force)
+            .collect::<Vec<_>>()
+    );
 }
 
 /// A symmetric block pressed by a centred plate with 0.1 N/mm: contact forces sum to the
@@ -504,6 +512,68 @@ fn coarse_thigh_indentation_stops_at_its_limit_point() {
         }
         Ok(s) => panic!("converged to force {}", s.bodies[0].force),
         Err(e) => panic!("unexpected error: {e}"),
+    }
+}
+
+/// Newton iterations of the seed's rigid-body tests on the 4 000-quad thigh (the demo's mesh)
+/// with the default settings, and their final states against tightly converged references of
+/// the same problems (residual 1e-12 and contact converged to 1e-12 of the element size).
+///
+/// Before the contact set of each Newton correction was solved for (see
+/// `femu_mech::solver` and its `active_set` module), the indentation took 135 iterations
+/// (21 increments, 6 cut-backs) and the compression 32 (8 increments, 1 cut-back), and their
+/// final states were off the exact-contact ones by 2.2e-4 and 1.6e-6 of the largest
+/// displacement (the multipliers were converged to 1e-3 of the element size). Now: 32 and 17
+/// iterations without a cut-back, within 2e-10 and 4e-11.
+#[test]
+fn thigh_contact_tests_iterations_and_final_state() {
+    use femu_mech::loading::Loading;
+    let tight = SolverOptions {
+        residual_tolerance: 1e-12,
+        energy_tolerance: 1e-24,
+        ..Default::default()
+    };
+    // (test, most iterations allowed): a few over the 32 and 17 measured, so that a change in
+    // rounding (another CPU's kernels) does not fail the test while a return of the cut-backs
+    // (each costs 8-10 iterations) does.
+    for (loading, bound) in [
+        (Loading::anterior_indentation(0.1), 36),
+        (Loading::seed_compression(), 20),
+    ] {
+        let model = common::thigh_model(4000, ElementKind::Cpe4h, &loading);
+        let sol = solve(&model, SolverOptions::default());
+        let report = &sol.report;
+        println!(
+            "{}: {} increments, {} cut-backs, {} Newton iterations, travel {:.6} mm",
+            loading.name(),
+            report.converged_increments,
+            report.cutbacks,
+            report.newton_iterations,
+            sol.bodies[0].travel
+        );
+        assert_eq!(report.cutbacks, 0, "{}", loading.name());
+        assert!(
+            report.newton_iterations <= bound,
+            "{}: {} iterations",
+            loading.name(),
+            report.newton_iterations
+        );
+        let mut exact = model.clone();
+        exact.contacts[0].penetration_tolerance = 1e-12;
+        let reference = solve(&exact, tight);
+        let scale = reference.u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = sol
+            .state
+            .iter()
+            .zip(&reference.state)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // The bound: the same final state to 1e-8 of the largest displacement (the
+        // nodal displacements and the travel).
+        assert!(
+            diff <= 1e-8 * scale,
+            "{}: final state off by {diff:.3e} of {scale:.3e} mm",
+            loading.name()
+        );
     }
 }
 

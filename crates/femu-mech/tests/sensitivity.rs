@@ -135,7 +135,7 @@ fn contention_cpe4_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4,
         Loading::seed_contention(),
-        500,
+        700,
         "contention CPE4",
     );
 }
@@ -145,7 +145,7 @@ fn contention_cpe4h_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4h,
         Loading::seed_contention(),
-        500,
+        700,
         "contention CPE4H",
     );
 }
@@ -155,7 +155,7 @@ fn compression_cpe4_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4,
         Loading::seed_compression(),
-        500,
+        700,
         "compression CPE4",
     );
 }
@@ -165,7 +165,7 @@ fn compression_cpe4h_matches_finite_differences() {
     check_against_fd(
         ElementKind::Cpe4h,
         Loading::seed_compression(),
-        500,
+        700,
         "compression CPE4H",
     );
 }
@@ -233,7 +233,7 @@ fn mooney_rivlin_and_yeoh_sensitivities_match_finite_differences() {
             "Yeoh and Mooney-Rivlin, compression CPE4",
         ),
     ] {
-        let model = thigh_with(kind, &loading, 500, materials.clone());
+        let model = thigh_with(kind, &loading, 700, materials.clone());
         let names: Vec<String> = all_parameters(&model)
             .iter()
             .map(|p| p.name(&model))

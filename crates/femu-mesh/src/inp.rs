@@ -19,7 +19,7 @@
 //! | `*SURFACE, NAME=[, TYPE=ELEMENT]` | `element or element set, S1..S4` |
 //! | `*MATERIAL, NAME=` then `*HYPERELASTIC, <law>` | the law's constants, stored as given in [`MaterialDef`]; which laws exist and what their constants may be is the material registry's (`femu_mech::material`), checked when a model is built, with errors naming the data line |
 //! | `*SOLID SECTION, ELSET=, MATERIAL=` | optional thickness line; must be 1 (per-mm plane strain) |
-//! | `*BOUNDARY` (model or step data) | `node or node set, first dof[, last dof][, value]`; dofs above 2 ignored |
+//! | `*BOUNDARY` (model or step data) | `node or node set, first dof[, last dof][, value]`; dofs 1 (x) and 2 (y); a range from 1 or 2 may run to 6 (3–6 are absent in plane strain), a line constraining neither 1 nor 2, or naming a dof above 6, is an error |
 //! | `*STEP[, NLGEOM[=YES\|NO]][, INC=n]` … `*END STEP` | exactly one step |
 //! | `*STATIC` | `initial, period, min, max` (Abaqus defaults for missing values) |
 //! | `*DLOAD` | `element or element set, P1..P4, pressure` or `surface, P, pressure` |
@@ -780,10 +780,16 @@ impl<'f> Parser<'f> {
                         ),
                     ));
                 }
-                if (last as i128 - first as i128) / step as i128 > 100_000_000 {
-                    return Err(
-                        self.err(r.line, format!("{}, GENERATE: range too large", b.display))
-                    );
+                let count = (last as i128 - first as i128) / step as i128 + 1;
+                if count > MAX_GENERATED as i128 {
+                    return Err(self.err(
+                        r.line,
+                        format!(
+                            "{}, GENERATE: {first}, {last}, {step} makes {count} members, above the limit of {MAX_GENERATED} (some {} MB)",
+                            b.display,
+                            count.saturating_mul(16) / 1_000_000
+                        ),
+                    ));
                 }
                 members.extend((first..=last).step_by(step as usize).map(|l| (l, r.line)));
             } else {
@@ -1023,6 +1029,7 @@ impl<'f> Parser<'f> {
                     format!("*BOUNDARY: last dof {last} is smaller than first dof {first}"),
                 ));
             }
+            check_plane_strain_dofs(first, last).map_err(|m| self.err(r.line, m))?;
             let value = self.opt_num(&r.fields, 3)?.unwrap_or(0.0);
             self.boundaries.push(RawBoundary {
                 target,
@@ -1497,6 +1504,35 @@ impl<'f> Parser<'f> {
 }
 
 /// `P3` → face 2 (0-based), for prefix `P` or `S`.
+/// The dofs of a `*BOUNDARY` line in plane strain: 1 (x) and 2 (y) exist; a range starting
+/// at 1 or 2 may run up to 6 (e.g. `1, 6`, Abaqus's "all displacements and rotations"), its
+/// out-of-plane dofs 3–6 being absent from the plane-strain nodes; a line that constrains
+/// neither in-plane dof, or names a dof above 6 (7 warping, 8 pore pressure, 11 temperature),
+/// would leave the node free without a word and is refused.
+fn check_plane_strain_dofs(first: usize, last: usize) -> std::result::Result<(), String> {
+    let range = if first == last {
+        format!("dof {first}")
+    } else {
+        format!("dofs {first} to {last}")
+    };
+    if first > 2 {
+        return Err(format!(
+            "*BOUNDARY: {range}: not a dof of plane strain (only 1 = x and 2 = y): the node would stay free"
+        ));
+    }
+    if last > 6 {
+        return Err(format!(
+            "*BOUNDARY: dof {last} is not a displacement dof (plane strain has dofs 1 = x and 2 = y; ranges up to 6 are accepted)"
+        ));
+    }
+    Ok(())
+}
+
+/// The most members a `GENERATE` line may make (16 bytes each): ten million, far above any
+/// deck femu can solve (500 000 quads), so that `1, 1000000000` is refused before it is
+/// allocated (issue 28.4).
+const MAX_GENERATED: usize = 10_000_000;
+
 fn face_number(text: &str, prefix: char) -> Option<usize> {
     let rest = text
         .strip_prefix(prefix)

@@ -303,7 +303,8 @@ impl<'a> Reader<'a> {
                         t.float("an entity coordinate")?;
                     }
                     let np = t.count("a number of physical tags")?;
-                    let mut tags = Vec::with_capacity(np);
+                    // A count from the file: capacity capped, the file must hold the tags.
+                    let mut tags = Vec::with_capacity(np.min(64));
                     for _ in 0..np {
                         tags.push(t.int("a physical tag")?.0);
                     }

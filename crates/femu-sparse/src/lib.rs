@@ -3,9 +3,9 @@
 //! per node, optionally bordered by a few dense equations), factorized many times.
 //!
 //! - [`linear`]: the pattern ([`CscPattern`], [`NodeGraph`]: sparsity, AMD ordering), faer's
-//!   supernodal LDLᵀ and sparse LU with their symbolic analyses and workspaces reused, and
-//!   [`SparseSolver`], which checks the symmetry of each matrix and factorizes it by LDLᵀ when
-//!   symmetric, by LU otherwise.
+//!   supernodal LDLᵀ and sparse LU with their symbolic analyses and workspaces reused.
+//! - [`solver`]: [`SparseSolver`], which checks the symmetry of each matrix and factorizes it by
+//!   LDLᵀ when symmetric (by halves for large models), by LU otherwise.
 //! - [`split`]: the LDLᵀ of a bisected mesh by halves on two cores, coupled through a dense
 //!   Schur complement on the separator ([`SplitLdlt`]; the first level of nested dissection).
 //! - [`supernodal`]: faer's left-looking supernodal LDLᵀ stopped at the separator
@@ -24,13 +24,12 @@
 
 pub mod linear;
 pub mod simd;
+pub mod solver;
 pub mod split;
 pub mod supernodal;
 
-pub use linear::{
-    CscPattern, Factorization, LinearSolveError, NodeGraph, SparseLdlt, SparseLu, SparseSolver,
-    MAX_RHS,
-};
+pub use linear::{CscPattern, LinearSolveError, NodeGraph, SparseLdlt, SparseLu, MAX_RHS};
 pub use simd::{has_avx2, with_avx2};
+pub use solver::{Factorization, SparseSolver};
 pub use split::{DofSplit, SplitLdlt};
 pub use supernodal::{LowerView, PartialLdlt};

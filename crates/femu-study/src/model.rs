@@ -3,14 +3,15 @@
 //! yet; and the skin faces the loading tests act on.
 
 use crate::schema::{
-    Geometry, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
-    DEFAULT_LABEL_SIZE_MM, ELEMENTS_RANGE,
+    Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
+    DEFAULT_LABEL_SIZE_MM,
 };
 use anyhow::{bail, Context, Result};
-use femu_geometry::{table1_materials, MeshOptions, ThighModel};
+use femu_geometry::{MeshOptions, ThighModel};
 use femu_mech::loading::apply_loading;
+use femu_mech::model::{ModelSpec as MechSpec, NamedMaterial};
 use femu_mech::Model;
-use femu_mesh::{Deck, ElementKind, MaterialDef};
+use femu_mesh::{Deck, ElementKind, FacePressure};
 use std::path::Path;
 
 /// A study's model before any loading.
@@ -34,9 +35,14 @@ impl StudyModel {
     }
 }
 
-/// Table 1 with the study's `[materials]` (regions checked against `regions`).
-fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialDef>> {
-    let mut materials = table1_materials();
+/// One material per region of `regions` (in that order, named as the region): Table 1 with
+/// the study's `[materials]` (regions checked against `regions`). A Table 1 region's table
+/// overrides its parameters (or gives it another law); a region outside Table 1 (`6=adductor`
+/// in a label map) gets the whole material its table gives (Neo-Hookean unless `law` names
+/// another; issue 32.13); a region with neither is an error naming the table to add. `femu
+/// mesh labels --materials` and the study share it.
+pub fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<NamedMaterial>> {
+    let mut materials = crate::schema::table1();
     for spec in specs {
         let region = &spec.region;
         if !regions.iter().any(|r| r.eq_ignore_ascii_case(region)) {
@@ -45,22 +51,72 @@ fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<MaterialD
                 regions.join(", ")
             );
         }
-        let m = materials
+        match materials
             .iter_mut()
             .find(|m| m.name.eq_ignore_ascii_case(region))
-            .with_context(|| format!("[materials.{region}]: not a Table 1 region"))?;
-        *m = spec
-            .apply(m)
-            .with_context(|| format!("[materials.{region}]"))?;
-    }
-    for r in regions {
-        if !materials.iter().any(|m| m.name.eq_ignore_ascii_case(r)) {
-            bail!(
-                "region {r} has no material: map its label to a Table 1 region (fat, quadriceps, ischio, gracilis, sartorius)"
-            );
+        {
+            Some(m) => {
+                m.law = spec
+                    .apply(&*m.law)
+                    .with_context(|| format!("[materials.{region}]"))?
+            }
+            None => materials.push(NamedMaterial {
+                name: region.to_ascii_uppercase(),
+                law: spec.build().with_context(|| {
+                    format!("[materials.{region}]: {region} is not in Table 1, so its table gives its whole material")
+                })?,
+            }),
         }
     }
-    Ok(materials)
+    regions
+        .iter()
+        .map(|r| {
+            let m = materials.iter().find(|m| m.name.eq_ignore_ascii_case(r)).with_context(|| {
+                format!(
+                    "region {r} has no material (it is not in the seed's Table 1): add a [materials.{r}] table with c10_kpa and d_per_mpa (or law = \"...\" and its keys), or map its label to a Table 1 region"
+                )
+            })?;
+            Ok(NamedMaterial {
+                name: r.clone(),
+                law: m.law.clone(),
+            })
+        })
+        .collect()
+}
+
+/// A meshed thigh as a model: `regions`' materials, the femur (node set `FEMUR`) fixed, no
+/// load, and its skin faces (surface `SKIN`).
+fn thigh_as_model(
+    thigh: &ThighModel,
+    regions: Vec<NamedMaterial>,
+) -> Result<(Model, Vec<(usize, usize)>)> {
+    let spec = MechSpec::with_regions(
+        thigh.mesh.mesh.clone(),
+        thigh.mesh.surfaces.clone(),
+        regions,
+        "FEMUR",
+    )?;
+    let model = Model::new(spec)?;
+    let skin = model.surface("SKIN").unwrap_or_default().to_vec();
+    if skin.is_empty() {
+        bail!("the model has no skin surface");
+    }
+    Ok((model, skin))
+}
+
+/// The contention deck of a model (written for Abaqus/CalculiX): its own content with a
+/// follower pressure `pressure_mpa` on every skin face.
+pub fn contention_deck(model: &Model, skin: &[(usize, usize)], pressure_mpa: f64) -> Deck {
+    let mut deck = model.to_deck();
+    deck.pressures = skin
+        .iter()
+        .map(|&(element, face)| FacePressure {
+            element,
+            face,
+            magnitude: pressure_mpa,
+        })
+        .collect();
+    deck
 }
 
 /// The built-in thigh of `spec`'s dimensions meshed at `resolution`.
@@ -90,70 +146,116 @@ pub fn build(spec: &ModelSpec) -> Result<StudyModel> {
             mesh_thigh(dims, spec.resolution, kind)?,
             "parametric thigh".to_string(),
         ),
-        Geometry::Labels(l) => {
-            let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
-                .context("[labels] map/bone/background")?;
-            let img = femu_geometry::read_label_image(&l.image, l.slice)
-                .with_context(|| format!("[labels] image {}", l.image.display()))?;
-            let options = MeshOptions {
-                element_size_mm: match spec.resolution {
-                    Resolution::SizeMm(h) => h,
-                    _ => DEFAULT_LABEL_SIZE_MM,
-                },
-                kind,
-                min_island_mm2: l.min_island_mm2,
-                ..MeshOptions::default()
-            };
-            (
-                femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
-                    .with_context(|| format!("meshing {}", l.image.display()))?,
-                format!("label image {}", l.image.display()),
-            )
-        }
+        Geometry::Labels(l) => (
+            mesh_labels(l, label_size(spec.resolution), kind)?,
+            format!("label image {}", l.image.display()),
+        ),
         Geometry::Deck(path) => return deck_model(&spec.materials, path),
     };
-    let materials = materials(&spec.materials, &thigh.regions)?;
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    if skin.is_empty() {
-        bail!("the model has no skin surface");
+    from_thigh(spec, thigh, source)
+}
+
+/// The element size of a meshed label image (mm).
+fn label_size(resolution: Resolution) -> f64 {
+    match resolution {
+        Resolution::SizeMm(h) => h,
+        _ => DEFAULT_LABEL_SIZE_MM,
     }
-    let mut deck = femu_geometry::contention_deck(&thigh, &materials, 0.0)?;
-    deck.pressures.clear();
+}
+
+/// The label image of `l` meshed with elements of `size_mm`.
+fn mesh_labels(l: &LabelsSpec, size_mm: f64, kind: ElementKind) -> Result<ThighModel> {
+    let labels = femu_geometry::LabelSpec::new(&l.map, &l.bone, &l.background)
+        .context("[labels] map/bone/background")?;
+    let img = femu_geometry::read_label_image(&l.image, l.slice)
+        .with_context(|| format!("[labels] image {}", l.image.display()))?;
+    let options = MeshOptions {
+        element_size_mm: size_mm,
+        kind,
+        min_island_mm2: l.min_island_mm2,
+        ..MeshOptions::default()
+    };
+    femu_geometry::mesh_label_image(&img, &labels, l.pixel_size_mm, &options)
+        .with_context(|| format!("meshing {}", l.image.display()))
+}
+
+/// The model of a meshed thigh with the study's materials, femur fixed, no load.
+fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
+    let regions = materials(&spec.materials, &thigh.regions)?;
+    let (model, skin) = thigh_as_model(&thigh, regions)?;
     Ok(StudyModel {
-        model: Model::from_deck(deck)?,
+        model,
         skin,
         thigh: Some(thigh),
         source,
     })
 }
 
+/// The study's model `built` of `spec` on a finer mesh of the same geometry: the element size
+/// divided by `ratio` (the built-in thigh on the raster of `built`'s mesh, as the convergence
+/// study; a label image at the finer size). `None` for a deck, which femu cannot refine.
+pub fn build_refined(
+    spec: &ModelSpec,
+    built: &StudyModel,
+    ratio: f64,
+) -> Result<Option<StudyModel>> {
+    let kind = spec.element.kind();
+    let Some(h) = built.thigh.as_ref().map(|t| t.element_size_mm) else {
+        return Ok(None);
+    };
+    let thigh = match &spec.geometry {
+        Geometry::Thigh(dims) => femu_convergence::refined_thigh(dims, kind, h, ratio)
+            .context("meshing the refined parametric thigh")?,
+        Geometry::Labels(l) => mesh_labels(l, h / ratio, kind)?,
+        Geometry::Deck(_) => return Ok(None),
+    };
+    let source = format!("{} refined {ratio:.3}x", built.source);
+    from_thigh(spec, thigh, source).map(Some)
+}
+
 /// A deck: its materials (overridden by `[materials.NAME]`, NAME a material or a region), its
 /// boundary conditions; the skin is the set of faces its `*DLOAD` loads, then removed.
 fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
-    let mut deck = femu_mesh::read_inp(path)?;
-    if deck.pressures.is_empty() {
+    let (spec, skin) = read_deck(specs, path)?;
+    Ok(StudyModel {
+        model: Model::new(spec)?,
+        skin,
+        thigh: None,
+        source: format!("deck {}", path.display()),
+    })
+}
+
+/// A study's deck as a model spec, the study's `[materials]` applied, its `*DLOAD` faces made
+/// the surface `SKIN` (the loads removed), and those faces.
+pub(crate) fn read_deck(
+    specs: &[MaterialSpec],
+    path: &Path,
+) -> Result<(MechSpec, Vec<(usize, usize)>)> {
+    let mut spec = MechSpec::from_deck(femu_mesh::read_inp(path)?)?;
+    if spec.pressures.is_empty() {
         bail!(
             "{}: the deck has no *DLOAD: its pressure faces define the skin the tests load (write a contention deck, e.g. with femu mesh)",
             path.display()
         );
     }
-    let skin: Vec<(usize, usize)> = deck.pressures.iter().map(|p| (p.element, p.face)).collect();
-    deck.pressures.clear();
-    for spec in specs {
-        let name = &spec.region;
-        let by_material = deck
+    let skin: Vec<(usize, usize)> = spec.pressures.iter().map(|p| (p.element, p.face)).collect();
+    spec.pressures.clear();
+    spec.surfaces.insert("SKIN".into(), skin.clone());
+    for m_spec in specs {
+        let name = &m_spec.region;
+        let by_material = spec
             .materials
             .iter()
             .position(|m| m.name.eq_ignore_ascii_case(name));
-        let by_region = deck
+        let by_region = spec
             .region_names
             .iter()
             .position(|r| r.eq_ignore_ascii_case(name))
             .and_then(|r| {
-                deck.element_region
+                spec.element_region
                     .iter()
                     .position(|&e| e == r)
-                    .map(|e| deck.element_material[e])
+                    .map(|e| spec.element_material[e])
             });
         let m = by_material.or(by_region).with_context(|| {
             format!(
@@ -161,33 +263,11 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
                 path.display()
             )
         })?;
-        deck.materials[m] = spec
-            .apply(&deck.materials[m])
+        spec.materials[m].law = m_spec
+            .apply(&*spec.materials[m].law)
             .with_context(|| format!("[materials.{name}]"))?;
     }
-    Ok(StudyModel {
-        model: Model::from_deck(deck)?,
-        skin,
-        thigh: None,
-        source: format!("deck {}", path.display()),
-    })
-}
-
-/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind`, as a
-/// contention deck: Table 1 materials, femur fixed, 20 mmHg on the skin; and its skin faces.
-pub fn thigh_deck(elements: usize, kind: ElementKind) -> Result<(Deck, Vec<(usize, usize)>)> {
-    if !ELEMENTS_RANGE.contains(&elements) {
-        bail!("the number of elements must be in [100, 500000], got {elements}");
-    }
-    let params = femu_geometry::ThighParams {
-        target_elements: Some(elements),
-        ..Default::default()
-    };
-    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
-    let skin = thigh.mesh.surfaces.get("SKIN").cloned().unwrap_or_default();
-    let deck =
-        femu_geometry::contention_deck(&thigh, &table1_materials(), femu_geometry::CONTENTION_MPA)?;
-    Ok((deck, skin))
+    Ok((spec, skin))
 }
 
 /// A Gmsh mesh set up by the study's Gmsh view (`[materials]` per physical surface, `[[fixed]]`,
@@ -248,9 +328,17 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
     Ok(model)
 }
 
-/// The built-in thigh as a model without loads (femur fixed), and its skin faces.
+/// The built-in parametric thigh (femu-geometry) with about `elements` quads of `kind` as a
+/// model: Table 1 materials, the femur fixed, no load; and its skin faces.
 pub fn thigh_model(elements: usize, kind: ElementKind) -> Result<(Model, Vec<(usize, usize)>)> {
-    let (mut deck, skin) = thigh_deck(elements, kind)?;
-    deck.pressures.clear();
-    Ok((Model::from_deck(deck)?, skin))
+    let params = femu_geometry::ThighParams {
+        target_elements: Some(elements),
+        ..Default::default()
+    };
+    if let Err(m) = crate::schema::thigh_elements(&params, elements) {
+        bail!("the number of elements: {m}");
+    }
+    let thigh = femu_geometry::parametric_thigh(&params, kind)?;
+    let regions = materials(&[], &thigh.regions)?;
+    thigh_as_model(&thigh, regions)
 }

@@ -78,6 +78,9 @@ pub struct IdentificationOverview {
     pub forward_solves_per_start: Vec<usize>,
     pub wall_time_s: f64,
     pub optimizer: String,
+    /// The discretization check's finding.
+    #[serde(default)]
+    pub discretization: Option<String>,
 }
 
 /// `summary.json` of a run folder: the numbers a user quotes, per step.
@@ -95,6 +98,8 @@ pub struct RunSummary {
     pub measurement: Option<MeasurementOverview>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub identification: Option<BTreeMap<String, IdentificationOverview>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub design: Option<Vec<String>>,
 }
 
 /// Writes `DIR/report.html` and `DIR/summary.json`; returns the report's path.
@@ -115,6 +120,7 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
         sensitivity: sensitivity_section(&mut html, &dir.join("sensitivity")),
         measurement: measurement_section(&mut html, &dir.join("measurement")),
         identification: identification_section(&mut html, dir)?,
+        design: design_section(&mut html, &dir.join("design")),
     };
     html.convergence(dir);
     if let Ok(text) = std::fs::read_to_string(dir.join("study.toml")) {
@@ -714,6 +720,7 @@ fn identification_section(
     let mut out = BTreeMap::new();
     for (grouping, s) in &results {
         html.h3(&format!("{grouping} parameters"));
+        measurements_table(html, s);
         let solves: Vec<String> = s
             .forward_solves_per_start
             .iter()
@@ -725,31 +732,18 @@ fn identification_section(
             solves.join(", "),
             s.wall_time_s
         ));
-        let rows: Vec<Vec<String>> = s
-            .parameters
-            .iter()
-            .map(|p| {
-                vec![
-                    p.name.clone(),
-                    p.reference.map(g).unwrap_or("-".into()),
-                    g(p.identified),
-                    p.relative_error.map(pct).unwrap_or("-".into()),
-                    format!("[{}, {}]", g(p.ci95[0]), g(p.ci95[1])),
-                    pct(p.relative_sd),
-                ]
-            })
-            .collect();
-        html.table(
-            &[
-                "parameter (C10 MPa, D 1/MPa)",
-                "reference",
-                "identified",
-                "error (Eq. 4)",
-                "95 % interval",
-                "relative sd",
-            ],
-            &rows,
-        );
+        if !s.warnings.is_empty() {
+            html.p(&format!(
+                "<b>Warning</b>: {}",
+                s.warnings
+                    .iter()
+                    .map(|w| esc(w))
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ));
+        }
+        parameters_table(html, s);
+        discretization_paragraph(html, s);
         let d = dir.join("identify").join(grouping);
         html.figure(
             &d.join("fields.png"),
@@ -763,6 +757,7 @@ fn identification_section(
                 forward_solves_per_start: s.forward_solves_per_start.clone(),
                 wall_time_s: s.wall_time_s,
                 optimizer: s.optimizer.clone(),
+                discretization: s.discretization.as_ref().map(|d| d.message.clone()),
             },
         );
     }
@@ -782,6 +777,209 @@ fn identification_section(
         }
     }
     Ok(Some(out))
+}
+
+/// The identified parameters: reference, value, error, interval (widened by the
+/// discretization bias when it is not negligible), sd; over repeats the worst error and the
+/// interval coverage.
+fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
+    let repeats = s.parameters.iter().any(|p| p.coverage95.is_some());
+    // In the units of the seed's Table 1 (C10 kPa, D MPa⁻¹).
+    let rows: Vec<Vec<String>> = s
+        .parameters
+        .iter()
+        .zip(&s.free_parameters)
+        .map(|(p, f)| {
+            let mut row = vec![
+                p.name.clone(),
+                esc(&f.unit),
+                p.reference.map(|v| g(f.shown(v))).unwrap_or("-".into()),
+                g(f.shown(p.identified)),
+                p.relative_error.map(pct).unwrap_or("-".into()),
+                format!("[{}, {}]", g(f.shown(p.ci95[0])), g(f.shown(p.ci95[1]))),
+                pct(p.relative_sd),
+                p.discretization_bias.map(pct).unwrap_or("-".into()),
+            ];
+            if repeats {
+                row.push(p.max_relative_error.map(pct).unwrap_or("-".into()));
+                row.push(
+                    p.coverage95
+                        .map(|c| format!("{:.0} %", 100.0 * c))
+                        .unwrap_or("-".into()),
+                );
+            }
+            row
+        })
+        .collect();
+    let mut header = vec![
+        "parameter",
+        "unit",
+        "reference",
+        "identified",
+        "error (Eq. 4)",
+        "95 % interval",
+        "relative sd",
+        "mesh bias",
+    ];
+    if repeats {
+        header.push("worst error over repeats");
+        header.push("interval coverage");
+    }
+    html.table(&header, &rows);
+}
+
+/// Each measurement's points and share of the information (a joint identification).
+fn measurements_table(html: &mut Html, s: &IdentificationSummary) {
+    if s.measurements.len() < 2 {
+        return;
+    }
+    html.p(
+        "Measurements fitted together (one cost, the exact Jacobian): each one's points and its \
+         share of the Fisher information of each parameter (the diagonal of JᵀJ; shares add to \
+         100 %), then the relative sd it would give alone.",
+    );
+    let mut header = vec!["measurement".to_string(), "points".to_string()];
+    header.extend(s.free_parameters.iter().map(|f| f.name.clone()));
+    let rows: Vec<Vec<String>> = s
+        .measurements
+        .iter()
+        .flat_map(|m| {
+            let mut share = vec![m.label.clone(), m.points_in_tissue.to_string()];
+            share.extend(
+                m.information
+                    .share
+                    .iter()
+                    .map(|v| format!("{:.1} %", 100.0 * v)),
+            );
+            let mut alone = vec![format!("{} alone: sd", m.name), String::new()];
+            alone.extend(m.information.alone_relative_sd.iter().map(|v| pct(*v)));
+            [share, alone]
+        })
+        .collect();
+    let h: Vec<&str> = header.iter().map(String::as_str).collect();
+    html.table(&h, &rows);
+}
+
+/// The discretization check: what refined meshes say about the bias of the mesh.
+fn discretization_paragraph(html: &mut Html, s: &IdentificationSummary) {
+    let Some(d) = &s.discretization else {
+        return;
+    };
+    let class = if d.status == "negligible" {
+        ""
+    } else {
+        " class=\"bad\""
+    };
+    let meshes: Vec<String> = d
+        .levels
+        .iter()
+        .map(|l| format!("{} elements", l.elements))
+        .collect();
+    html.p(&format!(
+        "<b>Discretization</b> (mesh of {} elements{}): <span{class}>{}</span>.",
+        d.elements,
+        if meshes.is_empty() {
+            String::new()
+        } else {
+            format!(", refined: {}", meshes.join(", "))
+        },
+        esc(&d.message)
+    ));
+}
+
+/// The design step: the best designs, the best single test per family, the figures.
+fn design_section(html: &mut Html, dir: &Path) -> Option<Vec<String>> {
+    let s: crate::steps::design::DesignSummary = html.read(&dir.join("summary.json"))?;
+    html.h2("Design of the experiment: tests and probe windows");
+    html.p(&format!(
+        "Each test solved once at the reference and differentiated exactly; each probe window a \
+         grid of points in the tissue it sees, with noise σ = {} mm. {} designs of up to {} \
+         measurements ranked by the predicted parameter uncertainty (Cramér–Rao): the \
+         A-optimal criterion (RMS relative sd) and the D-optimal one (geometric mean of the \
+         sds along the ellipsoid's axes); {} free parameters{}.",
+        g(s.noise_sigma_mm),
+        s.designs_ranked,
+        s.designs
+            .iter()
+            .map(|d| d.measurements.len())
+            .max()
+            .unwrap_or(1),
+        s.parameters.len(),
+        if s.grouped { ", groups tied" } else { "" }
+    ));
+    let items: String = s
+        .finding
+        .iter()
+        .map(|l| format!("<li>{}</li>", esc(l)))
+        .collect();
+    let _ = write!(html.body, "<ul>{items}</ul>");
+    let families: Vec<String> = {
+        let mut f: Vec<String> = Vec::new();
+        for (_, fam) in &s.parameters {
+            if !f.contains(fam) {
+                f.push(fam.clone());
+            }
+        }
+        f
+    };
+    let mut header = vec![
+        "rank (A)",
+        "rank (D)",
+        "design",
+        "A: RMS sd",
+        "D: geometric sd",
+    ];
+    let worst: Vec<String> = families.iter().map(|f| format!("worst {f} sd")).collect();
+    header.extend(worst.iter().map(String::as_str));
+    header.push("not identifiable");
+    let rows: Vec<Vec<String>> = s
+        .designs
+        .iter()
+        .take(20)
+        .map(|d| {
+            let mut r = vec![
+                d.rank_a.to_string(),
+                d.rank_d.to_string(),
+                d.measurements.join(" + "),
+                pct(d.a_criterion),
+                pct(d.d_criterion),
+            ];
+            r.extend(families.iter().map(|f| {
+                d.worst_by_family
+                    .iter()
+                    .find(|(x, _)| x == f)
+                    .map_or("-".into(), |w| pct(w.1))
+            }));
+            r.push(if d.not_identifiable.is_empty() {
+                "—".into()
+            } else {
+                d.not_identifiable.join(", ")
+            });
+            r
+        })
+        .collect();
+    html.table(&header, &rows);
+    html.figure(
+        &dir.join("designs.png"),
+        "The best designs: A-optimal criterion and worst predicted sd of each family against the rank.",
+    );
+    html.figure(
+        &dir.join("candidates.png"),
+        "Each probe window of each test alone: worst predicted C10 sd against worst D sd (log–log).",
+    );
+    Some(s.finding)
+}
+
+/// Writes `DIR/report.html` of a `femu design` folder (the design section alone).
+pub fn write_design(dir: &Path) -> Result<PathBuf> {
+    let mut html = Html::default();
+    let _ = write!(html.body, "<h1>femu design</h1>");
+    if design_section(&mut html, dir).is_none() {
+        anyhow::bail!("{} holds no design summary", dir.display());
+    }
+    let path = dir.join("report.html");
+    write_text(&path, &html.finish())?;
+    Ok(path)
 }
 
 /// The Fig. 9 chart of both groupings side by side (`identify/fig9_errors.png`), when the

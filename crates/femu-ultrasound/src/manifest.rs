@@ -57,6 +57,14 @@ pub struct Manifest {
 }
 
 impl Manifest {
+    /// The files a command reads through this manifest: the manifest and its images (an
+    /// output folder must not hold them: `femu_mesh::folder`).
+    pub fn input_files(&self) -> Vec<&Path> {
+        std::iter::once(self.path.as_path())
+            .chain(self.entries.iter().map(|e| e.path.as_path()))
+            .collect()
+    }
+
     /// Reads and checks a manifest (columns, numbers, files present).
     pub fn read(path: &Path) -> Result<Manifest, UsError> {
         let text = std::fs::read_to_string(path).map_err(|e| UsError::Manifest {

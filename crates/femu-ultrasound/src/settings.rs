@@ -30,26 +30,15 @@ pub enum Region {
 }
 
 impl Region {
-    /// Parses `x0,y0,x1,y1` (pixels, corners, x1 > x0, y1 > y0).
+    /// Parses the `--roi` of every command, `x,y,WxH` (pixels: the top-left corner and the
+    /// size; `femu_dic::Rect::parse`, which refuses four plain numbers).
     pub fn parse_rect(s: &str) -> Result<Region, UsError> {
-        let bad = || {
-            UsError::param(
-                "--roi",
-                format!("'{s}' is not x0,y0,x1,y1 (pixels, x1 > x0, y1 > y0)"),
-            )
-        };
-        let v: Vec<usize> = s
-            .split(',')
-            .map(|t| t.trim().parse::<usize>().map_err(|_| bad()))
-            .collect::<Result<_, _>>()?;
-        if v.len() != 4 || v[2] <= v[0] || v[3] <= v[1] {
-            return Err(bad());
-        }
+        let r = femu_dic::Rect::parse(s).map_err(|e| UsError::param("--roi", e.to_string()))?;
         Ok(Region::Rect {
-            x0: v[0],
-            y0: v[1],
-            x1: v[2],
-            y1: v[3],
+            x0: r.x,
+            y0: r.y,
+            x1: r.x + r.w,
+            y1: r.y + r.h,
         })
     }
 
@@ -78,7 +67,9 @@ impl Region {
                     return Err(UsError::param(
                         "--roi",
                         format!(
-                            "{x0},{y0},{x1},{y1} reaches outside the {width} x {height} px image"
+                            "{x0},{y0},{}x{} reaches column {x1} and row {y1}, outside the {width} x {height} px image",
+                            x1 - x0,
+                            y1 - y0
                         ),
                     ));
                 }

@@ -57,7 +57,7 @@ fn real_logiq_frames_give_sane_histograms_inside_the_roi() {
     let m = Manifest::read(&mp).unwrap();
     // The tissue area (README: x 110..690, y 60..520), inside the burned-in text and scales.
     let roi = SettingsOptions {
-        region: Region::parse_rect("115,65,685,515").unwrap(),
+        region: Region::parse_rect("115,65,570x450").unwrap(),
         ..Default::default()
     };
     let all = SettingsOptions::default();
@@ -138,7 +138,7 @@ fn bad_inputs_name_the_file_and_line() {
         "file,frequency_mhz,gain_db,dynamic_db\na.png,9,34,42\n",
     );
     let opts = SettingsOptions {
-        region: Region::parse_rect("0,0,100,10").unwrap(),
+        region: Region::parse_rect("0,0,100x10").unwrap(),
         ..Default::default()
     };
     let e = settings::analyse(&Manifest::read(&p).unwrap(), &opts)
@@ -146,5 +146,6 @@ fn bad_inputs_name_the_file_and_line() {
         .to_string();
     assert!(e.contains("--roi") && e.contains("64 x 64"), "{e}");
     assert!(Region::parse_rect("5,5,2,9").is_err());
+    assert!(Region::parse_rect("5,5,0x9").is_err());
     std::fs::remove_dir_all(&dir).ok();
 }

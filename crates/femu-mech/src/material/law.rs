@@ -9,7 +9,7 @@
 //! (seed §2.3). A law that is not linear in a function of each parameter (Ogden's exponents)
 //! would need a different rate; none is registered.
 
-use super::{Hyperelastic, NonPositiveJacobian};
+use super::hyperelastic::{EnergyPart, Hyperelastic, NonPositiveJacobian};
 use crate::element::{ElementGeometry, ElementResult, MAX_DOFS};
 use std::fmt;
 
@@ -59,15 +59,6 @@ pub enum Bound {
     Closed(f64),
     /// No bound on this side (besides finiteness).
     Unbounded,
-}
-
-/// Which part of the energy a parameter's term `E_k` lives in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum EnergyPart {
-    /// `E_k(I1, J)` of the isochoric part (the hybrid element evaluates it at each Gauss point).
-    Isochoric,
-    /// `E_k(J)` of the volumetric part (the hybrid element evaluates it at the mean dilatation).
-    Volumetric,
 }
 
 /// A parameter as its law declares it.
@@ -400,7 +391,10 @@ impl Clone for Box<dyn Material> {
 /// Two materials are equal when they are the same law with the same parameter values.
 impl PartialEq for dyn Material {
     fn eq(&self, other: &Self) -> bool {
-        std::ptr::eq(self.spec(), other.spec()) && self.parameters() == other.parameters()
+        // By the law's name, not its address: a law's spec is an associated const, which each
+        // crate that monomorphizes `spec()` may promote to its own copy (femu-study's
+        // the_example_study_is_the_default saw two FAT Neo-Hookeans compare unequal).
+        self.spec().name == other.spec().name && self.parameters() == other.parameters()
     }
 }
 

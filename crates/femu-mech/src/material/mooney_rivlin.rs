@@ -1,7 +1,8 @@
 //! Compressible Mooney–Rivlin material in the Abaqus form.
 
-use super::law::{AbaqusField, Bound, EnergyPart, LawSpec, MaterialLaw, ParameterSpec, Unit, C10, D};
-use super::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
+use super::hyperelastic::EnergyPart;
+use super::law::{AbaqusField, Bound, LawSpec, MaterialLaw, ParameterSpec, Unit, C10, D};
+use super::hyperelastic::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
 
 /// Compressible Mooney–Rivlin material (Abaqus `*HYPERELASTIC, MOONEY-RIVLIN`):
 /// `W = C10 (I1bar - 3) + C01 (I2bar - 3) + (1/D) (J - 1)²`, `I1bar = J^(-2/3) I1`,

@@ -1,7 +1,7 @@
 //! Compressible Neo-Hookean material in the Abaqus form (seed Eq. 1).
 
 use super::law::{AbaqusField, LawSpec, MaterialLaw, C10, D};
-use super::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
+use super::hyperelastic::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
 
 /// Compressible Neo-Hookean material in the Abaqus form (seed Eq. 1):
 /// `W = C10 (I1bar - 3) + (1/D) (J - 1)^2`, `I1bar = J^(-2/3) I1`.

@@ -1,7 +1,8 @@
 //! Compressible Yeoh material in the Abaqus form.
 
-use super::law::{AbaqusField, Bound, EnergyPart, LawSpec, MaterialLaw, ParameterSpec, Unit, C10, D};
-use super::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
+use super::hyperelastic::EnergyPart;
+use super::law::{AbaqusField, Bound, LawSpec, MaterialLaw, ParameterSpec, Unit, C10, D};
+use super::hyperelastic::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
 
 /// Compressible Yeoh material (Yeoh 1993; Abaqus `*HYPERELASTIC, YEOH`):
 /// `W = C10 (I1bar - 3) + C20 (I1bar - 3)² + C30 (I1bar - 3)³ + (1/D) (J - 1)²`.

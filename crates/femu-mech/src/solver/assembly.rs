@@ -55,7 +55,8 @@ pub(crate) struct DofMap {
 }
 
 impl DofMap {
-    /// Numbers the dofs of `model`. A condition repeated on one dof keeps its last value.
+    /// Numbers the dofs of `model`. A condition repeated on one dof keeps its last value; the
+    /// dofs of a node no element uses are prescribed at zero ([`Model::unused_nodes`]).
     pub fn new(model: &Model) -> Self {
         let n_nodes_dof = 2 * model.node_count();
         let n_dof = model.state_len();
@@ -70,6 +71,16 @@ impl DofMap {
             }
             eq[d] = prescribed.len();
             prescribed.push((d, bc.value));
+        }
+        // A node no element uses has no stiffness (a singular row): held at zero unless a
+        // condition prescribes it.
+        for n in model.unused_nodes() {
+            for d in [2 * n, 2 * n + 1] {
+                if eq[d] == NONE {
+                    eq[d] = prescribed.len();
+                    prescribed.push((d, 0.0));
+                }
+            }
         }
         for (b, c) in model.contacts.iter().enumerate() {
             if let TravelControl::Displacement(t) = c.control {

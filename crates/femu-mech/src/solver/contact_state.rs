@@ -4,6 +4,7 @@
 //! Newton's cycle detection), the contact terms of the residual and tangent, and the step limit
 //! that keeps a Newton step from driving free nodes deep into a body.
 
+use super::active_set::{Along, Candidate};
 use super::assembly::{DofMap, System, NONE};
 use crate::contact::BodyState;
 use crate::contact::TravelControl;
@@ -27,6 +28,13 @@ pub struct ActiveConstraint {
 /// (equal sets give equal fingerprints; Newton compares the sets of successive iterations).
 pub(crate) type ActiveSet = (usize, u64);
 
+/// Whether a node with trial force `trial = λ̂ - ε g` counts as in contact: touching within
+/// round-off counts (the first-contact node starts at `g = 0` up to rounding), so that the
+/// travel has stiffness from the start.
+fn in_contact(trial: f64, eps: f64, element_size: f64) -> bool {
+    trial >= -eps * 1e-12 * element_size
+}
+
 /// Contact state of every rigid body of a model.
 #[derive(Debug)]
 pub(crate) struct ContactState {
@@ -41,6 +49,8 @@ pub(crate) struct ContactState {
     penalties: Vec<f64>,
     /// Per rigid body: Uzawa updates made in this solve.
     augmentations: Vec<usize>,
+    /// Per rigid body: the complementarity error allowed at the last update check.
+    limits: Vec<f64>,
     /// The active set of the last assembly.
     active_set: ActiveSet,
 }
@@ -95,6 +105,11 @@ impl ContactState {
                 .collect(),
             penalties: vec![0.0; model.contacts.len()],
             augmentations: vec![0; model.contacts.len()],
+            limits: model
+                .contacts
+                .iter()
+                .map(|c| c.penetration_tolerance * c.element_size)
+                .collect(),
             active_set: (0, 0),
         }
     }
@@ -140,6 +155,7 @@ impl ContactState {
             self.penalties[b] = c.penalty_factor * kmax.max(1e-12);
             self.multipliers[b].iter_mut().for_each(|m| *m = 0.0);
             self.augmentations[b] = 0;
+            self.limits[b] = c.penetration_tolerance * c.element_size;
         }
     }
 
@@ -167,9 +183,7 @@ impl ContactState {
             for (k, &n) in c.nodes.iter().enumerate() {
                 let gap = c.body.gap(model.current_position(n, u), t);
                 let trial = self.multipliers[b][k] - eps * gap.g;
-                // Touching within round-off counts as active (the first-contact node starts at
-                // g = 0 up to rounding), so that the travel has stiffness from the start.
-                if trial < -eps * 1e-12 * c.element_size {
+                if !in_contact(trial, eps, c.element_size) {
                     continue;
                 }
                 let lam = trial.max(0.0);
@@ -211,16 +225,24 @@ impl ContactState {
     }
 
     /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` for the bodies whose complementarity error (a
-    /// penetration, or an open gap under a contact force) exceeds their limit; returns whether
-    /// any was updated.
-    pub fn augment(&mut self, model: &Model, u: &[f64]) -> bool {
+    /// penetration, or an open gap under a contact force) exceeds their limit (see
+    /// [`Self::limit`]), each node that keeps a force moved onto the body's surface; returns
+    /// whether any body was updated.
+    ///
+    /// The update alone doubles the contact forces at the state it is made at (the multiplier
+    /// takes over the force `-ε g` and the penalty still adds it): a load as large as the whole
+    /// contact force, pushing the tissue in, with the curvature term `-λ ∇²g` of the tangent
+    /// doubled too, which on the 10 000-quad CPE4 indentation turned the tangent indefinite and
+    /// Newton away. Closing each node's gap with the update (`x ← x - g ∇g / |∇g|²`) keeps
+    /// every contact force as it was: the state is then off equilibrium only by the tissue's
+    /// response to nodes moved by their penetration (hundredths of a millimetre).
+    pub fn augment(&mut self, model: &Model, u: &mut [f64], force_tolerance: f64) -> bool {
         let base = 2 * model.node_count();
         let mut updated = false;
         for (b, c) in model.contacts.iter().enumerate() {
             let t = c.first_contact + u[base + b];
             let eps = self.penalties[b];
-            let limit = c.penetration_tolerance * c.element_size;
-            let gap = |n: usize| c.body.gap(model.current_position(n, u), t).g;
+            self.limits[b] = self.limit(model, b, force_tolerance);
             // Complementarity error: a penetration, or a gap at a node that still carries a
             // contact force (the multiplier overshot).
             let violation =
@@ -228,7 +250,7 @@ impl ContactState {
                     .iter()
                     .zip(&self.multipliers[b])
                     .fold(0.0f64, |m, (&n, &lam)| {
-                        let g = gap(n);
+                        let g = c.body.gap(model.current_position(n, u), t).g;
                         if g < 0.0 {
                             m.max(-g)
                         } else if lam - eps * g > 0.0 {
@@ -237,29 +259,126 @@ impl ContactState {
                             m
                         }
                     });
-            if violation > limit {
-                for (m, &n) in self.multipliers[b].iter_mut().zip(&c.nodes) {
-                    *m = (*m - eps * gap(n)).max(0.0);
-                }
-                self.augmentations[b] += 1;
-                updated = true;
+            if violation <= self.limits[b] {
+                continue;
             }
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let m = &mut self.multipliers[b][k];
+                *m = (*m - eps * gap.g).max(0.0);
+                let [sx, _, _, sy, ..] = self.slots[b][k];
+                let norm2 = gap.dg_dx[0] * gap.dg_dx[0] + gap.dg_dx[1] * gap.dg_dx[1];
+                if *m > 0.0 && sx != NONE && sy != NONE && norm2 > 0.0 {
+                    u[2 * n] -= gap.g * gap.dg_dx[0] / norm2;
+                    u[2 * n + 1] -= gap.g * gap.dg_dx[1] / norm2;
+                }
+            }
+            self.augmentations[b] += 1;
+            updated = true;
         }
         updated
     }
 
+    /// The complementarity error allowed at the end of a solve for body `b`: the body's
+    /// penetration tolerance (a fraction of its element size), and at most the gap at which
+    /// the penalty's force `ε g` is `force_tolerance` (the residual tolerance times the
+    /// reference force): another Uzawa update would then change the contact forces by less
+    /// than the equilibrium residual allowed, so the multipliers are converged as tightly as
+    /// the equilibrium and the state is that of exact contact to the solve's own precision
+    /// (the penalty alone leaves it off by the penetration, about 1e-4 of the displacements
+    /// after one update on the thigh's indentation).
+    fn limit(&self, model: &Model, b: usize, force_tolerance: f64) -> f64 {
+        let c = &model.contacts[b];
+        let geometric = c.penetration_tolerance * c.element_size;
+        if force_tolerance > 0.0 {
+            geometric.min(force_tolerance / self.penalties[b])
+        } else {
+            geometric
+        }
+    }
+
+    /// The candidate nodes of every body linearized at `u` (equations from `eq`), into `out`
+    /// (see [`super::active_set`]).
+    pub fn linearize(&self, model: &Model, u: &[f64], eq: &[usize], out: &mut Vec<Candidate>) {
+        out.clear();
+        let base = 2 * model.node_count();
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            let qt = eq[base + b];
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let trial = self.multipliers[b][k] - eps * gap.g;
+                let (xx, xt) = (gap.d2g_dxdx, gap.d2g_dxdt);
+                out.push(Candidate {
+                    eqs: [eq[2 * n], eq[2 * n + 1], qt],
+                    grad: [gap.dg_dx[0], gap.dg_dx[1], gap.dg_dt],
+                    hess: [
+                        [xx[0][0], xx[0][1], xt[0]],
+                        [xx[1][0], xx[1][1], xt[1]],
+                        [xt[0], xt[1], gap.d2g_dtdt],
+                    ],
+                    trial,
+                    eps,
+                    active: in_contact(trial, eps, c.element_size),
+                    node: n,
+                    body: b,
+                    gap: gap.g,
+                });
+            }
+        }
+    }
+
+    /// The second-order correction of a trial state `u + α δ` (Nocedal & Wright, Numerical
+    /// Optimization, §15.6): each free node that the correction `δ` brings or keeps in contact
+    /// is moved along its gap gradient until its gap is the linearized one, `g + α ∇gᵀ δ`.
+    ///
+    /// The correction's linear model slides a node in contact along the tangent of a curved
+    /// body; the true gap then opens by the curvature term (`s²/2R` for a slip `s` on a
+    /// cylinder), which the stiff penalty turns into a force error of `ε s²/2R`, easily the
+    /// whole contact force: the full step would be refused, or leave the node free. Moved back
+    /// onto the surface, the node follows the body as the model meant it to.
+    pub fn second_order_correction(
+        &self,
+        model: &Model,
+        candidates: &[Candidate],
+        along: &[Along],
+        alpha: f64,
+        trial: &mut [f64],
+    ) {
+        let base = 2 * model.node_count();
+        for (c, a) in candidates.iter().zip(along) {
+            if !a.in_contact || c.eqs[0] == NONE || c.eqs[1] == NONE {
+                continue;
+            }
+            let body = &model.contacts[c.body];
+            let t = body.first_contact + trial[base + c.body];
+            let gap = body.body.gap(model.current_position(c.node, trial), t);
+            let d = c.gap + alpha * a.slope - gap.g;
+            trial[2 * c.node] += d * gap.dg_dx[0];
+            trial[2 * c.node + 1] += d * gap.dg_dx[1];
+        }
+    }
+
     /// The largest step length in (0, 1] from `u` towards `full` (the state after the full
-    /// correction) for which no contact node that is free at `u` penetrates its body deeper
+    /// correction) for which no contact node that is free at `u`, and that the correction does
+    /// not bring into contact (`along`, see [`super::active_set`]), penetrates its body deeper
     /// than 0.1 element size (gaps taken linear in the step).
-    pub fn step_limit(&self, model: &Model, u: &[f64], full: &[f64]) -> f64 {
+    pub fn step_limit(&self, model: &Model, u: &[f64], full: &[f64], along: &[Along]) -> f64 {
         let base = 2 * model.node_count();
         let mut cap = 1.0f64;
+        let mut index = 0;
         for (b, c) in model.contacts.iter().enumerate() {
             let depth = 0.1 * c.element_size;
             let eps = self.penalties[b];
             let t0 = c.first_contact + u[base + b];
             let t1 = c.first_contact + full[base + b];
             for (k, &n) in c.nodes.iter().enumerate() {
+                let brought = along.get(index).is_some_and(|a| a.in_contact);
+                index += 1;
+                if brought {
+                    continue; // the correction put it in contact (see `second_order_correction`)
+                }
                 let g0 = c.body.gap(model.current_position(n, u), t0).g;
                 if self.multipliers[b][k] - eps * g0 > 0.0 || g0 <= 0.0 {
                     continue; // in contact already
@@ -287,7 +406,7 @@ impl ContactState {
                     name: c.name.clone(),
                     travel: u[base + b],
                     penalty: eps,
-                    penetration_limit: c.penetration_tolerance * c.element_size,
+                    penetration_limit: self.limits[b],
                     augmentations: self.augmentations[b],
                     ..Default::default()
                 };

@@ -44,7 +44,7 @@ LEFT, 1, 2
 0.1, 1.0
 *BOUNDARY
 right, 1, 1, 0.25
-3, 3, 6
+left, 1, 6
 *Dload
 2, p2, -0.01
 FAT, P3, 0.02
@@ -101,8 +101,8 @@ fn good_deck() {
     assert_eq!(d.step.period, 1.0);
     assert_eq!(d.step.min_increment, 1e-5);
     assert_eq!(d.step.max_increment, 1.0);
-    // LEFT fixed in x and y, RIGHT moved in x (node 3 replaced by the later line? no: the
-    // later line names dofs 3..6, all ignored).
+    // LEFT fixed in x and y (again by the later `1, 6`: the out-of-plane dofs 3..6 are absent
+    // in plane strain), RIGHT moved in x.
     let bc = |n: usize, dof: usize| {
         d.boundaries
             .iter()
@@ -276,6 +276,24 @@ fn errors_name_file_line_and_problem() {
             )
             .replace("2, p2, -0.01", "2, P4, -0.01"),
             "model.inp:43: *DLOAD: element 2 is a CPE3 with faces P1..P3, not P4",
+        ),
+        (
+            // Issue 28.4: a GENERATE range refused before it is allocated.
+            GOOD.replace("1, 4, 3\n", "1, 1000000000, 1\n"),
+            "model.inp:19: *NSET, GENERATE: 1, 1000000000, 1 makes 1000000000 members, above the limit of 10000000",
+        ),
+        (
+            // A *BOUNDARY on a dof plane strain lacks would leave the node free (issue 32.5).
+            GOOD.replace("right, 1, 1, 0.25", "right, 7, 7"),
+            "model.inp:41: *BOUNDARY: dof 7: not a dof of plane strain (only 1 = x and 2 = y)",
+        ),
+        (
+            GOOD.replace("right, 1, 1, 0.25", "right, 3, 6"),
+            "model.inp:41: *BOUNDARY: dofs 3 to 6: not a dof of plane strain",
+        ),
+        (
+            GOOD.replace("right, 1, 1, 0.25", "right, 1, 8"),
+            "model.inp:41: *BOUNDARY: dof 8 is not a displacement dof",
         ),
         (
             GOOD.replace("6, 2, 1e-3", "6, 3, 1e-3"),

@@ -19,15 +19,14 @@
 
 use super::geometry::{Geometry, Resolution};
 use super::lines::KeyLines;
+use super::loading_tests::TestSpec;
 use super::materials::MaterialSpec;
 use super::measurement::GridSpec;
 use super::raw::ConvergenceEntry;
-use super::tests::TestSpec;
 use super::StudyError;
 use femu_convergence::{ConvergenceStudy, DicGrid, MeshSequence};
-use femu_geometry::table1_materials;
+use femu_mech::model::NamedMaterial;
 use femu_mesh::ElementKind;
-use femu_mesh::MaterialDef;
 
 /// The `[convergence]` table, checked.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -196,8 +195,8 @@ pub(crate) fn view(v: ViewInputs, lines: &KeyLines) -> Result<ConvergenceStudy, 
 fn table1_with(
     materials: &[MaterialSpec],
     lines: &KeyLines,
-) -> Result<Vec<MaterialDef>, StudyError> {
-    let mut out = table1_materials();
+) -> Result<Vec<NamedMaterial>, StudyError> {
+    let mut out = super::table1();
     for m in materials {
         let table = format!("materials.{}", m.region);
         let entry = out
@@ -211,8 +210,8 @@ fn table1_with(
                     "not a region of the built-in thigh (fat, quadriceps, ischio, gracilis, sartorius)".into(),
                 )
             })?;
-        *entry = m
-            .apply(entry)
+        entry.law = m
+            .apply(&*entry.law)
             .map_err(|e| lines.err(&table, 0, "", e.to_string()))?;
     }
     Ok(out)

@@ -70,7 +70,7 @@ pub const DEFAULT_ELEMENTS: usize = 6000;
 pub const DEFAULT_LABEL_SIZE_MM: f64 = 1.0;
 
 /// The accepted target element counts of the built-in thigh.
-pub const ELEMENTS_RANGE: std::ops::RangeInclusive<usize> = 100..=500_000;
+pub const ELEMENTS_RANGE: std::ops::RangeInclusive<usize> = 100..=femu_geometry::MAX_ELEMENTS;
 
 /// Checks `[model]` and the geometry tables.
 pub(crate) fn parse(
@@ -141,7 +141,7 @@ pub(crate) fn parse(
             }
             Geometry::Deck(resolve(base, &deck))
         }
-        (None, thigh, None) => Geometry::Thigh(Box::new(check_thigh(thigh, lines)?)),
+        (None, thigh, None) => Geometry::Thigh(Box::new(check_thigh(thigh, resolution, lines)?)),
         (None, None, Some(l)) => {
             if model.elements.is_some() {
                 return Err(lines.err(
@@ -157,9 +157,12 @@ pub(crate) fn parse(
     Ok((geometry, resolution, element))
 }
 
-/// `[thigh]`: the dimensions of the built-in thigh, without its mesh-size keys.
+/// `[thigh]`: the dimensions of the built-in thigh, without its mesh-size keys, and `[model]`'s
+/// mesh size for them (fine enough to keep every region: see
+/// `femu_geometry::ThighParams::max_element_size_mm`).
 pub(crate) fn check_thigh(
     thigh: Option<ThighParams>,
+    resolution: Resolution,
     lines: &KeyLines,
 ) -> Result<ThighParams, StudyError> {
     let t = thigh.unwrap_or_default();
@@ -172,11 +175,44 @@ pub(crate) fn check_thigh(
         ));
     }
     let mut check = t.clone();
-    check.target_elements = Some(1000);
+    check.target_elements = Some(t.min_target_elements().max(1000));
     check
         .validate()
         .map_err(|e| lines.err("thigh", 0, "", e.to_string()))?;
+    match resolution {
+        Resolution::Elements(n) => {
+            thigh_elements(&t, n).map_err(|m| lines.err("model", 0, "elements", m))?
+        }
+        Resolution::SizeMm(h) => {
+            let h_max = t.max_element_size_mm();
+            if h > h_max {
+                return Err(lines.err(
+                    "model",
+                    0,
+                    "size_mm",
+                    format!("{h} mm is too coarse for the thigh: at most {h_max:.2} mm keeps every region (the smallest muscles and the femur hole)"),
+                ));
+            }
+        }
+        Resolution::Default => {}
+    }
     Ok(t)
+}
+
+/// Whether the built-in thigh `t` can be meshed with about `n` quads: within
+/// [`ELEMENTS_RANGE`] and not below the count that keeps every region.
+pub(crate) fn thigh_elements(t: &ThighParams, n: usize) -> Result<(), String> {
+    if !ELEMENTS_RANGE.contains(&n) {
+        return Err(format!("must be in [100, 500000], got {n}"));
+    }
+    let min = t.min_target_elements();
+    if n < min {
+        return Err(format!(
+            "{n} is too few for the thigh: at least {min} keep every region (elements of at most {:.2} mm; fewer lose the small muscles and the femur hole)",
+            t.max_element_size_mm()
+        ));
+    }
+    Ok(())
 }
 
 fn check_labels(l: LabelsEntry, lines: &KeyLines, base: &Path) -> Result<LabelsSpec, StudyError> {

@@ -1,9 +1,9 @@
 //! `[parameters]`, `[identification]`, `[run]`: what is identified, how, and which steps run.
 
-use super::geometry::{Geometry, Resolution, DEFAULT_ELEMENTS, ELEMENTS_RANGE};
+use super::geometry::{thigh_elements, Geometry, Resolution, DEFAULT_ELEMENTS};
 use super::lines::KeyLines;
+use super::loading_tests::TestSpec;
 use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
-use super::tests::TestSpec;
 use super::StudyError;
 use femu_identify::campaign::Optimizer;
 
@@ -36,6 +36,24 @@ pub struct IdentificationSpec {
     /// Multilevel: run the starts on the built-in thigh with this many elements and refine the
     /// best on the study's mesh.
     pub coarse_elements: Option<usize>,
+    /// What to do about the model's discretization error.
+    pub discretization: Discretization,
+    /// The virtual data are made on a mesh of the same geometry with the element size divided
+    /// by this (1: the model's own mesh, the seed's numerical example).
+    pub data_refinement: f64,
+}
+
+/// `[identification] discretization`: the discretization check of every identification.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Discretization {
+    /// No check.
+    Off,
+    /// At the optimum, refined meshes estimate the bias the mesh implies; the intervals are
+    /// widened when it is not negligible (default).
+    Check,
+    /// As `Check`, and when the bias is not negligible the identification is continued on the
+    /// finest refined mesh.
+    Refine,
 }
 
 impl IdentificationSpec {
@@ -52,6 +70,8 @@ pub struct Steps {
     pub forward: bool,
     pub sensitivity: bool,
     pub identification: bool,
+    /// `femu design`'s ranking of tests and probe windows (`[design]`), off by default.
+    pub design: bool,
 }
 
 /// Checks `[identification]`.
@@ -69,28 +89,7 @@ pub(crate) fn parse(
             .iter()
             .position(|t| t.loading.is(&femu_mech::loading::compression::KIND))
             .unwrap_or(0),
-        Some(name) => tests
-            .iter()
-            .position(|t| {
-                let n = t.loading.name();
-                n.eq_ignore_ascii_case(name)
-                    || n.split('-')
-                        .next()
-                        .is_some_and(|k| k.eq_ignore_ascii_case(name))
-            })
-            .ok_or_else(|| {
-                err(
-                    "test",
-                    format!(
-                        "no test '{name}' (tests: {})",
-                        tests
-                            .iter()
-                            .map(|t| t.loading.name())
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
-                )
-            })?,
+        Some(name) => find_test(tests, name).map_err(|m| err("test", m))?,
     };
     let bounds_factor = e.bounds_factor.unwrap_or(4.0);
     if !(bounds_factor > 1.0 && bounds_factor.is_finite()) {
@@ -138,18 +137,13 @@ pub(crate) fn parse(
     let coarse_elements = match e.coarse_elements {
         None => None,
         Some(n) => {
-            if !matches!(geometry, Geometry::Thigh(_)) {
+            let Geometry::Thigh(thigh) = geometry else {
                 return Err(err(
                     "coarse_elements",
                     "multilevel identification needs the built-in thigh ([thigh])".into(),
                 ));
-            }
-            if !ELEMENTS_RANGE.contains(&n) {
-                return Err(err(
-                    "coarse_elements",
-                    format!("must be in [100, 500000], got {n}"),
-                ));
-            }
+            };
+            thigh_elements(thigh, n).map_err(|m| err("coarse_elements", m))?;
             let fine = match resolution {
                 Resolution::Elements(m) => m,
                 Resolution::Default => DEFAULT_ELEMENTS,
@@ -160,15 +154,46 @@ pub(crate) fn parse(
                     "coarse_elements",
                     format!(
                         "{n} is not coarser than the model's {fine} elements: the starts run on the coarse mesh and the best is refined on [model]'s; give fewer (e.g. {})",
-                        (fine / 3).max(100)
+                        (fine / 3).max(thigh.min_target_elements())
                     ),
                 ));
             }
             Some(n)
         }
     };
+    let discretization = match e
+        .discretization
+        .as_deref()
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
+        None | Some("check") => Discretization::Check,
+        Some("refine") => Discretization::Refine,
+        Some("off") => Discretization::Off,
+        Some(other) => {
+            return Err(err(
+                "discretization",
+                format!("unknown choice '{other}' (check, refine, off)"),
+            ))
+        }
+    };
+    let data_refinement = e.data_refinement.unwrap_or(1.0);
+    if !(1.0..=4.0).contains(&data_refinement) {
+        return Err(err(
+            "data_refinement",
+            format!("must be in [1, 4] (the element size of the virtual data's mesh divided by it), got {data_refinement}"),
+        ));
+    }
+    if data_refinement > 1.0 && matches!(geometry, Geometry::Deck(_)) {
+        return Err(err(
+            "data_refinement",
+            "femu cannot refine a deck; virtual data on another mesh need the built-in thigh or a label image".into(),
+        ));
+    }
     Ok(IdentificationSpec {
         test,
+        discretization,
+        data_refinement,
         fixed: e.fixed,
         bounds_factor,
         starts,
@@ -180,6 +205,33 @@ pub(crate) fn parse(
     })
 }
 
+/// The test of `tests` named `name` (its full name, `compression-lateral`, or its kind,
+/// `compression`: the first of that kind); the message names the tests otherwise.
+pub(crate) fn find_test(tests: &[TestSpec], name: &str) -> Result<usize, String> {
+    tests
+        .iter()
+        .position(|t| t.loading.name().eq_ignore_ascii_case(name))
+        .or_else(|| {
+            tests.iter().position(|t| {
+                t.loading
+                    .name()
+                    .split('-')
+                    .next()
+                    .is_some_and(|k| k.eq_ignore_ascii_case(name))
+            })
+        })
+        .ok_or_else(|| {
+            format!(
+                "no test '{name}' (tests: {})",
+                tests
+                    .iter()
+                    .map(|t| t.loading.name())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+}
+
 /// Checks `[run]`.
 pub(crate) fn parse_steps(r: Option<RunEntry>) -> Steps {
     match r {
@@ -187,11 +239,13 @@ pub(crate) fn parse_steps(r: Option<RunEntry>) -> Steps {
             forward: true,
             sensitivity: true,
             identification: true,
+            design: false,
         },
         Some(r) => Steps {
             forward: r.forward.unwrap_or(true),
             sensitivity: r.sensitivity.unwrap_or(true),
             identification: r.identification.unwrap_or(true),
+            design: r.design.unwrap_or(false),
         },
     }
 }

@@ -11,6 +11,8 @@ use std::path::{Path, PathBuf};
 #[derive(Debug)]
 pub(crate) struct KeyLines {
     keys: Vec<(String, usize, String, usize)>,
+    /// Tables written as arrays (`[[measurement]]`) in this text.
+    arrays: Vec<String>,
     /// Keys of an older layout moved into the schema's tables (see [`super::legacy`]).
     moved: Vec<Moved>,
 }
@@ -21,10 +23,14 @@ impl KeyLines {
         let mut table = String::new();
         let mut index = 0;
         let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+        let mut arrays = Vec::new();
         for (k, raw) in text.lines().enumerate() {
             let t = raw.trim();
             if let Some(name) = t.strip_prefix("[[").and_then(|r| r.split("]]").next()) {
                 table = name.trim().to_string();
+                if !arrays.contains(&table) {
+                    arrays.push(table.clone());
+                }
                 let c = counts.entry(table.clone()).or_insert(0);
                 index = *c;
                 *c += 1;
@@ -41,6 +47,7 @@ impl KeyLines {
         }
         KeyLines {
             keys,
+            arrays,
             moved: Vec::new(),
         }
     }
@@ -70,7 +77,7 @@ impl KeyLines {
                     .and_then(|m| line_of(&m.old_table, 0, &m.old_key))
             })
         };
-        let name = if ARRAY_TABLES.contains(&table) {
+        let name = if ARRAY_TABLES.contains(&table) || self.is_array(table) {
             format!("[[{table}]] {}", index + 1)
         } else if table.is_empty() {
             "(top level)".to_string()
@@ -86,6 +93,11 @@ impl KeyLines {
             Some(line) => format!("{name}{key_part} (line {line})"),
             None => format!("{name}{key_part}"),
         }
+    }
+
+    /// Whether `table` is written as an array of tables (`[[table]]`) in the text.
+    pub(crate) fn is_array(&self, table: &str) -> bool {
+        self.arrays.iter().any(|a| a.eq_ignore_ascii_case(table))
     }
 
     /// The line of `key` wherever it stands (the first occurrence), for the parser's messages

@@ -15,11 +15,19 @@
 use super::lines::KeyLines;
 use super::StudyError;
 use femu_mech::material::{
-    law, material_def, material_from_def, material_from_keys, parameter_key, set_from_keys,
-    LawEntry, Material, MaterialError,
+    law, material_from_keys, parameter_key, set_from_keys, LawEntry, Material, MaterialError,
 };
-use femu_mesh::MaterialDef;
+use femu_mech::model::NamedMaterial;
 use std::collections::BTreeMap;
+
+/// The seed's Table 1 ([`femu_geometry::TABLE1`]), the default materials of the built-in
+/// thigh's regions: compressible Neo-Hookean, named by region (C10 in MPa, D in MPa⁻¹).
+pub fn table1() -> Vec<NamedMaterial> {
+    femu_geometry::TABLE1
+        .iter()
+        .map(|&(region, c10_kpa, d)| NamedMaterial::neo_hookean(region, c10_kpa * 1e-3, d))
+        .collect()
+}
 
 /// A region's material as the study gives it.
 #[derive(Debug, Clone)]
@@ -48,16 +56,15 @@ impl MaterialSpec {
     }
 
     /// The material of the region: `default` (the model's own) with the study's law or values.
-    pub fn apply(&self, default: &MaterialDef) -> Result<MaterialDef, MaterialError> {
-        let material = match self.law {
-            Some(entry) => material_from_keys(entry.spec.name, self.pairs())?,
+    pub fn apply(&self, default: &dyn Material) -> Result<Box<dyn Material>, MaterialError> {
+        match self.law {
+            Some(entry) => material_from_keys(entry.spec.name, self.pairs()),
             None => {
-                let mut m = material_from_def(default)?;
+                let mut m = default.boxed();
                 set_from_keys(&mut *m, self.pairs())?;
-                m
+                Ok(m)
             }
-        };
-        Ok(material_def(&default.name, &*material))
+        }
     }
 
     /// The material of a region with no default (a Gmsh physical surface): its law

@@ -99,14 +99,12 @@ impl GridSpec {
     }
 }
 
-/// Checks `[grid]`, `[noise]` and `[measurement]`.
-pub(crate) fn parse(
+/// Checks `[grid]` and `[noise]`: the grid and the default noise of every measurement.
+pub(crate) fn parse_grid_noise(
     grid: Option<GridEntry>,
     noise: Option<NoiseEntry>,
-    measurement: Option<MeasurementEntry>,
     lines: &KeyLines,
-    base: &Path,
-) -> Result<MeasurementSpec, StudyError> {
+) -> Result<(GridSpec, f64), StudyError> {
     let grid = match grid {
         None => GridSpec::default(),
         Some(g) => check_grid(g, lines)?,
@@ -115,60 +113,68 @@ pub(crate) fn parse(
         None => SEED_SIGMA_MM,
         Some(n) => lines.positive("noise", 0, "sigma_mm", n.sigma_mm)?,
     };
-    let (source, travel) =
-        match measurement {
-            None => (MeasurementSource::Virtual, None),
-            Some(mut m) => {
-                let travel = check_travel(m.travel_mm.take(), m.travel_sigma_mm.take(), lines)?;
-                let source = check_source(m, lines, base)?;
-                match (&source, travel) {
-                    (
-                        MeasurementSource::File { .. },
-                        Some(Travel {
-                            measured_mm: None, ..
-                        }),
-                    ) => {
-                        return Err(lines.err(
-                            "measurement",
-                            0,
-                            "travel_sigma_mm",
-                            "a measured field needs its measured travel_mm".into(),
-                        ))
-                    }
-                    (
-                        MeasurementSource::Virtual,
-                        Some(Travel {
-                            measured_mm: Some(_),
-                            ..
-                        }),
-                    ) => return Err(lines.err(
-                        "measurement",
-                        0,
-                        "travel_mm",
-                        "the virtual experiment synthesizes the travel; give only travel_sigma_mm"
-                            .into(),
-                    )),
-                    _ => {}
-                }
-                (source, travel)
-            }
-        };
-    Ok(MeasurementSpec {
-        grid,
-        sigma_mm,
-        source,
-        travel,
-    })
+    Ok((grid, sigma_mm))
 }
+
+/// Checks the source and the actuator term of the `index`-th `[measurement]` entry.
+pub(crate) fn check_entry(
+    m: &mut MeasurementEntry,
+    index: usize,
+    lines: &KeyLines,
+    base: &Path,
+) -> Result<(MeasurementSource, Option<Travel>), StudyError> {
+    let travel = check_travel(m.travel_mm.take(), m.travel_sigma_mm.take(), index, lines)?;
+    let source = check_source(m, index, lines, base)?;
+    match (&source, travel) {
+        (
+            MeasurementSource::File { .. },
+            Some(Travel {
+                measured_mm: None, ..
+            }),
+        ) => {
+            return Err(lines.err(
+                "measurement",
+                index,
+                "travel_sigma_mm",
+                "a measured field needs its measured travel_mm".into(),
+            ))
+        }
+        (
+            MeasurementSource::Virtual,
+            Some(Travel {
+                measured_mm: Some(_),
+                ..
+            }),
+        ) => {
+            return Err(lines.err(
+                "measurement",
+                index,
+                "travel_mm",
+                "the virtual experiment synthesizes the travel; give only travel_sigma_mm".into(),
+            ))
+        }
+        _ => {}
+    }
+    Ok((source, travel))
+}
+
+/// The largest measurement grid (points).
+pub const MAX_GRID_POINTS: usize = 4_000_000;
 
 fn check_grid(g: GridEntry, lines: &KeyLines) -> Result<GridSpec, StudyError> {
     let counts = g.counts.unwrap_or([64, 64]);
-    if counts[0] < 2 || counts[1] < 2 || counts[0] * counts[1] > 4_000_000 {
+    // 4e6 points: the projection and the Jacobian hold 2 rows per point and parameter, some
+    // 1 GB for ten parameters (issue 28.4; the product saturates, a huge count cannot wrap).
+    let points = counts[0].saturating_mul(counts[1]);
+    if counts[0] < 2 || counts[1] < 2 || points > MAX_GRID_POINTS {
         return Err(lines.err(
             "grid",
             0,
             "counts",
-            format!("must be at least 2 x 2 and at most 4e6 points, got {counts:?}"),
+            format!(
+                "must be at least 2 x 2 and at most {MAX_GRID_POINTS} points, got {counts:?} ({:.1e} points)",
+                points as f64
+            ),
         ));
     }
     if let Some(s) = g.spacing_mm {
@@ -189,15 +195,21 @@ fn check_grid(g: GridEntry, lines: &KeyLines) -> Result<GridSpec, StudyError> {
 fn check_travel(
     travel: Option<f64>,
     sigma: Option<f64>,
+    index: usize,
     lines: &KeyLines,
 ) -> Result<Option<Travel>, StudyError> {
     match (travel, sigma) {
         (None, None) => Ok(None),
         (t, Some(sigma)) => {
-            lines.positive("measurement", 0, "travel_sigma_mm", sigma)?;
+            lines.positive("measurement", index, "travel_sigma_mm", sigma)?;
             if let Some(t) = t {
                 if !t.is_finite() {
-                    return Err(lines.err("measurement", 0, "travel_mm", "must be finite".into()));
+                    return Err(lines.err(
+                        "measurement",
+                        index,
+                        "travel_mm",
+                        "must be finite".into(),
+                    ));
                 }
             }
             Ok(Some(Travel {
@@ -207,7 +219,7 @@ fn check_travel(
         }
         (Some(_), None) => Err(lines.err(
             "measurement",
-            0,
+            index,
             "travel_mm",
             "give travel_sigma_mm too".into(),
         )),
@@ -216,11 +228,12 @@ fn check_travel(
 
 /// Checks the source of `[measurement]` and, for a file, its frame.
 fn check_source(
-    m: MeasurementEntry,
+    m: &MeasurementEntry,
+    index: usize,
     lines: &KeyLines,
     base: &Path,
 ) -> Result<MeasurementSource, StudyError> {
-    let err = |key: &str, message: &str| lines.err("measurement", 0, key, message.into());
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
     let source = m
         .source
         .as_deref()
@@ -254,7 +267,7 @@ fn check_source(
                 },
                 "px" => lines.positive(
                     "measurement",
-                    0,
+                    index,
                     "pixel_size_mm",
                     m.pixel_size_mm
                         .ok_or_else(|| err("units", "units = \"px\" needs pixel_size_mm"))?,

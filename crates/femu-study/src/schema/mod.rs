@@ -16,29 +16,36 @@
 
 mod boundary;
 mod convergence;
+mod deck_loads;
+mod design;
 mod error;
 mod geometry;
 mod identification;
 mod legacy;
 mod lines;
+mod loading_tests;
 mod materials;
 mod measurement;
+mod measurements;
 mod raw;
-mod tests;
+mod regions;
 pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
+pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
+pub(crate) use geometry::thigh_elements;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
 };
-pub use identification::{Grouping, IdentificationSpec, Steps};
-pub use materials::MaterialSpec;
+pub use identification::{Discretization, Grouping, IdentificationSpec, Steps};
+pub use loading_tests::{seed_tests, TestSpec};
+pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
-pub use tests::{seed_tests, TestSpec};
+pub use measurements::{Measurement, Region, WindowSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 
 use lines::KeyLines;
@@ -63,7 +70,12 @@ pub struct ModelSpec {
 pub struct Study {
     pub model: ModelSpec,
     pub tests: Vec<TestSpec>,
+    /// The grid, the default noise, and the first measurement's source and actuator term (the
+    /// one `[measurement]` of a single-measurement study).
     pub measurement: MeasurementSpec,
+    /// Every measurement (one for a single `[measurement]` or none given; a joint
+    /// identification fits them all).
+    pub measurements: Vec<Measurement>,
     /// Tied parameters (`[parameters] groups`; the seed's grouping when the study names none).
     pub groups: Vec<Vec<String>>,
     pub identification: IdentificationSpec,
@@ -75,10 +87,15 @@ pub struct Study {
     pub boundary: MeshBoundary,
     /// `[convergence]`: the convergence view (see [`Study::convergence_study`]).
     pub convergence: ConvergenceSpec,
-    /// Whether `[grid]` and `[[test]]` were written (the convergence and Gmsh views need to
-    /// know).
+    /// `[design]`: the candidates of `femu design`.
+    pub design: DesignSpec,
+    /// Whether `[grid]`, `[[test]]` and `[parameters] groups` were written (the convergence and
+    /// Gmsh views, and the check of the group names, need to know).
     grid_given: bool,
+    /// Whether the measurements were written as `[[measurement]]` (outputs per measurement).
+    measurement_list: bool,
     tests_given: bool,
+    groups_given: bool,
     /// The text's key lines, for the views checked later.
     lines: std::sync::Arc<KeyLines>,
 }
@@ -101,18 +118,28 @@ pub fn seed_groups() -> Vec<Vec<String>> {
 /// The study of a command: the file if given (else the defaults), `--elements` over it.
 pub fn load(study: Option<&Path>, elements: Option<usize>) -> Result<Study, StudyError> {
     let mut s = match study {
-        Some(p) => read(p)?,
+        Some(p) => read_for_model(p)?,
         None => Study::default(),
     };
     if let Some(n) = elements {
-        if !ELEMENTS_RANGE.contains(&n) {
-            return Err(StudyError::Study(format!(
-                "--elements must be in [100, 500000], got {n}"
-            )));
-        }
+        let checked = match &s.model.geometry {
+            Geometry::Thigh(t) => geometry::thigh_elements(t, n),
+            _ if !ELEMENTS_RANGE.contains(&n) => Err(format!("must be in [100, 500000], got {n}")),
+            _ => Ok(()),
+        };
+        checked.map_err(|m| StudyError::Study(format!("--elements: {m}")))?;
         s.model.resolution = Resolution::Elements(n);
     }
     Ok(s)
+}
+
+/// Reads and checks a study file for a command that builds the study's model (every command
+/// but `femu solve MESH.msh --study`, whose materials name the mesh's physical surfaces):
+/// [`read`], then what needs the files: [`Study::check_model_inputs`].
+pub fn read_for_model(path: &Path) -> Result<Study, StudyError> {
+    let study = read(path)?;
+    study.check_model_inputs().map_err(|e| e.in_file(path))?;
+    Ok(study)
 }
 
 /// Reads and checks a study file.
@@ -168,18 +195,40 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
-    let tests = tests::parse(file.test.as_deref(), &lines)?;
-    let measurement = measurement::parse(
-        file.grid.clone(),
-        file.noise,
+    let mut tests = loading_tests::parse(file.test.as_deref(), &lines)?;
+    if let Geometry::Deck(deck) = &geometry {
+        deck_loads::apply(deck, &mut tests, file.test.as_deref(), &lines)?;
+    }
+    let identification =
+        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let (grid, sigma_mm) = measurement::parse_grid_noise(file.grid.clone(), file.noise, &lines)?;
+    let probe = file.probe.unwrap_or_default();
+    let parsed = measurements::parse(
         file.measurement,
+        &tests,
+        &measurements::Defaults {
+            sigma_mm,
+            test: identification.test,
+            probe: &probe,
+        },
         &lines,
         base,
     )?;
-    let identification =
-        identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
+    let design = design::parse(file.design, &tests, &probe, &lines)?;
+    let first = &parsed.measurements[0];
+    let measurement = MeasurementSpec {
+        grid,
+        sigma_mm: if parsed.list {
+            sigma_mm
+        } else {
+            first.sigma_mm
+        },
+        source: first.source.clone(),
+        travel: first.travel,
+    };
     let boundary = boundary::parse(&file.fixed, &file.pressure, file.step.as_ref(), &lines)?;
     let convergence = convergence::parse(file.convergence, &tests, &lines)?;
+    let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
         _ => seed_groups(),
@@ -193,15 +242,19 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         },
         tests,
         measurement,
+        measurements: parsed.measurements,
         groups,
         identification,
         steps: identification::parse_steps(file.run),
-        probe: file.probe.unwrap_or_default(),
+        probe,
         ultrasound: file.ultrasound.unwrap_or_default(),
         boundary,
         convergence,
+        design,
         grid_given: file.grid.is_some(),
+        measurement_list: parsed.list,
         tests_given: file.test.is_some(),
+        groups_given,
         lines: std::sync::Arc::new(lines),
     };
     if study.convergence.given {
@@ -232,6 +285,85 @@ impl Study {
         )
     }
 
+    /// The checks that need the files and the model's regions, before anything runs (issue
+    /// 32.11): the label image, deck and measured field exist; every region has a material and
+    /// every `[materials]` table a region (see [`regions`]); the names in `[identification]
+    /// fixed` and `[parameters] groups` are parameters of the model (a deck is read for its
+    /// materials).
+    pub fn check_model_inputs(&self) -> Result<(), StudyError> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(("labels", "image", &l.image)),
+            Geometry::Deck(p) => files.push(("model", "deck", p)),
+            Geometry::Thigh(_) => {}
+        }
+        for m in &self.measurements {
+            if let MeasurementSource::File { path, .. } = &m.source {
+                files.push(("measurement", "file", path));
+            }
+        }
+        for (table, key, path) in files {
+            if !path.is_file() {
+                return Err(self.lines.err(
+                    table,
+                    0,
+                    key,
+                    format!(
+                        "{} does not exist (relative names start from the study file's folder)",
+                        path.display()
+                    ),
+                ));
+            }
+        }
+        let regions =
+            match regions::of_geometry(&self.model.geometry, &self.model.materials, &self.lines)? {
+                Some(r) => r,
+                None => {
+                    let Geometry::Deck(path) = &self.model.geometry else {
+                        unreachable!("of_geometry knows every other geometry")
+                    };
+                    let (deck, _) = crate::model::read_deck(&self.model.materials, path)
+                        .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
+                    deck.materials
+                        .iter()
+                        .map(|m| regions::RegionLaw {
+                            name: m.name.clone(),
+                            law: m.law.spec(),
+                        })
+                        .collect()
+                }
+            };
+        regions::check_parameter_names(
+            &regions,
+            &self.identification.fixed,
+            self.groups_given.then_some(&self.groups[..]),
+            &self.lines,
+        )
+    }
+
+    /// The data files the study reads: its label image, deck and measured field (an output
+    /// folder must not hold them: `femu_mesh::folder`).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let mut files = Vec::new();
+        match &self.model.geometry {
+            Geometry::Labels(l) => files.push(l.image.as_path()),
+            Geometry::Deck(p) => files.push(p.as_path()),
+            Geometry::Thigh(_) => {}
+        }
+        for m in &self.measurements {
+            if let MeasurementSource::File { path, .. } = &m.source {
+                files.push(path.as_path());
+            }
+        }
+        files
+    }
+
+    /// Whether the measurements were written as a list (`[[measurement]]`, even of one): the
+    /// outputs are then per measurement.
+    pub fn measurement_list(&self) -> bool {
+        self.measurement_list
+    }
+
     /// Whether the study names its tests (`[[test]]`), rather than taking the seed's three.
     pub fn tests_given(&self) -> bool {
         self.tests_given
@@ -244,5 +376,7 @@ impl Study {
     }
 }
 
+#[cfg(test)]
+mod measurement_tests;
 #[cfg(test)]
 mod unit_tests;

@@ -20,7 +20,9 @@ pub(crate) struct StudyFile {
     pub test: Option<Vec<TestEntry>>,
     pub grid: Option<GridEntry>,
     pub noise: Option<NoiseEntry>,
-    pub measurement: Option<MeasurementEntry>,
+    /// `[measurement]` (one table) or `[[measurement]]` (a list of them), read into
+    /// [`MeasurementEntry`] by `super::measurements` so that each entry's errors keep their line.
+    pub measurement: Option<toml::Value>,
     pub parameters: Option<ParametersEntry>,
     pub identification: Option<IdentificationEntry>,
     pub run: Option<RunEntry>,
@@ -33,6 +35,21 @@ pub(crate) struct StudyFile {
     pub pressure: Vec<PressureEntry>,
     pub step: Option<StepEntry>,
     pub convergence: Option<ConvergenceEntry>,
+    pub design: Option<DesignEntry>,
+}
+
+/// `[design]`: the candidate measurements of `femu design`.
+#[derive(Debug, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct DesignEntry {
+    /// The `[[test]]`s (names or kinds); all by default.
+    pub tests: Option<Vec<String>>,
+    pub sides: Option<Vec<String>>,
+    pub windows_mm: Option<Vec<[f64; 2]>>,
+    pub spacing_mm: Option<f64>,
+    pub max_measurements: Option<usize>,
+    pub identifiable_sd: Option<f64>,
+    pub grouped: Option<bool>,
 }
 
 #[derive(Debug, Deserialize, Default)]
@@ -81,9 +98,17 @@ pub(crate) struct NoiseEntry {
     pub sigma_mm: f64,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, Default)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct MeasurementEntry {
+    /// The measured `[[test]]` (name or kind); `[identification] test` by default.
+    pub test: Option<String>,
+    /// The probe window: its side, its width and depth, the spacing of its grid.
+    pub window: Option<String>,
+    pub window_mm: Option<[f64; 2]>,
+    pub spacing_mm: Option<f64>,
+    /// The noise of this measurement (`[noise] sigma_mm` by default).
+    pub sigma_mm: Option<f64>,
     pub source: Option<String>,
     pub file: Option<String>,
     pub units: Option<String>,
@@ -115,6 +140,8 @@ pub(crate) struct IdentificationEntry {
     pub grouped: Option<GroupedEntry>,
     pub optimizer: Option<String>,
     pub coarse_elements: Option<usize>,
+    pub discretization: Option<String>,
+    pub data_refinement: Option<f64>,
 }
 
 /// `grouped = true | false | "both"`.
@@ -131,6 +158,7 @@ pub(crate) struct RunEntry {
     pub forward: Option<bool>,
     pub sensitivity: Option<bool>,
     pub identification: Option<bool>,
+    pub design: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

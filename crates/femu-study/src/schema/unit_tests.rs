@@ -90,17 +90,19 @@ fn the_example_study_is_the_default() {
     assert_eq!(e.model.geometry, d.model.geometry);
     assert_eq!(e.tests, d.tests);
     assert_eq!(e.measurement, d.measurement);
+    assert_eq!(e.measurements, d.measurements);
     assert_eq!(e.identification, d.identification);
+    assert_eq!(e.design, d.design);
     assert_eq!(e.steps, d.steps);
     assert_eq!(e.groups, seed_groups());
     assert_eq!(e.model.resolution, Resolution::Elements(6000));
     // Every Table 1 value restated.
     for m in &e.model.materials {
-        let t = femu_geometry::table1_materials()
+        let t = super::table1()
             .into_iter()
             .find(|t| t.name.eq_ignore_ascii_case(&m.region))
             .expect("a Table 1 region");
-        assert_eq!(m.apply(&t).unwrap(), t, "{}", m.region);
+        assert!(*m.apply(&*t.law).unwrap() == *t.law, "{}", m.region);
     }
 }
 
@@ -136,6 +138,46 @@ fn mistakes_name_the_key_and_line() {
     assert!(e.contains("optimizer") && e.contains("lm, bfgs"), "{e}");
     let e = err("[model]\nelements = 5\n");
     assert!(e.contains("[model] elements (line 2)"), "{e}");
+    // Issue 32.7: a thigh too coarse to keep its regions (100 elements gave no femur).
+    let e = err("[model]\nelements = 300\n");
+    assert!(
+        e.contains("[model] elements (line 2)") && e.contains("at least 622"),
+        "{e}"
+    );
+    let e = err("[model]\nsize_mm = 6\n");
+    assert!(
+        e.contains("[model] size_mm (line 2)") && e.contains("at most 4.50 mm"),
+        "{e}"
+    );
+    let e = err("[thigh]\ngracilis_semi_axes_mm = [13, 4]\n[model]\nelements = 1000\n");
+    assert!(e.contains("at least 3145"), "{e}");
+    let e = err("[model]\nelements = 1500\n[identification]\ncoarse_elements = 400\n");
+    assert!(
+        e.contains("[identification] coarse_elements (line 4)") && e.contains("at least 622"),
+        "{e}"
+    );
+    // Issue 28.4: an absurd grid is refused with its size and the limit, a huge one without
+    // overflowing the product.
+    let e = err("[grid]\ncounts = [100000, 100000]\n");
+    assert!(
+        e.contains("[grid] counts (line 2)")
+            && e.contains("1.0e10 points")
+            && e.contains("4000000"),
+        "{e}"
+    );
+    let e = err("[grid]\ncounts = [9223372036854775807, 9223372036854775807]\n");
+    assert!(e.contains("[grid] counts"), "{e}");
+    // Issue 32.11: a side that is no angle (it used to pass).
+    let e = err("[[test]]\nkind = \"compression\"\nside = \"1e300\"\nforce_n_per_mm = 0.1\n");
+    assert!(
+        e.contains("side (line 3)") && e.contains("not a side"),
+        "{e}"
+    );
+    let e = load(None, Some(300)).unwrap_err().to_string();
+    assert!(
+        e.contains("--elements") && e.contains("at least 622"),
+        "{e}"
+    );
     // A multilevel identification whose coarse mesh is finer than the model's.
     let e = err("[model]\nelements = 1500\n[identification]\ncoarse_elements = 100000\n");
     assert!(
@@ -215,7 +257,7 @@ fn the_gmsh_layout_is_a_view_of_the_schema() {
 #[test]
 fn the_convergence_layout_is_a_view_of_the_schema() {
     let s = parse(
-        "elements = [\"CPE4\"]\ntarget_elements = [500, 1000, 2000]\nlocking = false\n[contention]\nmmhg = 10.0\n[materials.quadriceps]\nc10_kpa = 2.0\n",
+        "elements = [\"CPE4\"]\ntarget_elements = [700, 1000, 2000]\nlocking = false\n[contention]\nmmhg = 10.0\n[materials.quadriceps]\nc10_kpa = 2.0\n",
         Path::new("."),
     )
     .unwrap();
@@ -229,7 +271,7 @@ fn the_convergence_layout_is_a_view_of_the_schema() {
         })
     );
     let q = c.materials.iter().find(|m| m.name == "QUADRICEPS").unwrap();
-    assert_eq!(q.constants[0], 2e-3);
+    assert_eq!(q.law.parameter(0), 2e-3);
     let e = err("target_elements = [500, 1000]\n");
     assert!(
         e.contains("target_elements (line 1)") && e.contains("at least 3"),
@@ -241,4 +283,78 @@ fn the_convergence_layout_is_a_view_of_the_schema() {
     assert!(e.contains("origin_mm and spacing_mm"), "{e}");
     let e = err("[convergence]\nelement_types = [\"CPE9\"]\n");
     assert!(e.contains("CPE9"), "{e}");
+}
+
+/// Issues 32.11 and 32.13: what needs the files and the model's regions is checked before
+/// anything runs — files that do not exist, a region with no material, a `[materials]` table
+/// with no region, unknown names in `fixed` and `groups` (even ungrouped) — and a label-map
+/// region outside Table 1 takes the material its table gives.
+#[test]
+fn files_regions_and_parameter_names_are_checked_before_anything_runs() {
+    let dir = std::env::temp_dir().join(format!("femu-schema-inputs-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("l.png"), b"an image").unwrap();
+    let check = |text: &str| {
+        parse(text, &dir)
+            .and_then(|s| s.check_model_inputs())
+            .map_err(|e| e.to_string())
+    };
+    let labels = "[labels]\nimage = \"l.png\"\nmap = \"1=fat,6=adductor\"\nbone = [7]\n";
+    let e = check(labels).unwrap_err();
+    assert!(
+        e.contains("[labels] map (line 3)") && e.contains("add a [materials.ADDUCTOR] table"),
+        "{e}"
+    );
+    let e = check(&format!("{labels}[materials.ADDUCTOR]\nc10_kpa = 2.5\n")).unwrap_err();
+    assert!(
+        e.contains("[materials.ADDUCTOR]") && e.contains("d_per_mpa"),
+        "{e}"
+    );
+    let full = format!("{labels}[materials.ADDUCTOR]\nc10_kpa = 2.5\nd_per_mpa = 20\n");
+    check(&full).unwrap();
+    check(&format!(
+        "{full}[identification]\nfixed = [\"D_ADDUCTOR\"]\n"
+    ))
+    .unwrap();
+    // The seed's grouping names regions this map lacks: only groups the study gives are checked.
+    let e = check(&format!(
+        "{full}[parameters]\ngroups = [[\"D_ADDUCTOR\", \"D_ISCHIO\"]]\n"
+    ))
+    .unwrap_err();
+    assert!(
+        e.contains("[parameters] groups (line 9)") && e.contains("'D_ISCHIO'"),
+        "{e}"
+    );
+    let e = check("[materials.ADDUCTOR]\nc10_kpa = 2\nd_per_mpa = 18\n").unwrap_err();
+    assert!(
+        e.contains("no region ADDUCTOR in the built-in thigh"),
+        "{e}"
+    );
+    let e = check("[identification]\ngrouped = false\n[parameters]\ngroups = [[\"D_NOPE\"]]\n")
+        .unwrap_err();
+    assert!(
+        e.contains("[parameters] groups (line 4)") && e.contains("'D_NOPE'"),
+        "{e}"
+    );
+    let e = check("[materials.QUADRICEPS]\nlaw = \"mooney-rivlin\"\nc10_kpa = 1\nc01_kpa = 0.5\nd_per_mpa = 18\n[identification]\nfixed = [\"C01_FAT\"]\n").unwrap_err();
+    assert!(
+        e.contains("'C01_FAT'") && e.contains("C01_QUADRICEPS"),
+        "{e}"
+    );
+    // Files that do not exist, named with their key.
+    for (text, at) in [
+        (
+            "[labels]\nimage = \"none.png\"\nmap = \"1=fat\"\nbone = [7]\n",
+            "[labels] image (line 2)",
+        ),
+        ("[model]\ndeck = \"none.inp\"\n", "[model] deck (line 2)"),
+        (
+            "[measurement]\nfile = \"none.csv\"\n",
+            "[measurement] file (line 2)",
+        ),
+    ] {
+        let e = check(text).unwrap_err();
+        assert!(e.contains(at) && e.contains("does not exist"), "{e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
 }

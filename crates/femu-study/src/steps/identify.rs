@@ -1,20 +1,28 @@
 //! The identification step (`femu identify`, `femu synth`, and the last step of `femu run`):
-//! FEMU of the study's free parameters from the measured field (seed §2.1.3, Eq. 2; Fig. 9),
-//! computed by `femu_identify::campaign`, written as
+//! FEMU of the study's free parameters from its measurements — one, or several fitted together
+//! (a joint identification: tests seen through probe windows, grids or files) — (seed §2.1.3,
+//! Eq. 2; Fig. 9), computed by `femu_identify::campaign`, with the discretization check of
+//! `femu_identify::discretization`, written as
 //!
 //! - `parameters.csv` — identified values, Eq. 4 errors, relative sd, 95 % intervals;
+//! - `measurements.csv` — each measurement's points and share of the information;
 //! - `starts.csv` — every start of every repeat;
-//! - `errors.png` (Fig. 9 with error bars), `cost_history.png`, `fields.png`;
+//! - `errors.png` (Fig. 9 with error bars), `cost_history.png`, `fields.png` (one
+//!   `fields_NAME.png` per measurement of a list);
 //! - `summary.json` — [`IdentificationSummary`].
 
+use super::discretization;
+use super::joint::{self, FitFailure, JointFit, TestModels};
+use super::measure::{self, Prepared, PreparedData};
+use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
-use crate::schema::{MeasurementSource, Study};
-use anyhow::{Context, Result};
-use femu_identify::campaign::{
-    self, Campaign, CampaignOptions, Data, Estimate, Event, StartRecord, TravelTerm,
-};
+use crate::schema::{Discretization, MeasurementSource, Study};
+use anyhow::Result;
+use femu_identify::campaign::{self, CampaignOptions, Estimate, Event, StartRecord};
+use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
+use femu_identify::joint::{block_free, information_shares};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
@@ -29,6 +37,7 @@ use std::time::Instant;
 pub struct IdentificationSummary {
     pub command: String,
     pub version: String,
+    /// The measured test, or the tests of a joint identification joined by ` + `.
     pub test: String,
     pub optimizer: String,
     pub grouped: bool,
@@ -52,9 +61,34 @@ pub struct IdentificationSummary {
     pub forward_solves_per_start: Vec<usize>,
     pub starts: Vec<StartRecord>,
     pub wall_time_s: f64,
+    /// Why the values or intervals may mean nothing (a best start not converged, a parameter
+    /// at a bound, an infinite sd): `femu_identify::campaign::warnings`.
+    #[serde(default)]
+    pub warnings: Vec<String>,
     /// Set when the user stopped the run: what was kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub interrupted: Option<String>,
+    /// Each measurement fitted (and each actuator term): its points and its share of the
+    /// information.
+    #[serde(default)]
+    pub measurements: Vec<MeasurementSummary>,
+    /// The discretization check (`None` when `[identification] discretization = "off"`).
+    #[serde(default)]
+    pub discretization: Option<DiscretizationCheck>,
+}
+
+/// One measurement of an identification.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MeasurementSummary {
+    pub name: String,
+    pub label: String,
+    pub source: String,
+    /// Noise of a virtual measurement (mm).
+    pub sigma_mm: Option<f64>,
+    pub points_in_tissue: usize,
+    pub points_masked: usize,
+    /// Its share of the information, and what it would identify alone (per free parameter).
+    pub information: femu_identify::joint::InformationShare,
 }
 
 /// A model parameter as a free parameter lists it: its material (index) and parameter name.
@@ -71,10 +105,28 @@ pub struct FreeParameterSummary {
     pub members: Vec<MemberSummary>,
     pub lower: f64,
     pub upper: f64,
+    /// The unit tables show it in (C10 in kPa, D in MPa⁻¹: the seed's Table 1) and the factor
+    /// from the model unit (MPa, MPa⁻¹) to it.
+    #[serde(default)]
+    pub unit: String,
+    #[serde(default = "one")]
+    pub unit_factor: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl FreeParameterSummary {
+    /// `value` (model units) in the unit tables show.
+    pub fn shown(&self, value: f64) -> f64 {
+        value * self.unit_factor
+    }
 }
 
 impl From<&FreeParameter> for FreeParameterSummary {
     fn from(f: &FreeParameter) -> Self {
+        let (unit, unit_factor) = f.members[0].spec().unit.report();
         FreeParameterSummary {
             name: f.name.clone(),
             members: f
@@ -87,6 +139,8 @@ impl From<&FreeParameter> for FreeParameterSummary {
                 .collect(),
             lower: f.lower,
             upper: f.upper,
+            unit: unit.to_string(),
+            unit_factor,
         }
     }
 }
@@ -98,13 +152,6 @@ pub struct Measured {
     pub source: String,
     /// Whether the reference parameters of the model are the truth (a simulated experiment).
     pub reference_known: bool,
-}
-
-/// The study's model loaded with its identification test, and the test's name.
-pub fn measured_model(study: &Study) -> Result<(Model, String)> {
-    let built = crate::model::build(&study.model)?;
-    let test = study.identification_test().loading.clone();
-    Ok((built.loaded(&test)?, test.name()))
 }
 
 /// The free parameters of `study` on `model` (its groups tied when `grouped`).
@@ -134,90 +181,19 @@ pub fn free_parameters(
     })
 }
 
-/// The grid of the study over `model`, the points in the tissue, and the grid's size.
-fn grid_in_tissue(study: &Study, model: &Model) -> (Vec<[f64; 2]>, usize) {
-    let (lo, hi) = model.mesh.bounding_box();
-    let grid = study.measurement.grid.points(lo, hi);
-    (campaign::points_in_tissue(model, &grid), grid.len())
-}
-
-/// The virtual experiment's first noise realization of `model` (loaded with the identification
-/// test), with its comments.
-pub fn virtual_measurement(study: &Study, model: &Model) -> Result<MeasuredField> {
-    let (free, reference) = free_parameters(study, model, study.identification.grouped())?;
-    let (inside, total) = grid_in_tissue(study, model);
-    let sigma = study.measurement.sigma_mm;
-    let mut field = campaign::virtual_field(
-        model,
-        &free,
-        &reference,
-        &inside,
-        sigma,
-        study.identification.seed,
-    )?;
-    let [nx, ny] = study.measurement.grid.counts;
-    field.comments = vec![
-        "femu synth: virtual experiment (seed 2.4.1)".into(),
-        format!("noise sigma {sigma} mm, seed {}", study.identification.seed),
-        format!(
-            "grid {nx} x {ny} over the thigh, {} of {total} points in the tissue",
-            inside.len(),
-        ),
-    ];
-    Ok(field)
-}
-
-/// Writes the virtual experiment's first noise realization to `path` (`femu synth`).
-pub fn write_virtual_measurement(
-    study: &Study,
-    model: &Model,
-    test: &str,
-    path: &Path,
-    progress: &dyn Progress,
-) -> Result<()> {
-    let field = virtual_measurement(study, model)?;
-    field
-        .write(path, Some(study.measurement.sigma_mm))
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    progress.note(&format!(
-        "{test}: virtual experiment, {} measured points in the tissue, noise {} mm -> {}",
-        field.points.len(),
-        study.measurement.sigma_mm,
-        path.display()
-    ));
-    Ok(())
-}
-
-/// `femu synth`: the study's identification test on its model, the virtual measurement
-/// written to `out/measured.csv`.
+/// `femu synth`: the study's virtual measurements on its model (their first noise
+/// realization), written to `out/measured.csv` (`out/NAME/measured.csv` for a list).
 pub fn synth(study: &Study, out: &Path, progress: &dyn Progress) -> Result<()> {
+    femu_mesh::folder::refuse_inputs_in(out, &study.input_files())?;
     create_dir(out)?;
-    let (model, test) = measured_model(study)?;
-    write_virtual_measurement(study, &model, &test, &out.join("measured.csv"), progress)
-}
-
-/// The measured field of the study's `[measurement]`: `None` for the virtual experiment, else
-/// the file mapped to the model frame.
-pub fn study_measurement(study: &Study) -> Result<Option<Measured>> {
-    match &study.measurement.source {
-        MeasurementSource::Virtual => Ok(None),
-        MeasurementSource::Ultrasound => anyhow::bail!(
-            "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
-        ),
-        MeasurementSource::File { path, frame } => {
-            let f = MeasuredField::read(path)?;
-            Ok(Some(Measured {
-                field: f.to_model_frame(frame.scale, frame.origin, frame.x_axis, frame.y_axis),
-                source: path.display().to_string(),
-                reference_known: false,
-            }))
-        }
-    }
+    let built = crate::model::build(&study.model)?;
+    let prepared = measure::prepare(study, &built, out, progress)?;
+    measure::write_measured(study, &built, &prepared, out, progress)
 }
 
 /// `femu identify`: the study's identification (grouped unless `grouped = false`) from
-/// `measured` (a CSV in the model frame), the study's `[measurement]`, or the virtual
-/// experiment.
+/// `measured` (a CSV in the model frame, for a study of one measurement), the study's
+/// measurements, or the virtual experiment.
 pub fn identify(
     study: &Study,
     measured: Option<&Path>,
@@ -253,37 +229,58 @@ fn identify_measured(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<IdentificationSummary> {
-    let measured = match measured {
-        Some(p) => Some(Measured {
-            field: MeasuredField::read(p)?,
-            source: p.display().to_string(),
-            reference_known: false,
-        }),
-        None => study_measurement(study)?,
+    let mut inputs = study.input_files();
+    inputs.extend(measured);
+    femu_mesh::folder::refuse_inputs_in(out, &inputs)?;
+    if study
+        .measurements
+        .iter()
+        .any(|m| m.source == MeasurementSource::Ultrasound)
+        && measured.is_none()
+    {
+        anyhow::bail!(
+            "[measurement] source = \"ultrasound\": simulate the images with `femu us-sim` and pass its measured.csv with --measured, or run the whole study with `femu run`"
+        );
+    }
+    let built = crate::model::build(&study.model)?;
+    let prepared = match measured {
+        Some(p) => {
+            if study.measurements.len() > 1 {
+                anyhow::bail!(
+                    "--measured replaces the one measurement of a study, and this study has {}: name the file in its [[measurement]]",
+                    study.measurements.len()
+                );
+            }
+            let m = &study.measurements[0];
+            vec![Prepared {
+                name: m.name.clone(),
+                label: format!(
+                    "{}, file {}",
+                    study.tests[m.test].loading.name(),
+                    p.display()
+                ),
+                test: m.test,
+                data: PreparedData::Measured(Measured {
+                    field: MeasuredField::read(p)?,
+                    source: p.display().to_string(),
+                    reference_known: false,
+                }),
+                travel: m.travel.map(|t| campaign::TravelTerm {
+                    measured_mm: t.measured_mm,
+                    sigma_mm: t.sigma_mm,
+                }),
+            }]
+        }
+        None => measure::prepare(study, &built, out, progress)?,
     };
-    let (model, test) = measured_model(study)?;
-    let grouped = study.identification.grouped();
     identify_on(
         study,
-        grouped,
-        &model,
-        &test,
-        measured.as_ref(),
+        study.identification.grouped(),
+        &built,
+        &prepared,
         out,
         progress,
     )
-}
-
-/// The multilevel identification's coarse model: the built-in thigh with
-/// `[identification] coarse_elements`, loaded with the identification test.
-fn coarse_model(study: &Study) -> Result<Option<Model>> {
-    let Some(n) = study.identification.coarse_elements else {
-        return Ok(None);
-    };
-    let mut cs = study.clone();
-    cs.model.resolution = crate::schema::Resolution::Elements(n);
-    let (m, _) = measured_model(&cs).context("[identification] coarse_elements")?;
-    Ok(Some(m))
 }
 
 /// The progress of a campaign as notes and a bar per repeat.
@@ -339,73 +336,37 @@ fn show_events<'a>(progress: &'a dyn Progress, repeats: usize) -> impl Fn(Event)
     }
 }
 
-/// The identification of `study` (groups tied when `grouped`) on `model` (loaded with the
-/// measured test `test`) from `measured` (`None`: the virtual experiment, `[identification]
-/// repeat` noise realizations); writes `out`.
-pub fn identify_on(
+/// The fit of `prepared` on `models`; a campaign that stops keeps what finished (`starts.csv`
+/// in `out`, and the repeats finished when interrupted: returned with their number).
+fn fit_or_keep(
     study: &Study,
     grouped: bool,
-    model: &Model,
-    test: &str,
-    measured: Option<&Measured>,
+    models: &TestModels,
+    prepared: &[Prepared],
     out: &Path,
     progress: &dyn Progress,
-) -> Result<IdentificationSummary> {
-    let t0 = Instant::now();
-    create_dir(out)?;
+) -> Result<(JointFit, Option<usize>)> {
     let spec = &study.identification;
-    let (free, reference) = free_parameters(study, model, grouped)?;
-    let virtual_experiment = measured.is_none();
-    let reference_known = measured.is_none_or(|m| m.reference_known);
-    let repeats = if virtual_experiment { spec.repeat } else { 1 };
-    progress.note(&format!(
-        "identify ({}): {test}, {} elements, {} free parameters, {} starts x {} noise realizations",
-        spec.optimizer.name(),
-        model.mesh.elements.len(),
-        free.len(),
-        spec.starts,
-        repeats
-    ));
-    let coarse = coarse_model(study)?;
-    if let Some(c) = &coarse {
-        progress.note(&format!(
-            "multilevel: starts on {} elements, the best refined on {}",
-            c.mesh.elements.len(),
-            model.mesh.elements.len()
-        ));
-    }
-    let (inside, grid_total) = grid_in_tissue(study, model);
-    let data = match measured {
-        Some(m) => Data::Measured(&m.field),
-        None => Data::Virtual {
-            points: &inside,
-            sigma: study.measurement.sigma_mm,
-        },
-    };
+    let any_virtual = prepared
+        .iter()
+        .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
+    let repeats = if any_virtual { spec.repeat } else { 1 };
     let options = CampaignOptions {
         optimizer: spec.optimizer,
         starts: spec.starts,
         seed: spec.seed,
         repeats,
-        travel: study.measurement.travel.map(|t| TravelTerm {
-            measured_mm: t.measured_mm,
-            sigma_mm: t.sigma_mm,
-        }),
+        travel: None,
         stop: progress.stop_flag(),
     };
     let on_event = show_events(progress, repeats);
-    let result = campaign::run(
-        model,
-        coarse.as_ref(),
-        &free,
-        &reference,
-        data,
-        &options,
-        &on_event,
-    );
-    let (c, interrupted): (Campaign, Option<usize>) = match result {
-        Ok(c) => (c, None),
-        Err(campaign::CampaignError::Interrupted { finished, repeats }) => {
+    match joint::fit(study, grouped, models, prepared, &options, &on_event) {
+        Ok(fit) => Ok((fit, None)),
+        Err(FitFailure::Setup(e)) => Err(e),
+        Err(FitFailure::Campaign(
+            campaign::CampaignError::Interrupted { finished, repeats },
+            free,
+        )) => {
             if finished.best.is_empty() {
                 write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
                 return Err(anyhow::Error::new(crate::progress::Interrupted).context(
@@ -416,16 +377,27 @@ pub fn identify_on(
                     )),
                 ));
             }
-            (*finished, Some(repeats))
+            let (_, reference) = free_parameters(study, &models.full[0], grouped)?;
+            Ok((
+                JointFit {
+                    campaign: *finished,
+                    free,
+                    reference,
+                },
+                Some(repeats),
+            ))
         }
-        Err(campaign::CampaignError::AllStartsFailed {
-            repeat,
-            reasons,
-            starts,
-        }) => {
+        Err(FitFailure::Campaign(
+            campaign::CampaignError::AllStartsFailed {
+                repeat,
+                reasons,
+                starts,
+            },
+            free,
+        )) => {
             // What finished is kept: every start's outcome.
             write_starts_csv(&out.join("starts.csv"), &free, &starts)?;
-            return Err(
+            Err(
                 anyhow::Error::new(campaign::CampaignError::AllStartsFailed {
                     repeat,
                     reasons,
@@ -435,52 +407,206 @@ pub fn identify_on(
                     "identification (every start in {})",
                     out.join("starts.csv").display()
                 )),
+            )
+        }
+        Err(FitFailure::Campaign(e, _)) => Err(e.into()),
+    }
+}
+
+/// The estimates of `fit` with the discretization check: intervals widened when the bias is
+/// not negligible and the data did not come from the model's mesh; with `"refine"`, the first
+/// repeat identified again on the finest mesh of the check.
+#[allow(clippy::too_many_arguments)]
+fn estimate_with_check(
+    study: &Study,
+    built: &StudyModel,
+    models: &TestModels,
+    prepared: &[Prepared],
+    fit: &mut JointFit,
+    reference_known: bool,
+    known_noise: bool,
+    progress: &dyn Progress,
+) -> Result<(
+    Vec<Estimate>,
+    femu_identify::fisher::Identifiability,
+    Option<DiscretizationCheck>,
+)> {
+    let estimates = |fit: &JointFit| {
+        campaign::estimates(
+            &fit.campaign,
+            &fit.free,
+            &fit.reference,
+            reference_known,
+            known_noise,
+        )
+    };
+    let (mut parameters, mut id) = estimates(fit)?;
+    if study.identification.discretization == Discretization::Off {
+        return Ok((parameters, id, None));
+    }
+    let sd: Vec<f64> = parameters.iter().map(|p| p.relative_sd).collect();
+    let mut checked = discretization::check(study, built, models, prepared, fit, &sd, progress)?;
+    let flagged = checked.check.flagged();
+    if flagged && study.identification.discretization == Discretization::Refine {
+        if let Some(finest) = checked.finest.as_mut() {
+            let refined = discretization::refine(
+                finest,
+                &fit.free,
+                &fit.campaign.best[0].theta,
+                &checked.check.bias,
+            )?;
+            let finest_elements = checked.check.levels.last().map_or(0, |l| l.elements);
+            progress.note(&format!(
+                "identified again on the refined mesh ({finest_elements} elements): cost {:.4e}, {} forward solves",
+                refined.cost, refined.forward_solves
+            ));
+            fit.campaign.best[0] = refined;
+            (parameters, id) = estimates(fit)?;
+            // What remains beyond the finest mesh: the bias scaled by ρ^-p.
+            let remaining = checked
+                .check
+                .levels
+                .last()
+                .map_or(1.0, |l| l.ratio)
+                .powf(-checked.check.rate);
+            checked.check.bias.iter_mut().for_each(|b| *b *= remaining);
+            checked
+                .check
+                .bias_over_sd
+                .iter_mut()
+                .for_each(|b| *b *= remaining);
+            checked.check.status = "refined".into();
+            checked.check.message = format!(
+                "identified again on {finest_elements} elements (the mesh biased the parameters by up to {:.1} sd); the bias left is estimated at up to {:.2} sd",
+                checked.check.bias_over_sd.iter().copied().fold(0.0, f64::max) / remaining,
+                checked.check.bias_over_sd.iter().copied().fold(0.0, f64::max)
             );
         }
-        Err(e) => return Err(e.into()),
-    };
-    write_starts_csv(&out.join("starts.csv"), &free, &c.starts)?;
-    let (parameters, id) =
-        campaign::estimates(&c, &free, &reference, reference_known, virtual_experiment)?;
-    let repeats = c.best.len();
-    let best = &c.best[0];
+    }
+    let widen = checked.check.flagged() && !discretization::data_from_model(study, prepared);
+    if widen {
+        campaign::widen(
+            &mut parameters,
+            &checked.check.bias,
+            &fit.campaign,
+            &fit.free,
+            &fit.reference,
+            known_noise,
+        )?;
+    }
+    Ok((parameters, id, Some(checked.check)))
+}
+
+/// The identification of `study` (groups tied when `grouped`) on the model `built` from its
+/// `prepared` measurements (virtual ones drawn for `[identification] repeat` noise
+/// realizations); writes `out`.
+pub fn identify_on(
+    study: &Study,
+    grouped: bool,
+    built: &StudyModel,
+    prepared: &[Prepared],
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<IdentificationSummary> {
+    let t0 = Instant::now();
+    create_dir(out)?;
+    let spec = &study.identification;
+    let models = TestModels::new(study, built, prepared)?;
+    let virtual_experiment = prepared
+        .iter()
+        .all(|p| matches!(p.data, PreparedData::Virtual { .. }));
+    let reference_known = prepared.iter().all(|p| match &p.data {
+        PreparedData::Virtual { .. } => true,
+        PreparedData::Measured(m) => m.reference_known,
+    });
+    let tests: Vec<String> = models
+        .tests
+        .iter()
+        .map(|&t| study.tests[t].loading.name())
+        .collect();
+    progress.note(&format!(
+        "identify ({}): {} ({} measurement{}), {} elements, {} starts x {} noise realizations",
+        spec.optimizer.name(),
+        tests.join(" + "),
+        prepared.len(),
+        if prepared.len() == 1 { "" } else { "s" },
+        models.elements(),
+        spec.starts,
+        if virtual_experiment
+            || prepared
+                .iter()
+                .any(|p| matches!(p.data, PreparedData::Virtual { .. }))
+        {
+            spec.repeat
+        } else {
+            1
+        }
+    ));
+    if let Some(c) = models.coarse.first() {
+        progress.note(&format!(
+            "multilevel: starts on {} elements, the best refined on {}",
+            c.mesh.elements.len(),
+            models.elements()
+        ));
+    }
+    let (mut fit, interrupted) = fit_or_keep(study, grouped, &models, prepared, out, progress)?;
+    write_starts_csv(&out.join("starts.csv"), &fit.free, &fit.campaign.starts)?;
+    let (parameters, id, check) = estimate_with_check(
+        study,
+        built,
+        &models,
+        prepared,
+        &mut fit,
+        reference_known,
+        virtual_experiment,
+        progress,
+    )?;
+    let warnings = campaign::warnings(&fit.campaign, &fit.free, &parameters);
+    let measurements = measurement_summaries(prepared, &fit);
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
-    // What finished is written even after a stop (the field figure needs one more solve).
+    write_measurements_csv(&out.join("measurements.csv"), &fit.free, &measurements)?;
+    let c = &fit.campaign;
+    let best = &c.best[0];
+    // What finished is written even after a stop (the field figures need one more solve).
     femu_mesh::stop::shielded(|| {
-        write_figures(out, &parameters, best, reference_known, repeats)?;
-        write_field_figures(out, model, &free, &c.first_field, &best.theta)
+        write_result_figures(study, &models, &fit, &parameters, reference_known, out)
     })?;
-    let points_masked = if virtual_experiment {
-        // The virtual field holds only the grid points in the tissue; the rest are masked.
-        grid_total - c.points_in_tissue
-    } else {
-        c.points_masked
-    };
     let summary = IdentificationSummary {
         command: "identify".into(),
         version: env!("CARGO_PKG_VERSION").into(),
-        test: test.to_string(),
+        test: tests.join(" + "),
         optimizer: spec.optimizer.name().into(),
         grouped,
-        elements: model.mesh.elements.len(),
-        measured: match measured {
-            Some(m) => m.source.clone(),
-            None => "virtual experiment (femu synth)".into(),
+        elements: models.elements(),
+        measured: {
+            let mut sources: Vec<String> = Vec::new();
+            for p in prepared {
+                if !sources.contains(&p.source()) {
+                    sources.push(p.source());
+                }
+            }
+            sources.join("; ")
         },
         points_in_tissue: c.points_in_tissue,
-        points_masked,
-        noise_sigma_mm: study.measurement.sigma_mm,
-        free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
+        points_masked: measurements.iter().map(|m| m.points_masked).sum(),
+        noise_sigma_mm: prepared
+            .iter()
+            .find_map(|p| match p.data {
+                PreparedData::Virtual { sigma, .. } => Some(sigma),
+                PreparedData::Measured(_) => None,
+            })
+            .unwrap_or(study.measurement.sigma_mm),
+        free_parameters: fit.free.iter().map(FreeParameterSummary::from).collect(),
         parameters,
         correlation: id.correlation,
         best_cost: best.cost,
         starts_per_repeat: spec.starts,
-        repeats,
-        travel_term: study
-            .measurement
-            .travel
+        repeats: c.best.len(),
+        travel_term: prepared
+            .iter()
+            .find_map(|p| p.travel)
             .map(|t| (c.reference_travel, t.sigma_mm)),
-        coarse_elements: coarse.as_ref().map(|m| m.mesh.elements.len()),
+        coarse_elements: models.coarse.first().map(|m| m.mesh.elements.len()),
         refinement_forward_solves: c.refinement_forward_solves.clone(),
         forward_solves_per_start: c
             .starts
@@ -489,25 +615,18 @@ pub fn identify_on(
             .collect(),
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
-        interrupted: interrupted
-            .map(|n| format!("interrupted: {repeats} of {n} repeats finished and kept")),
+        warnings,
+        interrupted: interrupted.map(|n| {
+            format!(
+                "interrupted: {} of {n} repeats finished and kept",
+                c.best.len()
+            )
+        }),
+        measurements,
+        discretization: check,
     };
     write_json(&out.join("summary.json"), &summary)?;
-    progress.note(&format!(
-        "{:<36} {:>12} {:>12} {:>10} {:>10}",
-        "parameter", "reference", "identified", "error", "sd"
-    ));
-    for p in &summary.parameters {
-        progress.note(&format!(
-            "{:<36} {:>12} {:>12.5e} {:>10} {:>9.2}%",
-            p.name,
-            p.reference.map_or("-".into(), |v| format!("{v:.5e}")),
-            p.identified,
-            p.relative_error
-                .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
-            100.0 * p.relative_sd
-        ));
-    }
+    print_table(&summary, progress);
     progress.note(&format!(
         "wrote {} ({:.1} s)",
         out.display(),
@@ -530,6 +649,158 @@ enum Stopped {
     /// After some repeats: their results are written (summary.json says so).
     #[error("{0}")]
     RepeatsKept(String),
+}
+
+/// `errors.png`, `cost_history.png` and the field figure of each measurement (`fields.png`,
+/// or `fields_NAME.png` for a list of measurements) of the best start of the first repeat.
+fn write_result_figures(
+    study: &Study,
+    models: &TestModels,
+    fit: &JointFit,
+    parameters: &[Estimate],
+    reference_known: bool,
+    out: &Path,
+) -> Result<()> {
+    let c = &fit.campaign;
+    let best = &c.best[0];
+    write_figures(out, parameters, best, reference_known, c.best.len())?;
+    for (b, block) in c.blocks.iter().enumerate() {
+        for seg in &block.segments {
+            let name = if study.measurement_list() {
+                format!("fields_{}.png", seg.name)
+            } else {
+                "fields.png".to_string()
+            };
+            let field = MeasuredField {
+                points: block.first_field.points[seg.points.clone()].to_vec(),
+                comments: Vec::new(),
+            };
+            write_field_figures(
+                out,
+                &name,
+                &models.full[b],
+                &models.full[0],
+                &fit.free,
+                &field,
+                &best.theta,
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Each measurement (and actuator term) with its points and its share of the information.
+fn measurement_summaries(prepared: &[Prepared], fit: &JointFit) -> Vec<MeasurementSummary> {
+    let names: Vec<String> = fit.free.iter().map(|f| f.name.clone()).collect();
+    let shares = information_shares(&fit.campaign.best[0].jacobian, &fit.campaign.layout, &names);
+    let segments: Vec<&campaign::SegmentRecord> = fit
+        .campaign
+        .blocks
+        .iter()
+        .flat_map(|b| b.segments.iter())
+        .collect();
+    shares
+        .into_iter()
+        .map(|information| {
+            let p = prepared.iter().find(|p| p.name == information.measurement);
+            let seg = segments.iter().find(|s| s.name == information.measurement);
+            MeasurementSummary {
+                name: information.measurement.clone(),
+                label: p.map_or_else(
+                    || format!("{} (actuator term)", information.measurement),
+                    |p| p.label.clone(),
+                ),
+                source: p.map_or("the rigid body's measured travel".into(), |p| p.source()),
+                sigma_mm: p.and_then(|p| match p.data {
+                    PreparedData::Virtual { sigma, .. } => Some(sigma),
+                    PreparedData::Measured(_) => None,
+                }),
+                points_in_tissue: seg.map_or(0, |s| s.points_in_tissue),
+                points_masked: match p.map(|p| &p.data) {
+                    Some(PreparedData::Virtual { points, total, .. }) => total - points.len(),
+                    _ => seg.map_or(0, |s| s.points_masked),
+                },
+                information,
+            }
+        })
+        .collect()
+}
+
+/// The identified parameters in the console, in the units of the seed's Table 1 (C10 kPa, D
+/// MPa⁻¹), their coverage over repeats, then the warnings.
+fn print_table(summary: &IdentificationSummary, progress: &dyn Progress) {
+    progress.note(&format!(
+        "{:<36} {:>7} {:>12} {:>12} {:>10} {:>10}",
+        "parameter", "unit", "reference", "identified", "error", "sd"
+    ));
+    for (p, f) in summary.parameters.iter().zip(&summary.free_parameters) {
+        progress.note(&format!(
+            "{:<36} {:>7} {:>12} {:>12.5} {:>10} {:>9.2}%",
+            p.name,
+            f.unit,
+            p.reference
+                .map_or("-".into(), |v| format!("{:.5}", f.shown(v))),
+            f.shown(p.identified),
+            p.relative_error
+                .map_or("-".into(), |e| format!("{:.3}%", 100.0 * e)),
+            100.0 * p.relative_sd
+        ));
+    }
+    if summary.repeats > 1 {
+        for p in &summary.parameters {
+            if let (Some(worst), Some(cov)) = (p.max_relative_error, p.coverage95) {
+                progress.note(&format!(
+                    "  {:<34} over {} repeats: worst error {:.2} %, 95 % interval coverage {:.0} %",
+                    p.name,
+                    summary.repeats,
+                    100.0 * worst,
+                    100.0 * cov
+                ));
+            }
+        }
+    }
+    for w in &summary.warnings {
+        progress.warn(&format!("identification: {w}"));
+    }
+}
+
+/// `measurements.csv`: per measurement, its points and, per free parameter, its share of the
+/// information and the relative sd it would give alone.
+fn write_measurements_csv(
+    path: &Path,
+    free: &[FreeParameter],
+    measurements: &[MeasurementSummary],
+) -> Result<()> {
+    let mut w = crate::output::create_file(path)?;
+    write!(w, "name,label,points_in_tissue,points_masked,sigma_mm")?;
+    for f in free {
+        write!(w, ",share_{}", f.name)?;
+    }
+    for f in free {
+        write!(w, ",alone_sd_{}", f.name)?;
+    }
+    writeln!(w)?;
+    for m in measurements {
+        write!(
+            w,
+            "{},\"{}\",{},{},{}",
+            m.name,
+            m.label.replace('"', "'"),
+            m.points_in_tissue,
+            m.points_masked,
+            m.sigma_mm.map_or(String::new(), |s| format!("{s:e}"))
+        )?;
+        for v in m
+            .information
+            .share
+            .iter()
+            .chain(&m.information.alone_relative_sd)
+        {
+            write!(w, ",{v:.6e}")?;
+        }
+        writeln!(w)?;
+    }
+    crate::output::commit(w)
 }
 
 fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord]) -> Result<()> {
@@ -673,7 +944,9 @@ fn write_figures(
 /// panel each), when the points lie on a regular grid (as written by `synth` and `dic`).
 fn write_field_figures(
     out: &Path,
+    name: &str,
     model: &Model,
+    free_model: &Model,
     free: &[FreeParameter],
     field: &MeasuredField,
     theta: &[f64],
@@ -684,13 +957,13 @@ fn write_field_figures(
         .iter()
         .filter(|p| locator.locate(p.x).is_some())
         .collect();
-    let mut p = Problem::new(
-        model.clone(),
-        SolverOptions::default(),
-        field,
-        free.to_vec(),
-    )?;
-    let u = p.field_at(theta)?;
+    if inside.is_empty() {
+        return Ok(());
+    }
+    let (bfree, map) = block_free(free, free_model, model);
+    let btheta: Vec<f64> = map.iter().map(|&k| theta[k]).collect();
+    let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?;
+    let u = p.field_at(&btheta)?;
     // The grid: distinct x and y values.
     let distinct = |k: usize| {
         let mut v: Vec<f64> = inside.iter().map(|p| p.x[k]).collect();
@@ -749,7 +1022,7 @@ fn write_field_figures(
             .iter()
             .enumerate()
         {
-            let path = panels_dir.join(format!("field_{comp}_{k}.png"));
+            let path = panels_dir.join(format!("{}_{comp}_{k}.png", name.trim_end_matches(".png")));
             femu_plot::image_field_png(
                 &path,
                 &grey,
@@ -773,6 +1046,6 @@ fn write_field_figures(
         }
     }
     let refs: Vec<&Path> = paths.iter().map(|p| p.as_path()).collect();
-    femu_plot::tile_png(&out.join("fields.png"), &refs, 3)?;
+    femu_plot::tile_png(&out.join(name), &refs, 3)?;
     Ok(())
 }

@@ -10,7 +10,11 @@
 //! | identification | [`identify::identify`] | `identify/GROUPING/` |
 //! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
 
+pub mod design;
+pub mod discretization;
 pub mod identify;
+pub mod joint;
+pub mod measure;
 pub mod model;
 pub mod record;
 pub mod run;

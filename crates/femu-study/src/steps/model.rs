@@ -18,7 +18,7 @@ use anyhow::{bail, Context, Result};
 use femu_geometry::{
     contention_deck, mesh_label_image, parametric_thigh, quality_report, read_label_image,
     table1_materials, write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec,
-    MeshOptions, QualityReport, ThighModel, ThighParams, CONTENTION_MPA, TABLE1,
+    MeshOptions, QualityReport, ThighModel, ThighParams, CONTENTION_MPA,
 };
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -92,6 +92,8 @@ pub struct LabelMeshRequest {
     pub size_mm: f64,
     pub min_island_mm2: f64,
     pub element: QuadElement,
+    /// `[materials.REGION]` tables (`--materials FILE`): a region outside Table 1 needs one.
+    pub materials: Vec<crate::schema::MaterialSpec>,
 }
 
 /// `femu mesh thigh`: the built-in thigh meshed into `out`.
@@ -119,15 +121,16 @@ pub fn mesh_thigh(req: &ThighMeshRequest, out: &Path, progress: &dyn Progress) -
 /// `femu mesh labels`: a segmented image meshed into `out`.
 pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) -> Result<()> {
     let t0 = Instant::now();
+    femu_mesh::folder::refuse_inputs_in(out, &[&req.image])?;
     let spec = LabelSpec::new(&req.map, &req.bone, &req.background)
         .context("--map/--bone/--background")?;
-    for name in spec.region_names() {
-        if !TABLE1.iter().any(|(r, _, _)| r.eq_ignore_ascii_case(&name)) {
-            bail!(
-                "region '{name}' of --map has no material: the deck uses the seed's Table 1 (fat, quadriceps, ischio, gracilis, sartorius); map its label to one of them"
-            );
-        }
-    }
+    // Every region's material before anything is read or meshed: Table 1, or the
+    // `--materials` file's table for a region outside it (issue 32.13).
+    let materials: Vec<_> = crate::model::materials(&req.materials, &spec.region_names())
+        .context("--map and --materials")?
+        .iter()
+        .map(|m| m.to_def())
+        .collect();
     if let Some(s) = req.pixel_size_mm {
         if !(s > 0.0) || !s.is_finite() {
             bail!("--pixel-size must be a positive number of mm, got {s}");
@@ -158,7 +161,7 @@ pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) 
     let mesh_s = t0.elapsed().as_secs_f64();
     write_model_folder(
         &model,
-        &table1_materials(),
+        &materials,
         &ModelFolder {
             input,
             kind,

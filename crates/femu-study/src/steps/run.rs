@@ -11,22 +11,25 @@
 //! DIR/model/              mesh.inp, mesh.vtu, regions.png, quality.csv, summary.json
 //! DIR/forward/TEST/       displacements.csv, result.vtu, deformed_le11.png, summary.json, ...
 //! DIR/sensitivity/        sensitivity maps (Fig. 8), identifiability.csv (test ranking), ...
-//! DIR/measurement/        measured.csv (the field the identification fits, model frame)
+//! DIR/design/             tests x probe windows ranked ([run] design = true)
+//! DIR/measurement/        measured.csv (the field the identification fits, model frame;
+//!                         NAME/measured.csv per measurement of a [[measurement]] list)
 //! DIR/identify/GROUPING/  parameters.csv, errors.png, fields.png, summary.json (Fig. 9)
 //! DIR/steps.json, DIR/summary.json, DIR/report.html
 //! ```
 
-use super::identify::{self, Measured};
+use super::identify;
+use super::measure;
 use super::record::{begin, finish, skip, RunRecord};
 use super::sensitivity::{self, SensitivityOptions};
 use super::solve::{write_solved, SolveContext};
 use crate::model::{build, StudyModel};
 use crate::output::{create_dir, write_text};
 use crate::progress::Progress;
-use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
+use crate::schema::{self, Grouping, Study, EXAMPLE_STUDY};
 use anyhow::{bail, Result};
 use femu_mech::{Model, SolverOptions, StaticSolver};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 /// Elements of the demo's built-in thigh: the whole demo runs in about 12 s on two cores.
@@ -56,6 +59,8 @@ pub fn demo(
     progress: &dyn Progress,
 ) -> Result<RunRecord> {
     let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
+    schema::thigh_elements(&femu_geometry::ThighParams::default(), n)
+        .map_err(|m| anyhow::anyhow!("--elements: {m}"))?;
     let text = demo_study(n);
     let study = schema::parse(&text, out).map_err(|e| anyhow::anyhow!("the demo study: {e}"))?;
     if study.model.resolution != schema::Resolution::Elements(n)
@@ -74,7 +79,7 @@ pub fn demo(
 /// `femu run STUDY --out DIR`.
 pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<RunRecord> {
     // Checked in full before anything is computed or written.
-    let study = schema::read(study_file)?;
+    let study = schema::read_for_model(study_file)?;
     let text = std::fs::read_to_string(study_file)?;
     run_study(
         &study,
@@ -87,8 +92,9 @@ pub fn run(study_file: &Path, out: &Path, progress: &dyn Progress) -> Result<Run
 }
 
 /// What a run writes at the top of its folder; [`own_folder`] clears these before a run.
-const RUN_OUTPUTS: [&str; 9] = [
+const RUN_OUTPUTS: [&str; 10] = [
     "model",
+    "design",
     "forward",
     "sensitivity",
     "measurement",
@@ -235,6 +241,14 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     progress.check()?;
     let failed = forward_and_sensitivity(study, &built, out, progress, record)?;
 
+    // The design of the experiment (tests x probe windows), when asked.
+    if study.steps.design {
+        progress.check()?;
+        let t = begin(record, out, "design", Some("design"))?;
+        super::design::run_on(study, &built, &out.join("design"), progress)?;
+        finish(record, out, t)?;
+    }
+
     // 4–5. The measurement and the identification.
     if !study.steps.identification {
         skip(record, out, "measurement", "[run] identification = false")?;
@@ -246,20 +260,24 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         )?;
         return Ok(());
     }
-    let test = study.identification_test().loading.clone();
-    if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
-        let reason = format!("its test {} could not be solved: {why}", test.name());
-        skip(record, out, "measurement", &reason)?;
-        skip(record, out, "identification", &reason)?;
-        bail!(
-            "the identification needs the test {}, which could not be solved: {why}",
-            test.name()
-        );
+    for m in &study.measurements {
+        let test = &study.tests[m.test].loading;
+        if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
+            let reason = format!("its test {} could not be solved: {why}", test.name());
+            skip(record, out, "measurement", &reason)?;
+            skip(record, out, "identification", &reason)?;
+            bail!(
+                "the identification needs the test {}, which could not be solved: {why}",
+                test.name()
+            );
+        }
     }
     progress.check()?;
-    let measured_model = built.loaded(&test)?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
-    let measured = write_measurement(study, &measured_model, &out.join("measurement"), progress)?;
+    let dir = out.join("measurement");
+    create_dir(&dir)?;
+    let prepared = measure::prepare(study, &built, &dir, progress)?;
+    measure::write_measured(study, &built, &prepared, &dir, progress)?;
     finish(record, out, t)?;
 
     let groupings: Vec<(bool, &str)> = match study.identification.grouping {
@@ -279,9 +297,8 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         identify::identify_on(
             study,
             grouped,
-            &measured_model,
-            &test.name(),
-            measured.as_ref(),
+            &built,
+            &prepared,
             &out.join(&folder),
             progress,
         )?;
@@ -389,52 +406,4 @@ fn forward_and_sensitivity(
         }
     }
     Ok(failed)
-}
-
-/// The measurement folder: `measured.csv` in the model frame — the virtual experiment's first
-/// noise realization, the DIC of simulated images, or the study's file mapped to the model
-/// frame. Returns the field the identification fits (`None`: the virtual experiment, drawn per
-/// noise realization).
-fn write_measurement(
-    study: &Study,
-    model: &Model,
-    dir: &Path,
-    progress: &dyn Progress,
-) -> Result<Option<Measured>> {
-    create_dir(dir)?;
-    let path: PathBuf = dir.join("measured.csv");
-    match &study.measurement.source {
-        MeasurementSource::Virtual => {
-            let test = study.identification_test().loading.name();
-            identify::write_virtual_measurement(study, model, &test, &path, progress)?;
-            Ok(None)
-        }
-        MeasurementSource::Ultrasound => {
-            super::ultrasound::sim(
-                study,
-                &super::ultrasound::SimOptions::default(),
-                dir,
-                progress,
-            )?;
-            let field = femu_identify::measured::MeasuredField::read(&path)?;
-            Ok(Some(Measured {
-                field,
-                source: "DIC of simulated B-mode images (femu us-sim)".to_string(),
-                reference_known: true,
-            }))
-        }
-        MeasurementSource::File { .. } => {
-            let m = identify::study_measurement(study)?.expect("a file measurement");
-            m.field
-                .write(&path, None)
-                .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", path.display()))?;
-            progress.note(&format!(
-                "measurement: {} points from {}, mapped to the model frame -> {}",
-                m.field.points.len(),
-                m.source,
-                path.display()
-            ));
-            Ok(Some(m))
-        }
-    }
 }

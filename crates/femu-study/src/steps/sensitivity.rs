@@ -101,6 +101,7 @@ pub fn run(
     options: &SensitivityOptions,
     progress: &dyn Progress,
 ) -> Result<SensitivitySummary> {
+    femu_mesh::folder::refuse_inputs_in(&options.out, &study.input_files())?;
     let built = crate::model::build(&study.model)?;
     run_on(
         study,

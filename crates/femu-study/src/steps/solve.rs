@@ -64,6 +64,10 @@ pub struct SolveSummary {
     pub element_types: BTreeMap<String, usize>,
     pub materials: Vec<MaterialSummary>,
     pub prescribed_dofs: usize,
+    /// Labels of the nodes no element uses (e.g. reference points): held at zero
+    /// displacement, written as such, and named in a warning.
+    #[serde(default)]
+    pub unused_nodes: Vec<i64>,
     pub pressure_faces: usize,
     pub rigid_bodies: Vec<RigidBodySummary>,
     pub load_factor: f64,
@@ -135,6 +139,21 @@ pub fn solve_model(model: &Model, o: &SolveOutput, progress: &dyn Progress) -> R
     };
     let mut solver = StaticSolver::new(model, options)?;
     let setup_s = t0.elapsed().as_secs_f64();
+    let unused = model.unused_nodes();
+    if !unused.is_empty() {
+        let labels: Vec<String> = unused
+            .iter()
+            .take(10)
+            .map(|&n| model.mesh.node_labels[n].to_string())
+            .collect();
+        progress.warn(&format!(
+            "{}: {} node(s) belong to no element ({}{}): held at zero displacement (listed in summary.json, unused_nodes)",
+            o.input,
+            unused.len(),
+            labels.join(", "),
+            if unused.len() > 10 { ", ..." } else { "" }
+        ));
+    }
     progress.note(&format!(
         "{}: {} nodes, {} elements, {} equations; solving",
         o.input,
@@ -306,6 +325,11 @@ fn summary(
         element_types,
         materials,
         prescribed_dofs: model.constraints.len(),
+        unused_nodes: model
+            .unused_nodes()
+            .into_iter()
+            .map(|n| model.mesh.node_labels[n])
+            .collect(),
         pressure_faces: model.pressures.len(),
         rigid_bodies: model
             .contacts
@@ -357,6 +381,7 @@ pub fn solve_file(
     progress: &dyn Progress,
 ) -> Result<()> {
     let t0 = Instant::now();
+    femu_mesh::folder::refuse_inputs_in(out, &[input])?;
     let ext = input
         .extension()
         .and_then(|e| e.to_str())
@@ -412,25 +437,19 @@ pub fn forward(
 ) -> Result<()> {
     create_dir(out)?;
     let t0 = Instant::now();
-    let (base_deck, skin) = crate::model::thigh_deck(elements, kind)?;
+    let (base, skin) = crate::model::thigh_model(elements, kind)?;
     let mesh_s = t0.elapsed().as_secs_f64();
     for loading in tests {
         let t1 = Instant::now();
         let dir = out.join(loading.name());
         create_dir(&dir)?;
-        let mut deck = base_deck.clone();
-        deck.pressures.clear();
         if let Some(pressure) = loading.skin_pressure() {
-            let mut with_pressure = base_deck.clone();
-            with_pressure
-                .pressures
-                .iter_mut()
-                .for_each(|p| p.magnitude = pressure);
             let deck_path = dir.join("model.inp");
-            femu_mesh::write_inp_file(&with_pressure, &deck_path)
+            let deck = crate::model::contention_deck(&base, &skin, pressure);
+            femu_mesh::write_inp_file(&deck, &deck_path)
                 .with_context(|| format!("cannot write {}", deck_path.display()))?;
         }
-        let mut model = Model::from_deck(deck)?;
+        let mut model = base.clone();
         femu_mech::loading::apply_loading(&mut model, &skin, loading)?;
         progress.note(&format!(
             "forward: {} on the built-in thigh ({} elements, Table 1 materials, femur fixed) -> {}",

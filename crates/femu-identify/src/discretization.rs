@@ -1,0 +1,457 @@
+//! The model's own error in an identification: how far the parameters identified on the
+//! model's mesh are from those a converged mesh would give, from the same data.
+//!
+//! The seed chose its mesh once, by a convergence study under the reference parameters
+//! (§2.1.2.1). An identification can still be biased by the mesh far beyond its noise: with many
+//! measured points the statistical uncertainty shrinks as `1/√N` while the discretization error
+//! of the field does not, so a field error well below the noise can move the parameters by many
+//! standard deviations, and a small residual does not warn of it.
+//!
+//! At the optimum `φ̂` on the model's mesh (element size `h`), the same measured points are
+//! evaluated on meshes of the same geometry refined by the ratios `ρ_i = h / h_i` (e.g. √2 and
+//! 2). With `r_i` the whitened residuals on mesh `i` (the data cancel in differences), the
+//! parameter shift to mesh `i` is one Gauss–Newton step with the exact Jacobian `J_i`:
+//!
+//! ```text
+//!   δ_i = -(J_iᵀ J_i)⁻¹ J_iᵀ (r_i - r_h)
+//! ```
+//!
+//! With a discretization error `e(h) = C h^p`, the field differences `d_i = |r_i - r_h|` obey
+//! `d_2 / d_1 = (1 - ρ_2^-p) / (1 - ρ_1^-p)`, which gives the observed rate `p`; the bias of the
+//! identified log-parameters (model's mesh minus converged) is then `b = -δ_f / (1 - ρ_f^-p)`
+//! for the finest level `f` (Richardson). When `|b_k|` exceeds [`BIAS_FRACTION`] of the standard
+//! deviation the check is flagged: the caller widens the interval ([`crate::campaign::widen`])
+//! and the mesh that would make the bias negligible is `h (|b|/(f σ))^(-1/p)`.
+
+use crate::fit::{Columns, FitError, LeastSquares};
+use serde::{Deserialize, Serialize};
+
+/// A bias above this fraction of the standard deviation is not negligible: the coverage of a
+/// 95 % interval falls below 94.3 % (`Φ(1.96 - 0.25) - Φ(-1.96 - 0.25)`).
+pub const BIAS_FRACTION: f64 = 0.25;
+
+/// The rate assumed when the refined levels do not determine one (first order: the bias is
+/// then twice the shift to a mesh of half the element size, the cautious side for bilinear
+/// elements, whose displacements converge at rates 1–2).
+pub const ASSUMED_RATE: f64 = 1.0;
+
+/// The nominal rate of the displacements of bilinear elements (second order); an observed
+/// rate above it is used as this.
+pub const NOMINAL_RATE: f64 = 2.0;
+
+/// One mesh of the check: the joint problem on it, its refinement ratio `h / h_i` (1 for the
+/// model's own mesh) and its element count.
+pub struct Level<'a> {
+    pub ratio: f64,
+    pub elements: usize,
+    pub problem: &'a mut dyn LeastSquares,
+}
+
+/// A refined mesh of the check, as reported.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LevelRecord {
+    pub ratio: f64,
+    pub elements: usize,
+    /// `|r_i - r_h|`: the change of the whitened residuals from the model's mesh (noise units).
+    pub field_change: f64,
+    /// `|r_i - r_f|`: from the finest mesh of the check.
+    #[serde(default)]
+    pub change_to_finest: f64,
+    /// Per free parameter: the Gauss–Newton shift of the log-parameter to this mesh (only for
+    /// the finest level, which has a Jacobian).
+    pub shift: Option<Vec<f64>>,
+}
+
+/// What the check found.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DiscretizationCheck {
+    /// `"negligible"`, `"widened"` (the bias exceeds the fraction of the sd: intervals widened),
+    /// `"reported"` (not negligible, but the data come from the model's own mesh: nothing to
+    /// widen) or `"unknown"` (femu cannot refine this model).
+    pub status: String,
+    /// The model's mesh.
+    pub elements: usize,
+    pub levels: Vec<LevelRecord>,
+    /// The convergence rate of the field at the measured points the extrapolation used: the
+    /// observed one (at most [`NOMINAL_RATE`]), or [`ASSUMED_RATE`].
+    pub rate: f64,
+    pub rate_observed: bool,
+    /// The rate the meshes' field changes fit best.
+    #[serde(default)]
+    pub fitted_rate: Option<f64>,
+    /// RMS relative misfit of the fitted rate to the meshes' pairwise field changes (above
+    /// [`RATE_MISFIT`] the meshes do not converge cleanly and the rate is assumed).
+    #[serde(default)]
+    pub rate_misfit: f64,
+    /// Per free parameter: the estimated bias of the identified log-parameter (model's mesh
+    /// minus converged), and its ratio to the parameter's relative sd.
+    pub bias: Vec<f64>,
+    pub bias_over_sd: Vec<f64>,
+    pub threshold: f64,
+    /// About how many elements would make every bias negligible (when it is not).
+    pub recommended_elements: Option<usize>,
+    /// What to tell the user.
+    pub message: String,
+}
+
+impl DiscretizationCheck {
+    /// The check of a model femu cannot refine: the error is unknown; `how` says how to check it.
+    pub fn unknown(elements: usize, how: &str) -> DiscretizationCheck {
+        DiscretizationCheck {
+            status: "unknown".into(),
+            elements,
+            levels: Vec::new(),
+            rate: f64::NAN,
+            rate_observed: false,
+            fitted_rate: None,
+            rate_misfit: f64::NAN,
+            bias: Vec::new(),
+            bias_over_sd: Vec::new(),
+            threshold: BIAS_FRACTION,
+            recommended_elements: None,
+            message: format!("the discretization error of this model is unknown: {how}"),
+        }
+    }
+
+    /// Whether the bias is not negligible.
+    pub fn flagged(&self) -> bool {
+        self.bias_over_sd.iter().any(|r| *r > self.threshold)
+    }
+}
+
+/// Why the check could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    #[error("the discretization check needs the model's mesh and two refined meshes")]
+    Levels,
+    #[error("the meshes of the check see different data ({0} and {1} residuals): give them the same measured points")]
+    Rows(usize, usize),
+    #[error("the Gauss–Newton system of the finest mesh is singular")]
+    Singular,
+    #[error(transparent)]
+    Fit(#[from] FitError),
+}
+
+/// Above this RMS relative misfit the pairwise field changes do not follow `C h^p`: meshes
+/// that are not nested add a change of their own (how a facet meets the plate, say), and the
+/// rate is then assumed, not observed.
+pub const RATE_MISFIT: f64 = 0.25;
+
+/// The rate `p` (and its RMS relative misfit) that best fits the field changes between pairs
+/// of meshes, `(ρ_i, ρ_j, |r_i - r_j|)` with `|r_i - r_j| = C |ρ_i^-p - ρ_j^-p|`, in the log
+/// (C eliminated): a scan over [0.25, 8] refined by golden sections. `None` without a change.
+fn fit_rate(pairs: &[(f64, f64, f64)]) -> (Option<f64>, f64) {
+    if pairs.iter().any(|p| !(p.2 > 0.0 && p.2.is_finite())) || pairs.len() < 2 {
+        return (None, f64::INFINITY);
+    }
+    let misfit = |p: f64| {
+        let logs: Vec<f64> = pairs
+            .iter()
+            .map(|(a, b, d)| d.ln() - (a.powf(-p) - b.powf(-p)).abs().ln())
+            .collect();
+        let mean = logs.iter().sum::<f64>() / logs.len() as f64;
+        (logs.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / logs.len() as f64).sqrt()
+    };
+    let grid: Vec<f64> = (0..=775).map(|k| 0.25 + 0.01 * k as f64).collect();
+    let k = (0..grid.len())
+        .min_by(|&a, &b| misfit(grid[a]).total_cmp(&misfit(grid[b])))
+        .unwrap_or(0);
+    let (mut lo, mut hi) = (grid[k.saturating_sub(1)], grid[(k + 1).min(grid.len() - 1)]);
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..80 {
+        let (x1, x2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        if misfit(x1) < misfit(x2) {
+            hi = x2;
+        } else {
+            lo = x1;
+        }
+    }
+    let p = 0.5 * (lo + hi);
+    // The log misfit as a relative one.
+    (Some(p), misfit(p).exp() - 1.0)
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum::<f64>().sqrt()
+}
+
+/// `-(JᵀJ)⁻¹ Jᵀ d`.
+fn gauss_newton_step(j: &Columns, d: &[f64]) -> Result<Vec<f64>, CheckError> {
+    use faer::linalg::solvers::Solve;
+    let n = j.len();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let a = faer::Mat::<f64>::from_fn(n, n, |p, q| dot(&j[p], &j[q]));
+    let g = faer::Mat::<f64>::from_fn(n, 1, |p, _| -dot(&j[p], d));
+    let x = a.partial_piv_lu().solve(&g);
+    let step: Vec<f64> = (0..n).map(|k| x[(k, 0)]).collect();
+    if step.iter().all(|v| v.is_finite()) {
+        Ok(step)
+    } else {
+        Err(CheckError::Singular)
+    }
+}
+
+/// The check at the identified parameters `theta` (model units) with relative sds `sd`, from
+/// `levels`: the model's own mesh first (ratio 1), then meshes of the same geometry refined by
+/// increasing ratios, all with the same measured points (see the module documentation).
+/// `data_from_model`: the data were made by the model's own mesh (a virtual experiment without
+/// another mesh), so the bias is reported but no interval needs widening.
+pub fn check(
+    theta: &[f64],
+    sd: &[f64],
+    levels: &mut [Level],
+    data_from_model: bool,
+) -> Result<DiscretizationCheck, CheckError> {
+    if levels.len() < 3 || levels[0].ratio != 1.0 {
+        return Err(CheckError::Levels);
+    }
+    let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
+    let last = levels.len() - 1;
+    let mut residuals: Vec<Vec<f64>> = Vec::new();
+    let mut jacobian = None;
+    for (i, level) in levels.iter_mut().enumerate() {
+        let (r, j) = level.problem.evaluate(&phi, i == last)?;
+        if r.len() != residuals.first().map_or(r.len(), |r0| r0.len()) {
+            return Err(CheckError::Rows(residuals[0].len(), r.len()));
+        }
+        residuals.push(r);
+        jacobian = j.or(jacobian);
+    }
+    let distance =
+        |a: &[f64], b: &[f64]| norm(&a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>());
+    let d: Vec<f64> = residuals[last]
+        .iter()
+        .zip(&residuals[0])
+        .map(|(a, b)| a - b)
+        .collect();
+    let shift = gauss_newton_step(jacobian.as_ref().ok_or(CheckError::Levels)?, &d)?;
+    let records: Vec<LevelRecord> = levels
+        .iter()
+        .enumerate()
+        .skip(1)
+        .map(|(i, level)| LevelRecord {
+            ratio: level.ratio,
+            elements: level.elements,
+            field_change: distance(&residuals[i], &residuals[0]),
+            change_to_finest: distance(&residuals[i], &residuals[last]),
+            shift: (i == last).then(|| shift.clone()),
+        })
+        .collect();
+    // Every pair of meshes: |r_i - r_j| = C |ρ_i^-p - ρ_j^-p|.
+    let ratios: Vec<f64> = levels.iter().map(|l| l.ratio).collect();
+    let mut pairs = Vec::new();
+    for i in 0..=last {
+        for j in i + 1..=last {
+            pairs.push((ratios[i], ratios[j], distance(&residuals[i], &residuals[j])));
+        }
+    }
+    let (fitted, misfit) = fit_rate(&pairs);
+    let observed = fitted.filter(|p| *p >= 0.5 && misfit <= RATE_MISFIT);
+    // A faster apparent rate is pre-asymptotic: the extrapolation uses at most the elements'
+    // nominal rate.
+    let rate = observed.map_or(ASSUMED_RATE, |p| p.min(NOMINAL_RATE));
+    let finest = &records[records.len() - 1];
+    let factor = 1.0 / (1.0 - finest.ratio.powf(-rate));
+    let bias: Vec<f64> = shift.iter().map(|s| -s * factor).collect();
+    let bias_over_sd: Vec<f64> = bias
+        .iter()
+        .zip(sd)
+        .map(|(b, s)| if s.is_finite() { b.abs() / s } else { 0.0 })
+        .collect();
+    let worst = bias_over_sd.iter().copied().fold(0.0, f64::max);
+    let elements = levels[0].elements;
+    let recommended_elements = (worst > BIAS_FRACTION).then(|| {
+        let n = elements as f64 * (worst / BIAS_FRACTION).powf(2.0 / rate);
+        round_up(n)
+    });
+    let status = match (worst > BIAS_FRACTION, data_from_model) {
+        (false, _) => "negligible",
+        (true, false) => "widened",
+        (true, true) => "reported",
+    };
+    let mut out = DiscretizationCheck {
+        status: status.into(),
+        elements,
+        levels: records,
+        rate,
+        rate_observed: observed.is_some(),
+        fitted_rate: fitted,
+        rate_misfit: misfit,
+        bias,
+        bias_over_sd,
+        threshold: BIAS_FRACTION,
+        recommended_elements,
+        message: String::new(),
+    };
+    out.message = message(&out, data_from_model);
+    Ok(out)
+}
+
+/// `n` rounded up to two significant digits.
+fn round_up(n: f64) -> usize {
+    let scale = 10f64.powi((n.log10().floor() as i32 - 1).max(0));
+    ((n / scale).ceil() * scale) as usize
+}
+
+fn message(c: &DiscretizationCheck, data_from_model: bool) -> String {
+    let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
+    let rate = match c.fitted_rate {
+        Some(p) if c.rate_observed && p > c.rate => {
+            format!("observed rate {p:.2}, extrapolated at {:.0}", c.rate)
+        }
+        _ if c.rate_observed => format!("observed rate {:.2}", c.rate),
+        _ => format!(
+            "the meshes do not converge cleanly (misfit {:.0} %), rate {:.0} assumed",
+            100.0 * c.rate_misfit,
+            c.rate
+        ),
+    };
+    let finest = c.levels.last().map_or(0, |l| l.elements);
+    if worst <= c.threshold {
+        return format!(
+            "discretization bias negligible: at most {worst:.2} sd (meshes of {} and {finest} elements, {rate})",
+            c.levels.first().map_or(0, |l| l.elements)
+        );
+    }
+    let need = c.recommended_elements.map_or(String::new(), |n| {
+        format!("; about {n} elements would make it negligible")
+    });
+    if data_from_model {
+        format!(
+            "the mesh biases the parameters by up to {worst:.1} sd ({rate}, from {finest} elements){need}; the virtual data come from this mesh, so the intervals hold for them, not for real data"
+        )
+    } else {
+        format!(
+            "the mesh biases the parameters by up to {worst:.1} sd ({rate}, from {finest} elements): intervals widened to hold the corrected values{need}"
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fit::FreeParameter;
+    use femu_mech::material::{MaterialLaw, NeoHookean};
+    use femu_mech::sensitivity::Parameter;
+
+    /// A linear model `m(φ) = A φ + e_i` whose "discretization error" `e_i = C ρ_i^-p g`
+    /// converges at rate p: the check must find p, and the bias it extrapolates must be the
+    /// shift of the optimum to the converged model (`e = 0`), exactly for a linear model.
+    struct Mesh {
+        free: Vec<FreeParameter>,
+        a: Vec<Vec<f64>>,
+        error: Vec<f64>,
+        data: Vec<f64>,
+    }
+
+    impl LeastSquares for Mesh {
+        fn free(&self) -> &[FreeParameter] {
+            &self.free
+        }
+        fn evaluate(
+            &mut self,
+            phi: &[f64],
+            jacobian: bool,
+        ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
+            let r = (0..self.data.len())
+                .map(|i| {
+                    (0..phi.len()).map(|k| self.a[k][i] * phi[k]).sum::<f64>() + self.error[i]
+                        - self.data[i]
+                })
+                .collect();
+            Ok((r, jacobian.then(|| self.a.clone())))
+        }
+        fn counts(&self) -> (usize, usize) {
+            (0, 0)
+        }
+    }
+
+    #[test]
+    fn rate_and_bias_of_a_linear_model_are_recovered() {
+        let free: Vec<FreeParameter> = (0..2)
+            .map(|k| FreeParameter {
+                name: format!("P{k}"),
+                members: vec![Parameter::new(k, &NeoHookean::SPEC, 0).unwrap()],
+                lower: 1e-3,
+                upper: 1e3,
+            })
+            .collect();
+        let a = vec![
+            (0..8).map(|i| (i as f64 * 0.7).sin()).collect::<Vec<_>>(),
+            (0..8).map(|i| (i as f64 * 0.3).cos()).collect(),
+        ];
+        let g: Vec<f64> = (0..8).map(|i| 0.01 * (i as f64 - 3.0)).collect();
+        let data: Vec<f64> = (0..8).map(|i| (i as f64).sqrt()).collect();
+        let p = 1.6;
+        let mesh = |rho: f64| Mesh {
+            free: free.clone(),
+            a: a.clone(),
+            error: g.iter().map(|v| v * rho.powf(-p)).collect(),
+            data: data.clone(),
+        };
+        // The optimum of the model's own mesh, and of the converged model.
+        let solve = |e: &[f64]| {
+            let d: Vec<f64> = data.iter().zip(e).map(|(x, y)| y - x).collect();
+            gauss_newton_step(&a, &d).unwrap()
+        };
+        let phi_h = solve(&mesh(1.0).error);
+        let phi_inf = solve(&[0.0; 8]);
+        let theta: Vec<f64> = phi_h.iter().map(|v| v.exp()).collect();
+        let (mut m0, mut m1, mut m2) = (mesh(1.0), mesh(2f64.sqrt()), mesh(2.0));
+        let mut levels = [
+            Level {
+                ratio: 1.0,
+                elements: 1000,
+                problem: &mut m0,
+            },
+            Level {
+                ratio: 2f64.sqrt(),
+                elements: 2000,
+                problem: &mut m1,
+            },
+            Level {
+                ratio: 2.0,
+                elements: 4000,
+                problem: &mut m2,
+            },
+        ];
+        let c = check(&theta, &[1e-3, 1e-3], &mut levels, false).unwrap();
+        assert!(
+            c.rate_observed && (c.rate - p).abs() < 1e-9,
+            "rate {}",
+            c.rate
+        );
+        for k in 0..2 {
+            let actual = phi_h[k] - phi_inf[k];
+            assert!(
+                (c.bias[k] - actual).abs() < 1e-9 * actual.abs().max(1e-12),
+                "parameter {k}: bias {} vs {actual}",
+                c.bias[k]
+            );
+        }
+        assert_eq!(c.status, "widened");
+        // The recommended mesh meets the fraction at the observed rate.
+        let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
+        let n = c.recommended_elements.unwrap() as f64;
+        assert!(worst * (n / 1000.0).powf(-p / 2.0) <= BIAS_FRACTION * 1.0001);
+    }
+
+    #[test]
+    fn rate_fit_and_rounding() {
+        let r = [1.0, 2f64.sqrt(), 2.0];
+        for p in [0.5, 1.0, 2.0, 3.5] {
+            let pairs: Vec<(f64, f64, f64)> = [(0, 1), (0, 2), (1, 2)]
+                .iter()
+                .map(|&(i, j)| (r[i], r[j], 3.0 * (r[i].powf(-p) - r[j].powf(-p)).abs()))
+                .collect();
+            let (fitted, misfit) = fit_rate(&pairs);
+            assert!((fitted.unwrap() - p).abs() < 1e-6, "{p}: {fitted:?}");
+            assert!(misfit < 1e-9);
+        }
+        // A finer mesh as far from the model's as a coarser one: no clean rate.
+        let (_, misfit) = fit_rate(&[(1.0, 1.414, 60.9), (1.0, 2.0, 55.8), (1.414, 2.0, 40.0)]);
+        assert!(misfit > RATE_MISFIT, "{misfit}");
+        assert_eq!(round_up(12_345.0), 13_000);
+        assert_eq!(round_up(87.2), 88);
+    }
+}

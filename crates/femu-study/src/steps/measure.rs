@@ -1,0 +1,253 @@
+//! The measurements of a study made ready to fit: a virtual measurement's points in the tissue
+//! (the `[grid]`, or a probe window's grid), a file's field in the model frame, or the DIC of
+//! simulated B-mode images of its window. The identification (`identify_on`) fits them all.
+
+use super::identify::Measured;
+use crate::model::StudyModel;
+use crate::progress::Progress;
+use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
+use anyhow::{bail, Context, Result};
+use femu_identify::campaign::{self, TravelTerm};
+use femu_identify::measured::MeasuredField;
+use femu_mech::loading::Side;
+use femu_mesh::locate::PointLocator;
+use std::path::Path;
+
+/// A measurement ready to fit.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// Names its outputs (see [`Measurement::name`]).
+    pub name: String,
+    /// `contention, anterior 40 x 40 mm`.
+    pub label: String,
+    /// Index into the study's tests.
+    pub test: usize,
+    pub data: PreparedData,
+    pub travel: Option<TravelTerm>,
+}
+
+/// The data of a prepared measurement.
+#[derive(Debug, Clone)]
+pub enum PreparedData {
+    /// The virtual experiment at these points in the tissue (of `total` grid or window points)
+    /// with noise `sigma` (mm).
+    Virtual {
+        points: Vec<[f64; 2]>,
+        total: usize,
+        sigma: f64,
+    },
+    /// A measured field in the model frame.
+    Measured(Measured),
+}
+
+impl Prepared {
+    /// Where the data come from, for the summary.
+    pub fn source(&self) -> String {
+        match &self.data {
+            PreparedData::Virtual { .. } => "virtual experiment (femu synth)".into(),
+            PreparedData::Measured(m) => m.source.clone(),
+        }
+    }
+}
+
+/// The points of a probe window in the tissue of `built` (on the side of `w`, its width and
+/// depth, a grid `spacing_mm` apart centred in it), and the number of grid points.
+pub fn window_points(built: &StudyModel, w: &WindowSpec) -> Result<(Vec<[f64; 2]>, usize)> {
+    let side = Side::parse(&w.side).map_err(|e| anyhow::anyhow!("window side: {e}"))?;
+    // The probe's image is only used for its frame: 10 px/mm keeps it within its limits.
+    let probe = femu_ultrasound::probe::probe_on_skin(
+        &built.model.mesh,
+        &built.skin,
+        side.direction(),
+        w.width_mm,
+        w.depth_mm,
+        10.0f64.min(4000.0 / w.width_mm.max(w.depth_mm)).max(1.0),
+    )
+    .with_context(|| format!("placing the {} window", w.label()))?;
+    let (nl, nd) = (
+        ((w.width_mm / w.spacing_mm).floor() as usize).max(1),
+        ((w.depth_mm / w.spacing_mm).floor() as usize).max(1),
+    );
+    let locator = PointLocator::new(&built.model.mesh);
+    let mut points = Vec::new();
+    for j in 0..nd {
+        for i in 0..nl {
+            let l = -0.5 * w.width_mm + (i as f64 + 0.5) * w.width_mm / nl as f64;
+            let d = (j as f64 + 0.5) * w.depth_mm / nd as f64;
+            let x = probe.probe_to_model([l, d]);
+            if locator.locate(x).is_some() {
+                points.push(x);
+            }
+        }
+    }
+    Ok((points, nl * nd))
+}
+
+/// The points of a virtual measurement on `built` (its `[grid]` or its window) in the tissue,
+/// and how many the grid or window has.
+pub fn virtual_points(
+    study: &Study,
+    built: &StudyModel,
+    m: &Measurement,
+) -> Result<(Vec<[f64; 2]>, usize)> {
+    match &m.region {
+        Region::Grid => {
+            let (lo, hi) = built.model.mesh.bounding_box();
+            let grid = study.measurement.grid.points(lo, hi);
+            Ok((campaign::points_in_tissue(&built.model, &grid), grid.len()))
+        }
+        Region::Window(w) => window_points(built, w),
+    }
+}
+
+/// The study's measurements made ready to fit; an ultrasound measurement's images and DIC are
+/// simulated into `dir` (its sub-folder `NAME` for a list of measurements).
+pub fn prepare(
+    study: &Study,
+    built: &StudyModel,
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<Vec<Prepared>> {
+    study
+        .measurements
+        .iter()
+        .map(|m| {
+            let label = m.label(&study.tests);
+            let data = match &m.source {
+                MeasurementSource::Virtual => {
+                    let (points, total) = virtual_points(study, built, m)
+                        .with_context(|| format!("measurement {label}"))?;
+                    if points.is_empty() {
+                        bail!("measurement {label}: no point of its grid lies in the tissue");
+                    }
+                    PreparedData::Virtual {
+                        points,
+                        total,
+                        sigma: m.sigma_mm,
+                    }
+                }
+                MeasurementSource::File { path, frame } => {
+                    let f = MeasuredField::read(path)?;
+                    PreparedData::Measured(Measured {
+                        field: f.to_model_frame(
+                            frame.scale,
+                            frame.origin,
+                            frame.x_axis,
+                            frame.y_axis,
+                        ),
+                        source: path.display().to_string(),
+                        reference_known: false,
+                    })
+                }
+                MeasurementSource::Ultrasound => {
+                    let out = if study.measurement_list() {
+                        dir.join(&m.name)
+                    } else {
+                        dir.to_path_buf()
+                    };
+                    PreparedData::Measured(ultrasound_measurement(study, m, &out, progress)?)
+                }
+            };
+            Ok(Prepared {
+                name: m.name.clone(),
+                label,
+                test: m.test,
+                data,
+                travel: m.travel.map(|t| TravelTerm {
+                    measured_mm: t.measured_mm,
+                    sigma_mm: t.sigma_mm,
+                }),
+            })
+        })
+        .collect()
+}
+
+/// The DIC field of simulated B-mode images of `m`'s test under its window (or `[probe]`),
+/// written into `out` by `femu us-sim`'s step.
+fn ultrasound_measurement(
+    study: &Study,
+    m: &Measurement,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<Measured> {
+    let mut s = study.clone();
+    s.identification.test = m.test;
+    if let Region::Window(w) = &m.region {
+        s.probe.side = w.side.clone();
+        s.probe.width_mm = w.width_mm;
+        s.probe.depth_mm = w.depth_mm;
+    }
+    super::ultrasound::sim(&s, &super::ultrasound::SimOptions::default(), out, progress)?;
+    let path = out.join("measured.csv");
+    Ok(Measured {
+        field: MeasuredField::read(&path)?,
+        source: format!(
+            "DIC of simulated B-mode images (femu us-sim, {})",
+            path.display()
+        ),
+        reference_known: true,
+    })
+}
+
+/// Writes each prepared measurement's field as the identification fits it in its first repeat
+/// (a virtual one's first noise realization; a file's mapped to the model frame) to
+/// `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements (an ultrasound
+/// measurement's folder already holds its own).
+pub fn write_measured(
+    study: &Study,
+    built: &StudyModel,
+    prepared: &[Prepared],
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let models = super::joint::TestModels::new(study, built, prepared)?;
+    let (free, reference) =
+        super::identify::free_parameters(study, &models.full[0], study.identification.grouped())?;
+    let blocks = super::joint::blocks(prepared, &models, study);
+    let seed = study.identification.seed;
+    let fields = campaign::realized_fields(&models.full[0], &free, &reference, &blocks, seed, 0)?;
+    let mut fitted = Vec::new();
+    for (b, &t) in models.tests.iter().enumerate() {
+        let mine = prepared.iter().filter(|p| p.test == t);
+        for (p, range) in mine.zip(&fields[b].1) {
+            fitted.push((p, fields[b].0.points[range.clone()].to_vec()));
+        }
+    }
+    for (p, points) in fitted {
+        let path = if study.measurement_list() {
+            dir.join(&p.name).join("measured.csv")
+        } else {
+            dir.join("measured.csv")
+        };
+        let (comments, sigma) = match &p.data {
+            PreparedData::Virtual {
+                points,
+                total,
+                sigma,
+            } => (
+                vec![
+                    "femu synth: virtual experiment (seed 2.4.1)".into(),
+                    format!("{}; noise sigma {sigma} mm, seed {seed}", p.label),
+                    format!("{} of {total} grid points in the tissue", points.len()),
+                ],
+                Some(*sigma),
+            ),
+            PreparedData::Measured(m) if m.reference_known => continue,
+            PreparedData::Measured(m) => (vec![format!("{}: {}", p.label, m.source)], None),
+        };
+        if let Some(parent) = path.parent() {
+            crate::output::create_dir(parent)?;
+        }
+        let field = MeasuredField { points, comments };
+        field
+            .write(&path, sigma)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        progress.note(&format!(
+            "{}: {} measured points -> {}",
+            p.label,
+            field.points.len(),
+            path.display()
+        ));
+    }
+    Ok(())
+}
