@@ -434,7 +434,7 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
     let roi = a.corr.roi(images[0].width, images[0].height)?;
     let pixel_size = a.corr.pixel_size(images[0].pixel_size)?;
     let pairs = femu_dic::noise::successive_pairs(&images, &roi, &opts)?;
-    std::fs::create_dir_all(&a.out)
+    femu_mesh::atomic::create_dir_all(&a.out)
         .with_context(|| format!("cannot create the output folder {}", a.out.display()))?;
     let mut csv = String::from(
         "pair,reference,deformed,mean_ux_px,mean_uy_px,std_ux_px,std_uy_px,std_ux_mm,std_uy_mm,converged,iterations,residual_rms\n",

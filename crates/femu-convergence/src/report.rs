@@ -35,7 +35,7 @@ pub fn write_outputs(
     study: &ConvergenceStudy,
     result: &StudyResult,
 ) -> Result<(), ConvergenceError> {
-    std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    femu_mesh::atomic::create_dir_all(out).map_err(|e| io_err(out, e))?;
     write_table(out, &result.runs)?;
     let table = serde_json::to_string_pretty(&json!({
         "runs": result.runs,
@@ -49,7 +49,7 @@ pub fn write_outputs(
 /// Writes the solves a stopped study finished (`convergence.csv`, without the differences:
 /// the finest meshes they are measured against were not solved) into `out`.
 pub fn write_finished_runs(out: &Path, runs: &[MeshRun]) -> Result<(), ConvergenceError> {
-    std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    femu_mesh::atomic::create_dir_all(out).map_err(|e| io_err(out, e))?;
     write_table(out, runs)
 }
 

@@ -175,7 +175,7 @@ pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
     inputs.extend(job.correlation.roi.mask_file());
     femu_mesh::folder::refuse_inputs_in(&job.out, &inputs)?;
     let frames = load_frames(&job.frames)?;
-    std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
+    femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
     })?;

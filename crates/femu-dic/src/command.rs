@@ -219,7 +219,7 @@ pub fn run_dic(job: &DicJob) -> Result<DicReport, DicError> {
         y_up: job.y_up,
     };
     let (m, choice) = job.correlation.measure(&f, &g)?;
-    std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
+    femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
     })?;

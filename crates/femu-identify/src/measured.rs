@@ -41,7 +41,7 @@ pub enum MeasuredError {
         line: usize,
         message: String,
     },
-    #[error("{path}: no data row")]
+    #[error("{path}: no data row (expected a header line x,y,ux,uy[,sx,sy][,w] and one row per measured point, mm)")]
     Empty { path: String },
 }
 

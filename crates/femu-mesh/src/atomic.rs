@@ -112,6 +112,29 @@ pub fn write(path: impl AsRef<Path>, bytes: impl AsRef<[u8]>) -> io::Result<()> 
     write_with(path.as_ref(), |f| f.write_all(bytes.as_ref()))
 }
 
+/// Creates the folder `dir` and its parents (as `std::fs::create_dir_all`), with errors that
+/// say what is wrong in a user's terms: a file of that name, a file on the way, no permission.
+pub fn create_dir_all(dir: &Path) -> io::Result<()> {
+    if dir.exists() && !dir.is_dir() {
+        return Err(io::Error::new(
+            io::ErrorKind::AlreadyExists,
+            "it is a file, not a folder (an output folder is created if absent: give a new or existing folder)",
+        ));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| {
+        let hint = match e.kind() {
+            io::ErrorKind::NotADirectory => {
+                "a part of the path is a file, not a folder".to_string()
+            }
+            io::ErrorKind::PermissionDenied => {
+                "no permission to write there: choose a folder you can write to".to_string()
+            }
+            _ => e.to_string(),
+        };
+        io::Error::new(e.kind(), hint)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -172,6 +195,20 @@ mod tests {
         assert_eq!(names(&dir), vec!["b.csv".to_string()]);
         write(&path, "new\n").unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "new\n");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn folder_errors_say_what_is_wrong() {
+        let dir = scratch("folders");
+        let file = dir.join("a.txt");
+        write(&file, "x").unwrap();
+        let e = create_dir_all(&file).unwrap_err().to_string();
+        assert!(e.contains("is a file, not a folder"), "{e}");
+        let e = create_dir_all(&file.join("sub")).unwrap_err().to_string();
+        assert!(e.contains("a part of the path is a file"), "{e}");
+        create_dir_all(&dir.join("new/deeper")).unwrap();
+        assert!(dir.join("new/deeper").is_dir());
         std::fs::remove_dir_all(&dir).ok();
     }
 

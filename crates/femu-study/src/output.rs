@@ -8,7 +8,7 @@ use std::path::Path;
 
 /// Creates `dir` (and its parents).
 pub fn create_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir)
+    femu_mesh::atomic::create_dir_all(dir)
         .with_context(|| format!("cannot create output folder {}", dir.display()))
 }
 

@@ -1007,7 +1007,7 @@ fn write_field_figures(
     let spacing = xs[1] - xs[0];
     let grey = vec![255.0; nx * ny];
     let panels_dir = out.join("panels");
-    std::fs::create_dir_all(&panels_dir)?;
+    femu_mesh::atomic::create_dir_all(&panels_dir)?;
     let mut paths = Vec::new();
     for c in 0..2 {
         let comp = ["ux", "uy"][c];

@@ -447,7 +447,8 @@ fn run_test(
 /// `sensitivity.csv` (node, x, y, ux, uy, one map column per parameter) and `sensitivity.vtu`
 /// (the maps and the raw derivatives as point fields).
 fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    femu_mesh::atomic::create_dir_all(dir)
+        .with_context(|| format!("cannot create {}", dir.display()))?;
     let path = dir.join("sensitivity.csv");
     let mut w = crate::output::create_file(&path)?;
     write!(w, "node,x,y,ux,uy")?;
@@ -562,7 +563,7 @@ fn write_figures(
     progress: &dyn Progress,
 ) -> Result<()> {
     let panel_dir = out.join("panels");
-    std::fs::create_dir_all(&panel_dir)?;
+    femu_mesh::atomic::create_dir_all(&panel_dir)?;
     let mut panels: Vec<Vec<PathBuf>> = Vec::new();
     for (k, name) in names.iter().enumerate() {
         let hi = results
