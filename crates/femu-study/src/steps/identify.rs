@@ -415,7 +415,7 @@ fn fit_or_keep(
 
 /// The estimates of `fit` with the discretization check: intervals widened when the bias is
 /// not negligible and the data did not come from the model's mesh; with `"refine"`, the first
-/// repeat identified again on the finest mesh of the check.
+/// repeat identified again on the finest mesh of the check; without the check when `stopped`.
 #[allow(clippy::too_many_arguments)]
 fn estimate_with_check(
     study: &Study,
@@ -425,6 +425,7 @@ fn estimate_with_check(
     fit: &mut JointFit,
     reference_known: bool,
     known_noise: bool,
+    stopped: bool,
     progress: &dyn Progress,
 ) -> Result<(
     Vec<Estimate>,
@@ -442,6 +443,12 @@ fn estimate_with_check(
     };
     let (mut parameters, mut id) = estimates(fit)?;
     if study.identification.discretization == Discretization::Off {
+        return Ok((parameters, id, None));
+    }
+    if stopped {
+        // The user asked to stop: the repeats that finished are kept without the check's
+        // solves on finer meshes (they would see the stop request and lose the repeats).
+        progress.note("discretization check skipped: the identification was interrupted");
         return Ok((parameters, id, None));
     }
     let sd: Vec<f64> = parameters.iter().map(|p| p.relative_sd).collect();
@@ -559,6 +566,7 @@ pub fn identify_on(
         &mut fit,
         reference_known,
         virtual_experiment,
+        interrupted.is_some(),
         progress,
     )?;
     let warnings = campaign::warnings(&fit.campaign, &fit.free, &parameters);
