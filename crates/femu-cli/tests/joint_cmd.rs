@@ -164,7 +164,7 @@ fn a_decks_pressure_is_kept() {
         "mesh",
         "thigh",
         "--elements",
-        "600",
+        "700",
         "--out",
         mesh.to_str().unwrap(),
         "--quiet",
@@ -244,4 +244,42 @@ fn a_decks_pressure_is_kept() {
             && e.contains("20.0000 mmHg"),
         "{e}"
     );
+}
+/// Virtual data made on a mesh of half the element size (`data_refinement = 2`), identified on a
+/// coarse thigh: the check finds the mesh's bias beyond the noise, and with `discretization =
+/// "refine"` the identification is continued on the finest mesh of the check, which moves the
+/// estimates towards the data's mesh and leaves a smaller bias.
+#[test]
+fn refine_continues_the_identification_on_the_refined_mesh() {
+    let dir = scratch("refine");
+    let study = write(
+        &dir,
+        "refine.toml",
+        "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nside = \"anterior\"\n\
+         force_n_per_mm = 0.1\n[noise]\nsigma_mm = 0.002\n\
+         [identification]\ngrouped = true\nstarts = 1\ndata_refinement = 2.0\n\
+         discretization = \"refine\"\n",
+    );
+    let out = dir.join("out");
+    let o = femu(&[
+        "identify",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let s = json(&out.join("summary.json"));
+    let d = &s["discretization"];
+    assert_eq!(d["status"], "refined", "{d}");
+    let before: f64 = d["bias_over_sd"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .fold(0.0, f64::max);
+    eprintln!("{}", d["message"]);
+    // What is left after refining is the bias beyond the finest mesh (ρ^-p of it).
+    assert!(d["message"].as_str().unwrap().contains("identified again"));
+    assert!(before.is_finite());
 }

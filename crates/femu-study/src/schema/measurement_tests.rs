@@ -222,7 +222,7 @@ fn a_decks_pressure_is_kept_or_the_conflict_named() {
     assert!((contention_of(&s) - 20.0 * femu_mesh::MMHG_IN_MPA).abs() < 1e-15);
     let e = err("[model]\ndeck = \"missing.inp\"\n");
     assert!(
-        e.contains("[model] deck (line 2)") && e.contains("cannot read"),
+        e.contains("[model] deck (line 2)") && e.contains("does not exist"),
         "{e}"
     );
     let _ = std::fs::remove_dir_all(&dir);

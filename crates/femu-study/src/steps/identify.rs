@@ -468,6 +468,9 @@ fn estimate_with_check(
                 refined.cost, refined.forward_solves
             ));
             fit.campaign.best[0] = refined;
+            // The refined fit's Jacobian has the rows of the finest problem (the points inside
+            // every level's mesh): the information shares read them through its layout.
+            fit.campaign.layout = finest.segments();
             (parameters, id) = estimates(fit)?;
             // What remains beyond the finest mesh: the bias scaled by ρ^-p.
             let remaining = checked
