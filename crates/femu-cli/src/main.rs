@@ -3,6 +3,7 @@
 //! Thin glue: parse arguments, call the library crates, write the output folder, map errors to
 //! messages and a non-zero exit code. Nothing numerical lives here.
 
+mod batch_cmd;
 mod bench;
 mod convergence_cmd;
 mod dic_cmd;
@@ -258,6 +259,13 @@ enum Command {
     /// DIC random error of repeated acquisitions per setting, paired t-tests between settings,
     /// the recommended setting (seed §3.1.3, Fig. 7).
     UsNoise(us_cmd::UsNoiseArgs),
+    /// Population studies: many cases (subjects, slices, sessions, seeds) of one template study
+    /// run here or as a Slurm job array, their state, their results gathered (femu batch
+    /// run|status|collect).
+    Batch {
+        #[command(subcommand)]
+        what: batch_cmd::BatchCommand,
+    },
 }
 
 /// The named demo tests.
@@ -424,6 +432,7 @@ fn main() -> ExitCode {
         Command::UsScan(args) => us_cmd::scan(&args, quiet),
         Command::UsSettings(args) => us_cmd::run_settings(&args, quiet),
         Command::UsNoise(args) => us_cmd::run_noise(&args, quiet),
+        Command::Batch { what } => batch_cmd::run(what, &progress, quiet),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

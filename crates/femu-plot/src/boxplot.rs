@@ -1,5 +1,6 @@
 //! Box plots: one box per group (median, quartiles, whiskers to the most extreme values within
-//! 1.5 interquartile ranges, points beyond drawn as outliers), Tukey's convention.
+//! 1.5 interquartile ranges, points beyond drawn as outliers), Tukey's convention; optionally
+//! every value drawn over its box (a population of a few dozen subjects).
 
 use crate::colormap::SERIES;
 use crate::text::{draw_title, font, tick_label, Sizes};
@@ -12,6 +13,9 @@ use std::path::Path;
 pub struct BoxPlot {
     pub title: String,
     pub y_label: String,
+    /// Every value drawn as a dot over its box (spread sideways so that equal values stay
+    /// apart), instead of the outliers alone.
+    pub points: bool,
     pub width: u32,
     pub height: u32,
 }
@@ -21,14 +25,16 @@ impl Default for BoxPlot {
         BoxPlot {
             title: String::new(),
             y_label: String::new(),
+            points: false,
             width: crate::DEFAULT_WIDTH,
             height: crate::DEFAULT_HEIGHT,
         }
     }
 }
 
-/// Quartiles by linear interpolation between order statistics (type 7, R's default).
-fn quantile(sorted: &[f64], q: f64) -> f64 {
+/// The `q`-quantile of `sorted` (ascending, not empty) by linear interpolation between order
+/// statistics (type 7, R's default).
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     let h = (sorted.len() - 1) as f64 * q;
     let (i, f) = (h.floor() as usize, h - h.floor());
     if i + 1 < sorted.len() {
@@ -36,6 +42,13 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
     } else {
         sorted[i]
     }
+}
+
+/// The sideways offset of the `i`-th dot of a group: a low-discrepancy (golden ratio) sequence
+/// within ±0.2 of the box's centre, the same for every run.
+fn spread(i: usize) -> f64 {
+    let t = (i as f64 * 0.618_033_988_749_895).fract();
+    0.4 * (t - 0.5)
 }
 
 /// Writes a box plot of `groups` (`(name, values)`; NaN values are left out).
@@ -132,12 +145,28 @@ pub fn box_plot_png(
                     line((x - 0.5 * w, *lo), (x + 0.5 * w, *lo)),
                 ])
                 .map_err(de)?;
-            chart
-                .draw_series(
-                    out.iter()
-                        .map(|&v| Circle::new((x, v), s.px(5.0), BLACK.stroke_width(1))),
-                )
-                .map_err(de)?;
+            if !opts.points {
+                chart
+                    .draw_series(
+                        out.iter()
+                            .map(|&v| Circle::new((x, v), s.px(5.0), BLACK.stroke_width(1))),
+                    )
+                    .map_err(de)?;
+            }
+        }
+        if opts.points {
+            for (k, (_, values)) in groups.iter().enumerate() {
+                let dots = values.iter().filter(|v| v.is_finite()).enumerate();
+                chart
+                    .draw_series(dots.map(|(i, &v)| {
+                        Circle::new(
+                            (k as f64 + spread(i), v),
+                            s.px(6.0),
+                            BLACK.mix(0.7).filled(),
+                        )
+                    }))
+                    .map_err(de)?;
+            }
         }
         Ok(())
     })
@@ -159,6 +188,12 @@ mod tests {
             ("uy".to_string(), vec![0.05, 0.1, 0.12, 0.08]),
         ];
         box_plot_png(&dir.join("b.png"), &g, &BoxPlot::default()).unwrap();
+        let dots = BoxPlot {
+            points: true,
+            ..Default::default()
+        };
+        box_plot_png(&dir.join("d.png"), &g, &dots).unwrap();
+        assert!((0..100).all(|i| spread(i).abs() <= 0.2));
         assert!(box_plot_png(&dir.join("c.png"), &[], &BoxPlot::default()).is_err());
         std::fs::remove_dir_all(&dir).ok();
     }

@@ -11,7 +11,9 @@
 //! - [`bar_chart_png`]: grouped bars with optional error bars (identified parameters per tissue);
 //! - [`histogram_png`]: grey levels, errors;
 //! - [`image_field_png`]: a per-pixel field over a grey image (DIC maps);
-//! - [`box_plot_png`]: distributions per group (DIC random error per pair).
+//! - [`box_plot_png`]: distributions per group (DIC random error per pair, a population's
+//!   parameters per tissue);
+//! - [`forest_plot_png`]: estimates with their intervals, one row each (per-subject results).
 //!
 //! Drawing uses `plotters`' bitmap backend; text uses the DejaVu Sans font embedded by the
 //! `dejavu` crate (no system font library needed), registered once per process; the PNG is
@@ -28,14 +30,16 @@ mod boxplot;
 mod chart;
 pub mod colormap;
 mod field;
+mod forest;
 mod image_field;
 mod line;
 mod text;
 mod tile;
 
-pub use boxplot::{box_plot_png, BoxPlot};
+pub use boxplot::{box_plot_png, quantile, BoxPlot};
 pub use chart::{bar_chart_png, histogram_png, BarChart, Histogram};
 pub use field::{mesh_field_png, node_field_png, FieldPlot, Overlay};
+pub use forest::{forest_plot_png, ForestPlot, ForestRow};
 pub use image_field::{image_field_png, ImageField};
 pub use line::{line_plot_png, LegendPosition, LinePlot, LineStyle, Series};
 pub use tile::tile_png;

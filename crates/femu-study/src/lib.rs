@@ -8,7 +8,8 @@
 //! - [`steps`]: the pipeline's steps (model, forward, sensitivity, measurement,
 //!   identification, the whole run) as functions returning typed, serde-round-trippable
 //!   summaries.
-//! - [`report`]: the HTML report and `summary.json` of a run folder, from those summaries.
+//! - [`report`]: the HTML report and `summary.json` of a run folder, from those summaries
+//!   ([`html`]: the self-contained page it is written on).
 //! - [`progress`]: how a long step tells its user what it is doing.
 //!
 //! The crate sits above every computing crate (mesh → mechanics → DIC and ultrasound →
@@ -18,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub(crate) mod figures;
+pub mod html;
 pub mod json;
 pub mod model;
 pub mod output;

@@ -19,6 +19,7 @@ mod convergence;
 mod deck_loads;
 mod design;
 mod error;
+pub mod files;
 mod geometry;
 mod identification;
 mod legacy;
@@ -36,6 +37,7 @@ pub use convergence::ConvergenceSpec;
 pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
+pub use files::{absolute_file_names, is_file_key, FILE_KEYS};
 pub(crate) use geometry::thigh_elements;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,

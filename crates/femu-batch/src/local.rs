@@ -1,0 +1,226 @@
+//! The local runner: the cases on this machine, at most `jobs` at once, each a child process
+//! (`femu batch case DIR NAME`) of its own — a case that fails, panics or is killed takes
+//! nothing of the others with it — writing its output to `cases/NAME/femu.log`.
+//!
+//! Stopping: each child runs in a process group of its own, so a Ctrl-C at the terminal reaches
+//! the runner alone; the runner then starts no new case and sends each running case one
+//! SIGTERM, which `femu run` takes as a request to stop after its current unit of work (keeping
+//! its finished steps, recording `interrupted`), and waits for them.
+
+use crate::folder::{BatchDir, CaseRecord, RecordStatus};
+use anyhow::{Context, Result};
+use femu_study::Progress;
+use std::path::PathBuf;
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+/// How the local runner runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LocalOptions {
+    /// Cases at once.
+    pub jobs: usize,
+    /// Threads of each case (RAYON_NUM_THREADS of its process).
+    pub threads_per_case: usize,
+    /// The femu binary the cases run with.
+    pub femu: PathBuf,
+}
+
+impl LocalOptions {
+    /// `jobs` cases at once (no more than `cases`) with `femu`, this machine's cores shared
+    /// among them.
+    pub fn new(jobs: usize, cases: usize, femu: PathBuf) -> LocalOptions {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let jobs = jobs.min(cases).max(1);
+        LocalOptions {
+            jobs,
+            threads_per_case: (cores / jobs).max(1),
+            femu,
+        }
+    }
+}
+
+/// What a local run came to: the cases by outcome (with the error of each failed one).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LocalOutcome {
+    pub done: Vec<String>,
+    pub failed: Vec<(String, String)>,
+    pub interrupted: Vec<String>,
+    /// Cases not started because the run was stopped.
+    pub not_started: Vec<String>,
+    pub seconds: f64,
+}
+
+struct Running {
+    name: String,
+    child: Child,
+    signalled: bool,
+}
+
+/// Runs `cases` of the batch in `dir` (their study.toml written) on this machine.
+pub fn run_local(
+    dir: &BatchDir,
+    cases: &[String],
+    opts: &LocalOptions,
+    progress: &dyn Progress,
+) -> Result<LocalOutcome> {
+    let t0 = Instant::now();
+    let mut out = LocalOutcome::default();
+    let mut queue = cases.iter();
+    let mut running: Vec<Running> = Vec::new();
+    let bar = progress.task(&format!("cases ({} at once)", opts.jobs), Some(cases.len()));
+    loop {
+        let stop = progress.cancelled();
+        if stop {
+            for r in running.iter_mut().filter(|r| !r.signalled) {
+                terminate(r.child.id());
+                r.signalled = true;
+            }
+        }
+        while !stop && running.len() < opts.jobs {
+            let Some(name) = queue.next() else { break };
+            running.push(Running {
+                name: name.clone(),
+                child: spawn(dir, name, opts)?,
+                signalled: false,
+            });
+        }
+        if running.is_empty() {
+            break;
+        }
+        let names: Vec<&str> = running.iter().map(|r| r.name.as_str()).collect();
+        bar.message(&names.join(", "));
+        let mut k = 0;
+        while k < running.len() {
+            match running[k].child.try_wait()? {
+                Some(status) => {
+                    let r = running.swap_remove(k);
+                    let record = settle(dir, &r.name, status)?;
+                    match record.status {
+                        RecordStatus::Done => out.done.push(r.name),
+                        RecordStatus::Interrupted => out.interrupted.push(r.name),
+                        _ => {
+                            let why = record.error.unwrap_or_default();
+                            let first = why.lines().next().unwrap_or("").to_string();
+                            progress.warn(&format!("case {} failed: {first}", r.name));
+                            out.failed.push((r.name, why));
+                        }
+                    }
+                    bar.inc(1);
+                }
+                None => k += 1,
+            }
+        }
+        std::thread::sleep(Duration::from_millis(25));
+    }
+    out.not_started = queue.cloned().collect();
+    out.seconds = t0.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// Starts case `name` as a child process.
+fn spawn(dir: &BatchDir, name: &str, opts: &LocalOptions) -> Result<Child> {
+    let log_path = dir.case_log(name);
+    let log = std::fs::File::create(&log_path)
+        .with_context(|| format!("cannot write {}", log_path.display()))?;
+    let mut cmd = Command::new(&opts.femu);
+    cmd.arg("batch")
+        .arg("case")
+        .arg(dir.root())
+        .arg(name)
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .env("RAYON_NUM_THREADS", opts.threads_per_case.to_string());
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::CommandExt;
+        cmd.process_group(0);
+    }
+    cmd.spawn()
+        .with_context(|| format!("cannot start {} for case {name}", opts.femu.display()))
+}
+
+/// The record of a case whose process ended with `status`: its own, or — when the process ended
+/// without recording its end (killed, crashed) — a failure written for it.
+fn settle(dir: &BatchDir, name: &str, status: ExitStatus) -> Result<CaseRecord> {
+    let record = dir.read_record(name).ok().flatten();
+    match record {
+        Some(r) if r.status != RecordStatus::Running => Ok(r),
+        earlier => {
+            let log = std::fs::read_to_string(dir.case_log(name)).unwrap_or_default();
+            let last = log
+                .lines()
+                .rev()
+                .find(|l| !l.trim().is_empty())
+                .unwrap_or("");
+            let planned = dir.read_plan()?;
+            let fingerprint = planned
+                .cases
+                .iter()
+                .find(|c| c.name == name)
+                .map(|c| c.fingerprint.clone())
+                .unwrap_or_default();
+            let r = CaseRecord {
+                case: name.to_string(),
+                status: RecordStatus::Failed,
+                error: Some(format!(
+                    "the case's process ended without recording an outcome ({status}); last line of {}: {last}",
+                    dir.case_log(name).display()
+                )),
+                ..earlier.unwrap_or(CaseRecord {
+                    case: name.to_string(),
+                    status: RecordStatus::Failed,
+                    fingerprint,
+                    host: crate::folder::host_name(),
+                    pid: 0,
+                    slurm_task: None,
+                    started_unix_s: crate::folder::unix_now(),
+                    seconds: 0.0,
+                    error: None,
+                    femu_version: env!("CARGO_PKG_VERSION").into(),
+                })
+            };
+            dir.write_record(&r)?;
+            Ok(r)
+        }
+    }
+}
+
+/// Asks process `pid` to stop (SIGTERM).
+fn terminate(pid: u32) {
+    #[cfg(unix)]
+    if let Ok(pid) = i32::try_from(pid) {
+        // SAFETY: kill(2) takes plain integers and touches no memory of this process; `pid` is
+        // a positive process id (a child this runner started), never 0 or negative (which
+        // would name process groups).
+        if pid > 0 {
+            unsafe {
+                libc::kill(pid, libc::SIGTERM);
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = pid;
+}
+
+/// Whether process `pid` of this host is alive (signal 0: the existence check of kill(2)).
+pub fn process_alive(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        let Ok(pid) = i32::try_from(pid) else {
+            return false;
+        };
+        if pid <= 0 {
+            return false;
+        }
+        // SAFETY: as in `terminate`; signal 0 sends nothing, it only checks that the process
+        // exists (EPERM: it exists, owned by another user).
+        let r = unsafe { libc::kill(pid, 0) };
+        r == 0 || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
