@@ -230,7 +230,7 @@ pub fn run(
         compression_increments: comp_inc,
         compression_newton_iterations: comp_it,
     };
-    std::fs::write(
+    femu_mesh::atomic::write(
         out.join("summary.json"),
         serde_json::to_string_pretty(&summary)?,
     )?;

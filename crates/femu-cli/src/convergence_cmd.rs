@@ -35,7 +35,26 @@ pub fn run(study_file: Option<&Path>, out: &Path, quiet: bool) -> Result<()> {
             eprintln!("{line}");
         }
     };
-    let result = run_study(&study, &mut progress)?;
+    let t0 = std::time::Instant::now();
+    let result = match run_study(&study, &mut progress) {
+        Err(femu_convergence::ConvergenceError::Interrupted { finished, source }) => {
+            // The finished solves are kept, and the summary says what was stopped.
+            report::write_finished_runs(out, &finished)?;
+            let note = format!(
+                "stopped by the user after {} solves (their rows in convergence.csv; no differences, rates or recommendation: the finest meshes were not solved)",
+                finished.len()
+            );
+            femu_study::output::write_stopped(
+                out,
+                "convergence",
+                &note,
+                &["convergence.csv"],
+                t0.elapsed().as_secs_f64(),
+            )?;
+            return Err(anyhow::Error::new(source).context(note));
+        }
+        r => r?,
+    };
     report::write_outputs(out, &study, &result)
         .with_context(|| format!("writing the results into {}", out.display()))?;
     if !quiet {

@@ -266,7 +266,21 @@ pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
         figures: !a.no_figures,
         out: a.out.clone(),
     };
-    let r = run_dic(&job)?;
+    let t0 = Instant::now();
+    let r = match run_dic(&job) {
+        Err(femu_dic::DicError::Interrupted(stop)) => {
+            let note = "stopped by the user during the correlation: nothing was measured";
+            femu_study::output::write_stopped(
+                &a.out,
+                "dic",
+                note,
+                &[],
+                t0.elapsed().as_secs_f64(),
+            )?;
+            return Err(anyhow::Error::new(stop).context(note));
+        }
+        r => r?,
+    };
     if !quiet {
         let s = &r.result;
         println!(
@@ -420,7 +434,7 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
     let roi = a.corr.roi(images[0].width, images[0].height)?;
     let pixel_size = a.corr.pixel_size(images[0].pixel_size)?;
     let pairs = femu_dic::noise::successive_pairs(&images, &roi, &opts)?;
-    std::fs::create_dir_all(&a.out)
+    femu_mesh::atomic::create_dir_all(&a.out)
         .with_context(|| format!("cannot create the output folder {}", a.out.display()))?;
     let mut csv = String::from(
         "pair,reference,deformed,mean_ux_px,mean_uy_px,std_ux_px,std_uy_px,std_ux_mm,std_uy_mm,converged,iterations,residual_rms\n",
@@ -446,7 +460,8 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         ));
     }
     let path = a.out.join("noise.csv");
-    std::fs::write(&path, csv).with_context(|| format!("cannot write {}", path.display()))?;
+    femu_mesh::atomic::write(&path, csv)
+        .with_context(|| format!("cannot write {}", path.display()))?;
     let groups = vec![
         (
             "std ux".to_string(),
@@ -484,7 +499,7 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
     let path = a.out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)?)
+    femu_mesh::atomic::write(&path, serde_json::to_string_pretty(&summary)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     if !quiet {
         for (k, p) in pairs.iter().enumerate() {

@@ -296,7 +296,7 @@ fn init(path: &std::path::Path, force: bool, quiet: bool) -> anyhow::Result<()> 
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     }
-    std::fs::write(path, femu_study::schema::EXAMPLE_STUDY)
+    femu_mesh::atomic::write(path, femu_study::schema::EXAMPLE_STUDY)
         .with_context(|| format!("cannot write {}", path.display()))?;
     if !quiet {
         eprintln!(

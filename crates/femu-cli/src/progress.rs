@@ -18,6 +18,7 @@ pub fn install_stop_handler() {
         .get_or_init(|| Arc::new(AtomicBool::new(false)))
         .clone();
     let installed = ctrlc::set_handler(move || {
+        femu_mesh::stop::request();
         if flag.swap(true, Ordering::SeqCst) {
             eprintln!("\nstopped");
             std::process::exit(130);

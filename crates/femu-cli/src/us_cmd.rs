@@ -169,7 +169,7 @@ pub fn run_settings(args: &UsSettingsArgs, quiet: bool) -> Result<()> {
         pixel_size_mm: args.pixel_size,
     };
     let report = settings::analyse(&manifest, &opts)?;
-    std::fs::create_dir_all(&args.out)
+    femu_mesh::atomic::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let files = settings::write_outputs(&report, &opts, &args.out)?;
     #[derive(Serialize)]
@@ -266,7 +266,7 @@ pub fn run_noise(args: &UsNoiseArgs, quiet: bool) -> Result<()> {
             }
         },
     )?;
-    std::fs::create_dir_all(&args.out)
+    femu_mesh::atomic::create_dir_all(&args.out)
         .with_context(|| format!("cannot create output folder {}", args.out.display()))?;
     let files = noise::write_outputs(&report, &args.out)?;
     #[derive(Serialize)]

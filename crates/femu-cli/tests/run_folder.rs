@@ -3,12 +3,11 @@
 //! report, a folder that is not a run's is refused); Ctrl-C or SIGTERM stops a run, an
 //! identification's Monte Carlo repeats, keeping what was finished and saying so (exit 130).
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::Path;
 use std::time::Duration;
 
 mod common;
-use common::{femu, json, scratch, write};
+use common::{femu, interrupt, json, outputs_are_whole, scratch, write};
 
 /// The step names and statuses of `out/steps.json`.
 fn steps(out: &Path) -> Vec<(String, String)> {
@@ -180,62 +179,6 @@ fn a_run_owns_its_folder() {
     assert!(inside.exists());
 }
 
-/// Starts `femu ARGS`, sends SIGINT after `delay`, returns (exit code, stderr).
-fn interrupt(args: &[&str], delay: Duration) -> (Option<i32>, String) {
-    let child = Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(delay);
-    let _ = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status();
-    let o = child.wait_with_output().unwrap();
-    (
-        o.status.code(),
-        String::from_utf8_lossy(&o.stderr).into_owned(),
-    )
-}
-
-/// The number of fields of a CSV row (RFC 4180: a comma inside double quotes, as in a
-/// measurement's label `"compression-anterior, grid"`, does not separate fields).
-fn fields(row: &str) -> usize {
-    let mut quoted = false;
-    1 + row
-        .chars()
-        .filter(|&c| {
-            if c == '"' {
-                quoted = !quoted;
-            }
-            c == ',' && !quoted
-        })
-        .count()
-}
-
-/// Every CSV under `dir` has a header and rows of its header's width (no truncated file).
-fn csv_files_are_whole(dir: &Path) {
-    let mut stack: Vec<PathBuf> = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "csv") {
-                let text = std::fs::read_to_string(&p).unwrap();
-                let mut rows = text.lines().filter(|l| !l.starts_with('#'));
-                let width = rows.next().map_or(0, fields);
-                assert!(width > 0, "{}: no header", p.display());
-                assert!(text.ends_with('\n'), "{}: cut short", p.display());
-                for r in rows {
-                    assert_eq!(fields(r), width, "{}: {r}", p.display());
-                }
-            }
-        }
-    }
-}
-
 #[cfg(unix)]
 #[test]
 fn an_interrupted_run_keeps_its_finished_steps_and_says_so() {
@@ -278,7 +221,7 @@ fn an_interrupted_run_keeps_its_finished_steps_and_says_so() {
             let html = std::fs::read_to_string(out.join("report.html")).unwrap();
             assert!(html.contains("interrupted"));
         }
-        csv_files_are_whole(&out);
+        outputs_are_whole(&out);
     }
 }
 
@@ -311,5 +254,5 @@ fn an_interrupted_monte_carlo_keeps_its_finished_repeats() {
         .unwrap()
         .contains(&format!("{kept} of 200 repeats")));
     assert!(out.join("parameters.csv").exists() && out.join("starts.csv").exists());
-    csv_files_are_whole(&out);
+    outputs_are_whole(&out);
 }

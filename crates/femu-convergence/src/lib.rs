@@ -64,6 +64,12 @@ pub enum ConvergenceError {
         origin: [f64; 2],
         spacing: f64,
     },
+    /// The user asked to stop ([`femu_mesh::stop`]); the solves finished before are kept.
+    #[error("interrupted after {} solves", finished.len())]
+    Interrupted {
+        finished: Vec<MeshRun>,
+        source: femu_mesh::stop::Interrupted,
+    },
     #[error("{path}: cannot draw the figure: {source}")]
     Plot {
         path: PathBuf,

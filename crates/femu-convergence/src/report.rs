@@ -22,7 +22,7 @@ fn io_err(path: &Path, e: impl std::fmt::Display) -> ConvergenceError {
 }
 
 fn write(path: &Path, text: &str) -> Result<(), ConvergenceError> {
-    std::fs::write(path, text).map_err(|e| io_err(path, e))
+    femu_mesh::atomic::write(path, text).map_err(|e| io_err(path, e))
 }
 
 fn opt(v: Option<f64>) -> String {
@@ -35,12 +35,30 @@ pub fn write_outputs(
     study: &ConvergenceStudy,
     result: &StudyResult,
 ) -> Result<(), ConvergenceError> {
-    std::fs::create_dir_all(out).map_err(|e| io_err(out, e))?;
-    // The table.
+    femu_mesh::atomic::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    write_table(out, &result.runs)?;
+    let table = serde_json::to_string_pretty(&json!({
+        "runs": result.runs,
+        "fits": result.elements,
+    }))
+    .map_err(|e| io_err(&out.join("convergence.json"), e))?;
+    write(&out.join("convergence.json"), &table)?;
+    write_figures_and_summary(out, study, result)
+}
+
+/// Writes the solves a stopped study finished (`convergence.csv`, without the differences:
+/// the finest meshes they are measured against were not solved) into `out`.
+pub fn write_finished_runs(out: &Path, runs: &[MeshRun]) -> Result<(), ConvergenceError> {
+    femu_mesh::atomic::create_dir_all(out).map_err(|e| io_err(out, e))?;
+    write_table(out, runs)
+}
+
+/// `convergence.csv`: one row per solve.
+fn write_table(out: &Path, runs: &[MeshRun]) -> Result<(), ConvergenceError> {
     let mut csv = String::from(
         "test,element,d_scale,mesh,target_elements,element_size_mm,elements,nodes,h_mm,status,points_inside,max_diff_mm,rms_diff_mm,rms_displacement_mm,displacement_ratio,max_displacement_mm,reaction_x_n_per_mm,reaction_y_n_per_mm,travel_mm,contact_force_n_per_mm,increments,newton_iterations,mesh_s,solve_s,peak_memory_mb\n",
     );
-    for r in &result.runs {
+    for r in runs {
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{:.6},{},{},{:.6},{},{},{},{},{},{},{:.9e},{:.9e},{:.9e},{},{},{},{},{:.4},{:.4},{}",
@@ -71,14 +89,15 @@ pub fn write_outputs(
             r.peak_memory_mb.map_or(String::new(), |v| format!("{v:.1}")),
         );
     }
-    write(&out.join("convergence.csv"), &csv)?;
-    let table = serde_json::to_string_pretty(&json!({
-        "runs": result.runs,
-        "fits": result.elements,
-    }))
-    .map_err(|e| io_err(&out.join("convergence.json"), e))?;
-    write(&out.join("convergence.json"), &table)?;
+    write(&out.join("convergence.csv"), &csv)
+}
 
+/// The reference grid, the figures and `summary.json` of a finished study.
+fn write_figures_and_summary(
+    out: &Path,
+    study: &ConvergenceStudy,
+    result: &StudyResult,
+) -> Result<(), ConvergenceError> {
     // The reference displacement at the common grid points.
     let reference = result.runs.iter().find(|r| {
         r.test == result.loading

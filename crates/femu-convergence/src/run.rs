@@ -327,6 +327,12 @@ fn solve_run(
             run.points_inside = ip.inside();
             run.u_points = ip.interpolate_vector(&sol.u);
         }
+        Err(femu_mech::SolveError::Interrupted(source)) => {
+            return Err(ConvergenceError::Interrupted {
+                finished: Vec::new(),
+                source,
+            })
+        }
         Err(e) => {
             run.status = format!("failed: {e}");
             run.newton_iterations = 0;
@@ -385,7 +391,15 @@ pub fn run_study(
         vec![1.0, study.d_scale]
     };
     let mut runs = Vec::new();
+    // A stop between or inside the solves returns the runs finished so far.
+    let stopped = |runs: Vec<MeshRun>, source| ConvergenceError::Interrupted {
+        finished: runs,
+        source,
+    };
     for k in 0..study.meshes.len() {
+        if let Err(source) = femu_mesh::stop::check() {
+            return Err(stopped(runs, source));
+        }
         let tm = Instant::now();
         let quads = quad_mesh(study, k)?;
         let mesh_s = tm.elapsed().as_secs_f64();
@@ -400,7 +414,16 @@ pub fn run_study(
             }
         }
         for (loading, kind, d_scale) in jobs {
-            let run = solve_run(study, &loading, &quads, k, kind, d_scale, mesh_s, &points)?;
+            let run = match femu_mesh::stop::check() {
+                Err(source) => return Err(stopped(runs, source)),
+                Ok(()) => solve_run(study, &loading, &quads, k, kind, d_scale, mesh_s, &points),
+            };
+            let run = match run {
+                Err(ConvergenceError::Interrupted { source, .. }) => {
+                    return Err(stopped(runs, source))
+                }
+                r => r?,
+            };
             progress(&format!(
                 "{} {:<5} D x {:<6} mesh {}: {:>6} elements, {:>6} nodes, h {:.3} mm: {}, max |u| {:.5} mm, {} Newton iterations, {:.2} s",
                 run.test,

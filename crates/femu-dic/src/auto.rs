@@ -297,7 +297,11 @@ pub fn correlate_auto(
             };
             let m = match measure(f, g, roi, &opts, criteria) {
                 Ok(m) => m,
-                Err(e @ (DicError::Roi(_) | DicError::SizeMismatch { .. })) => return Err(e),
+                Err(
+                    e @ (DicError::Roi(_)
+                    | DicError::SizeMismatch { .. }
+                    | DicError::Interrupted(_)),
+                ) => return Err(e),
                 Err(e) => {
                     attempts.push(Attempt {
                         element_size_px: h,

@@ -175,7 +175,7 @@ pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
     inputs.extend(job.correlation.roi.mask_file());
     femu_mesh::folder::refuse_inputs_in(&job.out, &inputs)?;
     let frames = load_frames(&job.frames)?;
-    std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
+    femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
     })?;
@@ -271,7 +271,7 @@ fn werr(path: &Path) -> impl Fn(std::io::Error) -> DicError + '_ {
 
 fn write_pairs_csv(path: &Path, pairs: &[PairReport]) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     writeln!(f, "reference,deformed,element_px,regularization_px,attempts,converged,iterations,residual_rms,trusted_fraction,sd_median_ux_px,sd_median_uy_px,mean_ux_px,mean_uy_px,seconds,error").map_err(&e)?;
     for p in pairs {
         writeln!(
@@ -295,7 +295,7 @@ fn write_pairs_csv(path: &Path, pairs: &[PairReport]) -> Result<(), DicError> {
         )
         .map_err(&e)?;
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 fn write_checks_csv<'a>(
@@ -303,7 +303,7 @@ fn write_checks_csv<'a>(
     checks: impl Iterator<Item = &'a CheckSummary>,
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     writeln!(f, "check,frames,region,points_set,points,mean_dx_px,mean_dy_px,rms_dx_px,rms_dy_px,predicted_sd_x_px,predicted_sd_y_px").map_err(&e)?;
     for c in checks {
         for r in &c.regions {
@@ -325,7 +325,7 @@ fn write_checks_csv<'a>(
             .map_err(&e)?;
         }
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// The magnitude of the difference over the first frame, interpolated from the nodes of `ab`

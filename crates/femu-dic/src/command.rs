@@ -240,7 +240,7 @@ pub fn run_dic_on(
         y_up: job.y_up,
     };
     let (m, choice) = job.correlation.measure(f, g)?;
-    std::fs::create_dir_all(&job.out).map_err(|e| DicError::Write {
+    femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
     })?;
@@ -363,7 +363,7 @@ pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), Dic
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    std::fs::write(path, text).map_err(|e| DicError::Write {
+    femu_mesh::atomic::write(path, text).map_err(|e| DicError::Write {
         path: path.to_path_buf(),
         message: e.to_string(),
     })

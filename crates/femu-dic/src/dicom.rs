@@ -114,7 +114,16 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
                 format!("not a DICOM file (no valid file meta group): {e}"),
             )
         })?;
-    transfer_syntax_name(path, meta.transfer_syntax())?;
+    let ts = meta.transfer_syntax().trim_end_matches('\0').to_string();
+    transfer_syntax_name(path, &ts)?;
+    // Every element's declared length checked against the file before dicom-rs allocates it
+    // (a deflated data set cannot be walked: its lengths are inside the compressed stream).
+    if ts != "1.2.840.10008.1.2.1.99" {
+        // From the meta group, after the preamble and "DICM" (the group length read by
+        // dicom-rs is recomputed from what it kept, not the file's).
+        crate::dicom_scan::check_lengths(path, 132, ts != "1.2.840.10008.1.2")
+            .map_err(|m| err(path, m))?;
+    }
     open_file(path).map_err(|e| {
         // Issue 32.12: "Could not read data set token" says nothing to a user; a data set
         // that cannot be read to its end is nearly always a file cut short.

@@ -40,6 +40,9 @@ pub enum DicError {
     /// Non-finite values appeared during the iterations (the images do not correlate).
     #[error("correlation diverged: {0}")]
     Diverged(String),
+    /// The user asked to stop ([`femu_mesh::stop`]): between two Gauss–Newton iterations.
+    #[error("correlation interrupted")]
+    Interrupted(#[from] femu_mesh::stop::Interrupted),
     /// Writing an output file failed.
     #[error("{path}: cannot write: {message}")]
     Write { path: PathBuf, message: String },

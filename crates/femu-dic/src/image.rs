@@ -151,11 +151,12 @@ impl GreyImage {
             .ok_or_else(|| DicError::Write {
                 path: path.to_path_buf(),
                 message: "buffer size".into(),
-            })?
-            .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| DicError::Write {
-                path: path.to_path_buf(),
-                message: e.to_string(),
+            })
+            .and_then(|img| {
+                femu_plot::save_png(path, &img).map_err(|e| DicError::Write {
+                    path: path.to_path_buf(),
+                    message: e.to_string(),
+                })
             })
     }
 }

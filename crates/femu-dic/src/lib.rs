@@ -23,6 +23,7 @@ pub mod check;
 pub mod command;
 pub mod consistency;
 pub mod dicom;
+mod dicom_scan;
 pub mod error;
 pub mod fft;
 pub mod figures;

@@ -159,7 +159,7 @@ pub fn write_field_csv(
     comments: &[String],
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     for c in comments {
         writeln!(f, "# {c}").map_err(&e)?;
     }
@@ -186,7 +186,7 @@ pub fn write_field_csv(
         }
         writeln!(f, "{}", p.w).map_err(&e)?;
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// Writes `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm`, and with a quality also
@@ -198,7 +198,7 @@ pub fn write_nodes_csv(
     quality: Option<&Quality>,
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     let node_w = quality.map(|q| node_weights(res, q.trust));
     write!(f, "node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm").map_err(&e)?;
     writeln!(
@@ -238,7 +238,7 @@ pub fn write_nodes_csv(
         }
         writeln!(f).map_err(&e)?;
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// 1 for a node whose elements are all trusted, else 0.
@@ -264,7 +264,7 @@ pub fn write_matrix_market(
     comments: &[String],
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     writeln!(f, "%%MatrixMarket matrix coordinate real symmetric").map_err(&e)?;
     for c in comments {
         writeln!(f, "% {c}").map_err(&e)?;
@@ -286,7 +286,7 @@ pub fn write_matrix_market(
             }
         }
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// Writes a dense symmetric `m x m` matrix (row-major `values`) as a Matrix Market array: the
@@ -298,7 +298,7 @@ pub fn write_dense_symmetric(
     comments: &[String],
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     writeln!(f, "%%MatrixMarket matrix array real symmetric").map_err(&e)?;
     for c in comments {
         writeln!(f, "% {c}").map_err(&e)?;
@@ -309,7 +309,7 @@ pub fn write_dense_symmetric(
             writeln!(f, "{:.9e}", values[i * m + j]).map_err(&e)?;
         }
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// Largest grid of `field.csv` whose full covariance `femu dic` writes (`field_covariance.mtx`,
@@ -445,7 +445,7 @@ pub fn write_elements_csv(
     trust: Option<&[Trust]>,
 ) -> Result<(), DicError> {
     let e = werr(path);
-    let mut f = std::io::BufWriter::new(std::fs::File::create(path).map_err(&e)?);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
     writeln!(
         f,
         "element,n1,n2,n3,n4,exx,eyy,exy,residual,flagged,zncc,grey_std,texture_small,texture_large{}",
@@ -479,7 +479,7 @@ pub fn write_elements_csv(
         }
         writeln!(f).map_err(&e)?;
     }
-    f.flush().map_err(&e)
+    f.commit().map_err(&e)
 }
 
 /// Element strains in the model frame.

@@ -137,11 +137,13 @@ fn sandwich_with(
     let p = &sys.pattern;
     let n = p.n;
     let chol = Cholesky::factorize(p, a_values)?;
-    // Columns j of C = A⁻¹ M_σ A⁻¹ in blocks (multi-column solves), blocks in parallel.
+    // Columns j of C = A⁻¹ M_σ A⁻¹ in blocks (multi-column solves), blocks in parallel; a
+    // stop request is honoured between blocks (large fields take tens of seconds).
     const BLOCK: usize = 64;
     let blocks: Vec<Vec<(usize, f64)>> = (0..n.div_ceil(BLOCK))
         .into_par_iter()
         .map(|blk| {
+            femu_mesh::stop::check()?;
             let j0 = blk * BLOCK;
             let nc = BLOCK.min(n - j0);
             let mut z = vec![0.0; n * nc];
@@ -161,9 +163,9 @@ fn sandwich_with(
                     out.push((k, y[c * n + p.row_idx[k]]));
                 }
             }
-            out
+            Ok(out)
         })
-        .collect();
+        .collect::<Result<_, femu_mesh::stop::Interrupted>>()?;
     let mut values = vec![0.0; p.nnz()];
     for (k, v) in blocks.into_iter().flatten() {
         values[k] = v;

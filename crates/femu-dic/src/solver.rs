@@ -647,6 +647,7 @@ impl Level {
     ) -> Result<(usize, bool, f64), DicError> {
         let mut inc = f64::INFINITY;
         for it in 1..=max_iter {
+            femu_mesh::stop::check()?;
             self.warp(g, a);
             self.residual(mode);
             self.rhs.fill(0.0);

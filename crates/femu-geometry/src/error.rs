@@ -29,8 +29,15 @@ pub enum GeometryError {
         column: usize,
         row: usize,
     },
-    #[error("bone label {0} does not occur in the image")]
-    BoneLabelAbsent(u32),
+    #[error("bone label {label} does not occur in the image (labels present: {present}): give the femur's label with --bone (or [labels] bone)")]
+    BoneLabelAbsent { label: u32, present: String },
+    /// A label of the map that no pixel holds: a typo in the map or the wrong image.
+    #[error("label {label} (mapped to {region}) does not occur in the image (labels present: {present}): remove it from the map or check the image")]
+    MappedLabelAbsent {
+        label: u32,
+        region: String,
+        present: String,
+    },
     #[error("no tissue left to mesh: {0}")]
     NoTissue(String),
     #[error("invalid parameter {name} = {value}: {reason}")]

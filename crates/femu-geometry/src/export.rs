@@ -133,7 +133,7 @@ pub fn write_inp_with_surfaces(
     }
     let at = text.find("\n*STEP").map(|k| k + 1).unwrap_or(text.len());
     let out = format!("{}{}{}", &text[..at], block, &text[at..]);
-    std::fs::write(path, out).map_err(io)
+    femu_mesh::atomic::write(path, out).map_err(io)
 }
 
 /// Writes the mesh as a ParaView file with the cell fields `region` (index into

@@ -199,6 +199,15 @@ fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryE
     }
     let (nx, ny) = (dim[0] as usize, dim[1] as usize);
     let nz = dim.get(2).map_or(1, |&z| z as usize);
+    // The nifti crate reads what the file holds and indexes it unchecked (a panic on a file
+    // shorter than its header says: found by fuzzing, issue 28 item 2).
+    let need = dim.iter().map(|&v| v as usize).product::<usize>() * vol.data_type().size_of();
+    if vol.raw_data().len() < need {
+        return Err(bad(format!(
+            "the header's dimensions {dim:?} need {need} bytes of voxels and the file holds {}: the file is cut short",
+            vol.raw_data().len()
+        )));
+    }
     let k = match slice {
         Some(k) => k,
         None if nz == 1 => 0,

@@ -249,9 +249,39 @@ pub fn mesh_label_image(
             });
         }
     }
+    let present = || {
+        let labels: Vec<String> = hist.keys().map(|l| l.to_string()).collect();
+        labels.join(", ")
+    };
+    if !hist
+        .keys()
+        .any(|l| spec.regions.iter().any(|(r, _)| r == l))
+    {
+        return Err(GeometryError::NoTissue(format!(
+            "no pixel holds a tissue label of the map ({}); labels present: {}",
+            spec.regions
+                .iter()
+                .map(|(l, n)| format!("{l}={n}"))
+                .collect::<Vec<_>>()
+                .join(","),
+            present()
+        )));
+    }
+    for (label, region) in &spec.regions {
+        if !hist.contains_key(label) {
+            return Err(GeometryError::MappedLabelAbsent {
+                label: *label,
+                region: region.clone(),
+                present: present(),
+            });
+        }
+    }
     for &b in &spec.bone {
         if !hist.contains_key(&b) {
-            return Err(GeometryError::BoneLabelAbsent(b));
+            return Err(GeometryError::BoneLabelAbsent {
+                label: b,
+                present: present(),
+            });
         }
     }
     let class: Vec<u16> = image.labels.iter().map(|l| class_of[l]).collect();

@@ -194,6 +194,6 @@ pub fn write_regions_png(
     }
     let img = image::RgbImage::from_raw(w, h, buf)
         .ok_or_else(|| err("picture buffer has the wrong size".into()))?;
-    img.save_with_format(path, image::ImageFormat::Png)
+    femu_mesh::atomic::write_with(path, |f| img.write_to(f, image::ImageFormat::Png))
         .map_err(|e| err(e.to_string()))
 }

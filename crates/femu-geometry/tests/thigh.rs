@@ -417,7 +417,10 @@ fn bad_inputs_are_clear_errors() {
     // A bone label that does not occur.
     let spec8 = LabelSpec::new("1=fat", &[7, 8], &[0]).unwrap();
     let e = mesh_label_image(&img, &spec8, Some(0.25), &opts).unwrap_err();
-    assert!(matches!(e, GeometryError::BoneLabelAbsent(8)), "{e}");
+    assert!(
+        matches!(e, GeometryError::BoneLabelAbsent { label: 8, .. }),
+        "{e}"
+    );
     // No tissue: only bone and background; or tissue only in islands below the threshold.
     let bare = synthetic(40, 1.0, |x, y| {
         if (x - 20.0).hypot(y - 20.0) < 5.0 {

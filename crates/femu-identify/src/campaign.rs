@@ -763,11 +763,26 @@ fn run_repeat(
             r
         })
         .collect();
-    let stopped = options
-        .stop
-        .as_ref()
-        .is_some_and(|f| f.load(Ordering::Relaxed));
+    let stopped = femu_mesh::stop::requested()
+        || options
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
     if stopped {
+        // The starts that finished before the stop are kept; the stopped ones are not
+        // results.
+        for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {
+            if let Ok((mut r, _)) = o {
+                r.jacobian = Vec::new();
+                out.starts.push(StartRecord {
+                    repeat: rep,
+                    start: k,
+                    theta_start: s.clone(),
+                    result: Some(r),
+                    error: None,
+                });
+            }
+        }
         return Err(CampaignError::Interrupted {
             finished: Box::new(out.clone()),
             repeats: options.repeats.max(1),

@@ -295,10 +295,16 @@ impl Problem {
         self
     }
 
+    /// Also stops once the process was asked to stop ([`femu_mesh::stop`]).
     fn check_stop(&self) -> Result<(), FitError> {
-        match &self.stop {
-            Some(f) if f.load(Ordering::Relaxed) => Err(FitError::Interrupted),
-            _ => Ok(()),
+        let flagged = self
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed));
+        if flagged || femu_mesh::stop::requested() {
+            Err(FitError::Interrupted)
+        } else {
+            Ok(())
         }
     }
 
@@ -366,7 +372,7 @@ impl Problem {
         let sol = self
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
-            .map_err(|e| FitError::Solve(e.to_string()))?;
+            .map_err(FitError::from_solve)?;
         let mut diff = Vec::with_capacity(self.measured.len());
         self.project(&sol.u, &mut diff);
         for (d, m) in diff.iter_mut().zip(&self.measured) {
@@ -482,11 +488,29 @@ impl Problem {
         let sol = self
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
-            .map_err(|e| FitError::Solve(e.to_string()))?;
+            .map_err(FitError::from_solve)?;
         let mut out = Vec::new();
         self.project(&sol.u, &mut out);
         self.warm = Some(sol.state);
         Ok(out)
+    }
+}
+
+impl FitError {
+    /// A forward solve's failure; a solve stopped by the user is [`FitError::Interrupted`].
+    fn from_solve(e: femu_mech::SolveError) -> FitError {
+        match e {
+            femu_mech::SolveError::Interrupted(_) => FitError::Interrupted,
+            e => FitError::Solve(e.to_string()),
+        }
+    }
+
+    /// [`FitError::from_solve`] with where the solve was (`load step 2`, ...).
+    pub(crate) fn from_solve_at(e: femu_mech::SolveError, at: &str) -> FitError {
+        match e {
+            femu_mech::SolveError::Interrupted(_) => FitError::Interrupted,
+            e => FitError::Solve(format!("{at}: {e}")),
+        }
     }
 }
 

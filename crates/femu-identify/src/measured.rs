@@ -41,7 +41,7 @@ pub enum MeasuredError {
         line: usize,
         message: String,
     },
-    #[error("{path}: no data row")]
+    #[error("{path}: no data row (expected a header line x,y,ux,uy[,sx,sy][,w] and one row per measured point, mm)")]
     Empty { path: String },
 }
 
@@ -173,7 +173,7 @@ impl MeasuredField {
     /// Writes the field as `x,y,ux,uy` (and `sx,sy` when every weight is `1/s²` of a common
     /// `sigma`, given here), full precision, with the comment lines.
     pub fn write(&self, path: &Path, sigma: Option<f64>) -> std::io::Result<()> {
-        let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut w = femu_mesh::atomic::AtomicFile::create(path)?;
         for c in &self.comments {
             writeln!(w, "# {c}")?;
         }
@@ -192,7 +192,7 @@ impl MeasuredField {
             }
             writeln!(w)?;
         }
-        w.flush()
+        w.commit()
     }
 
     /// The field in the model frame, from a file frame (image pixels or mm): positions

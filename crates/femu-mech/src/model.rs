@@ -23,12 +23,14 @@ pub enum ModelError {
         gauss_point: usize,
         det_j: f64,
     },
-    #[error("material '{name}'{}: {source}", line.map(|l| format!(" (deck line {l})")).unwrap_or_default())]
+    /// The law's message is part of this one (not a separate source, which `{:#}` would print a
+    /// second time).
+    #[error("material '{name}'{}: {problem}", line.map(|l| format!(" (deck line {l})")).unwrap_or_default())]
     BadMaterial {
         name: String,
         /// The deck line of the material's data, when it came from a file.
         line: Option<usize>,
-        source: Box<MaterialError>,
+        problem: Box<MaterialError>,
     },
     #[error("element {label}: no material assigned")]
     NoMaterial { label: i64 },
@@ -72,10 +74,10 @@ impl NamedMaterial {
 
     /// The material of a deck, through the registry (errors name the deck line).
     pub fn from_def(def: &MaterialDef) -> Result<NamedMaterial, ModelError> {
-        let law = material_from_def(def).map_err(|source| ModelError::BadMaterial {
+        let law = material_from_def(def).map_err(|problem| ModelError::BadMaterial {
             name: def.name.clone(),
             line: def.line,
-            source: Box::new(source),
+            problem: Box::new(problem),
         })?;
         Ok(NamedMaterial {
             name: def.name.clone(),

@@ -4,6 +4,7 @@
 use crate::element::{formulation, ElementAverages};
 use crate::model::Model;
 use crate::solver::Solution;
+use femu_mesh::atomic::AtomicFile;
 use femu_mesh::decimal::push_f64;
 use femu_mesh::{write_vtu_with_int_cells, VtuField, VtuIntField};
 use rayon::prelude::*;
@@ -55,7 +56,7 @@ pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Res
     const BLOCKS_PER_WAVE: usize = 8;
     let n_nodes = model.mesh.nodes.len();
     let n_blocks = n_nodes.div_ceil(ROWS_PER_TASK);
-    let mut w = io::BufWriter::new(std::fs::File::create(path)?);
+    let mut w = AtomicFile::create(path)?;
     writeln!(w, "node,x,y,ux,uy")?;
     for wave in (0..n_blocks).step_by(BLOCKS_PER_WAVE) {
         let blocks: Vec<Vec<u8>> = (wave..(wave + BLOCKS_PER_WAVE).min(n_blocks))
@@ -80,7 +81,7 @@ pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Res
             w.write_all(b)?;
         }
     }
-    w.flush()
+    w.commit()
 }
 
 /// Writes the ParaView file: point fields `displacement` and `reaction_force`; cell fields `LE`,
@@ -199,7 +200,7 @@ pub fn write_contact_csv(
     solution: &Solution,
     b: usize,
 ) -> io::Result<()> {
-    let mut w = io::BufWriter::new(std::fs::File::create(dir.join("contact_pressure.csv"))?);
+    let mut w = AtomicFile::create(&dir.join("contact_pressure.csv"))?;
     writeln!(w, "node,x,y,angle_deg,gap_mm,force_n_per_mm,pressure_mpa")?;
     for p in contact_profile(model, solution, b) {
         writeln!(
@@ -214,8 +215,8 @@ pub fn write_contact_csv(
             p.pressure
         )?;
     }
-    w.flush()?;
-    let mut w = io::BufWriter::new(std::fs::File::create(dir.join("force_displacement.csv"))?);
+    w.commit()?;
+    let mut w = AtomicFile::create(&dir.join("force_displacement.csv"))?;
     writeln!(w, "increment,load_factor,travel_mm,force_n_per_mm")?;
     writeln!(w, "0,0,0,0")?;
     for rec in solution.report.increments.iter().filter(|r| r.converged) {
@@ -227,5 +228,5 @@ pub fn write_contact_csv(
             )?;
         }
     }
-    w.flush()
+    w.commit()
 }

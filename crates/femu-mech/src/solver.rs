@@ -124,6 +124,9 @@ pub enum SolveError {
     TooLarge { entries: usize },
     #[error("the undeformed state cannot be assembled: {0}")]
     Undeformed(#[source] AssemblyError),
+    /// The user asked to stop ([`femu_mesh::stop`]): between two Newton iterations.
+    #[error("solve interrupted")]
+    Interrupted(#[source] femu_mesh::stop::Interrupted),
 }
 
 impl std::fmt::Debug for SolveError {

@@ -38,7 +38,7 @@
 
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::Path;
 
 use crate::deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
@@ -449,7 +449,13 @@ impl<'f> Parser<'f> {
         };
         match parsed {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.err(f.line, format!("cannot read '{}' as a number", f.text))),
+            _ => Err(self.err(
+                f.line,
+                format!(
+                    "cannot read '{}' as a number (a finite decimal such as 0.5, -2 or 1.5e-3)",
+                    f.text
+                ),
+            )),
         }
     }
 
@@ -690,6 +696,10 @@ impl<'f> Parser<'f> {
             let x = self.num(&r.fields[1])?;
             let y = self.num(&r.fields[2])?;
             self.opt_num(&r.fields, 3)?;
+            for v in [x, y] {
+                crate::mesh::check_coordinate(v)
+                    .map_err(|m| self.err(r.line, format!("node {label}: {m}")))?;
+            }
             if !self.node_map.insert(label, self.nodes.len()) {
                 return Err(self.err(r.line, format!("node {label} is defined twice")));
             }
@@ -1921,9 +1931,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
 
 /// Writes `deck` to the file `path` with [`write_inp`].
 pub fn write_inp_file(deck: &Deck, path: &Path) -> io::Result<()> {
-    let mut w = BufWriter::new(fs::File::create(path)?);
-    write_inp(deck, &mut w)?;
-    w.flush()
+    crate::atomic::write_with(path, |w| write_inp(deck, w))
 }
 
 // ---------------------------------------------------------------------------------------------

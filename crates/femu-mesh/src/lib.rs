@@ -22,6 +22,7 @@
 /// 1 mmHg in MPa (the unit of the seed's contention pressure, 20 mmHg).
 pub const MMHG_IN_MPA: f64 = 133.322_387_415e-6;
 
+pub mod atomic;
 pub mod decimal;
 pub mod deck;
 pub mod folder;
@@ -31,6 +32,7 @@ pub mod limits;
 pub mod locate;
 pub mod mesh;
 pub mod msh;
+pub mod stop;
 pub mod vtu;
 
 pub use deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};

@@ -108,6 +108,22 @@ pub enum MeshError {
     UnknownNodeSet(String),
 }
 
+/// The largest node coordinate a model may have (mm): 1 km. A thigh is about 150 mm across; a
+/// coordinate beyond this is a unit or export mistake, and near `f64::MAX` (1e308) areas and
+/// stiffnesses overflow to infinity, so that a solve would "converge" at zero displacement.
+pub const MAX_COORDINATE_MM: f64 = 1e6;
+
+/// Checks a node coordinate against [`MAX_COORDINATE_MM`]; the error says what is valid.
+pub fn check_coordinate(v: f64) -> Result<(), String> {
+    if v.abs() <= MAX_COORDINATE_MM {
+        Ok(())
+    } else {
+        Err(format!(
+            "coordinate {v:e} is beyond ±{MAX_COORDINATE_MM:e} mm (femu reads mm; a thigh is about 150 mm across)"
+        ))
+    }
+}
+
 /// A 2D mesh: nodes (mm), elements, named element sets and node sets.
 ///
 /// Deck labels are kept so that outputs use the user's own numbering.

@@ -138,8 +138,19 @@ impl<'a> Tokens<'a> {
         let (t, line) = self.next(what)?;
         match t.parse::<f64>() {
             Ok(v) if v.is_finite() => Ok(v),
-            _ => Err(self.err(line, format!("cannot read '{t}' as {what} (a number)"))),
+            _ => Err(self.err(
+                line,
+                format!("cannot read '{t}' as {what} (a finite number such as 0.5 or -1.5e-3)"),
+            )),
         }
+    }
+
+    /// A node coordinate within [`crate::mesh::MAX_COORDINATE_MM`].
+    fn coordinate(&mut self) -> Result<f64> {
+        let line = self.toks.get(self.pos).map_or(self.end_line, |t| t.1);
+        let v = self.float("a node coordinate")?;
+        crate::mesh::check_coordinate(v).map_err(|m| self.err(line, m))?;
+        Ok(v)
     }
 }
 
@@ -350,8 +361,7 @@ impl<'a> Reader<'a> {
                 0
             };
             for _ in 0..n {
-                let x = t.float("a node coordinate")?;
-                let y = t.float("a node coordinate")?;
+                let (x, y) = (t.coordinate()?, t.coordinate()?);
                 t.float("a node coordinate")?;
                 for _ in 0..extra {
                     t.float("a parametric coordinate")?;

@@ -14,8 +14,7 @@
 use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine;
 use rayon::prelude::*;
-use std::fs;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, Write};
 use std::path::Path;
 
 use crate::mesh::Mesh;
@@ -70,16 +69,16 @@ pub fn write_vtu_with_int_cells(
         cell_fields,
         int_cell_fields,
     )?;
-    let mut w = BufWriter::new(fs::File::create(path)?);
-    write_to(
-        &mut w,
-        mesh,
-        displacement,
-        point_fields,
-        cell_fields,
-        int_cell_fields,
-    )?;
-    w.flush()
+    crate::atomic::write_with(path, |w| {
+        write_to(
+            w,
+            mesh,
+            displacement,
+            point_fields,
+            cell_fields,
+            int_cell_fields,
+        )
+    })
 }
 
 fn invalid(kind: io::ErrorKind, msg: String) -> io::Error {
@@ -346,6 +345,7 @@ fn write_to(
 mod tests {
     use super::*;
     use crate::mesh::{Element, ElementKind};
+    use std::fs;
 
     fn two_elements() -> Mesh {
         let mut m = Mesh::default();

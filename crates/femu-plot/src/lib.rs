@@ -161,9 +161,18 @@ impl Canvas {
         };
         let img = image::RgbImage::from_raw(self.width, self.height, self.buf)
             .ok_or_else(|| write_err("picture buffer has the wrong size".into()))?;
-        img.save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| write_err(e.to_string()))
+        save_png(path, &img).map_err(|e| write_err(e.to_string()))
     }
+}
+
+/// Writes `img` as a PNG file, whole or not at all ([`femu_mesh::atomic`]).
+pub fn save_png<P, C>(path: &Path, img: &image::ImageBuffer<P, C>) -> Result<(), image::ImageError>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+    C: std::ops::Deref<Target = [P::Subpixel]>,
+{
+    femu_mesh::atomic::write_with(path, |f| img.write_to(f, image::ImageFormat::Png))
 }
 
 /// Converts any displayable drawing error into the message carried by [`PlotError::Draw`].

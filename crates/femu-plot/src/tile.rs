@@ -33,11 +33,10 @@ pub fn tile_png(path: &Path, panels: &[&Path], columns: usize) -> Result<(), Plo
         let (c, r) = ((k % columns) as u32, (k / columns) as u32);
         image::imageops::replace(&mut out, img, (c * cw) as i64, (r * ch) as i64);
     }
-    out.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| PlotError::Write {
-            path: path.to_path_buf(),
-            message: e.to_string(),
-        })
+    crate::save_png(path, &out).map_err(|e| PlotError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
 }
 
 #[cfg(test)]

@@ -332,21 +332,20 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
         pressures: study.boundary.pressures.clone(),
         step: study.boundary.step,
     };
+    // The caller names the mesh and the study file in its context; these errors name the
+    // region or curve.
     let msh = femu_mesh::read_msh(mesh)?;
-    let context = || format!("setting up {name} with the study");
     let faces = match rigid.first() {
-        Some(t) => {
-            Some(curve_faces(&msh, t.curve.as_deref().expect("a curve")).with_context(context)?)
-        }
+        Some(t) => Some(curve_faces(&msh, t.curve.as_deref().expect("a curve"))?),
         None => None,
     };
-    let deck = deck_from_msh(msh, &setup).with_context(context)?;
+    let deck = deck_from_msh(msh, &setup)?;
     let mut model = Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?;
     if let (Some(t), Some(faces)) = (rigid.first(), faces) {
         if !t.loading.has_rigid_body() {
             bail!("a contention on a Gmsh mesh is a [[pressure]] on the skin curve");
         }
-        apply_loading(&mut model, &faces, &t.loading).with_context(context)?;
+        apply_loading(&mut model, &faces, &t.loading)?;
     }
     Ok(model)
 }

@@ -7,14 +7,15 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-/// The user asked to stop; what was finished is kept.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
-#[error("interrupted")]
-pub struct Interrupted;
+/// The user asked to stop; what was finished is kept (the stop request of the whole process
+/// is [`femu_mesh::stop`], set by the command line's signal handler).
+pub use femu_mesh::stop::Interrupted;
 
-/// Whether an error chain ends in an interruption.
+/// Whether an error is the end of an interruption: its chain holds [`Interrupted`], or the
+/// user asked to stop before it was returned (a computation that stopped midway may report
+/// the stop as its own failure, e.g. a forward solve inside an optimizer start).
 pub fn is_interrupted(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| c.is::<Interrupted>())
+    e.chain().any(|c| c.is::<Interrupted>()) || femu_mesh::stop::requested()
 }
 
 /// The user's side of a running computation.
@@ -29,7 +30,7 @@ pub trait Progress: Sync {
     fn task(&self, what: &str, total: Option<usize>) -> Box<dyn Task + '_>;
     /// Whether the user asked to stop (checked between units of work).
     fn cancelled(&self) -> bool {
-        self.stop_flag().is_some_and(|f| f.load(Ordering::Relaxed))
+        femu_mesh::stop::requested() || self.stop_flag().is_some_and(|f| f.load(Ordering::Relaxed))
     }
     /// The flag a stop request sets, for computations below this crate that check it
     /// themselves (an optimizer between forward solves).

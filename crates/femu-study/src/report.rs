@@ -112,6 +112,14 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     if !dir.is_dir() {
         anyhow::bail!("{} is not an output folder of femu run", dir.display());
     }
+    // Only a run's folder: elsewhere the report's summary.json would replace another
+    // command's (femu dic, identify, convergence write their own).
+    if !dir.join("steps.json").is_file() {
+        anyhow::bail!(
+            "{} is not the folder of a femu run or demo (no steps.json): femu report rewrites the report of a run's output folder",
+            dir.display()
+        );
+    }
     let record: Option<RunRecord> = read_json(&dir.join("steps.json")).ok();
     let mut html = Html::default();
     html.head(record.as_ref());

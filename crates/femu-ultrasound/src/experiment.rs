@@ -11,7 +11,6 @@ use crate::probe::{Probe, Transducer};
 use crate::render::{render, Frame, Scanner, BONE, NO_TISSUE};
 use femu_dic::{correlate, DicOptions, DicResult, Roi};
 use femu_mesh::locate::PointLocator;
-use std::io::Write;
 use std::path::Path;
 
 /// Options of the virtual experiment.
@@ -405,8 +404,6 @@ pub fn write_field_csv(
     truth: bool,
     comments: &[String],
 ) -> Result<(), UsError> {
-    let mut f =
-        std::io::BufWriter::new(std::fs::File::create(path).map_err(|e| UsError::write(path, e))?);
     let mut body = String::new();
     for c in comments {
         body += &format!("# {c}\n");
@@ -419,9 +416,7 @@ pub fn write_field_csv(
             p.x_mm[0], p.x_mm[1], u[0], u[1], p.w
         );
     }
-    f.write_all(body.as_bytes())
-        .map_err(|e| UsError::write(path, e))?;
-    f.flush().map_err(|e| UsError::write(path, e))
+    femu_mesh::atomic::write(path, body).map_err(|e| UsError::write(path, e))
 }
 
 /// Per-pixel maps over the ROI (NaN outside): DIC ux, uy, true ux, uy (px), in that order.

@@ -235,7 +235,7 @@ pub fn write_outputs(report: &NoiseReport, out: &Path) -> Result<Vec<String>, Us
     let mut files = Vec::new();
     let mut write = |name: &str, body: String| -> Result<(), UsError> {
         let p = out.join(name);
-        std::fs::write(&p, body).map_err(|e| UsError::write(&p, e))?;
+        femu_mesh::atomic::write(&p, body).map_err(|e| UsError::write(&p, e))?;
         files.push(name.to_string());
         Ok(())
     };

@@ -9,7 +9,6 @@ use crate::manifest::{fmt_num, Entry, Manifest};
 use crate::stats::{grey_stats, texture_by_depth, GreyStats};
 use femu_plot::{LinePlot, LineStyle, Series};
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::Path;
 
 /// Where to measure in each image (pixels): everything, a rectangle `[x0, x1) x [y0, y1)`,
@@ -314,7 +313,7 @@ pub fn write_outputs(
     let mut files = Vec::new();
     let csv = |name: &str, body: String, files: &mut Vec<String>| -> Result<(), UsError> {
         let p = out.join(name);
-        std::fs::write(&p, body).map_err(|e| UsError::write(&p, e))?;
+        femu_mesh::atomic::write(&p, body).map_err(|e| UsError::write(&p, e))?;
         files.push(name.to_string());
         Ok(())
     };
@@ -566,7 +565,7 @@ pub fn write_outputs(
 
 /// Writes a JSON value to `path`.
 pub fn write_json(path: &Path, v: &impl serde::Serialize) -> Result<(), UsError> {
-    let mut f = std::fs::File::create(path).map_err(|e| UsError::write(path, e))?;
-    serde_json::to_writer_pretty(&mut f, v).map_err(|e| UsError::write(path, e))?;
-    writeln!(f).map_err(|e| UsError::write(path, e))
+    let mut text = serde_json::to_string_pretty(v).map_err(|e| UsError::write(path, e))?;
+    text.push('\n');
+    femu_mesh::atomic::write(path, text).map_err(|e| UsError::write(path, e))
 }

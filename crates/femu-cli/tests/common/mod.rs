@@ -35,3 +35,114 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
 pub fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
+
+/// How a run stopped by a signal ended.
+pub struct Stopped {
+    /// The exit code (`None`: killed by the signal).
+    pub code: Option<i32>,
+    pub stderr: String,
+    /// From the signal to the end of the process.
+    pub after_signal: std::time::Duration,
+}
+
+/// Starts `femu ARGS`, sends `signal` (`INT`, `TERM`, `KILL`) after `delay` and waits for it.
+pub fn signal_after(args: &[&str], signal: &str, delay: std::time::Duration) -> Stopped {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Read stderr while the process runs (a full pipe would block it).
+    let mut pipe = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = std::io::Read::read_to_string(&mut pipe, &mut s);
+        s
+    });
+    std::thread::sleep(delay);
+    let sent = std::time::Instant::now();
+    let _ = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status();
+    let status = child.wait().unwrap();
+    let after_signal = sent.elapsed();
+    Stopped {
+        code: status.code(),
+        stderr: reader.join().unwrap(),
+        after_signal,
+    }
+}
+
+/// Starts `femu ARGS`, sends SIGINT after `delay`, returns (exit code, stderr).
+pub fn interrupt(args: &[&str], delay: std::time::Duration) -> (Option<i32>, String) {
+    let s = signal_after(args, "INT", delay);
+    (s.code, s.stderr)
+}
+
+/// The fields of a CSV row (commas inside double quotes do not split).
+fn csv_fields(row: &str) -> usize {
+    let mut quoted = false;
+    1 + row
+        .chars()
+        .filter(|&c| {
+            if c == '"' {
+                quoted = !quoted;
+            }
+            c == ',' && !quoted
+        })
+        .count()
+}
+
+/// Every file under `dir` is whole under its final name: a CSV has a header and rows of its
+/// width and ends with a newline, a JSON file parses, a PNG ends with its IEND chunk, a VTU
+/// with `</VTKFile>`, a deck, matrix or HTML file with a newline or its closing tag. Temporary
+/// files of a killed writer (`.NAME.PID.femu-tmp`) are not results and are skipped. Returns
+/// the number of files checked.
+pub fn outputs_are_whole(dir: &Path) -> usize {
+    const IEND: [u8; 12] = [0, 0, 0, 0, b'I', b'E', b'N', b'D', 0xAE, 0x42, 0x60, 0x82];
+    let mut checked = 0;
+    let mut stack: Vec<PathBuf> = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let p = e.path();
+            let name = p.file_name().unwrap().to_string_lossy().into_owned();
+            if p.is_dir() {
+                stack.push(p);
+                continue;
+            }
+            if name.ends_with(".femu-tmp") {
+                continue;
+            }
+            let bytes = std::fs::read(&p).unwrap();
+            let text = String::from_utf8_lossy(&bytes);
+            let what = p.display();
+            match p.extension().and_then(|x| x.to_str()).unwrap_or("") {
+                "csv" => {
+                    let mut rows = text.lines().filter(|l| !l.starts_with('#'));
+                    let width = rows.next().map_or(0, csv_fields);
+                    assert!(width > 0, "{what}: no header");
+                    assert!(text.ends_with('\n'), "{what}: cut short");
+                    for r in rows {
+                        assert_eq!(csv_fields(r), width, "{what}: {r}");
+                    }
+                }
+                "json" => {
+                    serde_json::from_slice::<serde_json::Value>(&bytes)
+                        .unwrap_or_else(|e| panic!("{what}: {e}"));
+                }
+                "png" => assert!(bytes.ends_with(&IEND), "{what}: no IEND chunk"),
+                "vtu" => assert!(text.trim_end().ends_with("</VTKFile>"), "{what}: cut short"),
+                "html" => assert!(text.trim_end().ends_with("</html>"), "{what}: cut short"),
+                "inp" | "mtx" => assert!(text.ends_with('\n'), "{what}: cut short"),
+                _ => {}
+            }
+            checked += 1;
+        }
+    }
+    checked
+}

@@ -430,7 +430,7 @@ impl IdicProblem {
                 let sol = st
                     .solver
                     .solve_with(&st.model, st.state.as_deref(), &mut |_| {})
-                    .map_err(|e| FitError::Solve(format!("load step {}: {e}", i + 1)))?;
+                    .map_err(|e| FitError::from_solve_at(e, &format!("load step {}", i + 1)))?;
                 if jacobian {
                     st.sensitivity
                         .compute(
@@ -681,7 +681,9 @@ impl IdicProblem {
                 .map_err(|e| FitError::Solve(e.to_string()))?;
             let sol = solver
                 .solve_with(&model, warm.as_deref(), &mut |_| {})
-                .map_err(|e| FitError::Solve(format!("refined mesh, load step {}: {e}", i + 1)))?;
+                .map_err(|e| {
+                    FitError::from_solve_at(e, &format!("refined mesh, load step {}", i + 1))
+                })?;
             let locator = femu_mesh::locate::PointLocator::new(&model.mesh);
             let own = &self.displacement[i + 1];
             let d: Vec<[f64; 2]> = self

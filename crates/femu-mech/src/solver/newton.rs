@@ -175,6 +175,9 @@ pub(crate) enum AttemptFailure {
     },
     #[error("residual blew up to {residual:.3e}")]
     BlewUp { residual: f64 },
+    /// The user asked to stop ([`femu_mesh::stop`]).
+    #[error(transparent)]
+    Interrupted(#[from] femu_mesh::stop::Interrupted),
     #[error("{iterations} iterations without convergence (|R| = {residual:.3e}, reference force {reference:.3e})")]
     IterationLimit {
         iterations: usize,
@@ -446,6 +449,9 @@ impl StaticSolver {
                         .flatten();
                     stepping.converged(target, iterations, self.options.growth, first_residual);
                 }
+                Err(AttemptFailure::Interrupted(stop)) => {
+                    return Err(SolveError::Interrupted(stop))
+                }
                 Err(failure) => {
                     rec.failure = Some(failure.to_string());
                     on_increment(&rec);
@@ -588,6 +594,7 @@ impl StaticSolver {
         // Whether the tangent values are at `u` (see `SolverOptions::final_tangent`).
         let mut tangent_at_u = true;
         for it in 0..opt.max_iterations {
+            femu_mesh::stop::check()?;
             if it == 0 && rnorm <= opt.residual_tolerance * fref.max(FLOOR) * 1e-3 {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
             }

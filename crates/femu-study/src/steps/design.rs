@@ -373,7 +373,7 @@ fn write_designs_csv(path: &Path, ranked: &[Design], names: &[String]) -> Result
         }
         writeln!(w)?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 fn write_candidates_csv(path: &Path, c: &[CandidateSummary], names: &[String]) -> Result<()> {
@@ -394,7 +394,7 @@ fn write_candidates_csv(path: &Path, c: &[CandidateSummary], names: &[String]) -
         }
         writeln!(w)?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 /// The worst sd of `family` among `sd` (infinite when unseen).

@@ -211,6 +211,35 @@ pub fn identify(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<IdentificationSummary> {
+    let t0 = Instant::now();
+    let result = identify_measured(study, measured, out, progress);
+    if let Err(e) = &result {
+        if crate::progress::is_interrupted(e) {
+            // Stopped before a summary was written: one that says so.
+            let kept: &[&str] = match e.downcast_ref::<Stopped>() {
+                Some(Stopped::RepeatsKept(_)) => return result,
+                Some(Stopped::BeforeARepeat(_)) => &["starts.csv"],
+                None => &[],
+            };
+            crate::output::write_stopped(
+                out,
+                "identify",
+                &format!("{e:#}"),
+                kept,
+                t0.elapsed().as_secs_f64(),
+            )?;
+        }
+    }
+    result
+}
+
+/// [`identify`] without the account of a stop.
+fn identify_measured(
+    study: &Study,
+    measured: Option<&Path>,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<IdentificationSummary> {
     let mut inputs = study.input_files();
     inputs.extend(measured);
     femu_mesh::folder::refuse_inputs_in(out, &inputs)?;
@@ -366,8 +395,13 @@ fn fit_or_keep(
         )) => {
             if finished.best.is_empty() {
                 write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
-                return Err(anyhow::Error::new(crate::progress::Interrupted)
-                    .context("identification: no repeat finished"));
+                return Err(anyhow::Error::new(crate::progress::Interrupted).context(
+                    Stopped::BeforeARepeat(format!(
+                        "identification: no repeat finished ({} finished starts in {})",
+                        finished.starts.len(),
+                        out.join("starts.csv").display()
+                    )),
+                ));
             }
             let (_, reference) = free_parameters(study, &models.full[0], grouped)?;
             Ok((
@@ -407,7 +441,7 @@ fn fit_or_keep(
 
 /// The estimates of `fit` with the discretization check: intervals widened when the bias is
 /// not negligible and the data did not come from the model's mesh; with `"refine"`, the first
-/// repeat identified again on the finest mesh of the check.
+/// repeat identified again on the finest mesh of the check; without the check when `stopped`.
 #[allow(clippy::too_many_arguments)]
 fn estimate_with_check(
     study: &Study,
@@ -417,6 +451,7 @@ fn estimate_with_check(
     fit: &mut JointFit,
     reference_known: bool,
     known_noise: bool,
+    stopped: bool,
     progress: &dyn Progress,
 ) -> Result<(
     Vec<Estimate>,
@@ -434,6 +469,12 @@ fn estimate_with_check(
     };
     let (mut parameters, mut id) = estimates(fit)?;
     if study.identification.discretization == Discretization::Off {
+        return Ok((parameters, id, None));
+    }
+    if stopped {
+        // The user asked to stop: the repeats that finished are kept without the check's
+        // solves on finer meshes (they would see the stop request and lose the repeats).
+        progress.note("discretization check skipped: the identification was interrupted");
         return Ok((parameters, id, None));
     }
     let sd: Vec<f64> = parameters.iter().map(|p| p.relative_sd).collect();
@@ -559,6 +600,7 @@ pub fn identify_on(
         &mut fit,
         reference_known,
         known_noise,
+        interrupted.is_some(),
         progress,
     )?;
     let warnings = campaign::warnings(&fit.campaign, &fit.free, &parameters);
@@ -567,29 +609,10 @@ pub fn identify_on(
     write_measurements_csv(&out.join("measurements.csv"), &fit.free, &measurements)?;
     let c = &fit.campaign;
     let best = &c.best[0];
-    write_figures(out, &parameters, best, reference_known, c.best.len())?;
-    for (b, block) in c.blocks.iter().enumerate() {
-        for seg in &block.segments {
-            let name = if study.measurement_list() {
-                format!("fields_{}.png", seg.name)
-            } else {
-                "fields.png".to_string()
-            };
-            let field = MeasuredField {
-                points: block.first_field.points[seg.points.clone()].to_vec(),
-                comments: Vec::new(),
-            };
-            write_field_figures(
-                out,
-                &name,
-                &models.full[b],
-                &models.full[0],
-                &fit.free,
-                &field,
-                &best.theta,
-            )?;
-        }
-    }
+    // What finished is written even after a stop (the field figures need one more solve).
+    femu_mesh::stop::shielded(|| {
+        write_result_figures(study, &models, &fit, &parameters, reference_known, out)
+    })?;
     let summary = IdentificationSummary {
         command: "identify".into(),
         version: env!("CARGO_PKG_VERSION").into(),
@@ -660,10 +683,60 @@ pub fn identify_on(
         summary.wall_time_s
     ));
     if let Some(note) = &summary.interrupted {
-        return Err(anyhow::Error::new(crate::progress::Interrupted)
-            .context(format!("identification: {note} in {}", out.display())));
+        return Err(anyhow::Error::new(crate::progress::Interrupted).context(
+            Stopped::RepeatsKept(format!("identification: {note} in {}", out.display())),
+        ));
     }
     Ok(summary)
+}
+
+/// How an identification stopped by the user ended (the context of its error).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum Stopped {
+    /// Before a repeat finished: `starts.csv` holds the starts that finished.
+    #[error("{0}")]
+    BeforeARepeat(String),
+    /// After some repeats: their results are written (summary.json says so).
+    #[error("{0}")]
+    RepeatsKept(String),
+}
+
+/// `errors.png`, `cost_history.png` and the field figure of each measurement (`fields.png`,
+/// or `fields_NAME.png` for a list of measurements) of the best start of the first repeat.
+fn write_result_figures(
+    study: &Study,
+    models: &TestModels,
+    fit: &JointFit,
+    parameters: &[Estimate],
+    reference_known: bool,
+    out: &Path,
+) -> Result<()> {
+    let c = &fit.campaign;
+    let best = &c.best[0];
+    write_figures(out, parameters, best, reference_known, c.best.len())?;
+    for (b, block) in c.blocks.iter().enumerate() {
+        for seg in &block.segments {
+            let name = if study.measurement_list() {
+                format!("fields_{}.png", seg.name)
+            } else {
+                "fields.png".to_string()
+            };
+            let field = MeasuredField {
+                points: block.first_field.points[seg.points.clone()].to_vec(),
+                comments: Vec::new(),
+            };
+            write_field_figures(
+                out,
+                &name,
+                &models.full[b],
+                &models.full[0],
+                &fit.free,
+                &field,
+                &best.theta,
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// Each measurement (and actuator term) with its points and its share of the information.
@@ -777,7 +850,7 @@ fn write_measurements_csv(
         }
         writeln!(w)?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord]) -> Result<()> {
@@ -817,7 +890,7 @@ fn write_starts_csv(path: &Path, free: &[FreeParameter], starts: &[StartRecord])
         }
         writeln!(w)?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 fn write_parameters_csv(path: &Path, params: &[Estimate]) -> Result<()> {
@@ -842,7 +915,7 @@ fn write_parameters_csv(path: &Path, params: &[Estimate]) -> Result<()> {
             opt(p.sd_relative_error)
         )?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 /// `errors.png` (Eq. 4 per parameter, mean ± sd over the repeats: the seed's Fig. 9) for a
@@ -984,7 +1057,7 @@ fn write_field_figures(
     let spacing = xs[1] - xs[0];
     let grey = vec![255.0; nx * ny];
     let panels_dir = out.join("panels");
-    std::fs::create_dir_all(&panels_dir)?;
+    femu_mesh::atomic::create_dir_all(&panels_dir)?;
     let mut paths = Vec::new();
     for c in 0..2 {
         let comp = ["ux", "uy"][c];

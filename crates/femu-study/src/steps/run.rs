@@ -385,6 +385,9 @@ fn forward_and_sensitivity(
                     &solution,
                     ts.elapsed().as_secs_f64(),
                 )?,
+                Err(femu_mech::SolveError::Interrupted(stop)) => {
+                    return Err(anyhow::Error::new(stop).context("forward tests"))
+                }
                 Err(e) => {
                     let why = format!(
                         "{e} (refine the mesh, [model] elements, or lower the test's load)"

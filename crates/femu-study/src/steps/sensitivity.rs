@@ -171,6 +171,8 @@ pub fn run_on(
         // A test that cannot be solved is reported and left out; the others go on.
         let r = match run_test(base, skin, loading, &params, args, progress) {
             Ok(r) => r,
+            // A stop is not a failure of the test.
+            Err(e) if crate::progress::is_interrupted(&e) => return Err(e),
             Err(e) => {
                 let why =
                     format!("{e:#} (refine the mesh, [model] elements, or lower the test's load)");
@@ -445,11 +447,10 @@ fn run_test(
 /// `sensitivity.csv` (node, x, y, ux, uy, one map column per parameter) and `sensitivity.vtu`
 /// (the maps and the raw derivatives as point fields).
 fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    femu_mesh::atomic::create_dir_all(dir)
+        .with_context(|| format!("cannot create {}", dir.display()))?;
     let path = dir.join("sensitivity.csv");
-    let mut w = std::io::BufWriter::new(
-        std::fs::File::create(&path).with_context(|| format!("cannot write {}", path.display()))?,
-    );
+    let mut w = crate::output::create_file(&path)?;
     write!(w, "node,x,y,ux,uy")?;
     for n in names {
         write!(w, ",S_{n}")?;
@@ -470,7 +471,7 @@ fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()
         }
         writeln!(w)?;
     }
-    w.flush()?;
+    crate::output::commit(w)?;
     let disp: Vec<[f64; 2]> = r.solution.u.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     let field_names: Vec<(String, String)> = names
         .iter()
@@ -524,7 +525,7 @@ fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
             per.join(" ")
         )?;
     }
-    Ok(())
+    crate::output::commit(w)
 }
 
 /// The seed's qualitative finding, restated from the numbers: per test, whether the C10 or the
@@ -562,7 +563,7 @@ fn write_figures(
     progress: &dyn Progress,
 ) -> Result<()> {
     let panel_dir = out.join("panels");
-    std::fs::create_dir_all(&panel_dir)?;
+    femu_mesh::atomic::create_dir_all(&panel_dir)?;
     let mut panels: Vec<Vec<PathBuf>> = Vec::new();
     for (k, name) in names.iter().enumerate() {
         let hi = results

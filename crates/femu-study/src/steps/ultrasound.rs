@@ -516,7 +516,8 @@ pub fn scan(study: &Study, args: &ScanOptions, out: &Path, progress: &dyn Progre
         }
     }
     let mp = out.join("manifest.csv");
-    std::fs::write(&mp, manifest).with_context(|| format!("cannot write {}", mp.display()))?;
+    femu_mesh::atomic::write(&mp, manifest)
+        .with_context(|| format!("cannot write {}", mp.display()))?;
     progress.note(&format!(
         "{n} images in {:.1} s -> {}",
         t0.elapsed().as_secs_f64(),

@@ -1,0 +1,7 @@
+//! Fuzz target `nifti`: see `harness::nifti`.
+#![no_main]
+
+#[path = "../harness.rs"]
+mod harness;
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| harness::nifti(data));

@@ -1,0 +1,7 @@
+//! Fuzz target `study`: see `harness::study`.
+#![no_main]
+
+#[path = "../harness.rs"]
+mod harness;
+
+libfuzzer_sys::fuzz_target!(|data: &[u8]| harness::study(data));
