@@ -120,3 +120,15 @@ def test_an_unknown_step_or_test():
         study.step("solve", "unused", progress=False)
     with pytest.raises(femu.StudyError, match="kind"):
         study.model().solve({"kind": "shearing"})
+
+
+def test_a_forward_solve_that_cannot_converge_raises_solve_error():
+    """The seed's indentation force (3 N/mm, 30 times femu's default) on the smallest thigh
+    passes the model's limit point: the Newton solver gives up and says where, as `femu
+    forward` does; from Python that is a ``femu.SolveError`` (not a crash, not NaN arrays)."""
+    model = femu.Model.thigh(elements=700)
+    with pytest.raises(femu.SolveError) as e:
+        model.solve({"kind": "indentation", "force_n_per_mm": 3.0})
+    message = str(e.value)
+    # The solver's diagnostics (the increment it stopped at), not an empty or generic text.
+    assert any(w in message.lower() for w in ("increment", "newton", "converge", "limit")), message

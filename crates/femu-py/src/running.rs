@@ -184,12 +184,18 @@ pub fn run<T: Send>(
         }
     };
     match (first_error, result) {
-        // Stopped by Ctrl-C: the work's own account of what it kept.
-        (Some(e), Err(w))
-            if e.is_instance_of::<PyKeyboardInterrupt>(py)
-                && errors::kind(&w) == errors::Kind::Interrupted =>
-        {
-            Err(errors::to_py(w))
+        // Stopped by Ctrl-C: the work's own account of what it kept. Whatever the work returned
+        // after the request is the stop's end, also when a part of it reports the stop as its
+        // own failure (a forward solve inside an optimizer start; the command line reads it the
+        // same way: `femu_study::progress::is_interrupted`).
+        (Some(e), Err(w)) if e.is_instance_of::<PyKeyboardInterrupt>(py) => Err(
+            PyKeyboardInterrupt::new_err(format!("{w:#}; what was finished is kept")),
+        ),
+        // The request came as the work finished: its results are whole.
+        (Some(e), Ok(_)) if e.is_instance_of::<PyKeyboardInterrupt>(py) => {
+            Err(PyKeyboardInterrupt::new_err(
+                "stopped as the computation finished: its results are complete; what was finished is kept",
+            ))
         }
         (Some(e), _) => Err(e),
         (None, r) => r.map_err(errors::to_py),

@@ -590,6 +590,11 @@ class IdentificationSummary:
     measurements: List[MeasurementSummary] = field(default_factory=list)
     #: The discretization check (None when switched off).
     discretization: Optional[DiscretizationCheck] = None
+    #: How the misfit was weighted: "one sigma" (virtual), "per point" (a file's sx, sy or w),
+    #: "full covariance" (weighted FEMU with the DIC's covariance).
+    weighting: str = ""
+    #: The loss on the whitened residuals: ``"squared"`` or ``{"huber": {"k": 1.345}}``.
+    loss: Any = "squared"
     extra: Dict[str, Any] = _extra()
 
     def table(self):
