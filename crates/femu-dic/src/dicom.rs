@@ -107,6 +107,7 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
             format!("not a DICOM file (shorter than its preamble): {e}"),
         )
     })?;
+    crate::dicom_scan::check_meta_lengths(path).map_err(|m| err(path, m))?;
     let meta =
         dicom_object::FileMetaTable::from_reader(std::io::BufReader::new(f)).map_err(|e| {
             err(

@@ -24,6 +24,20 @@ const LONG_VRS: [&[u8; 2]; 13] = [
 /// file meta group, always explicit VR little endian, then the data set, in explicit or implicit
 /// VR little endian). `Err` names the first element whose length the file cannot hold.
 pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), String> {
+    walk(path, start, explicit, false)
+}
+
+/// [`check_lengths`] over the file meta group only (group 0002, explicit VR little endian,
+/// after the 128-byte preamble and "DICM"): dicom-rs allocates its values' declared lengths
+/// while reading the group, before the transfer syntax of the rest is known (a 4 GB allocation
+/// from a fuzzed meta group, issue 28 item 2, second round).
+pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
+    walk(path, 132, true, true)
+}
+
+/// Walks the element headers from byte `start`; with `meta_only`, stops at the first element
+/// outside group 0002.
+fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let size = file.metadata().map_err(|e| e.to_string())?.len();
     let mut r = BufReader::new(file);
@@ -39,6 +53,9 @@ pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), Stri
         pos += 8;
         let u16_at = |k: usize| u16::from_le_bytes([head[k], head[k + 1]]);
         let (group, element) = (u16_at(0), u16_at(2));
+        if meta_only && group != 0x0002 {
+            return Ok(());
+        }
         let (len, sequence) = if group == 0xFFFE {
             // Item and delimiters: an implicit-style header in every transfer syntax.
             if element == 0xE0DD {

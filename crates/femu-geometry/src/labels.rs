@@ -154,6 +154,9 @@ fn grey_from_rgb(px: impl Iterator<Item = [u32; 3]>) -> Result<Vec<u32>, String>
     Ok(out)
 }
 
+/// The largest NIfTI volume read, in bytes (5e8 one-byte voxels, 5e8 / 4 floats).
+const MAX_VOLUME_BYTES: u64 = 2_000_000_000;
+
 fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryError> {
     use nifti::{NiftiHeader, NiftiObject, NiftiVolume, RandomAccessNiftiVolume, ReaderOptions};
     // The header's size checked before the volume is read (issue 28.4).
@@ -178,6 +181,33 @@ fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryE
             &d[1..=n],
             femu_mesh::limits::MAX_VOLUME_VOXELS
         )));
+    }
+    // The nifti crate allocates the header's voxel bytes before reading them: a header that
+    // promises more bytes than an uncompressed file holds is cut short (or forged), and no
+    // volume above MAX_VOLUME_BYTES is read (a 3.3 GB allocation from a fuzzed header, issue 28
+    // item 2, second round).
+    let bytes_per_voxel = header.data_type().map_or(1, |t| t.size_of()) as u64;
+    let need = voxels.saturating_mul(bytes_per_voxel);
+    if need > MAX_VOLUME_BYTES {
+        return Err(too_big(format!(
+            "the header's dimensions {:?} of {bytes_per_voxel}-byte voxels make {need:.1e} bytes, above the limit of {MAX_VOLUME_BYTES:.1e} (the volume is read whole): cut out the slices you need",
+            &d[1..=n],
+        )));
+    }
+    // A single uncompressed file (.nii) holds its voxels after vox_offset; a .nii.gz's size
+    // says nothing, and a .hdr's voxels are in its .img.
+    let single = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("nii"));
+    if single {
+        let size = std::fs::metadata(path).map_or(0, |m| m.len());
+        let offset = (header.vox_offset.max(0.0) as u64).max(348);
+        if size < offset.saturating_add(need) {
+            return Err(too_big(format!(
+                "the header's dimensions {:?} of {bytes_per_voxel}-byte voxels need {need} bytes after byte {offset}, and the file has {size} bytes: the file is cut short",
+                &d[1..=n],
+            )));
+        }
     }
     let obj = ReaderOptions::new()
         .read_file(path)
