@@ -174,6 +174,14 @@ fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryE
         path: path.to_path_buf(),
         reason,
     };
+    // The nifti crate sizes its buffer from these dimensions as they are: a zero or negative
+    // one (an i16) becomes a size beyond any memory (found by fuzzing, issue 28 item 2).
+    if let Some(bad) = d[1..=n].iter().find(|&&v| v < 1) {
+        return Err(too_big(format!(
+            "the header's dimensions {:?} hold {bad}: every dimension of a volume is at least 1 (the header is damaged)",
+            &d[1..=n]
+        )));
+    }
     femu_mesh::limits::check_image_size(slice_px[0], slice_px[1]).map_err(too_big)?;
     if voxels > femu_mesh::limits::MAX_VOLUME_VOXELS {
         return Err(too_big(format!(
@@ -186,7 +194,15 @@ fn read_nifti(path: &Path, slice: Option<usize>) -> Result<LabelImage, GeometryE
     // promises more bytes than an uncompressed file holds is cut short (or forged), and no
     // volume above MAX_VOLUME_BYTES is read (a 3.3 GB allocation from a fuzzed header, issue 28
     // item 2, second round).
-    let bytes_per_voxel = header.data_type().map_or(1, |t| t.size_of()) as u64;
+    // The crate sizes it as `bitpix as usize / 8`: a negative bitpix (an i16) is a size beyond
+    // any memory (found by fuzzing, issue 28 item 2).
+    if header.bitpix < 8 || header.bitpix % 8 != 0 {
+        return Err(too_big(format!(
+            "the header's bitpix is {}: a voxel is a whole number of bytes (8, 16, 32, 64 or 128 bits; the header is damaged)",
+            header.bitpix
+        )));
+    }
+    let bytes_per_voxel = (header.bitpix / 8) as u64;
     let need = voxels.saturating_mul(bytes_per_voxel);
     if need > MAX_VOLUME_BYTES {
         return Err(too_big(format!(
