@@ -507,9 +507,9 @@ impl FitError {
 
     /// [`FitError::from_solve`] with where the solve was (`load step 2`, ...).
     pub(crate) fn from_solve_at(e: femu_mech::SolveError, at: &str) -> FitError {
-        match e {
-            femu_mech::SolveError::Interrupted(_) => FitError::Interrupted,
-            e => FitError::Solve(format!("{at}: {e}")),
+        match FitError::from_solve(e) {
+            FitError::Solve(m) => FitError::Solve(format!("{at}: {m}")),
+            other => other,
         }
     }
 }

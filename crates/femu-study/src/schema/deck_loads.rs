@@ -25,17 +25,7 @@ pub(crate) fn apply(
     if !tests.iter().any(|t| t.loading.is(&contention::KIND)) {
         return Ok(());
     }
-    if !deck.is_file() {
-        return Err(lines.err(
-            "model",
-            0,
-            "deck",
-            format!(
-                "{} does not exist (relative names start from the study file's folder)",
-                deck.display()
-            ),
-        ));
-    }
+    lines.existing_file("model", "deck", deck)?;
     let read = femu_mesh::read_inp(deck)
         .map_err(|e| lines.err("model", 0, "deck", format!("cannot read the deck: {e}")))?;
     let magnitudes: Vec<f64> = read.pressures.iter().map(|p| p.magnitude).collect();

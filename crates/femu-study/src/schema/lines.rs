@@ -111,6 +111,27 @@ impl KeyLines {
         StudyError::key(self.at(table, index, key), message)
     }
 
+    /// An error at the key unless `path` (a file the key names) is a file.
+    pub(crate) fn existing_file(
+        &self,
+        table: &str,
+        key: &str,
+        path: &std::path::Path,
+    ) -> Result<(), StudyError> {
+        if path.is_file() {
+            return Ok(());
+        }
+        Err(self.err(
+            table,
+            0,
+            key,
+            format!(
+                "{} does not exist (relative names start from the study file's folder)",
+                path.display()
+            ),
+        ))
+    }
+
     /// `v` if it is positive and finite, else an error at the key.
     pub(crate) fn positive(
         &self,

@@ -313,17 +313,7 @@ impl Study {
             }
         }
         for (table, key, path) in files {
-            if !path.is_file() {
-                return Err(self.lines.err(
-                    table,
-                    0,
-                    key,
-                    format!(
-                        "{} does not exist (relative names start from the study file's folder)",
-                        path.display()
-                    ),
-                ));
-            }
+            self.lines.existing_file(table, key, path)?;
         }
         let regions =
             match regions::of_geometry(&self.model.geometry, &self.model.materials, &self.lines)? {
