@@ -25,6 +25,7 @@ pub mod design;
 pub mod discretization;
 pub mod fisher;
 pub mod fit;
+mod fit_error;
 pub mod idic;
 pub mod joint;
 pub mod measured;

@@ -17,7 +17,7 @@
 //! `ψ(r)/√(2ρ(r)) ∂r` (exact; `ψ = ρ'`). `k = 1.345` keeps 95 % of the efficiency of least
 //! squares for Gaussian errors.
 
-use crate::fit::FitError;
+use crate::fit_error::FitError;
 use serde::{Deserialize, Serialize};
 
 /// The covariance of a measured field's components `[ux0, uy0, ux1, uy1, ...]` in the model
