@@ -15,29 +15,51 @@ use std::path::Path;
 /// An undefined length (a sequence, an item or encapsulated pixel data closed by a delimiter).
 const UNDEFINED: u32 = 0xFFFF_FFFF;
 
-/// Value representations with a 2-byte reserved field and a 4-byte length in explicit VR.
-const LONG_VRS: [&[u8; 2]; 13] = [
-    b"OB", b"OD", b"OF", b"OL", b"OV", b"OW", b"SQ", b"UC", b"UN", b"UR", b"UT", b"SV", b"UV",
+/// Value representations with a 2-byte length in explicit VR (PS3.5 7.1.2, Table 7.1-2). Every
+/// other VR, and a VR the standard does not know, has 2 reserved bytes and a 4-byte length:
+/// dicom-rs reads an unknown VR as UN, so the walk must too (a fuzzed meta group with VR
+/// `A9 A9` hid a 2.8 GB length behind what the walk took for a 2-byte one).
+const SHORT_VRS: [&[u8; 2]; 21] = [
+    b"AE", b"AS", b"AT", b"CS", b"DA", b"DS", b"DT", b"FL", b"FD", b"IS", b"LO", b"LT", b"PN",
+    b"SH", b"SL", b"SS", b"ST", b"TM", b"UI", b"UL", b"US",
 ];
 
 /// Checks the elements of `path` from byte `start` (132, after the preamble and "DICM": the
 /// file meta group, always explicit VR little endian, then the data set, in explicit or implicit
 /// VR little endian). `Err` names the first element whose length the file cannot hold.
 pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), String> {
-    walk(path, start, explicit, false)
+    walk(path, start, explicit, None)
 }
 
-/// [`check_lengths`] over the file meta group only (group 0002, explicit VR little endian,
-/// after the 128-byte preamble and "DICM"): dicom-rs allocates its values' declared lengths
-/// while reading the group, before the transfer syntax of the rest is known (a 4 GB allocation
-/// from a fuzzed meta group, issue 28 item 2, second round).
+/// [`check_lengths`] over the file meta group only (explicit VR little endian, after the
+/// 128-byte preamble and "DICM"): dicom-rs allocates its values' declared lengths while reading
+/// the group, before the transfer syntax of the rest is known (a 4 GB allocation from a fuzzed
+/// meta group, issue 28 item 2, second round).
+///
+/// dicom-rs reads elements, of any group, until it has consumed the bytes that File Meta
+/// Information Group Length (0002,0000) declares, and skips values whole (it does not descend
+/// into sequences); the walk covers the same bytes the same way (third round: a group length
+/// of 16 MB in a 323-byte file let dicom-rs read on past an element of group 0000, into one
+/// that asked for 2.8 GB).
 pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
-    walk(path, 132, true, true)
+    let mut first = [0u8; 12];
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return Ok(()); // the reader says why
+    };
+    if file.seek(std::io::SeekFrom::Start(132)).is_err() || file.read_exact(&mut first).is_err() {
+        return Ok(()); // too short: the reader says so
+    }
+    // (0002,0000) UL, length 4: anything else dicom-rs refuses by itself, before any value.
+    if first[..8] != [0x02, 0x00, 0x00, 0x00, b'U', b'L', 0x04, 0x00] {
+        return Ok(());
+    }
+    let group_length = u32::from_le_bytes([first[8], first[9], first[10], first[11]]);
+    walk(path, 144, true, Some(group_length as u64))
 }
 
-/// Walks the element headers from byte `start`; with `meta_only`, stops at the first element
-/// outside group 0002.
-fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), String> {
+/// Walks the element headers from byte `start`. With `meta_bytes`, walks the file meta group
+/// as dicom-rs reads it: elements until that many bytes are consumed, values skipped whole.
+fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Result<(), String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let size = file.metadata().map_err(|e| e.to_string())?.len();
     let mut r = BufReader::new(file);
@@ -46,6 +68,10 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), 
     let mut pos = start;
     let mut in_pixels = false;
     loop {
+        if meta_bytes.is_some_and(|n| pos - start >= n) {
+            return Ok(());
+        }
+        let element_start = pos;
         let mut head = [0u8; 8];
         if size.saturating_sub(pos) < 8 || r.read_exact(&mut head).is_err() {
             return Ok(()); // the end, or a cut the reader reports itself
@@ -53,9 +79,6 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), 
         pos += 8;
         let u16_at = |k: usize| u16::from_le_bytes([head[k], head[k + 1]]);
         let (group, element) = (u16_at(0), u16_at(2));
-        if meta_only && group != 0x0002 {
-            return Ok(());
-        }
         let (len, sequence) = if group == 0xFFFE {
             // Item and delimiters: an implicit-style header in every transfer syntax.
             if element == 0xE0DD {
@@ -63,24 +86,27 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), 
             }
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             // An item of a sequence holds elements (walked); a fragment of pixel data not.
-            (len, !in_pixels)
-        } else if explicit || group == 0x0002 {
+            (len, !in_pixels && meta_bytes.is_none())
+        } else if explicit || group == 0x0002 || meta_bytes.is_some() {
             let vr = [head[4], head[5]];
-            if LONG_VRS.iter().any(|v| **v == vr) {
+            if SHORT_VRS.iter().any(|v| **v == vr) {
+                (u16_at(6) as u32, false)
+            } else {
                 let mut l = [0u8; 4];
                 if r.read_exact(&mut l).is_err() {
                     return Ok(());
                 }
                 pos += 4;
-                (u32::from_le_bytes(l), &vr == b"SQ")
-            } else {
-                (u16_at(6) as u32, false)
+                (u32::from_le_bytes(l), &vr == b"SQ" && meta_bytes.is_none())
             }
         } else {
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             (len, is_sequence(Tag(group, element)))
         };
         if len == UNDEFINED {
+            if meta_bytes.is_some() {
+                return Ok(()); // dicom-rs refuses an undefined length in the meta group
+            }
             if (group, element) == (0x7FE0, 0x0010) {
                 in_pixels = true;
             }
@@ -89,8 +115,7 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_only: bool) -> Result<(), 
         let left = size - pos;
         if len as u64 > left {
             return Err(format!(
-                "element ({group:04X},{element:04X}) at byte {} declares {len} bytes, and the file has {left} left: the file is cut short or damaged",
-                pos - 8
+                "element ({group:04X},{element:04X}) at byte {element_start} declares {len} bytes, and the file has {left} left: the file is cut short or damaged"
             ));
         }
         if !sequence {
@@ -133,6 +158,43 @@ mod tests {
         assert!(e.contains("(7FE0,0010)"), "{e}");
         assert!(e.contains("declares 4294967280 bytes"), "{e}");
         assert!(e.contains("has 4 left"), "{e}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A file meta group as dicom-rs reads it: preamble, "DICM", group length `group_length`,
+    /// then `rest`.
+    fn meta_group(group_length: u32, rest: &[u8]) -> Vec<u8> {
+        let mut d = vec![0u8; 128];
+        d.extend_from_slice(b"DICM");
+        d.extend_from_slice(&[0x02, 0x00, 0x00, 0x00, b'U', b'L', 4, 0]);
+        d.extend_from_slice(&group_length.to_le_bytes());
+        d.extend_from_slice(rest);
+        d
+    }
+
+    #[test]
+    fn the_meta_group_is_walked_to_its_declared_length_with_unknown_vrs_as_un() {
+        let dir = std::env::temp_dir().join(format!("femu-dicom-meta-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("m.dcm");
+        // The fuzzed file's shape: an element of group 0000 with VR 00 00 (UN to dicom-rs:
+        // 2 reserved bytes, a 4-byte length), then (0002,0002) with VR A9 A9 declaring
+        // 0xA9A9A9A9 bytes, which dicom-rs reserves before reading.
+        let mut rest = vec![0, 0, 0, 0, 0, 0, 0x0B, 0, 2, 0, 0, 0, 0, 1];
+        rest.extend_from_slice(&[2, 0, 2, 0, 0xA9, 0xA9, 0xA9, 0xA9, 0xA9, 0xA9, 0xA9, 0xA9]);
+        rest.extend_from_slice(&[0xA9; 40]);
+        std::fs::write(&p, meta_group(16_777_314, &rest)).unwrap();
+        let e = check_meta_lengths(&p).unwrap_err();
+        assert!(e.contains("(0002,0002) at byte 158"), "{e}");
+        assert!(e.contains("declares 2846468521 bytes"), "{e}");
+        // A group whose declared length ends before the damage: dicom-rs stops there too.
+        std::fs::write(&p, meta_group(14, &rest)).unwrap();
+        check_meta_lengths(&p).unwrap();
+        // A sound group: Transfer Syntax UID (UI, 2-byte length), 20 bytes.
+        let mut ts = vec![2, 0, 0x10, 0, b'U', b'I', 20, 0];
+        ts.extend_from_slice(b"1.2.840.10008.1.2.1\0");
+        std::fs::write(&p, meta_group(28, &ts)).unwrap();
+        check_meta_lengths(&p).unwrap();
         std::fs::remove_dir_all(&dir).ok();
     }
 }
