@@ -42,19 +42,38 @@ pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), Stri
 /// of 16 MB in a 323-byte file let dicom-rs read on past an element of group 0000, into one
 /// that asked for 2.8 GB).
 pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
-    let mut first = [0u8; 12];
+    let mut first = [0u8; 16];
     let Ok(mut file) = std::fs::File::open(path) else {
         return Ok(()); // the reader says why
     };
     if file.seek(std::io::SeekFrom::Start(132)).is_err() || file.read_exact(&mut first).is_err() {
         return Ok(()); // too short: the reader says so
     }
-    // (0002,0000) UL, length 4: anything else dicom-rs refuses by itself, before any value.
-    if first[..8] != [0x02, 0x00, 0x00, 0x00, b'U', b'L', 0x04, 0x00] {
+    // dicom-rs wants the tag (0002,0000) and a length of 4, whatever the VR says (a fuzzed
+    // `AS` in place of `UL` went through): the header is 8 or 12 bytes by the VR, as for any
+    // element, and the group length is the 4-byte value after it.
+    if first[..4] != [0x02, 0x00, 0x00, 0x00] {
+        return Ok(()); // dicom-rs refuses it by itself, before any value
+    }
+    let (length, header) = if SHORT_VRS.iter().any(|v| **v == [first[4], first[5]]) {
+        (u16::from_le_bytes([first[6], first[7]]) as u32, 8)
+    } else {
+        (
+            u32::from_le_bytes([first[8], first[9], first[10], first[11]]),
+            12,
+        )
+    };
+    if length != 4 {
         return Ok(());
     }
-    let group_length = u32::from_le_bytes([first[8], first[9], first[10], first[11]]);
-    walk(path, 144, true, Some(group_length as u64))
+    let v = &first[header..header + 4];
+    let group_length = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
+    walk(
+        path,
+        132 + header as u64 + 4,
+        true,
+        Some(group_length as u64),
+    )
 }
 
 /// Walks the element headers from byte `start`. With `meta_bytes`, walks the file meta group
@@ -195,6 +214,12 @@ mod tests {
         ts.extend_from_slice(b"1.2.840.10008.1.2.1\0");
         std::fs::write(&p, meta_group(28, &ts)).unwrap();
         check_meta_lengths(&p).unwrap();
+        // The group length under another VR (`AS`, fuzzed): dicom-rs reads it all the same.
+        let mut d = meta_group(16_777_314, &rest);
+        d[136..138].copy_from_slice(b"AS");
+        std::fs::write(&p, d).unwrap();
+        let e = check_meta_lengths(&p).unwrap_err();
+        assert!(e.contains("(0002,0002) at byte 158"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
