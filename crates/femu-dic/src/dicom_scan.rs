@@ -122,6 +122,21 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             (len, is_sequence(Tag(group, element)))
         };
+        if meta_bytes.is_none() && group != 0x0002 && len != UNDEFINED {
+            let vr = if explicit {
+                Some([head[4], head[5]])
+            } else {
+                dictionary_vr(Tag(group, element))
+            };
+            if let Some((vr, size)) = vr.and_then(|v| value_size(v).map(|s| (v, s))) {
+                if len % size != 0 {
+                    return Err(format!(
+                        "element ({group:04X},{element:04X}) at byte {element_start}: a {} value of {len} bytes, not a multiple of {size}: the file is damaged",
+                        String::from_utf8_lossy(&vr)
+                    ));
+                }
+            }
+        }
         if len == UNDEFINED {
             if meta_bytes.is_some() {
                 return Ok(()); // dicom-rs refuses an undefined length in the meta group
@@ -141,6 +156,29 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
             r.seek_relative(len as i64).map_err(|e| e.to_string())?;
             pos += len as u64;
         }
+    }
+}
+
+/// The size of one value of a binary VR. dicom-rs reads `len / size` values of such an element
+/// but counts `len` bytes, so a length that is not a multiple puts its reader off by the
+/// remainder: every header after it is read from the wrong bytes (a fuzzed SL of 2 bytes made
+/// it read a 4 GB length out of the next element's value). PS3.5 6.2 forbids such a length.
+fn value_size(vr: [u8; 2]) -> Option<u32> {
+    match &vr {
+        b"US" | b"SS" | b"OW" => Some(2),
+        b"UL" | b"SL" | b"FL" | b"AT" | b"OL" | b"OF" => Some(4),
+        b"FD" | b"OD" | b"SV" | b"UV" | b"OV" => Some(8),
+        _ => None,
+    }
+}
+
+/// The VR the standard dictionary gives `tag` (implicit VR), when it is one VR (US or SS: 2
+/// bytes either way).
+fn dictionary_vr(tag: Tag) -> Option<[u8; 2]> {
+    match StandardDataDictionary.by_tag(tag)?.vr() {
+        VirtualVr::Exact(vr) => Some(vr.to_bytes()),
+        VirtualVr::Xs => Some(*b"US"),
+        _ => None,
     }
 }
 
@@ -177,6 +215,24 @@ mod tests {
         assert!(e.contains("(7FE0,0010)"), "{e}");
         assert!(e.contains("declares 4294967280 bytes"), "{e}");
         assert!(e.contains("has 4 left"), "{e}");
+        // A binary value whose length is not a multiple of its size (SL of 2 bytes).
+        let mut d = vec![0x28, 0x00, 0x02, 0x01, b'S', b'L', 2, 0, 7, 0];
+        d.extend_from_slice(&data_set(4));
+        std::fs::write(&p, &d).unwrap();
+        let e = check_lengths(&p, 0, true).unwrap_err();
+        assert!(
+            e.contains("(0028,0102) at byte 0: a SL value of 2 bytes, not a multiple of 4"),
+            "{e}"
+        );
+        // The same in implicit VR: the dictionary's US for High Bit, 3 bytes.
+        let mut d = vec![0x28, 0x00, 0x02, 0x01, 3, 0, 0, 0, 7, 0, 0];
+        d.extend_from_slice(&[0x28, 0x00, 0x10, 0x00, 2, 0, 0, 0, 48, 0]);
+        std::fs::write(&p, &d).unwrap();
+        let e = check_lengths(&p, 0, false).unwrap_err();
+        assert!(
+            e.contains("a US value of 3 bytes, not a multiple of 2"),
+            "{e}"
+        );
         std::fs::remove_dir_all(&dir).ok();
     }
 
