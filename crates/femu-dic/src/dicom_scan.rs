@@ -28,7 +28,7 @@ const SHORT_VRS: [&[u8; 2]; 21] = [
 /// file meta group, always explicit VR little endian, then the data set, in explicit or implicit
 /// VR little endian). `Err` names the first element whose length the file cannot hold.
 pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), String> {
-    walk(path, start, explicit, None)
+    walk(path, start, explicit, None).map(|_| ())
 }
 
 /// [`check_lengths`] over the file meta group only (explicit VR little endian, after the
@@ -41,19 +41,25 @@ pub fn check_lengths(path: &Path, start: u64, explicit: bool) -> Result<(), Stri
 /// into sequences); the walk covers the same bytes the same way (third round: a group length
 /// of 16 MB in a 323-byte file let dicom-rs read on past an element of group 0000, into one
 /// that asked for 2.8 GB).
-pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
+///
+/// Returns the byte where dicom-rs's reading of the group ends, where it starts the data set:
+/// the data set must be walked from there, not from the group's elements as the data set's
+/// transfer syntax would read them (sixth round: an element of group 0000 inside the declared
+/// group, read by the implicit-VR walk with a 4-byte shorter header, put the walk 4 bytes off
+/// dicom-rs). `None` when dicom-rs refuses the group by itself.
+pub fn check_meta_lengths(path: &Path) -> Result<Option<u64>, String> {
     let mut first = [0u8; 16];
     let Ok(mut file) = std::fs::File::open(path) else {
-        return Ok(()); // the reader says why
+        return Ok(None); // the reader says why
     };
     if file.seek(std::io::SeekFrom::Start(132)).is_err() || file.read_exact(&mut first).is_err() {
-        return Ok(()); // too short: the reader says so
+        return Ok(None); // too short: the reader says so
     }
     // dicom-rs wants the tag (0002,0000) and a length of 4, whatever the VR says (a fuzzed
     // `AS` in place of `UL` went through): the header is 8 or 12 bytes by the VR, as for any
     // element, and the group length is the 4-byte value after it.
     if first[..4] != [0x02, 0x00, 0x00, 0x00] {
-        return Ok(()); // dicom-rs refuses it by itself, before any value
+        return Ok(None); // dicom-rs refuses it by itself, before any value
     }
     let (length, header) = if SHORT_VRS.iter().any(|v| **v == [first[4], first[5]]) {
         (u16::from_le_bytes([first[6], first[7]]) as u32, 8)
@@ -64,7 +70,7 @@ pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
         )
     };
     if length != 4 {
-        return Ok(());
+        return Ok(None);
     }
     let v = &first[header..header + 4];
     let group_length = u32::from_le_bytes([v[0], v[1], v[2], v[3]]);
@@ -74,11 +80,12 @@ pub fn check_meta_lengths(path: &Path) -> Result<(), String> {
         true,
         Some(group_length as u64),
     )
+    .map(Some)
 }
 
 /// Walks the element headers from byte `start`. With `meta_bytes`, walks the file meta group
 /// as dicom-rs reads it: elements until that many bytes are consumed, values skipped whole.
-fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Result<(), String> {
+fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Result<u64, String> {
     let file = std::fs::File::open(path).map_err(|e| e.to_string())?;
     let size = file.metadata().map_err(|e| e.to_string())?.len();
     let mut r = BufReader::new(file);
@@ -88,12 +95,12 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
     let mut in_pixels = false;
     loop {
         if meta_bytes.is_some_and(|n| pos - start >= n) {
-            return Ok(());
+            return Ok(pos);
         }
         let element_start = pos;
         let mut head = [0u8; 8];
         if size.saturating_sub(pos) < 8 || r.read_exact(&mut head).is_err() {
-            return Ok(()); // the end, or a cut the reader reports itself
+            return Ok(pos); // the end, or a cut the reader reports itself
         }
         pos += 8;
         let u16_at = |k: usize| u16::from_le_bytes([head[k], head[k + 1]]);
@@ -113,7 +120,7 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
             } else {
                 let mut l = [0u8; 4];
                 if r.read_exact(&mut l).is_err() {
-                    return Ok(());
+                    return Ok(pos);
                 }
                 pos += 4;
                 (u32::from_le_bytes(l), &vr == b"SQ" && meta_bytes.is_none())
@@ -139,7 +146,7 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
         }
         if len == UNDEFINED {
             if meta_bytes.is_some() {
-                return Ok(()); // dicom-rs refuses an undefined length in the meta group
+                return Ok(pos); // dicom-rs refuses an undefined length in the meta group
             }
             if (group, element) == (0x7FE0, 0x0010) {
                 in_pixels = true;
