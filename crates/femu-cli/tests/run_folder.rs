@@ -265,3 +265,36 @@ fn an_interrupted_monte_carlo_keeps_its_finished_repeats() {
     assert!(out.join("parameters.csv").exists() && out.join("starts.csv").exists());
     outputs_are_whole(&out);
 }
+
+#[cfg(unix)]
+#[test]
+fn an_identification_interrupted_in_its_discretization_check_keeps_the_fit() {
+    let dir = scratch("check-interrupted");
+    let out = dir.join("out");
+    // SIGINT once the check has started (its note), while it solves the refined meshes (over a
+    // second at 700 elements here; the signal comes within milliseconds of the note).
+    let (code, err) = interrupt_after_line(
+        &[
+            "identify",
+            "--elements",
+            "700",
+            "--starts",
+            "1",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "discretization check: the fit on refined meshes",
+        Duration::from_secs(600),
+    );
+    assert_eq!(code, Some(130), "{err}");
+    assert!(err.contains("the fit is kept without it"), "{err}");
+    let s = json(&out.join("summary.json"));
+    assert_eq!(s["discretization"]["status"], "interrupted", "{s}");
+    assert!(s["interrupted"]
+        .as_str()
+        .unwrap()
+        .contains("during the discretization check"));
+    assert_eq!(s["repeats"], 1);
+    assert!(out.join("parameters.csv").exists());
+    outputs_are_whole(&out);
+}

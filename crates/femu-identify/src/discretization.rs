@@ -328,8 +328,13 @@ fn message(c: &DiscretizationCheck, data_from_model: bool) -> String {
     // and the message says so instead of sending the user to a million elements.
     let need = c.recommended_elements.map_or(String::new(), |n| {
         if n > PRACTICAL_REFINEMENT * c.elements {
+            let carried = if data_from_model {
+                ""
+            } else {
+                ": the widened intervals carry it"
+            };
             format!(
-                "; only some {n} elements would make it negligible (more than {PRACTICAL_REFINEMENT} times this mesh): the widened intervals carry it"
+                "; only some {n} elements would make it negligible (more than {PRACTICAL_REFINEMENT} times this mesh){carried}"
             )
         } else {
             format!("; about {n} elements would make it negligible")

@@ -478,7 +478,22 @@ fn estimate_with_check(
         return Ok((parameters, id, None));
     }
     let sd: Vec<f64> = parameters.iter().map(|p| p.relative_sd).collect();
-    let mut checked = discretization::check(study, built, models, prepared, fit, &sd, progress)?;
+    progress.note("discretization check: the fit on refined meshes");
+    let mut checked =
+        match discretization::check(study, built, models, prepared, fit, &sd, progress) {
+            Ok(c) => c,
+            // A stop during the check's solves: the finished fit is kept, unchecked.
+            Err(e) if crate::progress::is_interrupted(&e) => {
+                progress.note("discretization check interrupted: the fit is kept without it");
+                let mut c = DiscretizationCheck::unknown(
+                    models.elements(),
+                    "the check was interrupted (run again to check the mesh)",
+                );
+                c.status = "interrupted".into();
+                return Ok((parameters, id, Some(c)));
+            }
+            Err(e) => return Err(e),
+        };
     let flagged = checked.check.flagged();
     if flagged && study.identification.discretization == Discretization::Refine {
         if let Some(finest) = checked.finest.as_mut() {
@@ -666,12 +681,16 @@ pub fn identify_on(
             "per point".into()
         },
         loss: spec.loss,
-        interrupted: interrupted.map(|n| {
-            format!(
+        interrupted: match interrupted {
+            Some(n) => Some(format!(
                 "interrupted: {} of {n} repeats finished and kept",
                 c.best.len()
-            )
-        }),
+            )),
+            None if check.as_ref().is_some_and(|k| k.status == "interrupted") => Some(
+                "interrupted during the discretization check: the fit is kept, its intervals not checked for the mesh".into(),
+            ),
+            None => None,
+        },
         measurements,
         discretization: check,
     };
