@@ -597,6 +597,10 @@ pub struct FitResult {
     pub jacobian: Vec<Vec<f64>>,
     /// Number of residual components.
     pub data: usize,
+    /// The residual at the optimum (for the jackknife over blocks of data; empty when the
+    /// optimizer does not keep it).
+    #[serde(skip)]
+    pub residual: Vec<f64>,
 }
 
 impl FitResult {
@@ -624,6 +628,7 @@ impl FitResult {
             wall_time_s: t0.elapsed().as_secs_f64(),
             data: 0,
             jacobian: Vec::new(),
+            residual: Vec::new(),
         }
     }
 }
@@ -874,6 +879,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
         history,
         data: r.len(),
         jacobian: j,
+        residual: r,
         ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }
@@ -1145,6 +1151,7 @@ pub fn bfgs<P: LeastSquares + ?Sized>(
         reason,
         history,
         data: r.len(),
+        residual: r,
         ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }
