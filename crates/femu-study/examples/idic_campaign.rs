@@ -131,7 +131,9 @@ struct Times {
 }
 
 /// The image route's options, with overrides for exploration: `IDIC_PAIRING=consecutive`,
-/// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`, `IDIC_MESH_CORRECTION=1`.
+/// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`, `IDIC_MESH_CORRECTION=1`;
+/// with `--idic-only`, `IDIC_START=v1,v2,...` adds a start and `IDIC_NO_DIC_START=1` drops the
+/// DIC optima.
 fn route() -> Result<ImageRouteOptions> {
     let mut r = ImageRouteOptions::default();
     if let Ok(v) = std::env::var("IDIC_PAIRING") {
@@ -167,6 +169,10 @@ fn main() -> Result<()> {
         }
         let seq = read_sequence(&dir.join("measurement"))?;
         let mut extra = Vec::new();
+        // `IDIC_START=v1,v2,...` (model units, one per free parameter): one more start.
+        if let Ok(v) = std::env::var("IDIC_START") {
+            extra.push(v.split(',').map(|x| x.parse()).collect::<Result<Vec<f64>, _>>()?);
+        }
         for route in ["dic", "dic-weighted"] {
             if std::env::var("IDIC_NO_DIC_START").is_ok() {
                 break;
