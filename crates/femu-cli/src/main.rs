@@ -13,7 +13,7 @@ mod progress;
 mod us_cmd;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use femu_study::steps::{design, identify, run, sensitivity, solve};
+use femu_study::steps::{identify, run, sensitivity, solve};
 use progress::Terminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -423,7 +423,7 @@ fn main() -> ExitCode {
             out,
             elements,
         } => study_with(study.as_deref(), elements, None, None)
-            .and_then(|s| design::run(&s, &out, &progress).map(|_| ())),
+            .and_then(|s| femu_study::commands::design(&s, &out, &progress).map(|_| ())),
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
         Command::Dic(args) => dic_cmd::run(&args, quiet),
         Command::DicNoise(args) => dic_cmd::run_noise(&args, quiet),

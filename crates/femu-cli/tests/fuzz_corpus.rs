@@ -125,3 +125,24 @@ fn the_seeds_are_inputs_the_readers_accept() {
         femu_study::parse(&text(&p), base).unwrap_or_else(|e| panic!("{}: {e:#}", p.display()));
     }
 }
+
+/// The DICOM inputs that once made dicom-rs reserve gigabytes (`fuzz/regressions/dicom/oom_*`)
+/// are refused by femu's own walk over the element headers (a length the file cannot hold, or
+/// one that would put dicom-rs's reader off), before dicom-rs reads a value: the
+/// replay above would pass on a machine with the memory to spare, this does not.
+#[test]
+fn dicom_inputs_that_once_asked_for_gigabytes_are_refused_before_a_value_is_read() {
+    let oom: Vec<PathBuf> = files(&fuzz_dir().join("regressions").join("dicom"))
+        .into_iter()
+        .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("oom_"))
+        .collect();
+    assert!(oom.len() >= 3, "the oom_* regressions are missing");
+    for p in oom {
+        let e = femu_dic::GreyImage::open(&p, 0).unwrap_err().to_string();
+        assert!(
+            e.contains("damaged") && e.contains("at byte"),
+            "{}: {e}",
+            p.display()
+        );
+    }
+}

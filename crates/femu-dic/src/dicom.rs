@@ -107,7 +107,7 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
             format!("not a DICOM file (shorter than its preamble): {e}"),
         )
     })?;
-    crate::dicom_scan::check_meta_lengths(path).map_err(|m| err(path, m))?;
+    let data_set_start = crate::dicom_scan::check_meta_lengths(path).map_err(|m| err(path, m))?;
     let meta =
         dicom_object::FileMetaTable::from_reader(std::io::BufReader::new(f)).map_err(|e| {
             err(
@@ -120,10 +120,14 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
     // Every element's declared length checked against the file before dicom-rs allocates it
     // (a deflated data set cannot be walked: its lengths are inside the compressed stream).
     if ts != "1.2.840.10008.1.2.1.99" {
-        // From the meta group, after the preamble and "DICM" (the group length read by
-        // dicom-rs is recomputed from what it kept, not the file's).
-        crate::dicom_scan::check_lengths(path, 132, ts != "1.2.840.10008.1.2")
-            .map_err(|m| err(path, m))?;
+        // From where dicom-rs ends the meta group (the declared group length; after the
+        // preamble and "DICM" when the meta walk could not tell, and dicom-rs refused it).
+        crate::dicom_scan::check_lengths(
+            path,
+            data_set_start.unwrap_or(132),
+            ts != "1.2.840.10008.1.2",
+        )
+        .map_err(|m| err(path, m))?;
     }
     open_file(path).map_err(|e| {
         // Issue 32.12: "Could not read data set token" says nothing to a user; a data set

@@ -657,21 +657,37 @@ pub fn run_joint(
         layout: Vec::new(),
     };
     for rep in 0..repeats {
-        let realized: Vec<Realized> = fields()
-            .enumerate()
-            .map(|(b, f)| {
-                realize(
-                    f,
-                    b,
-                    rep,
-                    free,
-                    free_model,
-                    reference,
-                    options.seed,
-                    travels[b],
-                )
-            })
-            .collect::<Result<_, _>>()?;
+        // A stop between repeats, or one that ends this repeat's virtual experiment (its
+        // forward solve sees the request), keeps the repeats that finished.
+        let realized: Result<Vec<Realized>, CampaignError> = if stop_requested(options) {
+            Err(CampaignError::Fit(FitError::Interrupted))
+        } else {
+            fields()
+                .enumerate()
+                .map(|(b, f)| {
+                    realize(
+                        f,
+                        b,
+                        rep,
+                        free,
+                        free_model,
+                        reference,
+                        options.seed,
+                        travels[b],
+                    )
+                })
+                .collect()
+        };
+        let realized = match realized {
+            Ok(r) => r,
+            Err(_) if stop_requested(options) => {
+                return Err(CampaignError::Interrupted {
+                    finished: Box::new(out),
+                    repeats,
+                })
+            }
+            Err(e) => return Err(e),
+        };
         // The joint problem of this repeat's data on the coarse or the full models.
         let problem = |coarse: bool| -> Result<JointProblem, FitError> {
             let mut stacked = Vec::with_capacity(blocks.len());
@@ -731,6 +747,15 @@ pub fn run_joint(
     Ok(out)
 }
 
+/// Whether the user asked to stop (Ctrl-C / SIGTERM, or the caller's flag).
+fn stop_requested(options: &CampaignOptions) -> bool {
+    femu_mesh::stop::requested()
+        || options
+            .stop
+            .as_ref()
+            .is_some_and(|f| f.load(Ordering::Relaxed))
+}
+
 /// The starts of one repeat in parallel (on the coarse models when `multilevel`); every start
 /// recorded in `out`; returns the best (its layout kept in `out` on one level).
 fn run_repeat(
@@ -763,12 +788,7 @@ fn run_repeat(
             r
         })
         .collect();
-    let stopped = femu_mesh::stop::requested()
-        || options
-            .stop
-            .as_ref()
-            .is_some_and(|f| f.load(Ordering::Relaxed));
-    if stopped {
+    if stop_requested(options) {
         // The starts that finished before the stop are kept; the stopped ones are not
         // results.
         for (k, (s, o)) in starts.iter().zip(outcomes).enumerate() {

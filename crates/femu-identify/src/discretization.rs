@@ -300,6 +300,9 @@ fn round_up(n: f64) -> usize {
     ((n / scale).ceil() * scale) as usize
 }
 
+/// A mesh more than this many times finer than the identified one is not a practical advice.
+const PRACTICAL_REFINEMENT: usize = 16;
+
 fn message(c: &DiscretizationCheck, data_from_model: bool) -> String {
     let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
     let rate = match c.fitted_rate {
@@ -320,8 +323,17 @@ fn message(c: &DiscretizationCheck, data_from_model: bool) -> String {
             c.levels.first().map_or(0, |l| l.elements)
         );
     }
+    // With the small noise of a good measurement the sd is small, and "negligible" may need a
+    // mesh no one would solve for an identification: then the widened interval is the answer,
+    // and the message says so instead of sending the user to a million elements.
     let need = c.recommended_elements.map_or(String::new(), |n| {
-        format!("; about {n} elements would make it negligible")
+        if n > PRACTICAL_REFINEMENT * c.elements {
+            format!(
+                "; only some {n} elements would make it negligible (more than {PRACTICAL_REFINEMENT} times this mesh): the widened intervals carry it"
+            )
+        } else {
+            format!("; about {n} elements would make it negligible")
+        }
     });
     if data_from_model {
         format!(
@@ -441,6 +453,31 @@ mod tests {
         let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
         let n = c.recommended_elements.unwrap() as f64;
         assert!(worst * (n / 1000.0).powf(-p / 2.0) <= BIAS_FRACTION * 1.0001);
+    }
+
+    /// A mesh 16 times finer or more is not sent to the user as advice: the message says the
+    /// widened intervals carry the bias (the demo's check once advised some 300 000 elements).
+    #[test]
+    fn an_impractical_mesh_is_not_advised() {
+        let mut c = DiscretizationCheck::unknown(4000, "");
+        c.status = "widened".into();
+        c.rate = 2.0;
+        c.rate_observed = true;
+        c.fitted_rate = Some(2.0);
+        c.rate_misfit = 0.0;
+        c.bias = vec![0.05];
+        c.bias_over_sd = vec![3.0];
+        for (n, practical) in [(40_000, true), (300_000, false)] {
+            c.recommended_elements = Some(n);
+            let m = message(&c, false);
+            assert!(m.contains(&n.to_string()), "{m}");
+            assert_eq!(m.contains(&format!("about {n} elements")), practical, "{m}");
+            assert_eq!(
+                m.contains("the widened intervals carry it"),
+                !practical,
+                "{m}"
+            );
+        }
     }
 
     #[test]

@@ -18,6 +18,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod commands;
 pub(crate) mod figures;
 pub mod html;
 pub mod json;

@@ -75,6 +75,60 @@ pub fn signal_after(args: &[&str], signal: &str, delay: std::time::Duration) -> 
     }
 }
 
+/// Starts `femu ARGS`, sends SIGINT as soon as a line of its stderr contains `line` (an event
+/// of the run, not a moment: a loaded machine only makes the test slower), waits for the end and
+/// returns (exit code, stderr). Panics with the stderr so far when the line has not come within
+/// `timeout`.
+pub fn interrupt_after_line(
+    args: &[&str],
+    line: &str,
+    timeout: std::time::Duration,
+) -> (Option<i32>, String) {
+    use std::io::BufRead;
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pipe = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    let reader = std::thread::spawn(move || {
+        for l in std::io::BufReader::new(pipe).lines().map_while(Result::ok) {
+            if tx.send(l).is_err() {
+                break;
+            }
+        }
+    });
+    let started = std::time::Instant::now();
+    let mut stderr = String::new();
+    loop {
+        let left = timeout.saturating_sub(started.elapsed());
+        match rx.recv_timeout(left) {
+            Ok(l) => {
+                let seen = l.contains(line);
+                stderr.push_str(&l);
+                stderr.push('\n');
+                if seen {
+                    break;
+                }
+            }
+            Err(_) => {
+                let _ = child.kill();
+                panic!("no line with {line:?} within {timeout:?}; stderr:\n{stderr}");
+            }
+        }
+    }
+    let _ = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status();
+    let status = child.wait().unwrap();
+    reader.join().unwrap();
+    stderr.extend(rx.try_iter().map(|l| l + "\n"));
+    (status.code(), stderr)
+}
+
 /// Starts `femu ARGS`, sends SIGINT after `delay`, returns (exit code, stderr).
 pub fn interrupt(args: &[&str], delay: std::time::Duration) -> (Option<i32>, String) {
     let s = signal_after(args, "INT", delay);

@@ -16,6 +16,7 @@
 
 mod boundary;
 mod convergence;
+mod deck;
 mod deck_loads;
 mod design;
 mod error;
@@ -34,6 +35,7 @@ pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
+pub(crate) use deck::read_deck;
 pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;
@@ -322,7 +324,7 @@ impl Study {
                     let Geometry::Deck(path) = &self.model.geometry else {
                         unreachable!("of_geometry knows every other geometry")
                     };
-                    let (deck, _) = crate::model::read_deck(&self.model.materials, path)
+                    let (deck, _) = read_deck(&self.model.materials, path)
                         .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
                     deck.materials
                         .iter()

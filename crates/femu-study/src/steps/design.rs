@@ -77,16 +77,6 @@ pub struct DesignSummary {
     pub timings_s: (f64, f64, f64),
 }
 
-/// `femu design`: the study's model built, its designs ranked into `out`, and `report.html`
-/// with the design section.
-pub fn run(study: &Study, out: &Path, progress: &dyn Progress) -> Result<DesignSummary> {
-    let built = crate::model::build(&study.model)?;
-    let summary = run_on(study, &built, out, progress)?;
-    let report = crate::report::write_design(out)?;
-    progress.note(&format!("wrote {}", report.display()));
-    Ok(summary)
-}
-
 /// The exact sensitivities of one test at the reference: the loaded model and `∂u/∂θ` of
 /// every member of `free`, in their order.
 fn differentiate(
