@@ -171,7 +171,11 @@ fn main() -> Result<()> {
         let mut extra = Vec::new();
         // `IDIC_START=v1,v2,...` (model units, one per free parameter): one more start.
         if let Ok(v) = std::env::var("IDIC_START") {
-            extra.push(v.split(',').map(|x| x.parse()).collect::<Result<Vec<f64>, _>>()?);
+            extra.push(
+                v.split(',')
+                    .map(|x| x.parse())
+                    .collect::<Result<Vec<f64>, _>>()?,
+            );
         }
         for route in ["dic", "dic-weighted"] {
             if std::env::var("IDIC_NO_DIC_START").is_ok() {
