@@ -932,6 +932,16 @@ pub struct Estimate {
     /// The interval of the noise alone, when `ci95` was widened.
     #[serde(default)]
     pub ci95_noise: Option<[f64; 2]>,
+    /// On a measured field (`crate::misfit_intervals`): the Fisher sd, the Birge ratio, the
+    /// block jackknife sd, and which of the three set `relative_sd`.
+    #[serde(default)]
+    pub sd_fisher: Option<f64>,
+    #[serde(default)]
+    pub birge_ratio: Option<f64>,
+    #[serde(default)]
+    pub sd_jackknife: Option<f64>,
+    #[serde(default)]
+    pub width_from: Option<String>,
 }
 
 /// The 95 % interval of `theta` with relative (log) standard deviation `sd` and an estimated
@@ -1049,6 +1059,10 @@ pub fn estimates(
                 coverage95: covered.as_ref().map(|c| c[k]),
                 discretization_bias: None,
                 ci95_noise: None,
+                sd_fisher: None,
+                birge_ratio: None,
+                sd_jackknife: None,
+                width_from: None,
             }
         })
         .collect();

@@ -512,6 +512,44 @@ pub struct LmOptions {
     /// parameters the data hardly see keep drifting: this stops it on what matters.
     #[serde(default)]
     pub significance: Option<f64>,
+    /// Extrapolate a linearly converging sequence of steps (Aitken's Δ² along the step): when
+    /// two accepted steps point the same way (cosine above [`ACCELERATION_COSINE`]) and the
+    /// second is a fraction `ρ` of the first, the remaining steps of that geometric sequence,
+    /// `d ρ / (1 − ρ)`, are tried at once and kept if the cost decreases. Gauss–Newton
+    /// converges linearly when the residual is large and curved (grey levels of decorrelated
+    /// speckle: each step 8 % shorter than the one before, measured on the built-in thigh at
+    /// 0 px): without this it crawls.
+    #[serde(default)]
+    pub accelerate: bool,
+}
+
+/// Two consecutive steps this parallel (cosine) form a geometric sequence that
+/// [`LmOptions::accelerate`] extrapolates: 0.95, about 18°.
+pub const ACCELERATION_COSINE: f64 = 0.95;
+
+/// The largest extrapolation factor `ρ / (1 − ρ)` (ρ = 0.95): further, the geometric model of
+/// the remaining steps is not trusted.
+pub const MAX_EXTRAPOLATION: f64 = 19.0;
+
+/// The extrapolated point of a geometric sequence of steps `prev`, `d` (see
+/// [`LmOptions::accelerate`]) from `phi` (the point after `d`), clamped to the log-bounds;
+/// `None` when the steps do not form one.
+fn extrapolated(prev: &[f64], d: &[f64], phi: &[f64], lo: &[f64], hi: &[f64]) -> Option<Vec<f64>> {
+    let (nd, np) = (dot(d, d).sqrt(), dot(prev, prev).sqrt());
+    if !(nd > 0.0 && np > 0.0) {
+        return None;
+    }
+    let cos = dot(d, prev) / (nd * np);
+    let rho = nd / np;
+    if cos < ACCELERATION_COSINE || rho >= 1.0 {
+        return None;
+    }
+    let factor = (rho / (1.0 - rho)).min(MAX_EXTRAPOLATION);
+    Some(
+        (0..phi.len())
+            .map(|p| (phi[p] + factor * d[p]).clamp(lo[p], hi[p]))
+            .collect(),
+    )
 }
 
 impl Default for LmOptions {
@@ -522,6 +560,7 @@ impl Default for LmOptions {
             cost_tolerance: 1e-10,
             initial_damping: 1e-3,
             significance: None,
+            accelerate: false,
         }
     }
 }
@@ -558,6 +597,10 @@ pub struct FitResult {
     pub jacobian: Vec<Vec<f64>>,
     /// Number of residual components.
     pub data: usize,
+    /// The residual at the optimum (for the jackknife over blocks of data; empty when the
+    /// optimizer does not keep it).
+    #[serde(skip)]
+    pub residual: Vec<f64>,
 }
 
 impl FitResult {
@@ -585,6 +628,7 @@ impl FitResult {
             wall_time_s: t0.elapsed().as_secs_f64(),
             data: 0,
             jacobian: Vec::new(),
+            residual: Vec::new(),
         }
     }
 }
@@ -672,6 +716,8 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
     let mut converged = false;
     let mut reason = format!("{} iterations", opts.max_iterations);
     let mut iterations = 0;
+    // The last accepted step (for `opts.accelerate`).
+    let mut previous_step: Option<Vec<f64>> = None;
     for it in 1..=opts.max_iterations {
         iterations = it;
         // Normal equations A = JᵀJ, g = Jᵀr.
@@ -760,6 +806,47 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                         reason = "cost stationary".into();
                         break;
                     }
+                    let ext = match &previous_step {
+                        Some(prev) if opts.accelerate => extrapolated(prev, &d, &phi, &lo, &hi),
+                        _ => None,
+                    };
+                    previous_step = Some(d.clone());
+                    if let Some(ext) = ext {
+                        let max_step = (0..n)
+                            .map(|p| (ext[p] - phi[p]).abs())
+                            .fold(0.0f64, f64::max);
+                        match problem.evaluate(&ext, true) {
+                            Ok((re, je)) => {
+                                let ce = 0.5 * dot(&re, &re);
+                                let better = ce < cost;
+                                history.push(LmStep {
+                                    iteration: it,
+                                    cost: ce,
+                                    damping: 0.0,
+                                    accepted: better,
+                                    max_step,
+                                    failure: None,
+                                });
+                                if better {
+                                    phi = ext;
+                                    r = re;
+                                    j = je.expect("asked");
+                                    cost = ce;
+                                    // The next extrapolation needs two fresh steps.
+                                    previous_step = None;
+                                }
+                            }
+                            Err(FitError::Solve(why)) => history.push(LmStep {
+                                iteration: it,
+                                cost: f64::NAN,
+                                damping: 0.0,
+                                accepted: false,
+                                max_step,
+                                failure: Some(why),
+                            }),
+                            Err(e) => return Err(e),
+                        }
+                    }
                 } else {
                     lambda *= 4.0;
                 }
@@ -792,6 +879,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
         history,
         data: r.len(),
         jacobian: j,
+        residual: r,
         ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }
@@ -844,6 +932,76 @@ mod tests {
             assert_eq!(strata, vec![0, 1, 2, 3, 4]);
         }
         assert_eq!(s, latin_hypercube(&free, 5, 3));
+    }
+
+    /// Dennis & Schnabel's large-residual example (1996, ex. 10.2.4) in `φ = ln θ`:
+    /// `r = (φ + 1, λφ² + φ − 1)`, minimum at `φ = 0`, where Gauss–Newton converges linearly
+    /// with ratio `λ` (the neglected `Σ r ∇²r = −2λ` against `JᵀJ = 2`).
+    struct LargeResidual {
+        free: Vec<FreeParameter>,
+        lambda: f64,
+        evaluations: usize,
+    }
+
+    impl LeastSquares for LargeResidual {
+        fn free(&self) -> &[FreeParameter] {
+            &self.free
+        }
+        fn evaluate(
+            &mut self,
+            phi: &[f64],
+            jacobian: bool,
+        ) -> Result<(Vec<f64>, Option<Columns>), FitError> {
+            self.evaluations += 1;
+            let x = phi[0];
+            let r = vec![x + 1.0, self.lambda * x * x + x - 1.0];
+            let j = jacobian.then(|| vec![vec![1.0, 2.0 * self.lambda * x + 1.0]]);
+            Ok((r, j))
+        }
+        fn counts(&self) -> (usize, usize) {
+            (self.evaluations, self.evaluations)
+        }
+    }
+
+    /// The extrapolation of a geometric sequence of steps reaches the same minimum in far fewer
+    /// evaluations; without it Gauss–Newton crawls at ratio λ = 0.9.
+    #[test]
+    fn acceleration_shortens_a_linear_crawl() {
+        let problem = || LargeResidual {
+            free: vec![FreeParameter {
+                name: "P".into(),
+                members: vec![Parameter::new(0, &NeoHookean::SPEC, 0).unwrap()],
+                lower: 0.1,
+                upper: 10.0,
+            }],
+            lambda: 0.9,
+            evaluations: 0,
+        };
+        let opts = |accelerate| LmOptions {
+            max_iterations: 400,
+            step_tolerance: 1e-7,
+            cost_tolerance: 1e-15,
+            accelerate,
+            ..LmOptions::default()
+        };
+        let start = [0.5f64.exp()];
+        let mut plain = problem();
+        let a = levenberg_marquardt(&mut plain, &start, &opts(false)).unwrap();
+        let mut fast = problem();
+        let b = levenberg_marquardt(&mut fast, &start, &opts(true)).unwrap();
+        assert!(a.converged && b.converged, "{} / {}", a.reason, b.reason);
+        // Both stop once a step is below 1e-7; the remaining error of a sequence of ratio 0.9
+        // is 9 steps: 1e-6 in ln θ.
+        assert!(a.theta[0].ln().abs() < 1e-5, "{}", a.theta[0]);
+        assert!(b.theta[0].ln().abs() < 1e-5, "{}", b.theta[0]);
+        // 0.5 · 0.9^k < 1e-7 takes ~146 iterations; the extrapolated sequence a handful
+        // (measured: see the assertion message).
+        assert!(
+            3 * fast.evaluations < plain.evaluations,
+            "{} evaluations with the extrapolation, {} without",
+            fast.evaluations,
+            plain.evaluations
+        );
     }
 }
 
@@ -993,6 +1151,7 @@ pub fn bfgs<P: LeastSquares + ?Sized>(
         reason,
         history,
         data: r.len(),
+        residual: r,
         ..FitResult::started(problem, start, &phi, solves0, jac0, t0)
     })
 }

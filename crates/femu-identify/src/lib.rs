@@ -8,6 +8,8 @@
 //! - [`fit`]: the identification problem (projection, exact Jacobian), Levenberg–Marquardt in
 //!   log-parameters with bounds, Latin-hypercube starts.
 //! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
+//! - [`misfit_intervals`]: intervals on a measured field widened by the Birge ratio or the
+//!   block jackknife, whichever is larger.
 //! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
 //! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
 //!   the free parameters, stacked into one problem; each measurement's share of the information.
@@ -29,4 +31,5 @@ mod fit_error;
 pub mod idic;
 pub mod joint;
 pub mod measured;
+pub mod misfit_intervals;
 pub mod weighted;

@@ -131,7 +131,9 @@ struct Times {
 }
 
 /// The image route's options, with overrides for exploration: `IDIC_PAIRING=consecutive`,
-/// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`.
+/// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`, `IDIC_MESH_CORRECTION=1`;
+/// with `--idic-only`, `IDIC_START=v1,v2,...` adds a start and `IDIC_NO_DIC_START=1` drops the
+/// DIC optima.
 fn route() -> Result<ImageRouteOptions> {
     let mut r = ImageRouteOptions::default();
     if let Ok(v) = std::env::var("IDIC_PAIRING") {
@@ -150,6 +152,7 @@ fn route() -> Result<ImageRouteOptions> {
     if let Ok(v) = std::env::var("IDIC_BLOCK") {
         r.correlation.pixels.block_px = v.parse()?;
     }
+    r.mesh_correction = std::env::var("IDIC_MESH_CORRECTION").is_ok();
     Ok(r)
 }
 
@@ -159,14 +162,28 @@ fn main() -> Result<()> {
     if let Some(dir) = &a.idic_only {
         let text = std::fs::read_to_string(dir.join("measurement/study.toml"))?;
         let mut study = femu_study::schema::parse(&text, dir)?;
+        // As in `identify_image_measurement`: the two DIC -> FEMU optima, no other start.
+        study.identification.starts = 0;
         if let Ok(v) = std::env::var("IDIC_STARTS") {
             study.identification.starts = v.parse()?;
         }
         let seq = read_sequence(&dir.join("measurement"))?;
-        let extra = match std::fs::read_to_string(dir.join("identify/dic/summary.json"))
-            .or_else(|_| std::fs::read_to_string(dir.join("dic/summary.json")))
-        {
-            Ok(t) if std::env::var("IDIC_NO_DIC_START").is_err() => {
+        let mut extra = Vec::new();
+        // `IDIC_START=v1,v2,...` (model units, one per free parameter): one more start.
+        if let Ok(v) = std::env::var("IDIC_START") {
+            extra.push(
+                v.split(',')
+                    .map(|x| x.parse())
+                    .collect::<Result<Vec<f64>, _>>()?,
+            );
+        }
+        for route in ["dic", "dic-weighted"] {
+            if std::env::var("IDIC_NO_DIC_START").is_ok() {
+                break;
+            }
+            if let Ok(t) =
+                std::fs::read_to_string(dir.join("identify").join(route).join("summary.json"))
+            {
                 let s: serde_json::Value = serde_json::from_str(&t)?;
                 let theta: Vec<f64> = s["parameters"]
                     .as_array()
@@ -174,10 +191,9 @@ fn main() -> Result<()> {
                     .iter()
                     .map(|p| p["identified"].as_f64().unwrap_or(f64::NAN))
                     .collect();
-                vec![theta]
+                extra.push(theta);
             }
-            _ => Vec::new(),
-        };
+        }
         identify_images(&study, true, &seq, true, extra, &route()?, &a.out, &Print)?;
         return Ok(());
     }

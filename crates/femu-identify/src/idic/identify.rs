@@ -52,6 +52,7 @@ impl Default for IdicSettings {
                 cost_tolerance: 1e-8,
                 step_tolerance: 1e-5,
                 significance: Some(0.1),
+                accelerate: true,
                 ..LmOptions::default()
             },
         }
@@ -146,6 +147,71 @@ pub enum IdicRunError {
     Scale { scale_px: f64, error: FitError },
     #[error("interrupted")]
     Interrupted,
+}
+
+/// Continues the identification from `theta` (model units, updated) on images smoothed by
+/// `scale_px`: each (pair, band) reweighted by its residual variance, the parameters the images
+/// do not see held ([`seen_parameters`]), the others optimized by `lm`. One scale of
+/// [`identify`]; also the re-identification with a corrected model (see
+/// [`IdicProblem::set_correction`]).
+pub fn continue_on_scale(
+    problem: &mut IdicProblem,
+    theta: &mut Vec<f64>,
+    scale_px: f64,
+    lm: &LmOptions,
+) -> Result<ScaleRecord, IdicRunError> {
+    let err = |error: FitError| match error {
+        FitError::Interrupted => IdicRunError::Interrupted,
+        error => IdicRunError::Scale { scale_px, error },
+    };
+    let free = problem.free().to_vec();
+    problem.set_scale(scale_px);
+    // exp(ln θ) of a parameter at its bound may land an ulp outside it.
+    for (t, f) in theta.iter_mut().zip(&free) {
+        *t = t.clamp(f.lower, f.upper);
+    }
+    let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
+    let band_sd = problem.reweight(&phi).map_err(err)?;
+    let seen = seen_parameters(problem, &phi).map_err(err)?;
+    let start: Vec<f64> = seen.iter().map(|&k| theta[k]).collect();
+    let mut sub = Subset::new(problem, seen.clone(), phi);
+    let mut result = levenberg_marquardt(&mut sub, &start, lm).map_err(err)?;
+    let full: Vec<f64> = sub
+        .full(&result.theta.iter().map(|t| t.ln()).collect::<Vec<_>>())
+        .iter()
+        .map(|p| p.exp())
+        .collect();
+    result.theta = full.clone();
+    *theta = full;
+    Ok(ScaleRecord {
+        scale_px,
+        result,
+        band_sd,
+        held: (0..free.len()).filter(|k| !seen.contains(k)).collect(),
+    })
+}
+
+/// The noise part of the uncertainty at `theta` (the problem is left there): the block
+/// sandwich covariance of `ln θ` and the delete-one-group jackknife sd over image regions, with
+/// the number of groups.
+pub fn noise_at(
+    problem: &mut IdicProblem,
+    theta: &[f64],
+) -> Result<(SandwichCovariance, Vec<f64>, usize), IdicRunError> {
+    let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
+    let (r, j) = problem
+        .evaluate(&phi, true)
+        .map_err(|error| IdicRunError::Scale {
+            scale_px: problem.scale_px(),
+            error,
+        })?;
+    let j = j.expect("asked");
+    let pixels = problem.pixels();
+    let n_pix = pixels.len();
+    let covariance = block_sandwich(&j, &r, &|k| pixels.block[k % n_pix], pixels.blocks);
+    let (jackknife_sd, groups) =
+        group_jackknife(&j, &r, &|k| pixels.group[k % n_pix], pixels.groups);
+    Ok((covariance, jackknife_sd, groups))
 }
 
 /// Identifies the free parameters of the problems `make` builds (one per start; they must be
@@ -248,54 +314,15 @@ pub fn identify(
         } else {
             &settings.coarse
         };
-        let err = |error: FitError| match error {
-            FitError::Interrupted => IdicRunError::Interrupted,
-            error => IdicRunError::Scale { scale_px, error },
-        };
         let solves0 = problem.counts().0;
-        problem.set_scale(scale_px);
-        // exp(ln θ) of a parameter at its bound may land an ulp outside it.
-        for (t, f) in theta.iter_mut().zip(&free) {
-            *t = t.clamp(f.lower, f.upper);
-        }
-        let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
-        let band_sd = problem.reweight(&phi).map_err(err)?;
-        let seen = seen_parameters(&mut problem, &phi).map_err(err)?;
-        let start: Vec<f64> = seen.iter().map(|&k| theta[k]).collect();
-        let mut sub = Subset::new(&mut problem, seen.clone(), phi);
-        let mut result = levenberg_marquardt(&mut sub, &start, lm).map_err(err)?;
-        let full: Vec<f64> = sub
-            .full(&result.theta.iter().map(|t| t.ln()).collect::<Vec<_>>())
-            .iter()
-            .map(|p| p.exp())
-            .collect();
-        result.theta = full.clone();
+        let rec = continue_on_scale(&mut problem, &mut theta, scale_px, lm)?;
         solves += problem.counts().0 - solves0;
-        theta = full;
-        let rec = ScaleRecord {
-            scale_px,
-            result,
-            band_sd,
-            held: (0..free.len()).filter(|k| !seen.contains(k)).collect(),
-        };
         on_event(IdicEvent::Scale(&rec));
         scales.push(rec);
     }
-    // The estimate's residual and Jacobian (the problem is left at the optimum).
-    let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
-    let (r, j) = problem
-        .evaluate(&phi, true)
-        .map_err(|error| IdicRunError::Scale {
-            scale_px: problem.scale_px(),
-            error,
-        })?;
+    let noise = noise_at(&mut problem, &theta)?;
     solves += problem.steps();
-    let j = j.expect("asked");
-    let pixels = problem.pixels();
-    let n_pix = pixels.len();
-    let covariance = block_sandwich(&j, &r, &|k| pixels.block[k % n_pix], pixels.blocks);
-    let (jackknife_sd, jackknife_groups) =
-        group_jackknife(&j, &r, &|k| pixels.group[k % n_pix], pixels.groups);
+    let (covariance, jackknife_sd, jackknife_groups) = noise;
     Ok((
         problem,
         IdicOutcome {

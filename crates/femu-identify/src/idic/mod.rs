@@ -21,11 +21,14 @@
 //!   covariance blocks.
 //! - [`brightness`]: contrast and offset per band by variable projection, exact derivative.
 //! - [`problem`]: the residuals and the Jacobian.
+//! - [`correction`]: the mesh's discretization error of the displacement, extrapolated, held
+//!   fixed in a second identification.
 //! - [`uncertainty`]: the sandwich covariance from the residual's own correlation, the
 //!   discretization shift.
 //! - [`identify`]: coarse to fine, from several starts.
 
 pub mod brightness;
+pub mod correction;
 pub mod frame;
 pub mod identify;
 pub mod pixels;
@@ -34,8 +37,8 @@ pub mod uncertainty;
 
 pub use frame::ImageFrame;
 pub use identify::{
-    identify, seen_parameters, IdicEvent, IdicOutcome, IdicRunError, IdicSettings, ScaleRecord,
-    SEEN_SD,
+    continue_on_scale, identify, noise_at, seen_parameters, IdicEvent, IdicOutcome, IdicRunError,
+    IdicSettings, ScaleRecord, SEEN_SD,
 };
 pub use pixels::{PixelOptions, PixelSet};
 pub use problem::{IdicError, IdicOptions, IdicProblem, Pairing};

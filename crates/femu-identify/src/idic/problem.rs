@@ -126,6 +126,9 @@ pub struct IdicProblem {
     pairs: Vec<(usize, usize)>,
     /// Pixel displacements `d_i` (px) of each frame `i ≥ 1` at the last evaluation.
     displacement: Vec<Vec<[f64; 2]>>,
+    /// A displacement held fixed and added to each step's model displacement (px, per step
+    /// and pixel): the discretization correction (see [`IdicProblem::set_correction`]).
+    correction: Option<Vec<Vec<[f64; 2]>>>,
     samples: Vec<PairSamples>,
     stop: Option<Arc<AtomicBool>>,
     forward_solves: usize,
@@ -236,6 +239,7 @@ impl IdicProblem {
             active: vec![1.0; pixels.len()],
             samples: vec![PairSamples::default(); pairs.len()],
             displacement: vec![vec![[0.0; 2]; pixels.len()]; images.len()],
+            correction: None,
             splines: Vec::new(),
             scale_px: -1.0,
             steps,
@@ -458,13 +462,55 @@ impl IdicProblem {
         let (pixels, frame) = (&self.pixels, &self.frame);
         for (i, st) in self.steps.iter().enumerate() {
             let u = st.state.as_deref().expect("solved");
+            let c = self.correction.as_ref().map(|c| &c[i]);
             self.displacement[i + 1]
                 .par_iter_mut()
                 .zip(pixels.loc.par_iter())
-                .for_each(|(d, l)| {
+                .enumerate()
+                .for_each(|(p, (d, l))| {
                     *d = frame
                         .displacement_to_pixels([l.interpolate(u, 2, 0), l.interpolate(u, 2, 1)]);
+                    if let Some(c) = c {
+                        d[0] += c[p][0];
+                        d[1] += c[p][1];
+                    }
                 });
+        }
+    }
+
+    /// Adds `correction[i][p]` (px) to the model displacement of load step `i + 1` at pixel
+    /// `p` in every later evaluation, held fixed (its parameter derivative is left out of the
+    /// Jacobian): the approximation-error treatment of the mesh (Kaipio & Somersalo 2007), the
+    /// correction being the discretization error of the model's displacement estimated at an
+    /// earlier estimate. `None` removes it.
+    pub fn set_correction(
+        &mut self,
+        correction: Option<Vec<Vec<[f64; 2]>>>,
+    ) -> Result<(), FitError> {
+        if let Some(c) = &correction {
+            if c.len() != self.steps.len() || c.iter().any(|c| c.len() != self.pixels.len()) {
+                return Err(FitError::Solve(format!(
+                    "a displacement correction needs {} load steps of {} pixels",
+                    self.steps.len(),
+                    self.pixels.len()
+                )));
+            }
+        }
+        self.correction = correction;
+        Ok(())
+    }
+
+    /// The model's own pixel displacement of frame `i ≥ 1` at the last evaluation, without
+    /// the correction.
+    pub fn model_displacement(&self, i: usize) -> Vec<[f64; 2]> {
+        let d = &self.displacement[i];
+        match &self.correction {
+            Some(c) => d
+                .iter()
+                .zip(&c[i - 1])
+                .map(|(d, c)| [d[0] - c[0], d[1] - c[1]])
+                .collect(),
+            None => d.clone(),
         }
     }
 
@@ -642,12 +688,14 @@ impl IdicProblem {
         self.directional(1, &dir).pop().expect("one direction")
     }
 
-    /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that the
-    /// `refined` models (the same load steps on a finer mesh of the same geometry and
-    /// materials) imply at the parameters of the last Jacobian evaluation: each refined step
-    /// solved there, its displacement at the problem's pixels compared with the problem's own.
-    /// Pixels the refined mesh does not cover keep their displacement.
-    pub fn discretization_shift(&self, refined: Vec<Model>) -> Result<Vec<f64>, FitError> {
+    /// The pixel displacements (px) of every load step that the `refined` models (the same
+    /// load steps on another mesh of the same geometry and materials) give at the parameters
+    /// of the last evaluation, at the problem's pixels; `None` where that mesh does not cover
+    /// a pixel. Each step warm-started from the one before.
+    pub fn displacements_on(
+        &self,
+        refined: Vec<Model>,
+    ) -> Result<Vec<Vec<Option<[f64; 2]>>>, FitError> {
         if refined.len() != self.steps.len() {
             return Err(FitError::Solve(format!(
                 "{} refined models for {} load steps",
@@ -661,8 +709,9 @@ impl IdicProblem {
             .map(|f| f.members[0].value(&self.steps[0].model))
             .collect();
         let mut warm: Option<Vec<f64>> = None;
-        let mut delta = Vec::with_capacity(refined.len());
+        let mut out = Vec::with_capacity(refined.len());
         for (i, mut model) in refined.into_iter().enumerate() {
+            self.check_stop()?;
             for (f, &t) in self.free.iter().zip(&theta) {
                 for m in &f.members {
                     if !m.belongs_to(&model) {
@@ -685,34 +734,53 @@ impl IdicProblem {
                     FitError::from_solve_at(e, &format!("refined mesh, load step {}", i + 1))
                 })?;
             let locator = femu_mesh::locate::PointLocator::new(&model.mesh);
-            let own = &self.displacement[i + 1];
-            let d: Vec<[f64; 2]> = self
+            let d: Vec<Option<[f64; 2]>> = self
                 .pixels
                 .px
                 .par_iter()
-                .zip(own.par_iter())
-                .map(|(p, d0)| {
+                .map(|p| {
                     let x = self.frame.pixel_to_model([p[0] as f64, p[1] as f64]);
-                    match locator.locate(x) {
-                        Some(l) => {
-                            let d = self.frame.displacement_to_pixels([
-                                l.interpolate(&sol.u, 2, 0),
-                                l.interpolate(&sol.u, 2, 1),
-                            ]);
-                            [d[0] - d0[0], d[1] - d0[1]]
-                        }
-                        None => [0.0, 0.0],
-                    }
+                    locator.locate(x).map(|l| {
+                        self.frame.displacement_to_pixels([
+                            l.interpolate(&sol.u, 2, 0),
+                            l.interpolate(&sol.u, 2, 1),
+                        ])
+                    })
                 })
                 .collect();
-            delta.push(d);
+            out.push(d);
             warm = Some(sol.state);
         }
-        let dr = self.residual_change(&delta);
-        Ok(super::uncertainty::gauss_newton_shift(
-            &self.jacobian_columns(),
-            &dr,
-        ))
+        Ok(out)
+    }
+
+    /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that moving
+    /// every step's pixel displacements by `delta[i][p]` (px) implies at the last Jacobian
+    /// evaluation.
+    pub fn shift_for(&self, delta: &[Vec<[f64; 2]>]) -> Vec<f64> {
+        let dr = self.residual_change(delta);
+        super::uncertainty::gauss_newton_shift(&self.jacobian_columns(), &dr)
+    }
+
+    /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that the
+    /// `refined` models (the same load steps on a finer mesh of the same geometry and
+    /// materials) imply at the parameters of the last Jacobian evaluation: each refined step
+    /// solved there, its displacement at the problem's pixels compared with the problem's own.
+    /// Pixels the refined mesh does not cover keep their displacement.
+    pub fn discretization_shift(&self, refined: Vec<Model>) -> Result<Vec<f64>, FitError> {
+        let fine = self.displacements_on(refined)?;
+        let delta: Vec<Vec<[f64; 2]>> = fine
+            .iter()
+            .enumerate()
+            .map(|(i, f)| {
+                let own = self.model_displacement(i + 1);
+                f.iter()
+                    .zip(&own)
+                    .map(|(f, d0)| f.map_or([0.0, 0.0], |f| [f[0] - d0[0], f[1] - d0[1]]))
+                    .collect()
+            })
+            .collect();
+        Ok(self.shift_for(&delta))
     }
 
     /// The unweighted residual maps of every pair at the last evaluation (grey levels, NaN out

@@ -255,16 +255,20 @@ fn identify_measured(
     }
     let built = crate::model::build(&study.model)?;
     let prepared = match measured {
-        Some(p) => measured_prepared(
-            study,
-            Measured {
-                field: MeasuredField::read(p)?,
-                source: p.display().to_string(),
-                reference_known: false,
-                covariance: None,
-            },
-            &format!("file {}", p.display()),
-        )?,
+        Some(p) => {
+            let field = MeasuredField::read(p)?;
+            let covariance = measured_covariance(study, p, field.points.len())?;
+            measured_prepared(
+                study,
+                Measured {
+                    field,
+                    source: p.display().to_string(),
+                    reference_known: false,
+                    covariance,
+                },
+                &format!("file {}", p.display()),
+            )?
+        }
         None => measure::prepare(study, &built, out, progress)?,
     };
     identify_on(
@@ -275,6 +279,33 @@ fn identify_measured(
         out,
         progress,
     )
+}
+
+/// The covariance of a `--measured` field: the study's `[measurement] covariance` (in the
+/// model frame, as the field given with `--measured` is), its point count checked against the
+/// field's; `None` without the key.
+fn measured_covariance(
+    study: &Study,
+    field: &Path,
+    points: usize,
+) -> Result<Option<femu_identify::weighted::FieldCovariance>> {
+    let Some(MeasurementSource::File {
+        covariance: Some(c),
+        ..
+    }) = study.measurements.first().map(|m| &m.source)
+    else {
+        return Ok(None);
+    };
+    let cov = femu_identify::weighted::FieldCovariance::read_mtx(c)?;
+    if cov.points != points {
+        anyhow::bail!(
+            "[measurement] covariance {}: {} points, the field {} has {points}",
+            c.display(),
+            cov.points,
+            field.display()
+        );
+    }
+    Ok(Some(cov))
 }
 
 /// The study's one measurement replaced by `measured` (a field in the model frame, from
@@ -439,6 +470,43 @@ fn fit_or_keep(
     }
 }
 
+/// Which term set the intervals' widths on a measured field
+/// (`femu_identify::misfit_intervals`), one sentence; `None` when none was applied.
+fn width_note(parameters: &[Estimate]) -> Option<String> {
+    let birge = parameters.iter().find_map(|p| p.birge_ratio)?;
+    let names = |from: &str| -> Vec<&str> {
+        parameters
+            .iter()
+            .filter(|p| p.width_from.as_deref() == Some(from))
+            .map(|p| p.name.as_str())
+            .collect()
+    };
+    let mut parts = Vec::new();
+    for (from, what) in [
+        (
+            "jackknife",
+            format!(
+                "the jackknife over {} depth blocks of the points",
+                femu_identify::misfit_intervals::JACKKNIFE_BLOCKS
+            ),
+        ),
+        (
+            "Birge ratio",
+            format!("the Birge ratio √(χ²/ν) = {birge:.2}"),
+        ),
+        ("Fisher", "the Jacobian alone".to_string()),
+    ] {
+        let n = names(from);
+        if !n.is_empty() {
+            parts.push(format!("{what} for {}", n.join(", ")));
+        }
+    }
+    Some(format!(
+        "interval widths on the measured field: {}",
+        parts.join("; ")
+    ))
+}
+
 /// The estimates of `fit` with the discretization check: intervals widened when the bias is
 /// not negligible and the data did not come from the model's mesh; with `"refine"`, the first
 /// repeat identified again on the finest mesh of the check; without the check when `stopped`.
@@ -458,6 +526,11 @@ fn estimate_with_check(
     femu_identify::fisher::Identifiability,
     Option<DiscretizationCheck>,
 )> {
+    // On measured fields the intervals also answer to the misfit itself (Birge ratio, block
+    // jackknife: `femu_identify::misfit_intervals`); a virtual experiment's noise is the model's.
+    let measured = prepared
+        .iter()
+        .any(|p| matches!(p.data, PreparedData::Measured(_)));
     let estimates = |fit: &JointFit| {
         campaign::estimates(
             &fit.campaign,
@@ -466,6 +539,16 @@ fn estimate_with_check(
             reference_known,
             known_noise,
         )
+        .map(|(mut e, id)| {
+            if measured {
+                femu_identify::misfit_intervals::widen_for_misfit(
+                    &mut e,
+                    &fit.campaign.best[0],
+                    known_noise,
+                );
+            }
+            (e, id)
+        })
     };
     let (mut parameters, mut id) = estimates(fit)?;
     if study.identification.discretization == Discretization::Off {
@@ -618,6 +701,9 @@ pub fn identify_on(
         interrupted.is_some(),
         progress,
     )?;
+    if let Some(note) = width_note(&parameters) {
+        progress.note(&note);
+    }
     let warnings = campaign::warnings(&fit.campaign, &fit.free, &parameters);
     let measurements = measurement_summaries(prepared, &fit);
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;

@@ -2,9 +2,11 @@
 //! (`femu_identify::idic`) of the study's free parameters from the image sequence of the
 //! measurement step — the unloaded frame and one frame per load step, correlated against the
 //! finite-element state of each step — with the same starts, bounds, groups and fixed parameters
-//! as `identify`, intervals from the grey-level residual's own correlation, the bias a refined
-//! mesh implies (extrapolated as in `femu_identify::discretization`) and the change from the
-//! last smoothed scale. Written as
+//! as `identify`; the mesh's discretization error of the displacement extrapolated from two
+//! further meshes, held fixed, and the parameters identified again with it
+//! (`femu_identify::idic::correction`); intervals from the grey-level residual's own
+//! correlation, the correction's own uncertainty and the change from the last smoothed scale.
+//! Written as
 //!
 //! - `parameters.csv` — identified values, errors (simulated images), standard deviations
 //!   (statistical, discretization, total), 95 % intervals, whether the window sees each;
@@ -22,7 +24,6 @@ use crate::steps::ultrasound::SimSummary;
 use anyhow::{bail, Context, Result};
 use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
-use femu_identify::discretization;
 use femu_identify::fit::FreeParameter;
 use femu_identify::idic::pixels::MaskCounts;
 use femu_identify::idic::{
@@ -97,6 +98,13 @@ pub struct ImageRouteOptions {
     pub scales_px: Vec<f64>,
     /// Whether to estimate the discretization shift on a refined mesh.
     pub discretization_check: bool,
+    /// With the check: correct the model's displacement for the mesh and identify again
+    /// ([`MeshCorrection`]) instead of widening the intervals by the extrapolated shift. Off by
+    /// default: on the built-in thigh it did not remove the D_FAT error (which images rendered
+    /// from the model's own mesh show as well: not a mesh error) and moved D_QUADRICEPS by
+    /// 6 % (README, images → parameters).
+    #[serde(default)]
+    pub mesh_correction: bool,
 }
 
 impl Default for ImageRouteOptions {
@@ -110,6 +118,7 @@ impl Default for ImageRouteOptions {
             },
             scales_px: IdicSettings::default().scales_px,
             discretization_check: true,
+            mesh_correction: false,
         }
     }
 }
@@ -133,10 +142,18 @@ pub struct ImageEstimate {
     /// The bias of `ln θ` the mesh implies (one Gauss–Newton step to a refined mesh,
     /// extrapolated: `femu_identify::discretization::extrapolated_bias`), if computed.
     pub discretization_bias: Option<f64>,
+    /// `sd(ln θ)` of the mesh correction itself (the spread of its effect over the rates
+    /// `p ∓ 1`, see [`MeshCorrection`]): what remains of the discretization error in the
+    /// interval once the estimate is corrected.
+    #[serde(default)]
+    pub discretization_sd: Option<f64>,
+    /// The estimate on the model's mesh before the correction.
+    #[serde(default)]
+    pub uncorrected: Option<f64>,
     /// The change of `ln θ` from the last smoothed scale to the images as recorded (see
     /// [`estimates`]).
     pub scale_change: Option<f64>,
-    /// `√(sd_statistical² + shift² + scale_change²)`: the interval's.
+    /// `√(sd_statistical² + discretization_sd² + scale_change²)`: the interval's.
     pub relative_sd: f64,
     /// 95 % interval `θ exp(±1.96 sd)`, clipped to the bounds.
     pub ci95: [f64; 2],
@@ -175,8 +192,11 @@ pub struct ImageIdentificationSummary {
     pub test: String,
     pub grouped: bool,
     pub elements: usize,
-    /// Elements of the refined mesh of the discretization check.
+    /// Elements of the first further mesh of the discretization correction.
     pub refined_elements: Option<usize>,
+    /// The discretization correction, when made.
+    #[serde(default)]
+    pub mesh_correction: Option<MeshCorrection>,
     pub source: String,
     pub load_fractions: Vec<f64>,
     pub image_px: (usize, usize),
@@ -219,18 +239,22 @@ fn step_models(
         .collect()
 }
 
-/// The mesh of the discretization check: the study's with twice the elements (element size
-/// divided by √2); `None` for a deck, which femu cannot refine.
-fn refined_spec(spec: &crate::schema::ModelSpec) -> Option<crate::schema::ModelSpec> {
+/// A mesh of the discretization correction: the study's with `factor` times the elements
+/// (element size divided by `√factor`); `None` for a deck, which femu cannot refine.
+fn refined_spec(
+    spec: &crate::schema::ModelSpec,
+    factor: usize,
+) -> Option<crate::schema::ModelSpec> {
     use crate::schema::{Geometry, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM};
+    let shrink = (factor as f64).sqrt();
     let resolution = match (&spec.geometry, spec.resolution) {
         (Geometry::Deck(_), _) => return None,
-        (_, Resolution::Elements(n)) => Resolution::Elements(2 * n),
-        (_, Resolution::SizeMm(h)) => Resolution::SizeMm(h / std::f64::consts::SQRT_2),
-        (Geometry::Thigh(_), Resolution::Default) => Resolution::Elements(2 * DEFAULT_ELEMENTS),
-        (_, Resolution::Default) => {
-            Resolution::SizeMm(DEFAULT_LABEL_SIZE_MM / std::f64::consts::SQRT_2)
+        (_, Resolution::Elements(n)) => Resolution::Elements(factor * n),
+        (_, Resolution::SizeMm(h)) => Resolution::SizeMm(h / shrink),
+        (Geometry::Thigh(_), Resolution::Default) => {
+            Resolution::Elements(factor * DEFAULT_ELEMENTS)
         }
+        (_, Resolution::Default) => Resolution::SizeMm(DEFAULT_LABEL_SIZE_MM / shrink),
     };
     Some(crate::schema::ModelSpec {
         resolution,
@@ -260,7 +284,7 @@ fn estimates(
     theta: &[f64],
     cov: &idic::SandwichCovariance,
     jackknife: &[f64],
-    shift: Option<&[f64]>,
+    mesh: Option<&MeshCorrection>,
     scale_change: Option<&[f64]>,
 ) -> Vec<ImageEstimate> {
     free.iter()
@@ -268,9 +292,12 @@ fn estimates(
         .map(|(k, f)| {
             let t = theta[k];
             let sd_stat = cov.sd[k].max(jackknife[k]);
-            let s = shift.map(|s| s[k]);
+            let s = mesh.map(|m| m.bias[k]);
+            let mesh_sd = mesh.map(|m| m.sd[k]);
             let c = scale_change.map(|c| c[k]);
-            let sd = sd_stat.hypot(s.unwrap_or(0.0)).hypot(c.unwrap_or(0.0));
+            let sd = sd_stat
+                .hypot(mesh_sd.unwrap_or(0.0))
+                .hypot(c.unwrap_or(0.0));
             let ci = [
                 (t * (-1.96 * sd).exp()).max(f.lower),
                 (t * (1.96 * sd).exp()).min(f.upper),
@@ -302,6 +329,8 @@ fn estimates(
                 sd_jackknife: jackknife[k],
                 sd_independent: cov.sd_independent[k],
                 discretization_bias: s,
+                discretization_sd: mesh_sd,
+                uncorrected: mesh.filter(|m| m.corrected).map(|m| m.uncorrected[k]),
                 scale_change: c,
                 relative_sd: sd,
                 ci95: if seen { ci } else { [f.lower, f.upper] },
@@ -311,6 +340,166 @@ fn estimates(
             }
         })
         .collect()
+}
+
+/// The discretization correction of an integrated-DIC estimate
+/// (`femu_identify::idic::correction`): what it did and cost.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct MeshCorrection {
+    /// Whether the estimate was corrected (`ImageRouteOptions::mesh_correction`); if not,
+    /// `bias` is the extrapolated shift of [`discretization_shift`] and `sd` its magnitude.
+    #[serde(default)]
+    pub corrected: bool,
+    /// Elements of the further meshes (twice and three times the model's).
+    pub elements: Vec<usize>,
+    /// The rate of eq. 2 when observed, and the rate used.
+    pub rate_observed: Option<f64>,
+    pub rate: f64,
+    /// RMS of the correction over the pixels of every step (px).
+    pub correction_rms_px: f64,
+    /// The estimate before (model units), `ln θ_before − ln θ_after` (the mesh's bias), and
+    /// the correction's own `sd(ln θ)`.
+    pub uncorrected: Vec<f64>,
+    pub bias: Vec<f64>,
+    pub sd: Vec<f64>,
+    /// The identification with the corrected model.
+    pub cost: f64,
+    pub iterations: usize,
+    pub reason: String,
+}
+
+/// The discretization term of the intervals without correction: the one-step Gauss–Newton
+/// shift of the estimate to the mesh of twice the elements (element size / √2), extrapolated by
+/// Richardson at the cautious first-order rate of the general check
+/// (`femu_identify::discretization::ASSUMED_RATE`: one refined level observes no rate), added
+/// to the sd in quadrature. Returned as a [`MeshCorrection`] that corrected nothing
+/// (`corrected: false`, `sd` = |bias|).
+fn discretization_shift(
+    study: &Study,
+    seq: &ImageSequence,
+    problem: &IdicProblem,
+) -> Result<MeshCorrection> {
+    use femu_identify::discretization::{extrapolated_bias, ASSUMED_RATE};
+    let spec = refined_spec(&study.model, 2).context("a deck cannot be refined")?;
+    let built = crate::model::build(&spec)?;
+    let models = step_models(study, &built, &seq.load_fractions)?;
+    let elements = vec![models[0].mesh.elements.len()];
+    let shift = problem.discretization_shift(models).map_err(|e| match e {
+        femu_identify::fit::FitError::Interrupted => {
+            anyhow::Error::new(crate::progress::Interrupted)
+        }
+        e => anyhow::Error::new(e),
+    })?;
+    let bias = extrapolated_bias(&shift, std::f64::consts::SQRT_2, ASSUMED_RATE);
+    Ok(MeshCorrection {
+        corrected: false,
+        elements,
+        rate_observed: None,
+        rate: ASSUMED_RATE,
+        correction_rms_px: 0.0,
+        uncorrected: Vec::new(),
+        sd: bias.iter().map(|b| b.abs()).collect(),
+        bias,
+        cost: f64::NAN,
+        iterations: 0,
+        reason: String::new(),
+    })
+}
+
+/// Corrects the estimate of `outcome` (at which `problem` was last evaluated) for the mesh's
+/// discretization error: the load steps solved on meshes of 2 and 3 times the elements, the
+/// displacement at the pixels extrapolated to the continuum (eq. 1 of
+/// `femu_identify::idic::correction`), the correction held fixed and the parameters identified
+/// again on the images as recorded (one pass: the correction depends on `θ` at second order).
+/// `outcome` then holds the corrected estimate and its noise; the correction's uncertainty is
+/// half the spread of the one-step Gauss–Newton shifts its rates `p ∓ 1` would give.
+fn mesh_correction(
+    study: &Study,
+    seq: &ImageSequence,
+    problem: &mut IdicProblem,
+    outcome: &mut idic::IdicOutcome,
+    lm: &femu_identify::fit::LmOptions,
+) -> Result<MeshCorrection> {
+    use idic::correction::{self, Level};
+    let run = |e: idic::IdicRunError| match e {
+        idic::IdicRunError::Interrupted => anyhow::Error::new(crate::progress::Interrupted),
+        e => anyhow::Error::new(e),
+    };
+    let fit = |e: femu_identify::fit::FitError| match e {
+        femu_identify::fit::FitError::Interrupted => {
+            anyhow::Error::new(crate::progress::Interrupted)
+        }
+        e => anyhow::Error::new(e),
+    };
+    let own: Vec<Vec<[f64; 2]>> = (1..=problem.steps())
+        .map(|i| problem.model_displacement(i))
+        .collect();
+    let mut levels = Vec::new();
+    let mut elements = Vec::new();
+    for factor in [2usize, 3] {
+        let spec = refined_spec(&study.model, factor).context("a deck cannot be refined")?;
+        let built = crate::model::build(&spec)?;
+        let models = step_models(study, &built, &seq.load_fractions)?;
+        elements.push(models[0].mesh.elements.len());
+        levels.push(Level {
+            ratio: (factor as f64).sqrt(),
+            displacement: problem.displacements_on(models).map_err(fit)?,
+        });
+    }
+    let rate_observed = correction::observed_rate(&own, &levels);
+    let rate = rate_observed.unwrap_or(correction::FALLBACK_RATE);
+    let c = correction::correction(&own, &levels, rate);
+    // The correction's uncertainty from the rate's: the shifts of the corrections at p ∓ 1
+    // relative to this one, at the uncorrected optimum (its Jacobian is the problem's).
+    let sd = {
+        let [lo, hi] = correction::rate_range(rate);
+        let diff = |p: f64| -> Vec<Vec<[f64; 2]>> {
+            correction::correction(&own, &levels, p)
+                .iter()
+                .zip(&c)
+                .map(|(a, b)| {
+                    a.iter()
+                        .zip(b)
+                        .map(|(a, b)| [a[0] - b[0], a[1] - b[1]])
+                        .collect()
+                })
+                .collect()
+        };
+        let (s_lo, s_hi) = (problem.shift_for(&diff(lo)), problem.shift_for(&diff(hi)));
+        s_lo.iter()
+            .zip(&s_hi)
+            .map(|(a, b)| 0.5 * (a - b).abs())
+            .collect::<Vec<f64>>()
+    };
+    let correction_rms_px = correction::rms_px(&c);
+    problem.set_correction(Some(c)).map_err(fit)?;
+    let uncorrected = outcome.theta.clone();
+    let mut theta = uncorrected.clone();
+    let scale = problem.scale_px();
+    let rec = idic::continue_on_scale(problem, &mut theta, scale, lm).map_err(run)?;
+    let (covariance, jackknife_sd, groups) = idic::noise_at(problem, &theta).map_err(run)?;
+    let bias = uncorrected
+        .iter()
+        .zip(&theta)
+        .map(|(a, b)| (a / b).ln())
+        .collect();
+    outcome.theta = theta;
+    outcome.covariance = covariance;
+    outcome.jackknife_sd = jackknife_sd;
+    outcome.jackknife_groups = groups;
+    Ok(MeshCorrection {
+        corrected: true,
+        elements,
+        rate_observed,
+        rate,
+        correction_rms_px,
+        uncorrected,
+        bias,
+        sd,
+        cost: rec.result.cost,
+        iterations: rec.result.iterations,
+        reason: rec.result.reason,
+    })
 }
 
 /// The integrated-DIC identification of `study` (groups tied when `grouped`) from `seq`;
@@ -381,58 +570,65 @@ pub fn identify_images(
             r.result.theta
         )),
     };
-    let (problem, outcome) = idic::identify(&make, &settings, &on_event).map_err(|e| match e {
+    let interrupted = |e: idic::IdicRunError| match e {
         idic::IdicRunError::Interrupted => {
             anyhow::Error::new(crate::progress::Interrupted).context("identification from images")
         }
         e => anyhow::Error::new(e).context("identification from images"),
-    })?;
+    };
+    let (mut problem, mut outcome) =
+        idic::identify(&make, &settings, &on_event).map_err(interrupted)?;
     let identification_s = t0.elapsed().as_secs_f64();
-    // The discretization check on a refined mesh.
+    // The discretization correction on further meshes.
     let t1 = Instant::now();
     let mut notes = Vec::new();
-    let refined = if route.discretization_check {
-        refined_spec(&study.model)
-    } else {
+    let mesh = if !route.discretization_check {
         notes.push(
             "the discretization check was not asked for: the intervals leave the mesh's error out"
                 .into(),
         );
         None
-    };
-    let (shift, refined_elements) = match refined {
-        Some(rs) => {
-            let rb = crate::model::build(&rs)?;
-            let refined = step_models(study, &rb, &seq.load_fractions)?;
-            let n = refined[0].mesh.elements.len();
-            // One refined level observes no rate: the bias is extrapolated at the cautious
-            // first-order rate of the general check (`femu_identify::discretization`), from
-            // the shift to the mesh of element size / √2.
-            match problem.discretization_shift(refined) {
-                Ok(s) => (
-                    Some(discretization::extrapolated_bias(
-                        &s,
-                        std::f64::consts::SQRT_2,
-                        discretization::ASSUMED_RATE,
-                    )),
-                    Some(n),
-                ),
-                Err(e) => {
-                    notes.push(format!(
-                        "the discretization check on {n} elements failed: {e}"
-                    ));
-                    (None, None)
-                }
+    } else if refined_spec(&study.model, 2).is_none() {
+        notes.push(
+            "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
+        );
+        None
+    } else if !route.mesh_correction {
+        match discretization_shift(study, seq, &problem) {
+            Ok(m) => Some(m),
+            Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+            Err(e) => {
+                notes.push(format!(
+                    "the discretization check failed ({e:#}): the intervals leave the mesh's error out"
+                ));
+                None
             }
         }
-        None if !route.discretization_check => (None, None),
-        None => {
-            notes.push(
-                "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
-            );
-            (None, None)
+    } else {
+        match mesh_correction(study, seq, &mut problem, &mut outcome, &settings.fine) {
+            Ok(m) => {
+                progress.note(&format!(
+                    "  mesh correction: meshes of {:?} elements, rate {:.2} ({}), correction RMS {:.3} px; identified again: cost {:.4e}, {} iterations ({})",
+                    m.elements,
+                    m.rate,
+                    if m.rate_observed.is_some() { "observed" } else { "not observed: nominal" },
+                    m.correction_rms_px,
+                    m.cost,
+                    m.iterations,
+                    m.reason
+                ));
+                Some(m)
+            }
+            Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+            Err(e) => {
+                notes.push(format!(
+                    "the discretization correction failed ({e:#}): the estimate is the mesh's own and the intervals leave the mesh's error out"
+                ));
+                None
+            }
         }
     };
+    let refined_elements = mesh.as_ref().and_then(|m| m.elements.first().copied());
     let discretization_s = t1.elapsed().as_secs_f64();
     let parameters = estimates(
         &free,
@@ -441,7 +637,7 @@ pub fn identify_images(
         &outcome.theta,
         &outcome.covariance,
         &outcome.jackknife_sd,
-        shift.as_deref(),
+        mesh.as_ref(),
         scale_change(&outcome).as_deref(),
     );
     notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
@@ -459,6 +655,7 @@ pub fn identify_images(
         grouped,
         elements: last.mesh.elements.len(),
         refined_elements,
+        mesh_correction: mesh.clone(),
         source: seq.source.clone(),
         load_fractions: seq.load_fractions.clone(),
         image_px: (seq.frames[0].width, seq.frames[0].height),
