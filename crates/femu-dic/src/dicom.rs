@@ -119,15 +119,11 @@ fn open(path: &Path) -> Result<DefaultDicomObject, DicError> {
     transfer_syntax_name(path, &ts)?;
     // Every element's declared length checked against the file before dicom-rs allocates it
     // (a deflated data set cannot be walked: its lengths are inside the compressed stream).
-    if ts != "1.2.840.10008.1.2.1.99" {
-        // From where dicom-rs ends the meta group (the declared group length; after the
-        // preamble and "DICM" when the meta walk could not tell, and dicom-rs refused it).
-        crate::dicom_scan::check_lengths(
-            path,
-            data_set_start.unwrap_or(132),
-            ts != "1.2.840.10008.1.2",
-        )
-        .map_err(|m| err(path, m))?;
+    if let (true, Some(start)) = (ts != "1.2.840.10008.1.2.1.99", data_set_start) {
+        // From where dicom-rs ends the meta group (its declared group length). Without that
+        // start dicom-rs has refused the meta group above.
+        crate::dicom_scan::check_lengths(path, start, ts != "1.2.840.10008.1.2")
+            .map_err(|m| err(path, m))?;
     }
     open_file(path).map_err(|e| {
         // Issue 32.12: "Could not read data set token" says nothing to a user; a data set

@@ -113,7 +113,9 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             // An item of a sequence holds elements (walked); a fragment of pixel data not.
             (len, !in_pixels && meta_bytes.is_none())
-        } else if explicit || group == 0x0002 || meta_bytes.is_some() {
+        } else if explicit || meta_bytes.is_some() {
+            // (Group 0002 in the data set is read in the data set's syntax by dicom-rs, as
+            // any other group: the walk starts after the meta group.)
             let vr = [head[4], head[5]];
             if SHORT_VRS.iter().any(|v| **v == vr) {
                 (u16_at(6) as u32, false)
@@ -129,7 +131,7 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             (len, is_sequence(Tag(group, element)))
         };
-        if meta_bytes.is_none() && group != 0x0002 && len != UNDEFINED {
+        if meta_bytes.is_none() && len != UNDEFINED {
             let vr = if explicit {
                 Some([head[4], head[5]])
             } else {
