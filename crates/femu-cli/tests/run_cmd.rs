@@ -396,6 +396,8 @@ fn femu_run_identifies_from_simulated_ultrasound_images() {
     let html = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(html.contains("Measurement: simulated ultrasound and DIC"));
     assert!(html.contains("Identification from images"));
+    // The DIC routes say which term set each interval's width (Fisher, Birge, jackknife).
+    assert!(html.contains("width set by: "));
 }
 
 /// `femu demo` itself (on 2 000 elements to stay quick): every step of the seed's numerical

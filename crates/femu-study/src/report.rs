@@ -730,6 +730,9 @@ fn identification_section(
 /// interval coverage.
 fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
     let repeats = s.parameters.iter().any(|p| p.coverage95.is_some());
+    // On a measured field: which term set each interval's width (Fisher, Birge ratio or the
+    // jackknife over depth blocks, `femu_identify::misfit_intervals`).
+    let widths = s.parameters.iter().any(|p| p.width_from.is_some());
     // In the units of the seed's Table 1 (C10 kPa, D MPa⁻¹).
     let rows: Vec<Vec<String>> = s
         .parameters
@@ -746,6 +749,9 @@ fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
                 pct(p.relative_sd),
                 p.discretization_bias.map(pct).unwrap_or("-".into()),
             ];
+            if widths {
+                row.push(p.width_from.as_deref().unwrap_or("-").to_string());
+            }
             if repeats {
                 row.push(p.max_relative_error.map(pct).unwrap_or("-".into()));
                 row.push(
@@ -767,6 +773,9 @@ fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
         "relative sd",
         "mesh bias",
     ];
+    if widths {
+        header.push("width set by");
+    }
     if repeats {
         header.push("worst error over repeats");
         header.push("interval coverage");

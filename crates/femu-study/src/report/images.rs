@@ -32,9 +32,14 @@ pub struct RouteRow {
     pub dic: f64,
     pub dic_error: Option<f64>,
     pub dic_ci95: [f64; 2],
+    /// Which term set the DIC → FEMU interval's width (`femu_identify::misfit_intervals`).
+    #[serde(default)]
+    pub dic_width_from: Option<String>,
     pub weighted: f64,
     pub weighted_error: Option<f64>,
     pub weighted_ci95: [f64; 2],
+    #[serde(default)]
+    pub weighted_width_from: Option<String>,
 }
 
 /// Whether `dir` holds an identification from images (the routes' folders).
@@ -105,9 +110,11 @@ pub fn section(
             dic: q.identified,
             dic_error: q.relative_error,
             dic_ci95: q.ci95,
+            dic_width_from: q.width_from.clone(),
             weighted: w.identified,
             weighted_error: w.relative_error,
             weighted_ci95: w.ci95,
+            weighted_width_from: w.width_from.clone(),
         })
         .collect();
     let cell = |v: f64, e: Option<f64>, ci: [f64; 2]| {
@@ -119,6 +126,14 @@ pub fn section(
             g(ci[1])
         )
     };
+    // The DIC routes' widths: which term set each (Fisher, Birge ratio, depth-block jackknife).
+    let dic_cell = |v: f64, e: Option<f64>, ci: [f64; 2], from: &Option<String>| {
+        let c = cell(v, e, ci);
+        match from {
+            Some(f) => format!("{c}, width set by: {f}"),
+            None => c,
+        }
+    };
     let table: Vec<Vec<String>> = rows
         .iter()
         .map(|r| {
@@ -126,8 +141,13 @@ pub fn section(
                 format!("{}{}", r.name, if r.idic_seen { "" } else { " *" }),
                 r.reference.map(g).unwrap_or("-".into()),
                 cell(r.idic, r.idic_error, r.idic_ci95),
-                cell(r.dic, r.dic_error, r.dic_ci95),
-                cell(r.weighted, r.weighted_error, r.weighted_ci95),
+                dic_cell(r.dic, r.dic_error, r.dic_ci95, &r.dic_width_from),
+                dic_cell(
+                    r.weighted,
+                    r.weighted_error,
+                    r.weighted_ci95,
+                    &r.weighted_width_from,
+                ),
             ]
         })
         .collect();
