@@ -460,6 +460,12 @@ class Estimate:
     #: noise alone (before widening for that bias).
     discretization_bias: Optional[float] = None
     ci95_noise: Optional[Tuple[float, float]] = None
+    #: On a measured field (``femu_identify::misfit_intervals``): the Fisher sd, the Birge ratio
+    #: √(χ²/ν), the depth-block jackknife sd, and which of them set ``relative_sd``.
+    sd_fisher: Optional[float] = None
+    birge_ratio: Optional[float] = None
+    sd_jackknife: Optional[float] = None
+    width_from: Optional[str] = None
     extra: Dict[str, Any] = _extra()
 
 
