@@ -45,15 +45,20 @@ pub struct Stopped {
     pub after_signal: std::time::Duration,
 }
 
-/// Starts `femu ARGS`, sends `signal` (`INT`, `TERM`, `KILL`) after `delay` and waits for it.
-pub fn signal_after(args: &[&str], signal: &str, delay: std::time::Duration) -> Stopped {
+/// `femu ARGS` started with stdout discarded and stderr piped (to be read while it runs).
+fn spawn_femu(args: &[&str]) -> std::process::Child {
     use std::process::Stdio;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_femu"))
+    Command::new(env!("CARGO_BIN_EXE_femu"))
         .args(args)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
-        .unwrap();
+        .unwrap()
+}
+
+/// Starts `femu ARGS`, sends `signal` (`INT`, `TERM`, `KILL`) after `delay` and waits for it.
+pub fn signal_after(args: &[&str], signal: &str, delay: std::time::Duration) -> Stopped {
+    let mut child = spawn_femu(args);
     // Read stderr while the process runs (a full pipe would block it).
     let mut pipe = child.stderr.take().unwrap();
     let reader = std::thread::spawn(move || {
@@ -85,13 +90,7 @@ pub fn interrupt_after_line(
     timeout: std::time::Duration,
 ) -> (Option<i32>, String) {
     use std::io::BufRead;
-    use std::process::Stdio;
-    let mut child = Command::new(env!("CARGO_BIN_EXE_femu"))
-        .args(args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_femu(args);
     let pipe = child.stderr.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel::<String>();
     let reader = std::thread::spawn(move || {
