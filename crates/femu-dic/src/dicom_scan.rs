@@ -5,6 +5,11 @@
 //! 300-byte file whose header claims a 4 GB value made `femu dic` allocate and write 4 GB
 //! (found by fuzzing, issue 28 item 2: libFuzzer's out-of-memory and 10 s timeouts). The walk
 //! reads only headers (8 or 12 bytes each) and skips values with a seek.
+//!
+//! The walk mirrors how dicom-rs 0.10.1 reads a file (where it ends the meta group, how it sizes
+//! a header, how far it advances after a binary value): a different reading would let a
+//! length past the check. When dicom-rs is upgraded, run the `dicom` fuzz target again
+//! (`cargo +nightly fuzz run dicom`, README "Reliability") before trusting the walk.
 
 use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry, VirtualVr};
 use dicom_core::{Tag, VR};
