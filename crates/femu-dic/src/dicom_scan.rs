@@ -110,38 +110,36 @@ fn walk(path: &Path, start: u64, explicit: bool, meta_bytes: Option<u64>) -> Res
         pos += 8;
         let u16_at = |k: usize| u16::from_le_bytes([head[k], head[k + 1]]);
         let (group, element) = (u16_at(0), u16_at(2));
-        let (len, sequence) = if group == 0xFFFE {
+        // The VR as dicom-rs reads it (an item or delimiter has none).
+        let (len, sequence, vr) = if group == 0xFFFE {
             // Item and delimiters: an implicit-style header in every transfer syntax.
             if element == 0xE0DD {
                 in_pixels = false;
             }
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
             // An item of a sequence holds elements (walked); a fragment of pixel data not.
-            (len, !in_pixels && meta_bytes.is_none())
+            (len, !in_pixels && meta_bytes.is_none(), None)
         } else if explicit || meta_bytes.is_some() {
             // (Group 0002 in the data set is read in the data set's syntax by dicom-rs, as
             // any other group: the walk starts after the meta group.)
             let vr = [head[4], head[5]];
             if SHORT_VRS.iter().any(|v| **v == vr) {
-                (u16_at(6) as u32, false)
+                (u16_at(6) as u32, false, Some(vr))
             } else {
                 let mut l = [0u8; 4];
                 if r.read_exact(&mut l).is_err() {
                     return Ok(pos);
                 }
                 pos += 4;
-                (u32::from_le_bytes(l), &vr == b"SQ" && meta_bytes.is_none())
+                let sequence = &vr == b"SQ" && meta_bytes.is_none();
+                (u32::from_le_bytes(l), sequence, Some(vr))
             }
         } else {
             let len = u32::from_le_bytes([head[4], head[5], head[6], head[7]]);
-            (len, is_sequence(Tag(group, element)))
+            let tag = Tag(group, element);
+            (len, is_sequence(tag), dictionary_vr(tag))
         };
         if meta_bytes.is_none() && len != UNDEFINED {
-            let vr = if explicit {
-                Some([head[4], head[5]])
-            } else {
-                dictionary_vr(Tag(group, element))
-            };
             if let Some((vr, size)) = vr.and_then(|v| value_size(v).map(|s| (v, s))) {
                 if len % size != 0 {
                     return Err(format!(
@@ -238,6 +236,15 @@ mod tests {
             e.contains("(0028,0102) at byte 0: a SL value of 2 bytes, not a multiple of 4"),
             "{e}"
         );
+        // An item has no VR: a fragment of 17 478 bytes (length bytes `46 44`, "FD") is not
+        // an FD value of the wrong size.
+        let mut d = vec![0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF];
+        d.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
+        d.extend_from_slice(&17_478u32.to_le_bytes());
+        d.extend(std::iter::repeat_n(0u8, 17_478));
+        d.extend_from_slice(&[0xFE, 0xFF, 0xDD, 0xE0, 0, 0, 0, 0]);
+        std::fs::write(&p, &d).unwrap();
+        check_lengths(&p, 0, true).unwrap();
         // The same in implicit VR: the dictionary's US for High Bit, 3 bytes.
         let mut d = vec![0x28, 0x00, 0x02, 0x01, 3, 0, 0, 0, 7, 0, 0];
         d.extend_from_slice(&[0x28, 0x00, 0x10, 0x00, 2, 0, 0, 0, 48, 0]);
