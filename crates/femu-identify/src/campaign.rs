@@ -947,7 +947,7 @@ pub struct Estimate {
 /// The 95 % interval of `theta` with relative (log) standard deviation `sd` and an estimated
 /// bias `bias` of its logarithm: the hull of the intervals around `theta` and around the
 /// corrected `theta·e^(-bias)`.
-fn interval(theta: f64, sd: f64, bias: f64) -> [f64; 2] {
+pub(crate) fn interval(theta: f64, sd: f64, bias: f64) -> [f64; 2] {
     let corrected = theta * (-bias).exp();
     [
         theta.min(corrected) * (-1.96 * sd).exp(),

@@ -716,8 +716,9 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
     let mut converged = false;
     let mut reason = format!("{} iterations", opts.max_iterations);
     let mut iterations = 0;
-    // The last accepted step (for `opts.accelerate`).
-    let mut previous_step: Option<Vec<f64>> = None;
+    // The last accepted step (for `opts.accelerate`; one buffer for the whole run).
+    let mut previous_step = vec![0.0; n];
+    let mut have_previous = false;
     for it in 1..=opts.max_iterations {
         iterations = it;
         // Normal equations A = JᵀJ, g = Jᵀr.
@@ -806,11 +807,15 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                         reason = "cost stationary".into();
                         break;
                     }
-                    let ext = match &previous_step {
-                        Some(prev) if opts.accelerate => extrapolated(prev, &d, &phi, &lo, &hi),
-                        _ => None,
+                    let ext = if opts.accelerate && have_previous {
+                        extrapolated(&previous_step, &d, &phi, &lo, &hi)
+                    } else {
+                        None
                     };
-                    previous_step = Some(d.clone());
+                    if opts.accelerate {
+                        previous_step.copy_from_slice(&d);
+                        have_previous = true;
+                    }
                     if let Some(ext) = ext {
                         let max_step = (0..n)
                             .map(|p| (ext[p] - phi[p]).abs())
@@ -833,7 +838,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                                     j = je.expect("asked");
                                     cost = ce;
                                     // The next extrapolation needs two fresh steps.
-                                    previous_step = None;
+                                    have_previous = false;
                                 }
                             }
                             Err(FitError::Solve(why)) => history.push(LmStep {

@@ -18,7 +18,7 @@
 //!
 //! Which term set each width is recorded (`Estimate::width_from`).
 
-use crate::campaign::Estimate;
+use crate::campaign::{interval, Estimate};
 use crate::fit::FitResult;
 use crate::idic::uncertainty::group_jackknife;
 
@@ -62,10 +62,7 @@ pub fn widen_for_misfit(estimates: &mut [Estimate], best: &FitResult, whitened: 
         e.sd_jackknife = Some(jk);
         e.width_from = Some(from.to_string());
         e.relative_sd = sd;
-        e.ci95 = [
-            e.identified * (-1.96 * sd).exp(),
-            e.identified * (1.96 * sd).exp(),
-        ];
+        e.ci95 = interval(e.identified, sd, 0.0);
     }
 }
 

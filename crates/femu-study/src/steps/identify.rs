@@ -296,16 +296,7 @@ fn measured_covariance(
     else {
         return Ok(None);
     };
-    let cov = femu_identify::weighted::FieldCovariance::read_mtx(c)?;
-    if cov.points != points {
-        anyhow::bail!(
-            "[measurement] covariance {}: {} points, the field {} has {points}",
-            c.display(),
-            cov.points,
-            field.display()
-        );
-    }
-    Ok(Some(cov))
+    measure::read_covariance(c, field, points, None).map(Some)
 }
 
 /// The study's one measurement replaced by `measured` (a field in the model frame, from

@@ -368,6 +368,25 @@ pub struct MeshCorrection {
     pub reason: String,
 }
 
+/// An optimizer's error as the step's: a stop request becomes [`crate::progress::Interrupted`]
+/// (what `femu run` keeps finished work for).
+fn fit_error(e: femu_identify::fit::FitError) -> anyhow::Error {
+    match e {
+        femu_identify::fit::FitError::Interrupted => {
+            anyhow::Error::new(crate::progress::Interrupted)
+        }
+        e => anyhow::Error::new(e),
+    }
+}
+
+/// [`fit_error`] for an integrated-DIC run's error.
+fn run_error(e: idic::IdicRunError) -> anyhow::Error {
+    match e {
+        idic::IdicRunError::Interrupted => anyhow::Error::new(crate::progress::Interrupted),
+        e => anyhow::Error::new(e),
+    }
+}
+
 /// The discretization term of the intervals without correction: the one-step Gauss–Newton
 /// shift of the estimate to the mesh of twice the elements (element size / √2), extrapolated by
 /// Richardson at the cautious first-order rate of the general check
@@ -384,12 +403,7 @@ fn discretization_shift(
     let built = crate::model::build(&spec)?;
     let models = step_models(study, &built, &seq.load_fractions)?;
     let elements = vec![models[0].mesh.elements.len()];
-    let shift = problem.discretization_shift(models).map_err(|e| match e {
-        femu_identify::fit::FitError::Interrupted => {
-            anyhow::Error::new(crate::progress::Interrupted)
-        }
-        e => anyhow::Error::new(e),
-    })?;
+    let shift = problem.discretization_shift(models).map_err(fit_error)?;
     let bias = extrapolated_bias(&shift, std::f64::consts::SQRT_2, ASSUMED_RATE);
     Ok(MeshCorrection {
         corrected: false,
@@ -421,16 +435,6 @@ fn mesh_correction(
     lm: &femu_identify::fit::LmOptions,
 ) -> Result<MeshCorrection> {
     use idic::correction::{self, Level};
-    let run = |e: idic::IdicRunError| match e {
-        idic::IdicRunError::Interrupted => anyhow::Error::new(crate::progress::Interrupted),
-        e => anyhow::Error::new(e),
-    };
-    let fit = |e: femu_identify::fit::FitError| match e {
-        femu_identify::fit::FitError::Interrupted => {
-            anyhow::Error::new(crate::progress::Interrupted)
-        }
-        e => anyhow::Error::new(e),
-    };
     let own: Vec<Vec<[f64; 2]>> = (1..=problem.steps())
         .map(|i| problem.model_displacement(i))
         .collect();
@@ -443,7 +447,7 @@ fn mesh_correction(
         elements.push(models[0].mesh.elements.len());
         levels.push(Level {
             ratio: (factor as f64).sqrt(),
-            displacement: problem.displacements_on(models).map_err(fit)?,
+            displacement: problem.displacements_on(models).map_err(fit_error)?,
         });
     }
     let rate_observed = correction::observed_rate(&own, &levels);
@@ -472,12 +476,12 @@ fn mesh_correction(
             .collect::<Vec<f64>>()
     };
     let correction_rms_px = correction::rms_px(&c);
-    problem.set_correction(Some(c)).map_err(fit)?;
+    problem.set_correction(Some(c)).map_err(fit_error)?;
     let uncorrected = outcome.theta.clone();
     let mut theta = uncorrected.clone();
     let scale = problem.scale_px();
-    let rec = idic::continue_on_scale(problem, &mut theta, scale, lm).map_err(run)?;
-    let (covariance, jackknife_sd, groups) = idic::noise_at(problem, &theta).map_err(run)?;
+    let rec = idic::continue_on_scale(problem, &mut theta, scale, lm).map_err(run_error)?;
+    let (covariance, jackknife_sd, groups) = idic::noise_at(problem, &theta).map_err(run_error)?;
     let bias = uncorrected
         .iter()
         .zip(&theta)
@@ -570,14 +574,8 @@ pub fn identify_images(
             r.result.theta
         )),
     };
-    let interrupted = |e: idic::IdicRunError| match e {
-        idic::IdicRunError::Interrupted => {
-            anyhow::Error::new(crate::progress::Interrupted).context("identification from images")
-        }
-        e => anyhow::Error::new(e).context("identification from images"),
-    };
-    let (mut problem, mut outcome) =
-        idic::identify(&make, &settings, &on_event).map_err(interrupted)?;
+    let (mut problem, mut outcome) = idic::identify(&make, &settings, &on_event)
+        .map_err(|e| run_error(e).context("identification from images"))?;
     let identification_s = t0.elapsed().as_secs_f64();
     // The discretization correction on further meshes.
     let t1 = Instant::now();

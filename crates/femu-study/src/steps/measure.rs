@@ -186,7 +186,22 @@ fn file_covariance(
         [s * frame.x_axis[0], s * frame.y_axis[0]],
         [s * frame.x_axis[1], s * frame.y_axis[1]],
     ];
-    let cov = FieldCovariance::read_mtx(c)?.mapped(t);
+    read_covariance(c, path, points, Some(t))
+}
+
+/// `[measurement] covariance` read from `c` (mapped by `map` to the model frame when the field
+/// is in another), its point count checked against the field `path`'s `points`.
+pub(crate) fn read_covariance(
+    c: &Path,
+    path: &Path,
+    points: usize,
+    map: Option<[[f64; 2]; 2]>,
+) -> Result<FieldCovariance> {
+    let cov = FieldCovariance::read_mtx(c)?;
+    let cov = match map {
+        Some(t) => cov.mapped(t),
+        None => cov,
+    };
     if cov.points != points {
         bail!(
             "[measurement] covariance {}: {} points, the field {} has {points}",
