@@ -238,7 +238,9 @@ mod tests {
         );
         // An item has no VR: a fragment of 17 478 bytes (length bytes `46 44`, "FD") is not
         // an FD value of the wrong size.
-        let mut d = vec![0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF];
+        let mut d = vec![
+            0xE0, 0x7F, 0x10, 0x00, b'O', b'B', 0, 0, 0xFF, 0xFF, 0xFF, 0xFF,
+        ];
         d.extend_from_slice(&[0xFE, 0xFF, 0x00, 0xE0]);
         d.extend_from_slice(&17_478u32.to_le_bytes());
         d.extend(std::iter::repeat_n(0u8, 17_478));
