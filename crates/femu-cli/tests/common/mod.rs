@@ -12,8 +12,9 @@ pub fn femu(args: &[&str]) -> Output {
         .expect("the femu binary runs")
 }
 
-/// An empty scratch folder named after the test binary, the process and `name`.
-pub fn scratch(name: &str) -> PathBuf {
+/// An empty scratch folder named after the test binary, the process and `name`; removed when
+/// the test that made it passes (kept when it fails, for a look at what the run wrote).
+pub fn scratch(name: &str) -> Scratch {
     let dir = std::env::temp_dir().join(format!(
         "femu-{}-{}-{name}",
         env!("CARGO_CRATE_NAME"),
@@ -21,7 +22,37 @@ pub fn scratch(name: &str) -> PathBuf {
     ));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
-    dir
+    Scratch(dir)
+}
+
+/// A scratch folder that removes itself when dropped outside a panic.
+pub struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::ffi::OsStr> for Scratch {
+    fn as_ref(&self) -> &std::ffi::OsStr {
+        self.0.as_os_str()
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        if !std::thread::panicking() {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
 }
 
 /// Writes `text` to `dir/name` and returns the path.
