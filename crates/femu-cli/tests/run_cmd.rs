@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 mod common;
-use common::{femu, json, scratch};
+use common::{femu, json, scratch, Scratch};
 
 /// A small thigh (400 quads), contention and compression, a 24 x 24 grid, two starts.
 const TINY: &str = r#"
@@ -39,18 +39,20 @@ fn run_file(study: &Path, out: &Path) -> Output {
     ])
 }
 
-fn run(study: &str, name: &str) -> (Output, PathBuf) {
+/// Runs `study` in a scratch folder: the output, the run's folder and the scratch folder
+/// (removed when dropped).
+fn run(study: &str, name: &str) -> (Output, PathBuf, Scratch) {
     let dir = scratch(name);
     let path = dir.join("study.toml");
     std::fs::write(&path, study).unwrap();
     let out = dir.join("out");
     let o = run_file(&path, &out);
-    (o, out)
+    (o, out, dir)
 }
 
 #[test]
 fn a_tiny_study_runs_end_to_end() {
-    let (o, out) = run(TINY, "tiny");
+    let (o, out, _scratch) = run(TINY, "tiny");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = json(&out.join("summary.json"));
     // Every step done, in order.
@@ -248,7 +250,7 @@ fn broken_study_files_name_the_key_and_write_nothing() {
         ),
     ];
     for (k, (text, expect)) in cases.iter().enumerate() {
-        let (o, out) = run(text, &format!("broken{k}"));
+        let (o, out, _scratch) = run(text, &format!("broken{k}"));
         assert!(!o.status.success(), "case {k} ran");
         let err = String::from_utf8_lossy(&o.stderr);
         assert!(err.contains(expect), "case {k}: {err}");
@@ -349,7 +351,7 @@ fn init_writes_a_study_that_runs_and_will_not_overwrite() {
 /// reported.
 #[test]
 fn femu_run_identifies_from_simulated_ultrasound_images() {
-    let (o, out) = run(
+    let (o, out, _scratch) = run(
         "[model]\nelements = 2000\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
          [measurement]\nsource = \"ultrasound\"\n[identification]\ngrouped = true\nstarts = 3\n\
          [run]\nsensitivity = false\n[probe]\nside = \"anterior\"\n",
@@ -404,7 +406,8 @@ fn femu_run_identifies_from_simulated_ultrasound_images() {
 /// example runs, the three tests are solved and the report is written.
 #[test]
 fn the_demo_runs_every_step() {
-    let out = scratch("demo").join("out");
+    let dir = scratch("demo");
+    let out = dir.join("out");
     let o = femu(&[
         "demo",
         "--elements",
@@ -449,7 +452,7 @@ fn label_image_and_deck_geometries_run() {
     }
     let forward_only = "[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
                         [run]\nsensitivity = false\nidentification = false\n";
-    let (o, out) = run(
+    let (o, out, _scratch) = run(
         &format!(
             "[model]\nsize_mm = 3.0\n[labels]\nimage = \"{}\"\n\
              map = \"1=fat,2=quadriceps,3=ischio,4=gracilis,5=sartorius,6=ischio\"\n\
@@ -466,7 +469,7 @@ fn label_image_and_deck_geometries_run() {
         .as_f64()
         .unwrap();
     let deck = out.join("model/mesh.inp");
-    let (o, out2) = run(
+    let (o, out2, _scratch) = run(
         &format!(
             "[model]\ndeck = \"{}\"\n[materials.FAT]\nc10_kpa = 1.6\n{forward_only}",
             deck.display()
