@@ -14,8 +14,9 @@ use femu_identify::fit::{
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::SolverOptions;
 use femu_study::schema::MeasurementSource;
-use femu_study::steps::identify::{self, Measured};
+use femu_study::steps::identify;
 use femu_study::steps::measure;
+use femu_study::steps::measure::Measured;
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -207,7 +208,7 @@ pub fn virtual_field(
         no_ultrasound(study)?;
         // Only an ultrasound measurement writes into the folder, and there is none.
         let prepared = measure::prepare(study, &built, Path::new("."), progress)?;
-        let fields = measure::realized(study, &built, &prepared)?;
+        let fields = femu_study::steps::joint::realized(study, &built, &prepared)?;
         Ok(fields
             .into_iter()
             .map(|(p, points)| {
@@ -310,12 +311,13 @@ pub fn least_squares(
                 measure::prepare(study, &built, Path::new("."), progress)?
             }
         };
-        let (p, points) = measure::realized(study, &built, &prepared)?
+        let (p, points) = femu_study::steps::joint::realized(study, &built, &prepared)?
             .pop()
             .expect("one measurement");
         let model = built.loaded(&study.tests[p.test].loading)?;
         let grouped = grouped.unwrap_or(study.identification.grouped());
-        let (free, reference) = identify::free_parameters(study, &model, grouped)?;
+        let (free, reference) =
+            femu_study::steps::parameters::free_parameters(study, &model, grouped)?;
         let field = MeasuredField {
             points,
             comments: vec![],

@@ -13,8 +13,8 @@
 //!   against worst D);
 //! - `summary.json` — [`DesignSummary`].
 
-use super::identify::free_parameters;
 use super::measure::window_points;
+use super::parameters::free_parameters;
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;

@@ -13,7 +13,8 @@
 
 use super::discretization;
 use super::joint::{self, FitFailure, JointFit, TestModels};
-use super::measure::{self, Prepared, PreparedData};
+use super::measure::{self, Measured, Prepared, PreparedData};
+use super::parameters::free_parameters;
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
@@ -24,7 +25,6 @@ use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
 use femu_identify::joint::{block_free, information_shares};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
-use femu_identify::weighted::FieldCovariance;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_plot::{bar_chart_png, line_plot_png, BarChart, LinePlot, LineStyle, Series};
@@ -152,46 +152,6 @@ impl From<&FreeParameter> for FreeParameterSummary {
     }
 }
 
-/// The measured field of an identification and where it came from.
-#[derive(Debug, Clone)]
-pub struct Measured {
-    pub field: MeasuredField,
-    pub source: String,
-    /// Whether the reference parameters of the model are the truth (a simulated experiment).
-    pub reference_known: bool,
-    /// The full covariance of the field's components (model frame, mm²): the misfit is then
-    /// weighted by it (weighted FEMU, `femu_identify::weighted`) instead of the per-point
-    /// weights.
-    pub covariance: Option<FieldCovariance>,
-}
-
-/// The free parameters of `study` on `model` (its groups tied when `grouped`).
-pub fn free_parameters(
-    study: &Study,
-    model: &Model,
-    grouped: bool,
-) -> Result<(Vec<FreeParameter>, Vec<f64>)> {
-    let groups = if grouped {
-        study.groups.clone()
-    } else {
-        Vec::new()
-    };
-    campaign::free_parameters(
-        model,
-        &groups,
-        &study.identification.fixed,
-        study.identification.bounds_factor,
-    )
-    .map_err(|e| match e {
-        campaign::CampaignError::UnknownParameter { .. }
-        | campaign::CampaignError::PartlyFixed(_)
-        | campaign::CampaignError::NothingFree => {
-            anyhow::anyhow!("[identification] fixed: {e}")
-        }
-        e => e.into(),
-    })
-}
-
 /// `femu synth`: the study's virtual measurements on its model (their first noise
 /// realization), written to `out/measured.csv` (`out/NAME/measured.csv` for a list).
 pub fn synth(study: &Study, out: &Path, progress: &dyn Progress) -> Result<()> {
@@ -199,7 +159,7 @@ pub fn synth(study: &Study, out: &Path, progress: &dyn Progress) -> Result<()> {
     create_dir(out)?;
     let built = crate::model::build(&study.model)?;
     let prepared = measure::prepare(study, &built, out, progress)?;
-    measure::write_measured(study, &built, &prepared, out, progress)
+    joint::write_measured(study, &built, &prepared, out, progress)
 }
 
 /// `femu identify`: the study's identification (grouped unless `grouped = false`) from

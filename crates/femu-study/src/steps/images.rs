@@ -19,7 +19,8 @@
 use crate::output::{create_dir, read_json, write_json};
 use crate::progress::Progress;
 use crate::schema::Study;
-use crate::steps::identify::{free_parameters, FreeParameterSummary};
+use crate::steps::identify::FreeParameterSummary;
+use crate::steps::parameters::free_parameters;
 use crate::steps::ultrasound::SimSummary;
 use anyhow::{bail, Context, Result};
 use femu_dic::GreyImage;
@@ -882,7 +883,8 @@ pub fn identify_image_measurement(
     crate::steps::identify::IdentificationSummary,
     ImageIdentificationSummary,
 )> {
-    use crate::steps::identify::{identify_on, Measured};
+    use crate::steps::identify::identify_on;
+    use crate::steps::measure::Measured;
     use crate::steps::measure::{Prepared, PreparedData};
     use femu_identify::measured::MeasuredField;
     use femu_identify::weighted::{Loss, HUBER_K};

@@ -2,17 +2,19 @@
 //! (its probe windows, grids and files sharing one forward solve), stacked into one cost over
 //! the shared free parameters (`femu_identify::campaign::run_joint`).
 
-use super::discretization;
-use super::identify::free_parameters;
 use super::measure::{Prepared, PreparedData};
+use super::parameters::free_parameters;
 use crate::model::StudyModel;
+use crate::progress::Progress;
 use crate::schema::Study;
 use anyhow::{Context, Result};
 use femu_identify::campaign::{
     self, BlockSpec, Campaign, CampaignOptions, Data, Event, FieldBlock,
 };
 use femu_identify::fit::FreeParameter;
+use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_mech::Model;
+use std::path::Path;
 
 /// The models of the measured tests: on the study's mesh, on the multilevel's coarse mesh, and
 /// on the mesh the virtual data come from (`[identification] data_refinement`).
@@ -51,8 +53,12 @@ impl TestModels {
             .iter()
             .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
         let truth = if virtual_data && study.identification.data_refinement > 1.0 {
-            let fine = discretization::refined(study, built, study.identification.data_refinement)?
-                .context("[identification] data_refinement: femu cannot refine this model")?;
+            let fine = crate::model::build_refined(
+                &study.model,
+                built,
+                study.identification.data_refinement,
+            )?
+            .context("[identification] data_refinement: femu cannot refine this model")?;
             load(&fine)?
         } else {
             Vec::new()
@@ -148,4 +154,78 @@ pub fn fit(
 pub enum FitFailure {
     Setup(anyhow::Error),
     Campaign(campaign::CampaignError, Vec<FreeParameter>),
+}
+
+/// Each prepared measurement with its field as the identification fits it in its first repeat
+/// (a virtual one's first noise realization; a file's mapped to the model frame).
+pub fn realized<'a>(
+    study: &Study,
+    built: &StudyModel,
+    prepared: &'a [Prepared],
+) -> Result<Vec<(&'a Prepared, Vec<MeasuredPoint>)>> {
+    let models = TestModels::new(study, built, prepared)?;
+    let (free, reference) =
+        super::parameters::free_parameters(study, &models.full[0], study.identification.grouped())?;
+    let blocks = blocks(prepared, &models, study);
+    let seed = study.identification.seed;
+    let fields = campaign::realized_fields(&models.full[0], &free, &reference, &blocks, seed, 0)?;
+    let mut fitted = Vec::new();
+    for (b, &t) in models.tests.iter().enumerate() {
+        let mine = prepared.iter().filter(|p| p.test == t);
+        for (p, range) in mine.zip(&fields[b].1) {
+            fitted.push((p, fields[b].0.points[range.clone()].to_vec()));
+        }
+    }
+    Ok(fitted)
+}
+
+/// Writes each prepared measurement's field as the identification fits it in its first repeat
+/// ([`realized`]) to `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements
+/// (an ultrasound measurement's folder already holds its own).
+pub fn write_measured(
+    study: &Study,
+    built: &StudyModel,
+    prepared: &[Prepared],
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let seed = study.identification.seed;
+    let fitted = realized(study, built, prepared)?;
+    for (p, points) in fitted {
+        let path = if study.measurement_list() {
+            dir.join(&p.name).join("measured.csv")
+        } else {
+            dir.join("measured.csv")
+        };
+        let (comments, sigma) = match &p.data {
+            PreparedData::Virtual {
+                points,
+                total,
+                sigma,
+            } => (
+                vec![
+                    "femu synth: virtual experiment (seed 2.4.1)".into(),
+                    format!("{}; noise sigma {sigma} mm, seed {seed}", p.label),
+                    format!("{} of {total} grid points in the tissue", points.len()),
+                ],
+                Some(*sigma),
+            ),
+            PreparedData::Measured(m) if m.reference_known => continue,
+            PreparedData::Measured(m) => (vec![format!("{}: {}", p.label, m.source)], None),
+        };
+        if let Some(parent) = path.parent() {
+            crate::output::create_dir(parent)?;
+        }
+        let field = MeasuredField { points, comments };
+        field
+            .write(&path, sigma)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        progress.note(&format!(
+            "{}: {} measured points -> {}",
+            p.label,
+            field.points.len(),
+            path.display()
+        ));
+    }
+    Ok(())
 }

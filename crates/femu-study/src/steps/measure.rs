@@ -2,17 +2,29 @@
 //! (the `[grid]`, or a probe window's grid), a file's field in the model frame, or the DIC of
 //! simulated B-mode images of its window. The identification (`identify_on`) fits them all.
 
-use super::identify::Measured;
 use crate::model::StudyModel;
 use crate::progress::Progress;
 use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
 use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, TravelTerm};
-use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::measured::MeasuredField;
 use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::Side;
 use femu_mesh::locate::PointLocator;
 use std::path::Path;
+
+/// The measured field of an identification and where it came from.
+#[derive(Debug, Clone)]
+pub struct Measured {
+    pub field: MeasuredField,
+    pub source: String,
+    /// Whether the reference parameters of the model are the truth (a simulated experiment).
+    pub reference_known: bool,
+    /// The full covariance of the field's components (model frame, mm²): the misfit is then
+    /// weighted by it (weighted FEMU, `femu_identify::weighted`) instead of the per-point
+    /// weights.
+    pub covariance: Option<FieldCovariance>,
+}
 
 /// A measurement ready to fit.
 #[derive(Debug, Clone)]
@@ -239,78 +251,4 @@ fn ultrasound_measurement(
         reference_known: true,
         covariance: None,
     })
-}
-
-/// Each prepared measurement with its field as the identification fits it in its first repeat
-/// (a virtual one's first noise realization; a file's mapped to the model frame).
-pub fn realized<'a>(
-    study: &Study,
-    built: &StudyModel,
-    prepared: &'a [Prepared],
-) -> Result<Vec<(&'a Prepared, Vec<MeasuredPoint>)>> {
-    let models = super::joint::TestModels::new(study, built, prepared)?;
-    let (free, reference) =
-        super::identify::free_parameters(study, &models.full[0], study.identification.grouped())?;
-    let blocks = super::joint::blocks(prepared, &models, study);
-    let seed = study.identification.seed;
-    let fields = campaign::realized_fields(&models.full[0], &free, &reference, &blocks, seed, 0)?;
-    let mut fitted = Vec::new();
-    for (b, &t) in models.tests.iter().enumerate() {
-        let mine = prepared.iter().filter(|p| p.test == t);
-        for (p, range) in mine.zip(&fields[b].1) {
-            fitted.push((p, fields[b].0.points[range.clone()].to_vec()));
-        }
-    }
-    Ok(fitted)
-}
-
-/// Writes each prepared measurement's field as the identification fits it in its first repeat
-/// ([`realized`]) to `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements
-/// (an ultrasound measurement's folder already holds its own).
-pub fn write_measured(
-    study: &Study,
-    built: &StudyModel,
-    prepared: &[Prepared],
-    dir: &Path,
-    progress: &dyn Progress,
-) -> Result<()> {
-    let seed = study.identification.seed;
-    let fitted = realized(study, built, prepared)?;
-    for (p, points) in fitted {
-        let path = if study.measurement_list() {
-            dir.join(&p.name).join("measured.csv")
-        } else {
-            dir.join("measured.csv")
-        };
-        let (comments, sigma) = match &p.data {
-            PreparedData::Virtual {
-                points,
-                total,
-                sigma,
-            } => (
-                vec![
-                    "femu synth: virtual experiment (seed 2.4.1)".into(),
-                    format!("{}; noise sigma {sigma} mm, seed {seed}", p.label),
-                    format!("{} of {total} grid points in the tissue", points.len()),
-                ],
-                Some(*sigma),
-            ),
-            PreparedData::Measured(m) if m.reference_known => continue,
-            PreparedData::Measured(m) => (vec![format!("{}: {}", p.label, m.source)], None),
-        };
-        if let Some(parent) = path.parent() {
-            crate::output::create_dir(parent)?;
-        }
-        let field = MeasuredField { points, comments };
-        field
-            .write(&path, sigma)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        progress.note(&format!(
-            "{}: {} measured points -> {}",
-            p.label,
-            field.points.len(),
-            path.display()
-        ));
-    }
-    Ok(())
 }

@@ -17,6 +17,7 @@ pub mod images;
 pub mod joint;
 pub mod measure;
 pub mod model;
+pub mod parameters;
 pub mod record;
 pub mod run;
 pub mod sensitivity;

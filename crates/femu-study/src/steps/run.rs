@@ -277,7 +277,7 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     let dir = out.join("measurement");
     create_dir(&dir)?;
     let prepared = measure::prepare(study, &built, &dir, progress)?;
-    measure::write_measured(study, &built, &prepared, &dir, progress)?;
+    super::joint::write_measured(study, &built, &prepared, &dir, progress)?;
     finish(record, out, t)?;
 
     let groupings: Vec<(bool, &str)> = match study.identification.grouping {
