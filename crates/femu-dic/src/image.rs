@@ -140,6 +140,39 @@ impl GreyImage {
         }
     }
 
+    /// The image locally normalized: each grey level minus its local mean, over its local
+    /// spread, both Gaussian-weighted over `window` px (standard deviation),
+    ///
+    /// ```text
+    ///   n = 50 (f − G∗f) / √(G∗(f − G∗f)² + 5²)
+    /// ```
+    ///
+    /// (scaled so that a textured region keeps a spread of about 50 grey levels; the 5 grey
+    /// levels keep flat regions, the black gel above the skin, from being amplified into noise).
+    /// A brightness that changes slowly in space — a gain, an offset, the echo of an interface
+    /// whose amplitude changes between frames — leaves `n` as it was while the positions of the
+    /// pattern stay: what a correlation then matches is the pattern, not its local brightness
+    /// (locally normalized correlation; cf. the zero-normalized criteria of subset DIC, Pan et
+    /// al. 2009).
+    pub fn locally_normalized(&self, window: f64) -> GreyImage {
+        let mean = self.gaussian_blur(window);
+        let mut centred = self.clone();
+        centred
+            .data
+            .iter_mut()
+            .zip(&mean.data)
+            .for_each(|(v, m)| *v -= m);
+        let mut square = centred.clone();
+        square.data.iter_mut().for_each(|v| *v *= *v);
+        let variance = square.gaussian_blur(window);
+        centred
+            .data
+            .iter_mut()
+            .zip(&variance.data)
+            .for_each(|(v, s2)| *v = 50.0 * *v / (s2 + 25.0).sqrt());
+        centred
+    }
+
     /// Writes the image as an 8-bit grey PNG (values clamped to 0–255).
     pub fn save_png(&self, path: &Path) -> Result<(), DicError> {
         let buf: Vec<u8> = self
@@ -221,6 +254,61 @@ mod tests {
             .gaussian_blur(3.0);
         assert!(flat.data.iter().all(|v| (v - 42.0).abs() < 1e-12));
         assert_eq!(b.gaussian_blur(0.0).data, b.data);
+    }
+
+    /// Local normalization removes a gain and an offset that vary slowly across the image
+    /// (here 0.5 → 1.5 and 20 → 80 grey levels over 64 px, against a 4-px window): the
+    /// normalized textures agree to a few percent of their spread, where the raw ones differ by
+    /// their whole spread; a flat image normalizes to zero.
+    #[test]
+    fn local_normalization_ignores_a_slow_gain_and_offset() {
+        let (w, h) = (64, 64);
+        let texture: Vec<f64> = (0..w * h)
+            .map(|k| {
+                let (x, y) = ((k % w) as f64, (k / w) as f64);
+                100.0 + 40.0 * (0.9 * x).sin() * (0.7 * y + 0.3 * x).cos()
+            })
+            .collect();
+        let shaded: Vec<f64> = texture
+            .iter()
+            .enumerate()
+            .map(|(k, v)| {
+                let t = (k % w) as f64 / (w - 1) as f64;
+                (0.5 + t) * v + 20.0 + 60.0 * t
+            })
+            .collect();
+        let a = GreyImage::new(w, h, texture.clone())
+            .unwrap()
+            .locally_normalized(4.0);
+        let b = GreyImage::new(w, h, shaded.clone())
+            .unwrap()
+            .locally_normalized(4.0);
+        let inner = |k: usize| (12..w - 12).contains(&(k % w)) && (12..h - 12).contains(&(k / w));
+        let (mut diff, mut spread, mut n) = (0.0, 0.0, 0.0);
+        for k in (0..w * h).filter(|&k| inner(k)) {
+            diff += (a.data[k] - b.data[k]).powi(2);
+            spread += a.data[k].powi(2);
+            n += 1.0;
+        }
+        let (diff, spread) = ((diff / n).sqrt(), (spread / n).sqrt());
+        assert!(spread > 30.0 && spread < 60.0, "spread {spread}");
+        assert!(
+            diff < 0.05 * spread,
+            "rms difference {diff} against spread {spread}"
+        );
+        // Without the normalization the two differ by more than the texture's own spread.
+        let raw = GreyImage::new(w, h, texture.clone()).unwrap();
+        let shaded = GreyImage::new(w, h, shaded).unwrap();
+        let raw_diff = (0..w * h)
+            .filter(|&k| inner(k))
+            .map(|k| (raw.data[k] - shaded.data[k]).powi(2))
+            .sum::<f64>()
+            / n;
+        assert!(raw_diff.sqrt() > 28.0, "{}", raw_diff.sqrt());
+        let flat = GreyImage::new(9, 7, vec![42.0; 63])
+            .unwrap()
+            .locally_normalized(3.0);
+        assert!(flat.data.iter().all(|v| v.abs() < 1e-9));
     }
 
     #[test]

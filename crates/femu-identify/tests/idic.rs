@@ -116,6 +116,7 @@ fn problem(
     pairing: Pairing,
     solver: SolverOptions,
     contact_tolerance: f64,
+    local_normalization_px: Option<f64>,
 ) -> IdicProblem {
     let models: Vec<Model> = fractions
         .iter()
@@ -143,13 +144,14 @@ fn problem(
                 ..PixelOptions::default()
             },
             solver,
+            local_normalization_px,
         },
     )
     .unwrap()
 }
 
 /// `∂r/∂φ_j` against central differences of the residuals, both pairings, on the sharp images
-/// and on smoothed ones, away from the optimum (parameters 10–30 % off). The states are
+/// and on smoothed ones, the frames as recorded and locally normalized, away from the optimum (parameters 10–30 % off). The states are
 /// converged to a relative force residual of 1e-12 and the plate's contact to a penetration of
 /// 1e-12 of the element size (the identification's 1e-8 moves the skin under the plate by
 /// ~1e-8 mm between neighbouring solves, ~3e-3 of a column after division by 2h: measured).
@@ -159,13 +161,17 @@ fn problem(
 fn jacobian_matches_finite_differences() {
     let fractions = [0.5, 1.0];
     let imgs = images(1200, &fractions, 3);
-    for (pairing, scale) in [(Pairing::Reference, 0.0), (Pairing::Consecutive, 2.0)] {
+    for (pairing, scale, local) in [
+        (Pairing::Reference, 0.0, None),
+        (Pairing::Consecutive, 2.0, None),
+        (Pairing::Consecutive, 0.0, Some(3.0)),
+    ] {
         let tight = SolverOptions {
             residual_tolerance: 1e-12,
             energy_tolerance: 1e-20,
             ..SolverOptions::default()
         };
-        let mut p = problem(700, imgs.clone(), &fractions, pairing, tight, 1e-12);
+        let mut p = problem(700, imgs.clone(), &fractions, pairing, tight, 1e-12, local);
         p.set_scale(scale);
         let (_, reference) = free(p.model(0));
         let phi: Vec<f64> = reference
@@ -194,7 +200,7 @@ fn jacobian_matches_finite_differences() {
             );
             assert!(
                 worst < 1e-5 * scale_col,
-                "{pairing:?}, scale {scale}: parameter {k}: largest difference {worst:.3e}, column scale {scale_col:.3e}"
+                "{pairing:?}, scale {scale}, local normalization {local:?}: parameter {k}: largest difference {worst:.3e}, column scale {scale_col:.3e}"
             );
         }
     }
@@ -222,6 +228,7 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
             Pairing::Reference,
             SolverOptions::default(),
             1e-8,
+            None,
         ))
     };
     let settings = IdicSettings {

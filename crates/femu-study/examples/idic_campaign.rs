@@ -131,6 +131,7 @@ struct Times {
 }
 
 /// The image route's options, with overrides for exploration: `IDIC_PAIRING=consecutive`,
+/// `IDIC_LOCAL_NORM=4` (0: none),
 /// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`, `IDIC_MESH_CORRECTION=1`;
 /// with `--idic-only`, `IDIC_START=v1,v2,...` adds a start and `IDIC_NO_DIC_START=1` drops the
 /// DIC optima.
@@ -153,6 +154,11 @@ fn route() -> Result<ImageRouteOptions> {
         r.correlation.pixels.block_px = v.parse()?;
     }
     r.mesh_correction = std::env::var("IDIC_MESH_CORRECTION").is_ok();
+    // `IDIC_LOCAL_NORM=0`: the grey levels as recorded.
+    if let Ok(v) = std::env::var("IDIC_LOCAL_NORM") {
+        let w: f64 = v.parse()?;
+        r.correlation.local_normalization_px = (w > 0.0).then_some(w);
+    }
     Ok(r)
 }
 

@@ -69,6 +69,14 @@ pub struct IdicOptions {
     pub pixels: PixelOptions,
     /// The forward solves' Newton settings.
     pub solver: SolverOptions,
+    /// Window (px, a Gaussian's standard deviation) of the local normalization of every frame
+    /// after its smoothing (`GreyImage::locally_normalized`): the frames are compared as their
+    /// local patterns, not their local brightness. `None`: as recorded. The echo of an
+    /// interface (skin, fascia) whose scatterers are renewed between load steps changes its
+    /// brightness along the line, which a warp would otherwise follow by moving the line
+    /// (README, images → parameters).
+    #[serde(default)]
+    pub local_normalization_px: Option<f64>,
 }
 
 impl Default for IdicOptions {
@@ -78,6 +86,7 @@ impl Default for IdicOptions {
             brightness: true,
             pixels: PixelOptions::default(),
             solver: SolverOptions::default(),
+            local_normalization_px: None,
         }
     }
 }
@@ -267,7 +276,8 @@ impl IdicProblem {
     }
 
     /// Compares the images smoothed by a Gaussian of `sigma_px` (coarse-to-fine: a wider
-    /// capture range, see `GreyImage::gaussian_blur`); the weights return to one per pixel
+    /// capture range, see `GreyImage::gaussian_blur`), then locally normalized if asked
+    /// ([`IdicOptions::local_normalization_px`]); the weights return to one per pixel
     /// scaled by the reference's grey-level spread, the same for every start.
     pub fn set_scale(&mut self, sigma_px: f64) {
         if sigma_px == self.scale_px {
@@ -279,6 +289,10 @@ impl IdicProblem {
             .par_iter()
             .map(|im| {
                 let b = im.gaussian_blur(sigma_px);
+                let b = match self.options.local_normalization_px {
+                    Some(window) => b.locally_normalized(window),
+                    None => b,
+                };
                 BSpline::new(&b.data, b.width, b.height)
             })
             .collect();
@@ -368,6 +382,11 @@ impl IdicProblem {
 
     pub fn pairs(&self) -> &[(usize, usize)] {
         &self.pairs
+    }
+
+    /// How the grey levels are compared.
+    pub fn options(&self) -> &IdicOptions {
+        &self.options
     }
 
     pub fn frame(&self) -> &ImageFrame {

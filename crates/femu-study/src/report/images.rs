@@ -67,7 +67,7 @@ pub fn section(
          frames ({}) directly, each load step's frame compared with the one before it at the \
          material points the finite-element model of that step moves ({} elements; {} pixels in \
          the tissue, {} in the bone's shadow, {} outside the tissue, masked by the model). \
-         Brightness and contrast per depth band; coarse to fine over Gaussian smoothings of {} px. \
+         Brightness and contrast per depth band{}; coarse to fine over Gaussian smoothings of {} px. \
          Intervals: the larger of the block sandwich ({} blocks: the residual's own correlation) \
          and the jackknife over {} image regions, with the bias a refined mesh of {} elements \
          implies (extrapolated at the first-order rate) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
@@ -78,6 +78,10 @@ pub fn section(
         idic.pixels,
         idic.mask.shadow,
         idic.mask.outside,
+        idic.local_normalization_px.map_or(String::new(), |w| format!(
+            ", the frames locally normalized over {} px (compared as their local patterns, not their local brightness)",
+            g(w)
+        )),
         idic.scales
             .iter()
             .map(|s| g(s.scale_px))
