@@ -655,6 +655,14 @@ fn study_cases() -> Vec<Case> {
             &["study.toml", "bounds_factor", "line 23", "must be above 1"],
         ),
         run_study(
+            "study: image_normalization_px < 0",
+            &study_with(
+                "bounds_factor = 4.0",
+                "bounds_factor = 4.0\nimage_normalization_px = -1.0",
+            ),
+            &["study.toml", "image_normalization_px", "line 24", "[0, 32]"],
+        ),
+        run_study(
             "study: starts = 0",
             &study_with("starts = 1", "starts = 0"),
             &["study.toml", "starts", "line 24", "[1, 64]"],

@@ -43,7 +43,19 @@ pub struct IdentificationSpec {
     /// The virtual data are made on a mesh of the same geometry with the element size divided
     /// by this (1: the model's own mesh, the seed's numerical example).
     pub data_refinement: f64,
+    /// Identification from images: the window (px) over which the integrated correlation
+    /// normalizes each frame's grey levels (`IdicOptions::local_normalization_px`); `None`
+    /// (`image_normalization_px = 0`): the grey levels as recorded.
+    pub image_normalization_px: Option<f64>,
 }
+
+/// Default `[identification] image_normalization_px` (px): about the speckle's size along the
+/// beam at 9–11 MHz and 0.1 mm pixels (README, images → parameters).
+pub const DEFAULT_IMAGE_NORMALIZATION_PX: f64 = 2.0;
+
+/// Largest `image_normalization_px` (px): beyond, the window spans the fat's thickness and the
+/// normalization no longer separates an interface's position from its brightness.
+pub const MAX_IMAGE_NORMALIZATION_PX: f64 = 32.0;
 
 /// `[identification] discretization`: the discretization check of every identification.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -204,7 +216,17 @@ pub(crate) fn parse(
             "femu cannot refine a deck; virtual data on another mesh need the built-in thigh or a label image".into(),
         ));
     }
+    let normalization = e
+        .image_normalization_px
+        .unwrap_or(DEFAULT_IMAGE_NORMALIZATION_PX);
+    if !(0.0..=MAX_IMAGE_NORMALIZATION_PX).contains(&normalization) {
+        return Err(err(
+            "image_normalization_px",
+            format!("must be in [0, {MAX_IMAGE_NORMALIZATION_PX}] px (0: the grey levels as recorded; default {DEFAULT_IMAGE_NORMALIZATION_PX}), got {normalization}"),
+        ));
+    }
     Ok(IdentificationSpec {
+        image_normalization_px: (normalization > 0.0).then_some(normalization),
         loss,
         test,
         discretization,

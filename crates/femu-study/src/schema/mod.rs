@@ -45,7 +45,10 @@ pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
     ELEMENTS_RANGE,
 };
-pub use identification::{Discretization, Grouping, IdentificationSpec, Steps};
+pub use identification::{
+    Discretization, Grouping, IdentificationSpec, Steps, DEFAULT_IMAGE_NORMALIZATION_PX,
+    MAX_IMAGE_NORMALIZATION_PX,
+};
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};
 pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};

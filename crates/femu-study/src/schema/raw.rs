@@ -144,6 +144,7 @@ pub(crate) struct IdentificationEntry {
     pub loss: Option<String>,
     pub discretization: Option<String>,
     pub data_refinement: Option<f64>,
+    pub image_normalization_px: Option<f64>,
 }
 
 /// `grouped = true | false | "both"`.

@@ -91,12 +91,6 @@ pub fn read_sequence(dir: &Path) -> Result<ImageSequence> {
     })
 }
 
-/// The local normalization window of the image route (px): about the speckle's size along the
-/// beam and a third of it across; 2, 4 and 8 px gave the same D_FAT within 3.5 % on the
-/// diagnostic realizations, where the raw grey levels were 12 % off (README, images →
-/// parameters).
-pub const LOCAL_NORMALIZATION_PX: f64 = 2.0;
-
 /// How the images are compared (the integrated correlation's options and its scales).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ImageRouteOptions {
@@ -122,7 +116,7 @@ impl Default for ImageRouteOptions {
                 brightness: true,
                 pixels: PixelOptions::default(),
                 solver: femu_mech::SolverOptions::default(),
-                local_normalization_px: Some(LOCAL_NORMALIZATION_PX),
+                local_normalization_px: Some(crate::schema::DEFAULT_IMAGE_NORMALIZATION_PX),
             },
             scales_px: IdicSettings::default().scales_px,
             discretization_check: true,
@@ -962,6 +956,8 @@ pub fn identify_image_measurement(
         a.parameters.iter().map(|p| p.identified).collect(),
         b.parameters.iter().map(|p| p.identified).collect(),
     ];
+    let mut route = ImageRouteOptions::default();
+    route.correlation.local_normalization_px = study.identification.image_normalization_px;
     let mut study_idic = study.clone();
     // The integrated DIC's starts are the two optima (see above).
     study_idic.identification.starts = 0;
@@ -971,7 +967,7 @@ pub fn identify_image_measurement(
         &seq,
         true,
         starts,
-        &ImageRouteOptions::default(),
+        &route,
         out,
         progress,
     )?;
