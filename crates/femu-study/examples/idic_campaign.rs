@@ -216,7 +216,9 @@ fn main() -> Result<()> {
              [identification]\ngrouped = true\nstarts = 5\nseed = {seed}\n",
             a.elements, a.render_refine, a.decorrelation
         );
-        let study = femu_study::schema::parse(&text, &dir)?;
+        let mut study = femu_study::schema::parse(&text, &dir)?;
+        // `IDIC_LOCAL_NORM` acts on the full campaign too.
+        study.identification.image_normalization_px = route()?.correlation.local_normalization_px;
         std::fs::create_dir_all(dir.join("measurement"))?;
         std::fs::write(dir.join("measurement/study.toml"), &text)?;
         eprintln!(
