@@ -79,8 +79,7 @@ pub fn section(
         idic.mask.shadow,
         idic.mask.outside,
         idic.local_normalization_px.map_or(String::new(), |w| format!(
-            ", the frames locally normalized over {} px (compared as their local patterns, not their local brightness)",
-            g(w)
+            ", the frames locally normalized over {w} px (compared as their local patterns, not their local brightness)"
         )),
         idic.scales
             .iter()
