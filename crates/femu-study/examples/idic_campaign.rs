@@ -130,13 +130,13 @@ struct Times {
     all_routes: f64,
 }
 
-/// The image route's options, with overrides for exploration: `IDIC_PAIRING=consecutive`,
+/// The image route's options for `study`, with overrides for exploration: `IDIC_PAIRING=consecutive`,
 /// `IDIC_LOCAL_NORM=4` (0: none),
 /// `IDIC_SCALES=4,2,1,0`, `IDIC_BAND=64` (0: one band), `IDIC_BLOCK=32`, `IDIC_MESH_CORRECTION=1`;
 /// with `--idic-only`, `IDIC_START=v1,v2,...` adds a start and `IDIC_NO_DIC_START=1` drops the
 /// DIC optima.
-fn route() -> Result<ImageRouteOptions> {
-    let mut r = ImageRouteOptions::default();
+fn route(study: &femu_study::schema::Study) -> Result<ImageRouteOptions> {
+    let mut r = ImageRouteOptions::for_study(study);
     if let Ok(v) = std::env::var("IDIC_PAIRING") {
         r.correlation.pairing = match v.as_str() {
             "consecutive" => femu_identify::idic::Pairing::Consecutive,
@@ -200,7 +200,16 @@ fn main() -> Result<()> {
                 extra.push(theta);
             }
         }
-        identify_images(&study, true, &seq, true, extra, &route()?, &a.out, &Print)?;
+        identify_images(
+            &study,
+            true,
+            &seq,
+            true,
+            extra,
+            &route(&study)?,
+            &a.out,
+            &Print,
+        )?;
         return Ok(());
     }
     let mut rows = Vec::new();
@@ -218,7 +227,8 @@ fn main() -> Result<()> {
         );
         let mut study = femu_study::schema::parse(&text, &dir)?;
         // `IDIC_LOCAL_NORM` acts on the full campaign too.
-        study.identification.image_normalization_px = route()?.correlation.local_normalization_px;
+        study.identification.image_normalization_px =
+            route(&study)?.correlation.local_normalization_px;
         std::fs::create_dir_all(dir.join("measurement"))?;
         std::fs::write(dir.join("measurement/study.toml"), &text)?;
         eprintln!(

@@ -125,6 +125,15 @@ impl Default for ImageRouteOptions {
     }
 }
 
+impl ImageRouteOptions {
+    /// The defaults with the study's own choices (`[identification] image_normalization_px`).
+    pub fn for_study(study: &Study) -> ImageRouteOptions {
+        let mut route = ImageRouteOptions::default();
+        route.correlation.local_normalization_px = study.identification.image_normalization_px;
+        route
+    }
+}
+
 /// One identified parameter with its uncertainty.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ImageEstimate {
@@ -956,8 +965,7 @@ pub fn identify_image_measurement(
         a.parameters.iter().map(|p| p.identified).collect(),
         b.parameters.iter().map(|p| p.identified).collect(),
     ];
-    let mut route = ImageRouteOptions::default();
-    route.correlation.local_normalization_px = study.identification.image_normalization_px;
+    let route = ImageRouteOptions::for_study(study);
     let mut study_idic = study.clone();
     // The integrated DIC's starts are the two optima (see above).
     study_idic.identification.starts = 0;
