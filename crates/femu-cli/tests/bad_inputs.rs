@@ -660,7 +660,38 @@ fn study_cases() -> Vec<Case> {
                 "bounds_factor = 4.0",
                 "bounds_factor = 4.0\nimage_normalization_px = -1.0",
             ),
-            &["study.toml", "image_normalization_px", "line 24", "[0, 32]"],
+            &[
+                "study.toml",
+                "image_normalization_px",
+                "line 24",
+                "[0.5, 32]",
+            ],
+        ),
+        run_study(
+            "study: image_normalization_px below a pixel",
+            &study_with(
+                "bounds_factor = 4.0",
+                "bounds_factor = 4.0\nimage_normalization_px = 0.2",
+            ),
+            &[
+                "study.toml",
+                "image_normalization_px",
+                "line 24",
+                "must be 0 or",
+            ],
+        ),
+        run_study(
+            "study: image_pairing unknown",
+            &study_with(
+                "bounds_factor = 4.0",
+                "bounds_factor = 4.0\nimage_pairing = \"neighbours\"",
+            ),
+            &[
+                "study.toml",
+                "image_pairing",
+                "line 24",
+                "both, consecutive, reference",
+            ],
         ),
         run_study(
             "study: starts = 0",

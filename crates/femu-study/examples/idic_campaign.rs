@@ -140,6 +140,7 @@ fn route(study: &femu_study::schema::Study) -> Result<ImageRouteOptions> {
     if let Ok(v) = std::env::var("IDIC_PAIRING") {
         r.correlation.pairing = match v.as_str() {
             "consecutive" => femu_identify::idic::Pairing::Consecutive,
+            "both" => femu_identify::idic::Pairing::Both,
             _ => femu_identify::idic::Pairing::Reference,
         };
     }

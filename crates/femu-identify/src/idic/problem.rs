@@ -22,9 +22,11 @@
 //!   ∂d_i/∂φ_j = Σ_{m tied in j} θ_m P ∂u_i/∂θ_m                                           (2)
 //! ```
 //!
-//! The pairs are either every frame against the reference (`Pairing::Reference`, Leclerc et al.
-//! 2009) or each frame against the one before it (`Pairing::Consecutive`: both frames warped by
-//! the model, small increments of strain decorrelate the speckle less). Each step is solved
+//! The pairs are every frame against the reference (`Pairing::Reference`, Leclerc et al.
+//! 2009), each frame against the one before it (`Pairing::Consecutive`: both frames warped by
+//! the model, small increments of strain decorrelate the speckle less), or both
+//! (`Pairing::Both`: the two comparisons of a frame see its renewed scatterers against two
+//! different frames, and their errors partly average out). Each step is solved
 //! from its own last converged state (warm start), the steps in parallel.
 
 use super::brightness::{BandFit, BandSums};
@@ -57,6 +59,8 @@ pub enum Pairing {
     Reference,
     /// Each frame against the previous one: pairs `(i − 1, i)`.
     Consecutive,
+    /// Both: `(i − 1, i)` for every frame and `(0, i)` for the frames after the first loaded one.
+    Both,
 }
 
 /// How the grey levels are compared.
@@ -237,12 +241,15 @@ impl IdicProblem {
                 })
             })
             .collect::<Result<Vec<_>, FitError>>()?;
-        let pairs: Vec<(usize, usize)> = (1..images.len())
+        let mut pairs: Vec<(usize, usize)> = (1..images.len())
             .map(|i| match options.pairing {
                 Pairing::Reference => (0, i),
-                Pairing::Consecutive => (i - 1, i),
+                Pairing::Consecutive | Pairing::Both => (i - 1, i),
             })
             .collect();
+        if options.pairing == Pairing::Both {
+            pairs.extend((2..images.len()).map(|i| (0, i)));
+        }
         let mut p = IdicProblem {
             sqrt_w: vec![1.0; pairs.len() * pixels.bands],
             active: vec![1.0; pixels.len()],

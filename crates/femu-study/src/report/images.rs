@@ -64,16 +64,21 @@ pub fn section(
     let dic_route = sim.as_ref().map_or(0.0, |s| s.timings_s.dic) + dic.wall_time_s;
     html.p(&format!(
         "Integrated DIC (I-DIC, Leclerc et al. 2009): the parameters from the grey levels of the {} \
-         frames ({}) directly, each load step's frame compared with the one before it at the \
+         frames ({}) directly, each load step's frame compared with {} at the \
          material points the finite-element model of that step moves ({} elements; {} pixels in \
          the tissue, {} in the bone's shadow, {} outside the tissue, masked by the model). \
          Brightness and contrast per depth band{}; coarse to fine over Gaussian smoothings of {} px. \
          Intervals: the larger of the block sandwich ({} blocks: the residual's own correlation) \
-         and the jackknife over {} image regions, with the bias a refined mesh of {} elements \
-         implies (extrapolated at the first-order rate) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
+         and the jackknife over {} image regions, with the bias refined meshes of {} elements \
+         imply (each extrapolated at the first-order rate; the larger) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
          {:.1} s) against {:.1} s for the DIC → FEMU route (DIC {:.1} s, FEMU {:.1} s): ratio {:.2}.",
         idic.load_fractions.len() + 1,
         esc(&idic.source),
+        match idic.pairing {
+            femu_identify::idic::Pairing::Reference => "the unloaded one",
+            femu_identify::idic::Pairing::Consecutive => "the one before it",
+            femu_identify::idic::Pairing::Both => "the one before it and with the unloaded one",
+        },
         idic.elements,
         idic.pixels,
         idic.mask.shadow,
@@ -88,8 +93,16 @@ pub fn section(
             .join(", "),
         idic.sandwich_blocks,
         idic.jackknife_groups,
-        idic.refined_elements
-            .map_or("(none)".to_string(), |n| n.to_string()),
+        if idic.refined_meshes.is_empty() {
+            idic.refined_elements
+                .map_or("(none)".to_string(), |n| n.to_string())
+        } else {
+            idic.refined_meshes
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(" and ")
+        },
         idic.wall_time_s,
         idic.identification_s,
         idic.discretization_s,

@@ -145,6 +145,7 @@ pub(crate) struct IdentificationEntry {
     pub discretization: Option<String>,
     pub data_refinement: Option<f64>,
     pub image_normalization_px: Option<f64>,
+    pub image_pairing: Option<String>,
 }
 
 /// `grouped = true | false | "both"`.
