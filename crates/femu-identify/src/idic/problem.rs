@@ -241,15 +241,15 @@ impl IdicProblem {
                 })
             })
             .collect::<Result<Vec<_>, FitError>>()?;
-        let mut pairs: Vec<(usize, usize)> = (1..images.len())
-            .map(|i| match options.pairing {
-                Pairing::Reference => (0, i),
-                Pairing::Consecutive | Pairing::Both => (i - 1, i),
-            })
-            .collect();
-        if options.pairing == Pairing::Both {
-            pairs.extend((2..images.len()).map(|i| (0, i)));
-        }
+        let n = images.len();
+        let consecutive = (1..n).map(|i| (i - 1, i));
+        let reference = (1..n).map(|i| (0, i));
+        let pairs: Vec<(usize, usize)> = match options.pairing {
+            Pairing::Reference => reference.collect(),
+            Pairing::Consecutive => consecutive.collect(),
+            // (0, 1) is already the first consecutive pair.
+            Pairing::Both => consecutive.chain(reference.skip(1)).collect(),
+        };
         let mut p = IdicProblem {
             sqrt_w: vec![1.0; pairs.len() * pixels.bands],
             active: vec![1.0; pixels.len()],

@@ -93,15 +93,15 @@ pub fn section(
             .join(", "),
         idic.sandwich_blocks,
         idic.jackknife_groups,
-        if idic.refined_meshes.is_empty() {
-            idic.refined_elements
-                .map_or("(none)".to_string(), |n| n.to_string())
-        } else {
-            idic.refined_meshes
+        // Every refined mesh of the discretization term (older summaries: the first only).
+        match (&idic.mesh_correction, idic.refined_elements) {
+            (Some(m), _) if !m.elements.is_empty() => m
+                .elements
                 .iter()
                 .map(|n| n.to_string())
                 .collect::<Vec<_>>()
-                .join(" and ")
+                .join(" and "),
+            (_, first) => first.map_or("(none)".to_string(), |n| n.to_string()),
         },
         idic.wall_time_s,
         idic.identification_s,

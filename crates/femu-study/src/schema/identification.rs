@@ -57,6 +57,10 @@ pub struct IdentificationSpec {
 /// its brightness (README, images → parameters: chosen on realizations 1–20, checked on 21–30).
 pub const DEFAULT_IMAGE_NORMALIZATION_PX: f64 = 0.75;
 
+/// Default `[identification] image_pairing`: each frame against the one before it and against
+/// the unloaded one (README, images → parameters).
+pub const DEFAULT_IMAGE_PAIRING: femu_identify::idic::Pairing = femu_identify::idic::Pairing::Both;
+
 /// Smallest nonzero `image_normalization_px` (px): below, the Gaussian window is narrower than a
 /// pixel, the local mean is the pixel itself and nothing is left to compare.
 pub const MIN_IMAGE_NORMALIZATION_PX: f64 = 0.5;
@@ -242,7 +246,8 @@ pub(crate) fn parse(
         .map(str::to_ascii_lowercase)
         .as_deref()
     {
-        None | Some("both") => Pairing::Both,
+        None => DEFAULT_IMAGE_PAIRING,
+        Some("both") => Pairing::Both,
         Some("consecutive") => Pairing::Consecutive,
         Some("reference") => Pairing::Reference,
         Some(other) => {

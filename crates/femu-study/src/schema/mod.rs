@@ -47,7 +47,7 @@ pub use geometry::{
 };
 pub use identification::{
     Discretization, Grouping, IdentificationSpec, Steps, DEFAULT_IMAGE_NORMALIZATION_PX,
-    MAX_IMAGE_NORMALIZATION_PX, MIN_IMAGE_NORMALIZATION_PX,
+    DEFAULT_IMAGE_PAIRING, MAX_IMAGE_NORMALIZATION_PX, MIN_IMAGE_NORMALIZATION_PX,
 };
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};

@@ -112,7 +112,7 @@ impl Default for ImageRouteOptions {
     fn default() -> Self {
         ImageRouteOptions {
             correlation: IdicOptions {
-                pairing: Pairing::Both,
+                pairing: crate::schema::DEFAULT_IMAGE_PAIRING,
                 brightness: true,
                 pixels: PixelOptions::default(),
                 solver: femu_mech::SolverOptions::default(),
@@ -207,10 +207,6 @@ pub struct ImageIdentificationSummary {
     pub elements: usize,
     /// Elements of the first further mesh of the discretization correction.
     pub refined_elements: Option<usize>,
-    /// Elements of every refined mesh of the discretization term (twice and three times the
-    /// model's).
-    #[serde(default)]
-    pub refined_meshes: Vec<usize>,
     /// The discretization correction, when made.
     #[serde(default)]
     pub mesh_correction: Option<MeshCorrection>,
@@ -436,11 +432,12 @@ fn discretization_shift(
             ASSUMED_RATE,
         ));
     }
-    let bias: Vec<f64> = (0..biases[0].len())
-        .map(|k| 0.5 * (biases[0][k] + biases[1][k]))
-        .collect();
-    let sd: Vec<f64> = (0..biases[0].len())
-        .map(|k| biases[0][k].abs().max(biases[1][k].abs()))
+    let (fine, finer) = (&biases[0], &biases[1]);
+    let bias: Vec<f64> = fine.iter().zip(finer).map(|(a, b)| 0.5 * (a + b)).collect();
+    let sd: Vec<f64> = fine
+        .iter()
+        .zip(finer)
+        .map(|(a, b)| a.abs().max(b.abs()))
         .collect();
     Ok(MeshCorrection {
         corrected: false,
@@ -669,7 +666,6 @@ pub fn identify_images(
         }
     };
     let refined_elements = mesh.as_ref().and_then(|m| m.elements.first().copied());
-    let refined_meshes = mesh.as_ref().map_or(Vec::new(), |m| m.elements.clone());
     let discretization_s = t1.elapsed().as_secs_f64();
     let parameters = estimates(
         &free,
@@ -696,7 +692,6 @@ pub fn identify_images(
         grouped,
         elements: last.mesh.elements.len(),
         refined_elements,
-        refined_meshes,
         mesh_correction: mesh.clone(),
         source: seq.source.clone(),
         load_fractions: seq.load_fractions.clone(),
