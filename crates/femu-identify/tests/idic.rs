@@ -165,6 +165,7 @@ fn jacobian_matches_finite_differences() {
         (Pairing::Reference, 0.0, None),
         (Pairing::Consecutive, 2.0, None),
         (Pairing::Consecutive, 0.0, Some(3.0)),
+        (Pairing::All, 0.0, Some(0.75)),
     ] {
         let tight = SolverOptions {
             residual_tolerance: 1e-12,
@@ -239,7 +240,10 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
     let (p, out) = idic::identify(&make, &settings, &|_| {}).unwrap();
     let (_, reference) = free(&thigh(1000, 1.0));
     let shift = p
-        .discretization_shift(fractions.iter().map(|&f| thigh(2000, f)).collect())
+        .discretization_shift(
+            fractions.iter().map(|&f| thigh(2000, f)).collect(),
+            &[true; 4],
+        )
         .unwrap();
     for (k, f) in p.free().iter().enumerate() {
         let e = (out.theta[k] / reference[k]).ln();
@@ -271,4 +275,75 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
     }
     let quad = (out.theta[2] / reference[2] - 1.0).abs();
     assert!(quad < 0.05, "C10_QUADRICEPS {quad}");
+}
+
+/// No start (`starts = 0`, none given) is a returned error, not a panic.
+#[test]
+fn no_start_is_an_error() {
+    let fractions = [1.0];
+    let imgs = images(1000, &fractions, 3);
+    let make = || {
+        Ok(problem(
+            1000,
+            imgs.clone(),
+            &fractions,
+            Pairing::Reference,
+            SolverOptions::default(),
+            1e-8,
+            None,
+        ))
+    };
+    let settings = IdicSettings {
+        starts: 0,
+        ..IdicSettings::default()
+    };
+    match idic::identify(&make, &settings, &|_| {}) {
+        Err(e) => assert!(e.to_string().contains("no start"), "{e}"),
+        Ok(_) => panic!("identified without a start"),
+    }
+}
+
+/// The pairs of each pairing on five frames; `All` ordered by the frames' distance, the last
+/// `(0, 4)` as for `Reference` and `Both` (the residual maps show the last pair).
+#[test]
+fn pairings_compare_the_frames_they_name() {
+    let fractions = [0.25, 0.5, 0.75, 1.0];
+    let imgs = images(700, &fractions, 4);
+    let pairs = |pairing| {
+        problem(
+            700,
+            imgs.clone(),
+            &fractions,
+            pairing,
+            SolverOptions::default(),
+            1e-8,
+            None,
+        )
+        .pairs()
+        .to_vec()
+    };
+    assert_eq!(pairs(Pairing::Reference), [(0, 1), (0, 2), (0, 3), (0, 4)]);
+    assert_eq!(
+        pairs(Pairing::Consecutive),
+        [(0, 1), (1, 2), (2, 3), (3, 4)]
+    );
+    assert_eq!(
+        pairs(Pairing::Both),
+        [(0, 1), (1, 2), (2, 3), (3, 4), (0, 2), (0, 3), (0, 4)]
+    );
+    assert_eq!(
+        pairs(Pairing::All),
+        [
+            (0, 1),
+            (1, 2),
+            (2, 3),
+            (3, 4),
+            (0, 2),
+            (1, 3),
+            (2, 4),
+            (0, 3),
+            (1, 4),
+            (0, 4)
+        ]
+    );
 }

@@ -141,6 +141,7 @@ fn route(study: &femu_study::schema::Study) -> Result<ImageRouteOptions> {
         r.correlation.pairing = match v.as_str() {
             "consecutive" => femu_identify::idic::Pairing::Consecutive,
             "both" => femu_identify::idic::Pairing::Both,
+            "all" => femu_identify::idic::Pairing::All,
             _ => femu_identify::idic::Pairing::Reference,
         };
     }

@@ -234,6 +234,11 @@ pub fn identify(
             .map(|(v, f)| v.clamp(f.lower, f.upper))
             .collect::<Vec<f64>>()
     }));
+    if starts.is_empty() {
+        return Err(IdicRunError::AllStartsFailed(
+            "no start: settings.starts is 0 and no start was given".into(),
+        ));
+    }
     let widest = settings.scales_px.first().copied().unwrap_or(0.0);
     let mut problems: Vec<Option<IdicProblem>> = (0..starts.len()).map(|_| None).collect();
     problems[0] = Some(first);

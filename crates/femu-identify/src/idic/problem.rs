@@ -26,7 +26,8 @@
 //! 2009), each frame against the one before it (`Pairing::Consecutive`: both frames warped by
 //! the model, small increments of strain decorrelate the speckle less), or both
 //! (`Pairing::Both`: the two comparisons of a frame see its renewed scatterers against two
-//! different frames, and their errors partly average out). Each step is solved
+//! different frames, and their errors partly average out), or every frame against every
+//! earlier one (`Pairing::All`, the default of a study). Each step is solved
 //! from its own last converged state (warm start), the steps in parallel.
 
 use super::brightness::{BandFit, BandSums};
@@ -61,6 +62,10 @@ pub enum Pairing {
     Consecutive,
     /// Both: `(i − 1, i)` for every frame and `(0, i)` for the frames after the first loaded one.
     Both,
+    /// Every frame against every earlier one: pairs `(a, b)`, `a < b` — more comparisons of
+    /// each frame's renewed scatterers against different frames (README, images →
+    /// parameters).
+    All,
 }
 
 /// How the grey levels are compared.
@@ -249,6 +254,11 @@ impl IdicProblem {
             Pairing::Consecutive => consecutive.collect(),
             // (0, 1) is already the first consecutive pair.
             Pairing::Both => consecutive.chain(reference.skip(1)).collect(),
+            // By the frames' distance, so that the last is (0, n − 1) as with `Reference` and
+            // `Both` (the residual maps show the last pair).
+            Pairing::All => (1..n)
+                .flat_map(|gap| (gap..n).map(move |b| (b - gap, b)))
+                .collect(),
         };
         let mut p = IdicProblem {
             sqrt_w: vec![1.0; pairs.len() * pixels.bands],
@@ -782,18 +792,24 @@ impl IdicProblem {
 
     /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that moving
     /// every step's pixel displacements by `delta[i][p]` (px) implies at the last Jacobian
-    /// evaluation.
-    pub fn shift_for(&self, delta: &[Vec<[f64; 2]>]) -> Vec<f64> {
+    /// evaluation, the parameters with `moving[k] == false` held (see
+    /// [`super::uncertainty::gauss_newton_shift`]).
+    pub fn shift_for(&self, delta: &[Vec<[f64; 2]>], moving: &[bool]) -> Vec<f64> {
         let dr = self.residual_change(delta);
-        super::uncertainty::gauss_newton_shift(&self.jacobian_columns(), &dr)
+        super::uncertainty::gauss_newton_shift(&self.jacobian_columns(), &dr, moving)
     }
 
     /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that the
     /// `refined` models (the same load steps on a finer mesh of the same geometry and
     /// materials) imply at the parameters of the last Jacobian evaluation: each refined step
     /// solved there, its displacement at the problem's pixels compared with the problem's own.
-    /// Pixels the refined mesh does not cover keep their displacement.
-    pub fn discretization_shift(&self, refined: Vec<Model>) -> Result<Vec<f64>, FitError> {
+    /// Pixels the refined mesh does not cover keep their displacement. The parameters with
+    /// `moving[k] == false` are held ([`Self::shift_for`]).
+    pub fn discretization_shift(
+        &self,
+        refined: Vec<Model>,
+        moving: &[bool],
+    ) -> Result<Vec<f64>, FitError> {
         let fine = self.displacements_on(refined)?;
         let delta: Vec<Vec<[f64; 2]>> = fine
             .iter()
@@ -806,7 +822,7 @@ impl IdicProblem {
                     .collect()
             })
             .collect();
-        Ok(self.shift_for(&delta))
+        Ok(self.shift_for(&delta, moving))
     }
 
     /// The unweighted residual maps of every pair at the last evaluation (grey levels, NaN out

@@ -70,7 +70,8 @@ pub fn section(
          Brightness and contrast per depth band{}; coarse to fine over Gaussian smoothings of {} px. \
          Intervals: the larger of the block sandwich ({} blocks: the residual's own correlation) \
          and the jackknife over {} image regions, with the bias refined meshes of {} elements \
-         imply (each extrapolated at the first-order rate; the larger) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
+         imply (each extrapolated at the first-order rate, the parameters the images do not see \
+         held as the identification holds them; the larger) and the change from the last smoothed scale added in quadrature. Time: {:.1} s (identification {:.1} s, discretization check \
          {:.1} s) against {:.1} s for the DIC → FEMU route (DIC {:.1} s, FEMU {:.1} s): ratio {:.2}.",
         idic.load_fractions.len() + 1,
         esc(&idic.source),
@@ -78,6 +79,7 @@ pub fn section(
             femu_identify::idic::Pairing::Reference => "the unloaded one",
             femu_identify::idic::Pairing::Consecutive => "the one before it",
             femu_identify::idic::Pairing::Both => "the one before it and with the unloaded one",
+            femu_identify::idic::Pairing::All => "every frame before it",
         },
         idic.elements,
         idic.pixels,

@@ -48,7 +48,7 @@ pub struct IdentificationSpec {
     /// (`image_normalization_px = 0`): the grey levels as recorded.
     pub image_normalization_px: Option<f64>,
     /// Identification from images: which frames the integrated correlation compares
-    /// (`image_pairing = "both" | "consecutive" | "reference"`).
+    /// (`image_pairing = "all" | "both" | "consecutive" | "reference"`).
     pub image_pairing: femu_identify::idic::Pairing,
 }
 
@@ -57,9 +57,10 @@ pub struct IdentificationSpec {
 /// its brightness (README, images → parameters: chosen on realizations 1–20, checked on 21–30).
 pub const DEFAULT_IMAGE_NORMALIZATION_PX: f64 = 0.75;
 
-/// Default `[identification] image_pairing`: each frame against the one before it and against
-/// the unloaded one (README, images → parameters).
-pub const DEFAULT_IMAGE_PAIRING: femu_identify::idic::Pairing = femu_identify::idic::Pairing::Both;
+/// Default `[identification] image_pairing`: each frame against every earlier one (README,
+/// images → parameters: on realizations 1–30, D_FAT's largest error 5.7 % against 7.0 % with
+/// "both", for 1.4 times the pairs).
+pub const DEFAULT_IMAGE_PAIRING: femu_identify::idic::Pairing = femu_identify::idic::Pairing::All;
 
 /// Smallest nonzero `image_normalization_px` (px): below, the Gaussian window is narrower than a
 /// pixel, the local mean is the pixel itself and nothing is left to compare.
@@ -247,13 +248,14 @@ pub(crate) fn parse(
         .as_deref()
     {
         None => DEFAULT_IMAGE_PAIRING,
+        Some("all") => Pairing::All,
         Some("both") => Pairing::Both,
         Some("consecutive") => Pairing::Consecutive,
         Some("reference") => Pairing::Reference,
         Some(other) => {
             return Err(err(
                 "image_pairing",
-                format!("unknown choice '{other}' (both, consecutive, reference)"),
+                format!("unknown choice '{other}' (all, both, consecutive, reference)"),
             ))
         }
     };
