@@ -150,6 +150,25 @@ fn problem(
     .unwrap()
 }
 
+/// [`problem`] with the identification's solver settings (default Newton, contact 1e-8) and
+/// the grey levels as recorded.
+fn identification_problem(
+    elements: usize,
+    imgs: Vec<GreyImage>,
+    fractions: &[f64],
+    pairing: Pairing,
+) -> IdicProblem {
+    problem(
+        elements,
+        imgs,
+        fractions,
+        pairing,
+        SolverOptions::default(),
+        1e-8,
+        None,
+    )
+}
+
 /// `∂r/∂φ_j` against central differences of the residuals, both pairings, on the sharp images
 /// and on smoothed ones, the frames as recorded and locally normalized, away from the optimum (parameters 10–30 % off). The states are
 /// converged to a relative force residual of 1e-12 and the plate's contact to a penetration of
@@ -222,14 +241,11 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
     let fractions = [0.5, 1.0];
     let imgs = images(4000, &fractions, 5);
     let make = || {
-        Ok(problem(
+        Ok(identification_problem(
             1000,
             imgs.clone(),
             &fractions,
             Pairing::Reference,
-            SolverOptions::default(),
-            1e-8,
-            None,
         ))
     };
     let settings = IdicSettings {
@@ -283,14 +299,11 @@ fn no_start_is_an_error() {
     let fractions = [1.0];
     let imgs = images(1000, &fractions, 3);
     let make = || {
-        Ok(problem(
+        Ok(identification_problem(
             1000,
             imgs.clone(),
             &fractions,
             Pairing::Reference,
-            SolverOptions::default(),
-            1e-8,
-            None,
         ))
     };
     let settings = IdicSettings {
@@ -310,17 +323,9 @@ fn pairings_compare_the_frames_they_name() {
     let fractions = [0.25, 0.5, 0.75, 1.0];
     let imgs = images(700, &fractions, 4);
     let pairs = |pairing| {
-        problem(
-            700,
-            imgs.clone(),
-            &fractions,
-            pairing,
-            SolverOptions::default(),
-            1e-8,
-            None,
-        )
-        .pairs()
-        .to_vec()
+        identification_problem(700, imgs.clone(), &fractions, pairing)
+            .pairs()
+            .to_vec()
     };
     assert_eq!(pairs(Pairing::Reference), [(0, 1), (0, 2), (0, 3), (0, 4)]);
     assert_eq!(

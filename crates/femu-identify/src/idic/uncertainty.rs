@@ -183,8 +183,9 @@ pub fn group_jackknife(
 /// The one-step Gauss–Newton shift (3) of the log-parameters for a residual change `dr`, the
 /// parameters with `moving[k] == false` held (their shift 0), as the identification holds the
 /// parameters the images do not see or that sit at a bound: left free here, a direction the
-/// images hardly constrain would take up the change (shifts of e^±15 measured on the built-in
-/// thigh's grouped D) and the seen parameters' shifts would be those of another problem.
+/// images hardly constrain would take up the change (shifts of `ln θ` of −15 to −18 measured
+/// on the built-in thigh's grouped D) and the seen parameters' shifts would be those of another
+/// problem.
 pub fn gauss_newton_shift(jacobian: &Columns, dr: &[f64], moving: &[bool]) -> Vec<f64> {
     let n = jacobian.len();
     let h: Vec<Vec<f64>> = (0..n)

@@ -428,11 +428,12 @@ fn run_error(e: idic::IdicRunError) -> anyhow::Error {
 /// shifts of the estimate to the meshes of twice and three times the elements (element size
 /// / √2 and / √3), each extrapolated by Richardson at the cautious first-order rate of the
 /// general check (`femu_identify::discretization::ASSUMED_RATE`: the two meshes are not nested,
-/// their shifts observe no rate), added to the sd in quadrature. The two extrapolations estimate
-/// the same bias but each carries its own mesh's local pattern (on the built-in thigh from one
-/// level, C10_FAT's 1.5 % bias came out between 0.15 and 2 % across image realizations); `bias`
-/// is their mean, `sd` the larger magnitude. Returned as a [`MeshCorrection`] that corrected
-/// nothing (`corrected: false`).
+/// their shifts observe no rate), added to the sd in quadrature; only the `moving` parameters
+/// shift ([`moving_parameters`]). The two extrapolations estimate the same bias but each carries
+/// its own mesh's local pattern (on the built-in thigh C10_FAT's bias, about −2 %, came out
+/// with its sign in 25 of 30 image realizations, 0.35–2.3 % in magnitude); `bias` is their
+/// mean, `sd` the larger magnitude. Returned as a [`MeshCorrection`] that corrected nothing
+/// (`corrected: false`).
 fn discretization_shift(
     study: &Study,
     seq: &ImageSequence,
