@@ -138,12 +138,7 @@ struct Times {
 fn route(study: &femu_study::schema::Study) -> Result<ImageRouteOptions> {
     let mut r = ImageRouteOptions::for_study(study);
     if let Ok(v) = std::env::var("IDIC_PAIRING") {
-        r.correlation.pairing = match v.as_str() {
-            "consecutive" => femu_identify::idic::Pairing::Consecutive,
-            "both" => femu_identify::idic::Pairing::Both,
-            "all" => femu_identify::idic::Pairing::All,
-            _ => femu_identify::idic::Pairing::Reference,
-        };
+        r.correlation.pairing = v.parse().unwrap_or(femu_identify::idic::Pairing::Reference);
     }
     if let Ok(v) = std::env::var("IDIC_SCALES") {
         r.scales_px = v.split(',').map(|x| x.parse()).collect::<Result<_, _>>()?;

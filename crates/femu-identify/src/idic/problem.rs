@@ -68,6 +68,26 @@ pub enum Pairing {
     All,
 }
 
+impl Pairing {
+    /// The names a study or a command line gives (`[identification] image_pairing`).
+    pub const NAMES: &'static str = "all, both, consecutive, reference";
+}
+
+impl std::str::FromStr for Pairing {
+    type Err = String;
+
+    /// `"all" | "both" | "consecutive" | "reference"`.
+    fn from_str(name: &str) -> Result<Pairing, String> {
+        match name {
+            "all" => Ok(Pairing::All),
+            "both" => Ok(Pairing::Both),
+            "consecutive" => Ok(Pairing::Consecutive),
+            "reference" => Ok(Pairing::Reference),
+            other => Err(format!("unknown choice '{other}' ({})", Pairing::NAMES)),
+        }
+    }
+}
+
 /// How the grey levels are compared.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 pub struct IdicOptions {

@@ -240,24 +240,12 @@ pub(crate) fn parse(
             format!("must be 0 or in [{MIN_IMAGE_NORMALIZATION_PX}, {MAX_IMAGE_NORMALIZATION_PX}] px (0: the grey levels as recorded; default {DEFAULT_IMAGE_NORMALIZATION_PX}), got {normalization}"),
         ));
     }
-    use femu_identify::idic::Pairing;
-    let image_pairing = match e
-        .image_pairing
-        .as_deref()
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
+    let image_pairing = match &e.image_pairing {
         None => DEFAULT_IMAGE_PAIRING,
-        Some("all") => Pairing::All,
-        Some("both") => Pairing::Both,
-        Some("consecutive") => Pairing::Consecutive,
-        Some("reference") => Pairing::Reference,
-        Some(other) => {
-            return Err(err(
-                "image_pairing",
-                format!("unknown choice '{other}' (all, both, consecutive, reference)"),
-            ))
-        }
+        Some(name) => name
+            .to_ascii_lowercase()
+            .parse()
+            .map_err(|why| err("image_pairing", why))?,
     };
     Ok(IdentificationSpec {
         image_normalization_px: (normalization > 0.0).then_some(normalization),

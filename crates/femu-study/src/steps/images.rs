@@ -278,6 +278,17 @@ fn refined_spec(
     })
 }
 
+/// The further meshes of the discretization term and correction: twice and three times the
+/// model's elements (never the renderer's `render_refine²`).
+const REFINEMENT_FACTORS: [usize; 2] = [2, 3];
+
+/// The sequence's load steps on the study's mesh with `factor` times the elements.
+fn refined_step_models(study: &Study, seq: &ImageSequence, factor: usize) -> Result<Vec<Model>> {
+    let spec = refined_spec(&study.model, factor).context("a deck cannot be refined")?;
+    let built = crate::model::build(&spec)?;
+    step_models(study, &built, &seq.load_fractions)
+}
+
 /// The estimates from the identified `theta` and their uncertainty budget, three terms added
 /// in quadrature:
 ///
@@ -443,10 +454,8 @@ fn discretization_shift(
     use femu_identify::discretization::{extrapolated_bias, ASSUMED_RATE};
     let mut elements = Vec::new();
     let mut biases: Vec<Vec<f64>> = Vec::new();
-    for factor in [2usize, 3] {
-        let spec = refined_spec(&study.model, factor).context("a deck cannot be refined")?;
-        let built = crate::model::build(&spec)?;
-        let models = step_models(study, &built, &seq.load_fractions)?;
+    for factor in REFINEMENT_FACTORS {
+        let models = refined_step_models(study, seq, factor)?;
         elements.push(models[0].mesh.elements.len());
         let shift = problem
             .discretization_shift(models, moving)
@@ -500,10 +509,8 @@ fn mesh_correction(
         .collect();
     let mut levels = Vec::new();
     let mut elements = Vec::new();
-    for factor in [2usize, 3] {
-        let spec = refined_spec(&study.model, factor).context("a deck cannot be refined")?;
-        let built = crate::model::build(&spec)?;
-        let models = step_models(study, &built, &seq.load_fractions)?;
+    for factor in REFINEMENT_FACTORS {
+        let models = refined_step_models(study, seq, factor)?;
         elements.push(models[0].mesh.elements.len());
         levels.push(Level {
             ratio: (factor as f64).sqrt(),
