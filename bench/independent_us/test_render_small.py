@@ -1,0 +1,87 @@
+"""Small checks of render_pymust.py (pytest; < 1 min): pymust's speckle follows a known rigid
+shift of the scatterers, and a --small realization writes consistent files.
+
+    pip install pymust==0.1.9 scipy pillow pytest
+    pytest bench/independent_us/test_render_small.py
+"""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pymust", reason="pymust is not installed (pip install pymust==0.1.9)")
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import render_pymust as rp  # noqa: E402
+
+
+def test_rigid_shift_moves_the_speckle_by_the_shift():
+    """A 64 x 64 px frame of a few hundred random scatterers, then the same scatterers moved
+    0.5 mm laterally and 0.3 mm axially (5 and 3 px at 0.1 mm): the phase correlation of the
+    two B-mode frames finds that shift."""
+    s = rp.small_settings()
+    ren = rp.Renderer(s, 64, 64, z0_mm=8.0)  # the window 8-14.4 mm deep: past the near field
+    rng = np.random.default_rng(7)
+    n = 400
+    # Scatterers over the window and a margin wider than the shift, so that the speckle that
+    # enters the window on one side was there before the shift too.
+    q = np.column_stack([rng.uniform(-4.4, 4.4, n), rng.uniform(6.5, 16.0, n)])
+    rc = rng.standard_normal(n)
+    shift = np.array([0.5, 0.3])  # mm: lateral, depth
+    frames = []
+    for qq in (q, q + shift):
+        v = ren.in_view(qq)
+        env = np.abs(ren.iq_image(qq[v], rc[v]))
+        frames.append(20 * np.log10(env / env.max() + 1e-6))
+    dx, dy = rp.phase_correlation(frames[0], frames[1])
+    # 0.5 px: the brief's tolerance; speckle of a rigidly moved scatterer field moves with it
+    # up to the PSF's small change with position (the plane wave and the receive aperture
+    # are nearly shift-invariant over 0.5 mm).
+    assert abs(dx - 5.0) < 0.5, (dx, dy)
+    assert abs(dy - 3.0) < 0.5, (dx, dy)
+
+
+def test_small_run_writes_consistent_files(tmp_path):
+    pytest.importorskip(
+        "femu", reason="femu's Python package is not installed (.ci/python builds it)")
+    out = tmp_path / "small"
+    r = subprocess.run(
+        [sys.executable, str(HERE / "render_pymust.py"), "--small", "--seed", "3",
+         "--out", str(out), "--quiet"],
+        capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    m = json.loads((out / "manifest.json").read_text())
+    w, h = m["image_px"]
+    assert (w, h) == (64, 64)
+    assert len(m["frames"]) == len(m["loads_n_per_mm"]) == len(m["truth"]) + 1 == 3
+    assert m["loads_n_per_mm"][0] == 0.0 and m["loads_n_per_mm"][-1] == pytest.approx(0.1)
+    from PIL import Image
+
+    for name in m["frames"]:
+        img = Image.open(out / name)
+        assert img.mode == "L" and img.size == (w, h)
+        a = np.asarray(img)
+        assert a.std() > 5, f"{name} is blank"
+    meas = m["measurement"]
+    assert meas["units"] == "px" and meas["pixel_size_mm"] == pytest.approx(0.1)
+    x_axis, y_axis = np.array(meas["x_axis"]), np.array(meas["y_axis"])
+    assert abs(x_axis @ y_axis) < 1e-12 and abs(np.linalg.norm(x_axis) - 1) < 1e-12
+    pts = None
+    for k, name in enumerate(m["truth"], start=1):
+        t = np.genfromtxt(out / name, delimiter=",", names=True)
+        assert t.dtype.names == ("x_px", "y_px", "ux_px", "uy_px")
+        assert len(t) > 10
+        assert (t["x_px"] >= 0).all() and (t["x_px"] < w).all()
+        assert (t["y_px"] >= 0).all() and (t["y_px"] < h).all()
+        assert (np.mod(t["x_px"], 8) == 0).all() and (np.mod(t["y_px"], 8) == 0).all()
+        p = np.column_stack([t["x_px"], t["y_px"]])
+        assert pts is None or np.array_equal(p, pts)
+        pts = p
+    # The plate pushes the tissue away from the probe: the last step moves it down the image.
+    assert np.mean(t["uy_px"]) > 0
+    assert m["timings_s"]["total_wall"] < 60
