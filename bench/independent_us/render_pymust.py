@@ -630,6 +630,9 @@ def write_truth(path: Path, pts_px, u_px):
     os.replace(tmp, path)
 
 
+_RENDERERS = {}
+
+
 def realization(seed: int, out: Path, s: Settings, fe_cache: Path = None, log=print) -> dict:
     t_start = time.time()
     c_start = time.process_time()
@@ -646,7 +649,12 @@ def realization(seed: int, out: Path, s: Settings, fe_cache: Path = None, log=pr
     t_phantom = time.time() - t
     # Positions per state: the unloaded one, then each load step.
     states = [ph.x_ref] + [ph.x_ref + loc.interpolate(u, ph.elem, ph.xi, ph.eta) for u in fe["u"]]
-    ren = Renderer(s, w, h)
+    # One renderer (its DAS matrices) per window and settings, shared by the realizations.
+    key = (w, h, json.dumps(asdict(s), sort_keys=True))
+    ren = _RENDERERS.get(key)
+    if ren is None:
+        ren = _RENDERERS[key] = Renderer(s, w, h)
+    ren.seconds = dict.fromkeys(ren.seconds, 0.0)
     # Pixels of the reference frame in the tissue (for the truth and the display level).
     jj, ii = np.mgrid[0:h, 0:w]
     pix = np.stack([ii.ravel(), jj.ravel()], axis=1)
