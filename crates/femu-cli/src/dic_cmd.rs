@@ -80,6 +80,12 @@ pub struct DicArgs {
     pub reference: PathBuf,
     /// Deformed image (PNG, TIFF or DICOM).
     pub deformed: PathBuf,
+    /// Further frames of a sequence (a cine loop under an increasing load): each frame is
+    /// correlated with the one before, warm-started by the previous increment, and the
+    /// increments are composed to the reference on its material points (field.csv: reference
+    /// to the last frame; frame_K/field.csv: to frame K).
+    #[arg(num_args = 0..)]
+    pub then: Vec<PathBuf>,
     #[command(flatten)]
     pub corr: CorrelationArgs,
     /// Frame of a multi-frame DICOM reference (from 0).
@@ -121,7 +127,7 @@ pub struct DicNoiseArgs {
     pub out: PathBuf,
 }
 
-fn parse_pair(name: &str, s: &str) -> Result<[f64; 2]> {
+pub(crate) fn parse_pair(name: &str, s: &str) -> Result<[f64; 2]> {
     let v: Vec<f64> = s
         .split(',')
         .map(|t| t.trim().parse::<f64>())
@@ -186,7 +192,7 @@ impl CorrelationArgs {
     }
 
     /// The correlation as `femu dic` and `femu dic-check` run it.
-    fn spec(&self) -> Result<CorrelationSpec> {
+    pub(crate) fn spec(&self) -> Result<CorrelationSpec> {
         if !(self.min_zncc > -1.0 && self.min_zncc < 1.0) {
             bail!("--min-zncc {}: must lie in (-1, 1)", self.min_zncc);
         }
@@ -233,7 +239,7 @@ impl CorrelationArgs {
     }
 
     /// The pixel size: the option, else the reference header, else none.
-    fn pixel_size(&self, header: Option<PixelSize>) -> Result<Option<PixelSize>> {
+    pub(crate) fn pixel_size(&self, header: Option<PixelSize>) -> Result<Option<PixelSize>> {
         if let Some(s) = &self.pixel_size {
             let p = parse_pair("pixel-size", s)?;
             if !(p[0] > 0.0 && p[1] > 0.0) {
@@ -251,6 +257,9 @@ impl CorrelationArgs {
 
 /// `femu dic`.
 pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
+    if !a.then.is_empty() {
+        return crate::dic_seq::run(a, quiet);
+    }
     let origin = parse_pair("origin", &a.origin)?;
     let job = DicJob {
         reference: a.reference.clone(),
@@ -312,6 +321,20 @@ pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
             eprintln!("warning: {w}");
         }
         println!("results in {}", a.out.display());
+    }
+    if r.quality.trusted_elements == 0 {
+        bail!(
+            "no element of the {} is trusted (every one fails the trust criteria: {}): field.csv has weight 0 everywhere and measures nothing; the folder {} says why per element (elements.csv, trust.png)",
+            r.result.elements,
+            r.quality
+                .untrusted
+                .iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(why, n)| format!("{n} {why}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            a.out.display()
+        );
     }
     if !r.result.converged {
         bail!(

@@ -7,6 +7,7 @@ mod batch_cmd;
 mod bench;
 mod convergence_cmd;
 mod dic_cmd;
+mod dic_seq;
 mod huge_pages;
 mod mesh_cmd;
 mod progress;

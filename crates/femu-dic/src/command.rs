@@ -384,6 +384,11 @@ fn write_tables(
         None => "pixel size unknown: 1 mm = 1 px".to_string(),
     };
     let comments = vec![
+        // Machine-readable: the identification checks a study's frame keys against it.
+        format!(
+            "units: {}",
+            if pixel_size.is_some() { "mm" } else { "px" }
+        ),
         format!(
             "femu dic {}: reference {} (frame {}), deformed {} (frame {})",
             env!("CARGO_PKG_VERSION"),
@@ -393,7 +398,7 @@ fn write_tables(
             job.frame_def
         ),
         format!(
-            "units mm; {size_note}; origin at pixel ({}, {}); x {}, y {}",
+            "frame: {size_note}; origin at pixel ({}, {}); x {}, y {}",
             frame.origin_px[0],
             frame.origin_px[1],
             if frame.x_left { "left" } else { "right" },

@@ -35,6 +35,7 @@ pub mod output;
 pub mod quality;
 pub mod read;
 pub mod solver;
+pub mod sequence;
 pub mod sparse;
 
 pub use error::DicError;

@@ -916,6 +916,23 @@ pub fn correlate(
     roi: &Roi,
     opts: &DicOptions,
 ) -> Result<DicResult, DicError> {
+    correlate_from(reference, deformed, roi, opts, None)
+}
+
+/// A displacement guess `u(x)` (full-resolution pixels) at a pixel position `x` of the
+/// reference image.
+pub type InitialGuess<'a> = &'a (dyn Fn([f64; 2]) -> [f64; 2] + Sync);
+
+/// [`correlate`] started from `initial` instead of the FFT shift: the coarsest level's nodes
+/// take the guess at their full-resolution position (a sequence's previous increment: a warm
+/// start that keeps a large motion within the capture range).
+pub fn correlate_from(
+    reference: &GreyImage,
+    deformed: &GreyImage,
+    roi: &Roi,
+    opts: &DicOptions,
+    initial: Option<InitialGuess>,
+) -> Result<DicResult, DicError> {
     let t0 = Instant::now();
     opts.validate()?;
     if (reference.width, reference.height) != (deformed.width, deformed.height) {
@@ -954,7 +971,7 @@ pub fn correlate(
         .collect();
     // FFT integer shift on the coarsest level that has a valid ROI.
     let mut shift_px = (0i64, 0i64);
-    if opts.fft_init {
+    if opts.fft_init && initial.is_none() {
         for l in (0..=n_levels).rev() {
             if let Ok(b) = rois[l].bounding_box(refs[l].width, refs[l].height) {
                 if b.w >= 8 && b.h >= 8 {
@@ -1018,10 +1035,26 @@ pub fn correlate(
         let ti = Instant::now();
         let mut a = match &carried {
             Some((mesh, u, from)) => prolong(mesh, u, &level.mesh, from - l),
-            None => {
-                let s = ((shift_px.0 >> l) as f64, (shift_px.1 >> l) as f64);
-                (0..level.mesh.n_nodes()).flat_map(|_| [s.0, s.1]).collect()
-            }
+            None => match initial {
+                // Level `l` pixel `p` is full-resolution `f p + (f − 1)/2` ([`prolong`]).
+                Some(guess) => {
+                    let f = (1usize << l) as f64;
+                    let off = 0.5 * (f - 1.0);
+                    level
+                        .mesh
+                        .nodes
+                        .iter()
+                        .flat_map(|p| {
+                            let u = guess([f * p[0] + off, f * p[1] + off]);
+                            [u[0] / f, u[1] / f]
+                        })
+                        .collect()
+                }
+                None => {
+                    let s = ((shift_px.0 >> l) as f64, (shift_px.1 >> l) as f64);
+                    (0..level.mesh.n_nodes()).flat_map(|_| [s.0, s.1]).collect()
+                }
+            },
         };
         let (tol, max_iter) = if l == 0 {
             (opts.tolerance, opts.max_iterations)

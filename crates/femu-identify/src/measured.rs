@@ -7,11 +7,36 @@
 //! ```
 //!
 //! `x,y` reference coordinates in the model frame (mm), `ux,uy` the measured displacement (mm),
-//! optional standard deviations `sx,sy` (mm) or a weight `w`. A non-finite or non-numeric cell is
-//! an error naming its line, and so is a point given twice (same `x,y`).
+//! optional standard deviations `sx,sy` (mm) and a weight `w` (it multiplies the inverse
+//! variances; `w = 0` leaves a point out). A comment line `# units: mm` or `# units: px` declares
+//! the units (`femu dic` writes it); a study's frame keys must agree with it. A non-finite or
+//! non-numeric cell is an error naming its line, and so is a point given twice (same `x,y`).
 
 use std::io::Write;
 use std::path::Path;
+
+/// The largest coordinate or displacement a measured-field file may hold (mm or px): a
+/// thigh is well under a metre and an image under a million pixels, so a larger value is a
+/// broken file, not a measurement.
+pub const MAX_MAGNITUDE: f64 = 1e6;
+
+/// The units a measured-field file declares in a `# units: mm` or `# units: px` comment line
+/// (`femu dic` writes one): coordinates and displacements in the model's mm, or in image
+/// pixels that a pixel size must map.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeclaredUnits {
+    Mm,
+    Px,
+}
+
+impl DeclaredUnits {
+    pub fn name(self) -> &'static str {
+        match self {
+            DeclaredUnits::Mm => "mm",
+            DeclaredUnits::Px => "px",
+        }
+    }
+}
 
 /// One measured point.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -94,9 +119,6 @@ impl MeasuredField {
                 if (idx[4] == usize::MAX) != (idx[5] == usize::MAX) {
                     return Err(bad(line, "sx and sy go together".into()));
                 }
-                if idx[4] != usize::MAX && idx[6] != usize::MAX {
-                    return Err(bad(line, "give sx,sy or w, not both".into()));
-                }
                 if let Some(u) = names
                     .iter()
                     .find(|n| !["x", "y", "ux", "uy", "sx", "sy", "w"].contains(&n.as_str()))
@@ -128,6 +150,17 @@ impl MeasuredField {
                 }
                 Ok(v)
             };
+            // `w` multiplies the inverse variances `1/sx², 1/sy²` (1 without them): `femu dic`
+            // writes both, `w = 0` for a point it does not trust.
+            let w = if idx[6] != usize::MAX {
+                let w = get(6)?;
+                if !(w >= 0.0) {
+                    return Err(bad(line, format!("w must be non-negative, got {w}")));
+                }
+                w
+            } else {
+                1.0
+            };
             let weight = if idx[4] != usize::MAX {
                 let (sx, sy) = (get(4)?, get(5)?);
                 if !(sx > 0.0 && sy > 0.0) {
@@ -136,17 +169,31 @@ impl MeasuredField {
                         format!("sx, sy must be positive, got {sx}, {sy}"),
                     ));
                 }
-                [1.0 / (sx * sx), 1.0 / (sy * sy)]
-            } else if idx[6] != usize::MAX {
-                let w = get(6)?;
-                if !(w >= 0.0) {
-                    return Err(bad(line, format!("w must be non-negative, got {w}")));
+                let weight = [w / (sx * sx), w / (sy * sy)];
+                if !weight.iter().all(|v| v.is_finite()) {
+                    return Err(bad(
+                        line,
+                        format!("sx, sy = {sx}, {sy}: too small to weigh (1/s² overflows)"),
+                    ));
                 }
-                [w, w]
+                weight
             } else {
-                [1.0, 1.0]
+                [w, w]
             };
-            let x = [get(0)?, get(1)?];
+            let plausible = |slot: usize| -> Result<f64, MeasuredError> {
+                let v = get(slot)?;
+                if v.abs() > MAX_MAGNITUDE {
+                    return Err(bad(
+                        line,
+                        format!(
+                            "column {}: {v:e} is beyond {MAX_MAGNITUDE:e} (mm or px): not a position or displacement of an image or a thigh",
+                            cols[idx[slot]]
+                        ),
+                    ));
+                }
+                Ok(v)
+            };
+            let x = [plausible(0)?, plausible(1)?];
             if let Some(first) = seen.insert(x.map(|c| (c + 0.0).to_bits()), line) {
                 return Err(bad(
                     line,
@@ -158,7 +205,7 @@ impl MeasuredField {
             }
             field.points.push(MeasuredPoint {
                 x,
-                u: [get(2)?, get(3)?],
+                u: [plausible(2)?, plausible(3)?],
                 weight,
             });
         }
@@ -168,6 +215,43 @@ impl MeasuredField {
             });
         }
         Ok(field)
+    }
+
+    /// The units the file declares (`# units: mm` or `# units: px`), if it declares them.
+    pub fn declared_units(&self) -> Result<Option<DeclaredUnits>, String> {
+        let mut found = None;
+        for c in &self.comments {
+            let Some(v) = c
+                .strip_prefix("units:")
+                .or_else(|| c.strip_prefix("units :"))
+            else {
+                continue;
+            };
+            let u = match v.trim().to_ascii_lowercase().as_str() {
+                "mm" => DeclaredUnits::Mm,
+                "px" => DeclaredUnits::Px,
+                other => return Err(format!("'# units: {other}': the units are mm or px")),
+            };
+            if found.is_some_and(|f| f != u) {
+                return Err("two '# units:' lines that disagree".into());
+            }
+            found = Some(u);
+        }
+        Ok(found)
+    }
+
+    /// The points that weigh something (a point whose two weights are 0, e.g. one `femu dic`
+    /// does not trust, carries no information and is left out of the fit), and the index in
+    /// `self.points` of each point kept — to take the same rows of a full covariance.
+    pub fn weighted_points(&self) -> (MeasuredField, Vec<usize>) {
+        let keep: Vec<usize> = (0..self.points.len())
+            .filter(|&i| self.points[i].weight.iter().any(|&w| w > 0.0))
+            .collect();
+        let field = MeasuredField {
+            points: keep.iter().map(|&i| self.points[i]).collect(),
+            comments: self.comments.clone(),
+        };
+        (field, keep)
     }
 
     /// Writes the field as `x,y,ux,uy` (and `sx,sy` when every weight is `1/s²` of a common
@@ -218,15 +302,18 @@ impl MeasuredField {
             .iter()
             .map(|p| {
                 let x = map(p.x);
+                // A component of weight 0 (a point left out) has an infinite variance: it
+                // reaches only the model components its axis has a share in (no `∞ · 0`).
                 let var = [1.0 / p.weight[0], 1.0 / p.weight[1]];
+                let part = |v: f64, c: f64| if c == 0.0 { 0.0 } else { v * c * c };
                 let var_model = [
-                    scale * scale * (var[0] * x_axis[0].powi(2) + var[1] * y_axis[0].powi(2)),
-                    scale * scale * (var[0] * x_axis[1].powi(2) + var[1] * y_axis[1].powi(2)),
+                    scale * scale * (part(var[0], x_axis[0]) + part(var[1], y_axis[0])),
+                    scale * scale * (part(var[0], x_axis[1]) + part(var[1], y_axis[1])),
                 ];
                 MeasuredPoint {
                     x: [origin[0] + x[0], origin[1] + x[1]],
                     u: map(p.u),
-                    weight: [1.0 / var_model[0], 1.0 / var_model[1]],
+                    weight: var_model.map(|v| if v.is_finite() { 1.0 / v } else { 0.0 }),
                 }
             })
             .collect();
@@ -257,6 +344,20 @@ mod tests {
         assert!(err("x,y,ux,uy\n1,2,3\n").contains("m.csv:2"));
         assert!(err("x,y,ux,uy\n").contains("no data"));
         assert!(err("x,y,ux,uy,q\n").contains("unknown column 'q'"));
+        // What `femu dic` writes: sx, sy and w together; w multiplies the inverse variances.
+        let f = MeasuredField::parse(
+            "# units: mm\nx,y,ux,uy,sx,sy,w\n1,2,0.1,0.2,0.5,0.25,1\n3,2,0.1,0.2,0.5,0.25,0\n",
+            "m.csv",
+        )
+        .unwrap();
+        assert_eq!(f.points[0].weight, [4.0, 16.0]);
+        assert_eq!(f.points[1].weight, [0.0, 0.0]);
+        assert_eq!(f.declared_units(), Ok(Some(DeclaredUnits::Mm)));
+        let (kept, index) = f.weighted_points();
+        assert_eq!((kept.points.len(), index), (1, vec![0]));
+        assert!(err("x,y,ux,uy\n1e308,2,3,4\n").contains("m.csv:2"));
+        assert!(err("x,y,ux,uy\n1,2,3,-2e6\n").contains("column uy"));
+        assert!(err("x,y,ux,uy,sx,sy\n1,2,3,4,1e-200,1\n").contains("overflows"));
         // Issue 32.6: a point repeated (2 500 times in the audit) would weigh 2 500 times and
         // shrink the reported sd; refused naming both lines.
         let e = err("x,y,ux,uy\n1,2,3,4\n5,6,7,8\n1.0,2,3,4\n");
@@ -299,5 +400,11 @@ mod tests {
         let m = f.to_model_frame(1.0, [0.0; 2], [0.0, 1.0], [1.0, 0.0]);
         assert_eq!(m.points[0].u, [-2.0, 1.0]);
         assert!((m.points[0].weight[0] - 0.25).abs() < 1e-12);
+        // A point left out (w = 0) stays out in any frame, with no NaN weight.
+        let f = MeasuredField::parse("x,y,ux,uy,w\n10,20,1,-2,0\n", "t").unwrap();
+        for axes in [([1.0, 0.0], [0.0, -1.0]), ([0.0, 1.0], [1.0, 0.0])] {
+            let m = f.to_model_frame(0.1, [0.0; 2], axes.0, axes.1);
+            assert_eq!(m.points[0].weight, [0.0, 0.0]);
+        }
     }
 }

@@ -63,9 +63,10 @@ fn measured_field(
     if n == 0 {
         return Err(errors::input("the measured field has no point"));
     }
-    let given = [sx.is_some() || sy.is_some(), w.is_some(), weights.is_some()];
-    if given.iter().filter(|g| **g).count() > 1 {
-        return Err(errors::input("give sx, sy or w or weights, not several"));
+    if weights.is_some() && (sx.is_some() || sy.is_some() || w.is_some()) {
+        return Err(errors::input(
+            "give weights alone, or sx, sy and w (w multiplies 1/sx², 1/sy²)",
+        ));
     }
     if let Some(wts) = weights {
         let flat = convert::floats(&wts.call_method0("ravel")?, "weights")?;
@@ -84,9 +85,25 @@ fn measured_field(
         }
         return Ok(field_of(&cols, |k| [flat[2 * k], flat[2 * k + 1]]));
     }
-    let weights: Vec<[f64; 2]> = match (sx, sy, w) {
-        (Some(_), Some(_), Some(_)) => return Err(errors::input("give sx, sy or w, not both")),
-        (Some(sx), Some(sy), None) => {
+    // `w` multiplies the inverse variances (1 without sx, sy), as in a measured-field CSV:
+    // `w = 0` leaves a point out.
+    let w = match w {
+        Some(w) => {
+            let w = convert::floats(w, "w")?;
+            same(&w, "w")?;
+            if let Some(k) = w.iter().position(|v| !(*v >= 0.0)) {
+                return Err(errors::input(format!(
+                    "point {k}: w must be non-negative, got {}",
+                    w[k]
+                )));
+            }
+            Some(w)
+        }
+        None => None,
+    };
+    let wk = |k: usize| w.as_ref().map_or(1.0, |w| w[k]);
+    let weights: Vec<[f64; 2]> = match (sx, sy) {
+        (Some(sx), Some(sy)) => {
             let (sx, sy) = (convert::floats(sx, "sx")?, convert::floats(sy, "sy")?);
             same(&sx, "sx")?;
             same(&sy, "sy")?;
@@ -97,24 +114,11 @@ fn measured_field(
                 )));
             }
             (0..n)
-                .map(|k| [1.0 / (sx[k] * sx[k]), 1.0 / (sy[k] * sy[k])])
+                .map(|k| [wk(k) / (sx[k] * sx[k]), wk(k) / (sy[k] * sy[k])])
                 .collect()
         }
-        (Some(_), None, _) | (None, Some(_), _) => {
-            return Err(errors::input("sx and sy go together"))
-        }
-        (None, None, Some(w)) => {
-            let w = convert::floats(w, "w")?;
-            same(&w, "w")?;
-            if let Some(k) = w.iter().position(|v| !(*v >= 0.0)) {
-                return Err(errors::input(format!(
-                    "point {k}: w must be non-negative, got {}",
-                    w[k]
-                )));
-            }
-            w.iter().map(|&v| [v, v]).collect()
-        }
-        (None, None, None) => vec![[1.0, 1.0]; n],
+        (Some(_), None) | (None, Some(_)) => return Err(errors::input("sx and sy go together")),
+        (None, None) => (0..n).map(|k| [wk(k), wk(k)]).collect(),
     };
     Ok(field_of(&cols, |k| weights[k]))
 }

@@ -322,28 +322,10 @@ pub fn grid_covariance(
     probe: &Probe,
 ) -> Result<Vec<f64>, UsError> {
     let m = 2 * points.len();
-    let mut c = vec![0.0; m * m];
-    for (k, d) in exp.increments.iter().enumerate() {
-        let rows: Vec<Vec<(usize, f64)>> = points
-            .iter()
-            .flat_map(|&i| {
-                let p = exp.paths[i][k];
-                let (e, xi, eta) = d.mesh.locate(p[0], p[1]).expect("located when composed");
-                let n = femu_dic::DicMesh::shape(xi, eta);
-                let conn = d.mesh.conn[e];
-                (0..2).map(move |comp| (0..4).map(|a| (2 * conn[a] + comp, n[a])).collect())
-            })
-            .collect();
-        let sys = &d.system;
-        let ck = femu_dic::quality::combined_covariance(
-            &sys.pattern,
-            &sys.a_values(),
-            &femu_dic::quality::noise_matrix(d),
-            &rows,
-        )
-        .map_err(|e| UsError::Geometry(format!("covariance of DIC step {}: {e}", k + 1)))?;
-        c.iter_mut().zip(&ck).for_each(|(a, b)| *a += b);
-    }
+    let increments: Vec<&femu_dic::DicResult> = exp.increments.iter().collect();
+    let paths: Vec<&[[f64; 2]]> = points.iter().map(|&i| exp.paths[i].as_slice()).collect();
+    let c = femu_dic::sequence::composed_covariance(&increments, &paths)
+        .map_err(|e| UsError::Geometry(format!("covariance of the DIC increments: {e}")))?;
     // Model frame: u_mm = T u_px blockwise, C_mm = T C Tᵀ.
     let t = [
         probe.displacement_to_model([1.0, 0.0]),

@@ -54,9 +54,25 @@ pub struct Travel {
 pub struct Frame {
     /// mm per unit of the file (the pixel size for a field in px; 1 for mm).
     pub scale: f64,
+    /// The file's coordinates are image pixels (`units = "px"`), not mm.
+    #[serde(default)]
+    pub pixels: bool,
     pub origin: [f64; 2],
     pub x_axis: [f64; 2],
     pub y_axis: [f64; 2],
+}
+
+impl Frame {
+    /// The model's own frame: mm, no offset, the model's axes.
+    pub fn model() -> Frame {
+        Frame {
+            scale: 1.0,
+            pixels: false,
+            origin: [0.0; 2],
+            x_axis: [1.0, 0.0],
+            y_axis: [0.0, 1.0],
+        }
+    }
 }
 
 /// The measurement grid: `counts` points `spacing` apart from `origin` (mm); `None` fields are
@@ -263,6 +279,22 @@ fn check_source(
             if m.file.is_some() {
                 return Err(err("file", "a virtual measurement reads no file"));
             }
+            // A file's frame on a measurement without a file would be silently unused (and
+            // `femu identify --measured` would read its file in the model frame).
+            for (key, given) in [
+                ("units", m.units.is_some()),
+                ("pixel_size_mm", m.pixel_size_mm.is_some()),
+                ("origin_mm", m.origin_mm.is_some()),
+                ("x_axis", m.x_axis.is_some()),
+                ("y_axis", m.y_axis.is_some()),
+            ] {
+                if given {
+                    return Err(err(
+                        key,
+                        "is the frame of a measured file, and this measurement is virtual: give file (femu identify --measured FILE replaces it) or remove the frame keys",
+                    ));
+                }
+            }
             if m.covariance.is_some() {
                 return Err(err(
                     "covariance",
@@ -315,6 +347,7 @@ fn check_source(
                 path: resolve(base, file),
                 frame: Frame {
                     scale,
+                    pixels: m.units.as_deref() == Some("px"),
                     origin,
                     x_axis,
                     y_axis,

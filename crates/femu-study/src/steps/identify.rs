@@ -216,18 +216,16 @@ fn identify_measured(
     let built = crate::model::build(&study.model)?;
     let prepared = match measured {
         Some(p) => {
-            let field = MeasuredField::read(p)?;
-            let covariance = measured_covariance(study, p, field.points.len())?;
-            measured_prepared(
-                study,
-                Measured {
-                    field,
-                    source: p.display().to_string(),
-                    reference_known: false,
-                    covariance,
-                },
-                &format!("file {}", p.display()),
-            )?
+            // The file replaces the study's measured file and is read in its frame, with its
+            // covariance: `--measured` and `[measurement] file` read a file alike.
+            let (frame, covariance) = match study.measurements.first().map(|m| &m.source) {
+                Some(MeasurementSource::File {
+                    frame, covariance, ..
+                }) => (*frame, covariance.as_deref()),
+                _ => (crate::schema::Frame::model(), None),
+            };
+            let measured = measure::read_measured(p, &frame, covariance)?;
+            measured_prepared(study, measured, &format!("file {}", p.display()))?
         }
         None => measure::prepare(study, &built, out, progress)?,
     };
@@ -239,24 +237,6 @@ fn identify_measured(
         out,
         progress,
     )
-}
-
-/// The covariance of a `--measured` field: the study's `[measurement] covariance` (in the
-/// model frame, as the field given with `--measured` is), its point count checked against the
-/// field's; `None` without the key.
-fn measured_covariance(
-    study: &Study,
-    field: &Path,
-    points: usize,
-) -> Result<Option<femu_identify::weighted::FieldCovariance>> {
-    let Some(MeasurementSource::File {
-        covariance: Some(c),
-        ..
-    }) = study.measurements.first().map(|m| &m.source)
-    else {
-        return Ok(None);
-    };
-    measure::read_covariance(c, field, points, None).map(Some)
 }
 
 /// The study's one measurement replaced by `measured` (a field in the model frame, from

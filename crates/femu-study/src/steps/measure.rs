@@ -7,7 +7,7 @@ use crate::progress::Progress;
 use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
 use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, TravelTerm};
-use femu_identify::measured::MeasuredField;
+use femu_identify::measured::{DeclaredUnits, MeasuredField};
 use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::Side;
 use femu_mesh::locate::PointLocator;
@@ -143,24 +143,7 @@ pub fn prepare(
                     path,
                     frame,
                     covariance,
-                } => {
-                    let f = MeasuredField::read(path)?;
-                    let covariance = match covariance {
-                        Some(c) => Some(file_covariance(c, path, frame, f.points.len())?),
-                        None => None,
-                    };
-                    PreparedData::Measured(Measured {
-                        field: f.to_model_frame(
-                            frame.scale,
-                            frame.origin,
-                            frame.x_axis,
-                            frame.y_axis,
-                        ),
-                        source: path.display().to_string(),
-                        reference_known: false,
-                        covariance,
-                    })
-                }
+                } => PreparedData::Measured(read_measured(path, frame, covariance.as_deref())?),
                 MeasurementSource::Ultrasound => {
                     let out = if study.measurement_list() {
                         dir.join(&m.name)
@@ -184,21 +167,79 @@ pub fn prepare(
         .collect()
 }
 
-/// The full covariance of the field in `path` (`[measurement] covariance`, Matrix Market, in
-/// the file's frame) mapped to the model frame: `U = s (u_x e_x + u_y e_y)`, the columns of the
-/// map are `s e_x` and `s e_y`.
-fn file_covariance(
-    c: &Path,
+/// A measured-field file made ready to fit, whichever command reads it (`[measurement] file`
+/// or `femu identify --measured`): read; its declared units (`# units: px` or `mm`, as `femu
+/// dic` writes) checked against the study's `frame`; mapped to the model frame; the points that
+/// weigh nothing (`w = 0`: not trusted by the DIC) left out, with their rows of the full
+/// covariance `covariance` (`[measurement] covariance`, in the file's frame), so that a file
+/// with such rows and the same file without them give the same fit and the same intervals.
+pub fn read_measured(
     path: &Path,
     frame: &crate::schema::Frame,
-    points: usize,
-) -> Result<FieldCovariance> {
-    let s = frame.scale;
-    let t = [
-        [s * frame.x_axis[0], s * frame.y_axis[0]],
-        [s * frame.x_axis[1], s * frame.y_axis[1]],
-    ];
-    read_covariance(c, path, points, Some(t))
+    covariance: Option<&Path>,
+) -> Result<Measured> {
+    let all = MeasuredField::read(path)?;
+    let declared = all
+        .declared_units()
+        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    match declared {
+        Some(DeclaredUnits::Px) if !frame.pixels => bail!(
+            "{}: the file says its coordinates are pixels ('# units: px': no pixel size was known when it was written), and the study reads it in mm: give [measurement] units = \"px\" with pixel_size_mm (and origin_mm, x_axis, y_axis to place the image in the model)",
+            path.display()
+        ),
+        Some(DeclaredUnits::Mm) if frame.pixels => bail!(
+            "{}: the file says its coordinates are mm ('# units: mm'), and [measurement] units = \"px\" would scale them by pixel_size_mm again: remove units and pixel_size_mm (origin_mm and the axes still place it)",
+            path.display()
+        ),
+        _ => {}
+    }
+    let (field, kept) = all.weighted_points();
+    if field.points.is_empty() {
+        bail!(
+            "{}: every point has weight 0 (w = 0: none is trusted), nothing to fit",
+            path.display()
+        );
+    }
+    let covariance = match covariance {
+        Some(c) => {
+            let s = frame.scale;
+            let t = [
+                [s * frame.x_axis[0], s * frame.y_axis[0]],
+                [s * frame.x_axis[1], s * frame.y_axis[1]],
+            ];
+            let full = read_covariance(c, path, all.points.len(), Some(t))?;
+            let cov = if kept.len() == all.points.len() {
+                full
+            } else {
+                full.sub(&kept)
+            };
+            // Checked here, where the file can be named, not first at the fit.
+            femu_identify::weighted::Whitening::new(&cov).map_err(|e| {
+                anyhow::anyhow!(
+                    "[measurement] covariance {}: {e} (of the {} points of {} that weigh something)",
+                    c.display(),
+                    kept.len(),
+                    path.display()
+                )
+            })?;
+            Some(cov)
+        }
+        None => None,
+    };
+    let left_out = all.points.len() - kept.len();
+    let mut field = field.to_model_frame(frame.scale, frame.origin, frame.x_axis, frame.y_axis);
+    if left_out > 0 {
+        field.comments.push(format!(
+            "{left_out} of {} points left out: weight 0 (not trusted)",
+            all.points.len()
+        ));
+    }
+    Ok(Measured {
+        field,
+        source: path.display().to_string(),
+        reference_known: false,
+        covariance,
+    })
 }
 
 /// `[measurement] covariance` read from `c` (mapped by `map` to the model frame when the field
