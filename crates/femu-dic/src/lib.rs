@@ -34,8 +34,8 @@ pub mod noise;
 pub mod output;
 pub mod quality;
 pub mod read;
-pub mod solver;
 pub mod sequence;
+pub mod solver;
 pub mod sparse;
 
 pub use error::DicError;
