@@ -162,8 +162,54 @@ impl CorrelationArgs {
         })
     }
 
+    /// Checks every correlation option's range once, before any image is read or correlated:
+    /// the first one out of range is the error, naming the option as it is typed (`femu dic`,
+    /// `femu dic-check` and `femu dic-noise` call it through [`Self::spec`] and
+    /// [`Self::options`]).
+    pub fn validate_options(&self) -> Result<()> {
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            bail!(
+                "--tolerance {}: must be a positive number of pixels (e.g. 1e-3)",
+                self.tolerance
+            );
+        }
+        if self.max_iterations == 0 {
+            bail!("--max-iterations 0: must be at least 1");
+        }
+        if !(self.flag_factor > 1.0 && self.flag_factor.is_finite()) {
+            bail!(
+                "--flag-factor {}: must be a number above 1 (times the median residual)",
+                self.flag_factor
+            );
+        }
+        if !(self.min_zncc > -1.0 && self.min_zncc < 1.0) {
+            bail!("--min-zncc {}: must lie in (-1, 1)", self.min_zncc);
+        }
+        if let Some(l) = self.levels.filter(|&l| l > 6) {
+            bail!("--levels {l}: at most 6 pyramid levels");
+        }
+        if let Some(h) = self.element.filter(|&h| h < 4) {
+            bail!("--element {h}: at least 4 px (fewer pixels per element are not measurable)");
+        }
+        let regularization = self.regularization_setting()?;
+        if let (Some(h), Setting::Given(l)) = (self.element, regularization) {
+            if l < 2.0 * h as f64 {
+                bail!(
+                    "--regularization {l}: must be at least twice the element size (--element {h}: {} px)",
+                    2 * h
+                );
+            }
+        }
+        if let Some(r) = &self.roi {
+            Rect::parse(r)?;
+        }
+        self.pixel_size(None)?;
+        Ok(())
+    }
+
     /// The options with a fixed element size and regularization (dic-noise: auto = 16 px, off).
     fn options(&self) -> Result<DicOptions> {
+        self.validate_options()?;
         Ok(DicOptions {
             element_size: self.element.unwrap_or(16),
             regularization_length: match self.regularization_setting()? {
@@ -193,9 +239,7 @@ impl CorrelationArgs {
 
     /// The correlation as `femu dic` and `femu dic-check` run it.
     pub(crate) fn spec(&self) -> Result<CorrelationSpec> {
-        if !(self.min_zncc > -1.0 && self.min_zncc < 1.0) {
-            bail!("--min-zncc {}: must lie in (-1, 1)", self.min_zncc);
-        }
+        self.validate_options()?;
         Ok(CorrelationSpec {
             roi: match (&self.roi, &self.mask) {
                 (Some(r), _) => RoiSpec::Rect(Rect::parse(r)?),
@@ -416,11 +460,26 @@ pub fn run_dic_check(a: &DicCheckArgs, quiet: bool) -> Result<()> {
         println!("results in {}", a.out.display());
     }
     if !r.all_converged {
+        let failed: Vec<String> = r
+            .pairs
+            .iter()
+            .filter(|p| !p.converged)
+            .map(|p| {
+                let why = p.error.clone().unwrap_or_else(|| {
+                    format!(
+                        "not converged in {} iterations (element {} px)",
+                        p.iterations, p.element_size_px
+                    )
+                });
+                format!("  {} -> {}: {why}", p.reference, p.deformed)
+            })
+            .collect();
         bail!(
-            "{} of {} correlations did not converge (pairs.csv in {})",
-            r.pairs.iter().filter(|p| !p.converged).count(),
+            "{} of {} correlations did not converge (pairs.csv in {}):\n{}",
+            failed.len(),
             r.pairs.len(),
-            a.out.display()
+            a.out.display(),
+            failed.join("\n")
         );
     }
     Ok(())
@@ -544,4 +603,61 @@ pub fn run_noise(a: &DicNoiseArgs, quiet: bool) -> Result<()> {
         bail!("pair {} did not converge; see {}", k + 1, a.out.display());
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+    use femu_dic::auto::{advice_text, suggestions, FAILURES};
+    use femu_dic::Rect;
+
+    /// `femu dic ref.png def.png ARGS` through the command line's own parser, then the option
+    /// check every DIC command runs first.
+    fn parse(args: &[String]) {
+        let argv = ["femu", "dic", "ref.png", "def.png"]
+            .into_iter()
+            .map(String::from)
+            .chain(args.iter().cloned());
+        let cli = crate::Cli::try_parse_from(argv)
+            .unwrap_or_else(|e| panic!("femu dic refuses the advice {args:?}: {e}"));
+        let crate::Command::Dic(a) = cli.command else {
+            panic!("{args:?} is not femu dic")
+        };
+        a.corr
+            .validate_options()
+            .unwrap_or_else(|e| panic!("femu dic refuses the advice {args:?}: {e:#}"));
+    }
+
+    /// Every piece of advice femu can print after a failed correlation (each failure kind, with
+    /// and without a ROI hint, small and large elements) is accepted by `femu dic` as printed,
+    /// alone and all together.
+    #[test]
+    fn every_piece_of_advice_parses_as_femu_dic_options() {
+        let hint = Rect {
+            x: 16,
+            y: 84,
+            w: 448,
+            h: 197,
+        };
+        let mut checked = 0;
+        for failure in FAILURES {
+            for h in [4, 16, 64] {
+                for tissue in [None, Some(hint)] {
+                    let all = suggestions(failure, h, tissue);
+                    let text = advice_text(&all);
+                    let mut together = Vec::new();
+                    for s in &all {
+                        if !s.args.is_empty() {
+                            assert!(text.contains(&s.args.join(" ")), "{text}");
+                        }
+                        parse(&s.args);
+                        together.extend(s.args.iter().cloned());
+                        checked += 1;
+                    }
+                    parse(&together);
+                }
+            }
+        }
+        assert!(checked >= 20, "{checked} suggestions");
+    }
 }

@@ -18,7 +18,9 @@
 //! most the ROI's longer side) whose correlation converges with at least half of the elements
 //! trusted; when the median texture ratio is below [`LINE_TEXTURE`] (line-like texture, which
 //! needs the support of more neighbours: muscle fibres, fascia) the ladder starts at `8h`. If no rung converges the element size is doubled once and the ladder walked
-//! again. When everything fails the error names what was tried and what to try next.
+//! again. A rung that fails with the images not matching even on the coarsest pyramid level
+//! ([`MIN_COARSE_MATCH`]) ends the ladder: images of different scenes do not correlate with any
+//! option. When everything fails the error names what was tried and what to try next.
 
 use crate::error::DicError;
 use crate::image::GreyImage;
@@ -35,6 +37,12 @@ pub const SPECKLES_PER_ELEMENT: f64 = 2.0;
 
 /// Minimum share of trusted elements for a rung to be accepted.
 pub const MIN_TRUSTED: f64 = 0.5;
+
+/// The match on the coarsest pyramid level ([`coarse_match`]) below which a rung that failed
+/// ends the ladder: the images do not show the same scene. Measured: 0.96-0.99 between frames
+/// 2 and 4 video frames apart of the Logiq E9 gastrocnemius sequence (ROI 110,60,580x460), 0.00
+/// between independent speckle images and between unrelated B-mode and DIC Challenge frames.
+pub const MIN_COARSE_MATCH: f64 = 0.3;
 
 /// How the element size or the regularization length is set.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
@@ -228,6 +236,47 @@ fn attempt_of(m: &Measured, opts: &DicOptions) -> Attempt {
     }
 }
 
+/// The match of the images on the coarsest pyramid level a correlation solved: its level and
+/// `sqrt(1 − (r / s)²)`, with `r` the level's grey-level residual RMS (after the brightness
+/// correction) and `s` the reference's grey-level standard deviation over the region at that
+/// level — the ZNCC of the two images for a least-squares brightness fit: about 0 for images
+/// that show different scenes, whatever the regularization or the element size.
+pub fn coarse_match(f: &GreyImage, bb: &Rect, res: &DicResult) -> Option<(usize, f64)> {
+    let lv = res
+        .levels
+        .iter()
+        .filter(|l| l.level > 0 && l.skipped.is_none() && l.residual_rms.is_finite())
+        .max_by_key(|l| l.level)?;
+    let mut img = f.half();
+    for _ in 1..lv.level {
+        img = img.half();
+    }
+    let s = 1usize << lv.level;
+    let (x0, y0) = (
+        (bb.x / s).min(img.width - 1),
+        (bb.y / s).min(img.height - 1),
+    );
+    let (x1, y1) = (
+        ((bb.x + bb.w) / s).clamp(x0 + 1, img.width),
+        ((bb.y + bb.h) / s).clamp(y0 + 1, img.height),
+    );
+    let (mut sum, mut sum2, mut n) = (0.0, 0.0, 0.0);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let v = img.at(x, y);
+            sum += v;
+            sum2 += v * v;
+            n += 1.0;
+        }
+    }
+    let var = (sum2 / n - (sum / n).powi(2)).max(0.0);
+    if !(var > 0.0) {
+        return None;
+    }
+    let ratio = lv.residual_rms / var.sqrt();
+    Some((lv.level, (1.0 - ratio * ratio).max(0.0).sqrt()))
+}
+
 /// Correlates `f` → `g` with the element size and regularization length chosen as the module
 /// documentation says (or as given), returning the field with its quality and the choice.
 pub fn correlate_auto(
@@ -253,6 +302,18 @@ pub fn correlate_auto(
     };
     // Element size and ROI errors (an element larger than the ROI, an empty mask) at once.
     crate::mesh::DicMesh::new(roi, f.width, f.height, h0)?;
+    // Options out of their range (tolerance, iterations, flag factor, levels, a given
+    // regularization shorter than two elements) would fail every rung alike: refused once,
+    // before the ladder.
+    DicOptions {
+        element_size: h0,
+        regularization_length: match regularization {
+            Setting::Given(l) => Some(l),
+            _ => None,
+        },
+        ..base.clone()
+    }
+    .validate()?;
     let (ratio, gradient) = texture(f, &bb, h0);
     let mut stats = ImageStatistics {
         speckle_fwhm_px: fwhm,
@@ -334,6 +395,26 @@ pub fn correlate_auto(
                     100.0 * a.trusted_fraction
                 ));
             }
+            // Frames that do not match even on the coarsest level (different scenes, or a
+            // motion far beyond the capture range): no longer regularization or larger element
+            // makes them correlate; the ladder stops here instead of trying every rung.
+            let mismatch = (!ok)
+                .then(|| coarse_match(f, &bb, &m.res))
+                .flatten()
+                .filter(|&(_, z)| z < MIN_COARSE_MATCH);
+            if let Some((level, z)) = mismatch {
+                a.note = Some(format!(
+                    "{}; the images do not match on the coarsest level (1/{} resolution, ZNCC {z:.2} < {MIN_COARSE_MATCH})",
+                    a.note.take().unwrap_or_else(|| "rejected".into()),
+                    1usize << level
+                ));
+                attempts.push(a);
+                return Err(DicError::Diverged(format!(
+                    "the images do not correlate: on the coarsest pyramid level (1/{} resolution) they match with a ZNCC of {z:.2} (< {MIN_COARSE_MATCH}) after the correlation (element {h} px, regularization {}); they may not show the same scene, or move farther than the correlation can follow. The rest of the ladder (longer regularizations, larger elements) was not tried",
+                    1usize << level,
+                    ladder[k].map_or("off".to_string(), |l| format!("{l} px")),
+                )));
+            }
             attempts.push(a);
             if ok {
                 let reason = match (element, regularization) {
@@ -371,21 +452,92 @@ pub fn correlate_auto(
     )))
 }
 
+/// What failed, for [`suggestions`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Failure {
+    /// A correlation with the element size and regularization given did not converge.
+    GivenOptions,
+    /// No rung of the automatic choice converged with enough elements trusted.
+    NothingConverged,
+}
+
+/// Every [`Failure`], for a caller (a test) that checks each piece of advice.
+pub const FAILURES: [Failure; 2] = [Failure::GivenOptions, Failure::NothingConverged];
+
+/// One thing to try next: what it is, and the options of `femu dic` that do it (none: leave
+/// options out).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Suggestion {
+    pub what: &'static str,
+    pub args: Vec<String>,
+}
+
+/// What to try after `failure` with element `h`: a larger element, a longer regularization,
+/// and, when `tissue` (the bright part of the ROI, [`tissue_box`]) is given, a ROI over it.
+pub fn suggestions(failure: Failure, h: usize, tissue: Option<Rect>) -> Vec<Suggestion> {
+    let (element, length) = match failure {
+        Failure::GivenOptions => (2 * h, 16 * h),
+        Failure::NothingConverged => (4 * h, 32 * h),
+    };
+    let mut out = Vec::new();
+    if failure == Failure::GivenOptions {
+        out.push(Suggestion {
+            what: "the automatic choice (no --element, no --regularization)",
+            args: Vec::new(),
+        });
+    }
+    out.push(Suggestion {
+        what: "a larger element",
+        args: vec!["--element".into(), element.to_string()],
+    });
+    out.push(Suggestion {
+        what: "a longer regularization",
+        args: vec!["--regularization".into(), length.to_string()],
+    });
+    if let Some(t) = tissue {
+        out.push(Suggestion {
+            what: "a smaller ROI away from the dark bands",
+            args: vec!["--roi".into(), format!("{},{},{}x{}", t.x, t.y, t.w, t.h)],
+        });
+    }
+    out
+}
+
+/// The suggestions as one sentence: `try A (--x 1), B (--y 2); or C (--roi ...)`.
+pub fn advice_text(suggestions: &[Suggestion]) -> String {
+    let item = |s: &Suggestion| {
+        if s.args.is_empty() {
+            s.what.to_string()
+        } else {
+            format!("{} ({})", s.what, s.args.join(" "))
+        }
+    };
+    let (roi, rest): (Vec<&Suggestion>, Vec<&Suggestion>) = suggestions
+        .iter()
+        .partition(|s| s.args.first().is_some_and(|a| a == "--roi"));
+    let mut text = format!(
+        "try {}",
+        rest.iter().map(|s| item(s)).collect::<Vec<_>>().join(", ")
+    );
+    for s in roi {
+        text.push_str(&format!("; or {}", item(s)));
+    }
+    text
+}
+
+/// The bright part of `bb` when it is smaller than `bb` (a ROI worth suggesting).
+fn tissue_hint(f: &GreyImage, bb: &Rect, h: usize) -> Option<Rect> {
+    tissue_box(f, bb, h).filter(|t| t != bb)
+}
+
 /// What to try when a correlation with element `h` did not converge: a larger element, a
 /// longer regularization, a ROI away from the dark bands (computed from the image).
 pub fn advice(f: &GreyImage, bb: &Rect, h: usize) -> String {
-    let roi_hint = match tissue_box(f, bb, h) {
-        Some(t) if t != *bb => format!(
-            "; or a smaller ROI away from the dark bands, e.g. --roi {},{},{},{}",
-            t.x, t.y, t.w, t.h
-        ),
-        _ => String::new(),
-    };
-    format!(
-        "try the automatic choice (no --element, no --regularization), a larger element (--element {}), a longer regularization (--regularization {}){roi_hint}",
-        2 * h,
-        16 * h
-    )
+    advice_text(&suggestions(
+        Failure::GivenOptions,
+        h,
+        tissue_hint(f, bb, h),
+    ))
 }
 
 /// The error message when nothing converged: what was tried and what to try.
@@ -402,20 +554,19 @@ fn failure_advice(f: &GreyImage, bb: &Rect, attempts: &[Attempt], h: usize) -> S
             )
         })
         .collect();
-    let tissue = tissue_box(f, bb, h);
-    let roi_hint = match tissue {
-        Some(t) if t != *bb => format!(
-            "; or a smaller ROI away from the dark bands, e.g. --roi {},{},{},{}",
-            t.x, t.y, t.w, t.h
-        ),
-        _ => String::new(),
-    };
+    let hint = tissue_hint(f, bb, h);
+    let text = advice_text(&suggestions(Failure::NothingConverged, h, hint));
     format!(
-        "no correlation converged ({}). Try a larger element (--element {}), a longer regularization (--regularization {}){roi_hint}",
+        "no correlation converged ({}). {}",
         tried.join("; "),
-        4 * h,
-        32 * h
+        capitalized(&text)
     )
+}
+
+fn capitalized(s: &str) -> String {
+    let mut c = s.chars();
+    c.next()
+        .map_or_else(String::new, |f| f.to_uppercase().chain(c).collect())
 }
 
 /// The run of rows and of columns of `bb`, around its middle, whose mean grey level exceeds a

@@ -114,6 +114,62 @@ fn load_frames(paths: &[PathBuf]) -> Result<Vec<Frame>, DicError> {
     Ok(out)
 }
 
+/// The file a frame's label comes from (`stem` or `stem#k`).
+fn file_of(paths: &[PathBuf], label: &str) -> String {
+    let stem = label.split('#').next().unwrap_or(label);
+    paths
+        .iter()
+        .find(|p| p.file_stem().is_some_and(|s| s.to_string_lossy() == stem))
+        .map_or_else(|| label.to_string(), |p| p.display().to_string())
+}
+
+/// What would fail every pair alike, refused before any correlation: frames of different
+/// sizes (naming the first that differs and both sizes), a region of interest (`--roi`,
+/// `--mask`) that does not fit the frames, an element size that does not fit the region.
+fn check_inputs(
+    paths: &[PathBuf],
+    frames: &[Frame],
+    spec: &CorrelationSpec,
+) -> Result<(), DicError> {
+    let first = &frames[0];
+    let size = (first.image.width, first.image.height);
+    if let Some(other) = frames
+        .iter()
+        .find(|f| (f.image.width, f.image.height) != size)
+    {
+        return Err(DicError::option(
+            "frames",
+            format!(
+                "{} ({}) is {} x {} px, but {} ({}) is {} x {} px: the frames of a sequence must have one size (crop them alike)",
+                file_of(paths, &other.label),
+                other.label,
+                other.image.width,
+                other.image.height,
+                file_of(paths, &first.label),
+                first.label,
+                size.0,
+                size.1
+            ),
+        ));
+    }
+    let roi = spec.roi.resolve(size.0, size.1)?;
+    let what = match &spec.roi {
+        crate::command::RoiSpec::Rect(_) => "--roi",
+        crate::command::RoiSpec::Mask(_) => "--mask",
+        crate::command::RoiSpec::Whole => "the whole frame",
+    };
+    roi.bounding_box(size.0, size.1).map_err(|e| {
+        DicError::Roi(format!(
+            "{what}: {e} (the frames are {} x {} px)",
+            size.0, size.1
+        ))
+    })?;
+    if let crate::auto::Setting::Given(h) = spec.element {
+        crate::mesh::DicMesh::new(&roi, size.0, size.1, h as usize)?;
+    }
+    Ok(())
+}
+
 type Field = Option<Measured>;
 
 fn checked(m: &Measured) -> CheckedField<'_> {
@@ -124,10 +180,17 @@ fn checked(m: &Measured) -> CheckedField<'_> {
     }
 }
 
-/// Correlates `a → b` and records the pair.
+/// Correlates `a → b` and records the pair. After a stop request nothing is correlated or
+/// recorded (the pairs and checks finished are written, then the check stops).
 fn pair(spec: &CorrelationSpec, a: &Frame, b: &Frame, pairs: &mut Vec<PairReport>) -> Field {
     let t = Instant::now();
+    if femu_mesh::stop::requested() {
+        return None;
+    }
     let r = spec.measure(&a.image, &b.image);
+    if matches!(r, Err(DicError::Interrupted(_))) {
+        return None;
+    }
     let mut rep = PairReport {
         reference: a.label.clone(),
         deformed: b.label.clone(),
@@ -175,6 +238,7 @@ pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
     inputs.extend(job.correlation.roi.mask_file());
     femu_mesh::folder::refuse_inputs_in(&job.out, &inputs)?;
     let frames = load_frames(&job.frames)?;
+    check_inputs(&job.frames, &frames, &job.correlation)?;
     femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
@@ -248,6 +312,10 @@ pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
         &job.out.join("checks.csv"),
         checks.iter().map(|c| &c.0).chain(pooled.iter()),
     )?;
+    if femu_mesh::stop::requested() {
+        // Stopped: the pairs and checks finished are in pairs.csv and checks.csv.
+        return Err(DicError::Interrupted(femu_mesh::stop::Interrupted));
+    }
     let report = CheckReport {
         femu_version: env!("CARGO_PKG_VERSION"),
         command: "dic-check",

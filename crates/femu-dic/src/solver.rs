@@ -104,7 +104,8 @@ impl Default for DicOptions {
 }
 
 impl DicOptions {
-    fn validate(&self) -> Result<(), DicError> {
+    /// The options' ranges, checked by [`correlate`] before any work (an error names the option).
+    pub fn validate(&self) -> Result<(), DicError> {
         if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
             return Err(DicError::option(
                 "tolerance",
