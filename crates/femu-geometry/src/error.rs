@@ -40,6 +40,14 @@ pub enum GeometryError {
     },
     #[error("no tissue left to mesh: {0}")]
     NoTissue(String),
+    /// Tissue in separate bodies of comparable size (two thighs in one slice): which one to
+    /// model is the user's choice.
+    #[error("the tissue forms {count} separate bodies of {areas} mm² (the smaller ones at least {percent:.0} % of the largest): femu models one cross-section; crop the image to one body, or label the others as background")]
+    SeveralBodies {
+        count: usize,
+        areas: String,
+        percent: f64,
+    },
     #[error("invalid parameter {name} = {value}: {reason}")]
     InvalidParameter {
         name: String,

@@ -370,7 +370,7 @@ pub(crate) fn mesh_classes(
         options.min_island_mm2,
         &class_name,
         &mut warnings,
-    );
+    )?;
     let after = grid.class_areas(n_classes);
     if after[FIRST_REGION as usize..].iter().all(|&a| a == 0.0) {
         return Err(GeometryError::NoTissue(
@@ -536,13 +536,17 @@ fn bordering_class(grid: &ClassGrid, id: &[usize], k: usize, pixels: &[usize]) -
         .map(|(c, _)| c)
 }
 
+/// A tissue piece detached from the largest one and at least this fraction of its area is a
+/// second body (another thigh in the slice), not a speck of segmentation: refused, not dropped.
+const SECOND_BODY_FRACTION: f64 = 0.1;
+
 /// Step 2: islands, holes, detached pieces (see the module documentation).
 fn clean(
     grid: &mut ClassGrid,
     min_island_mm2: f64,
     class_name: &dyn Fn(u16) -> String,
     warnings: &mut Vec<String>,
-) {
+) -> Result<(), GeometryError> {
     let pa = grid.pixel_area();
     // (from, to) -> (pieces, area)
     let mut merged: BTreeMap<(u16, u16), (usize, f64)> = BTreeMap::new();
@@ -601,7 +605,27 @@ fn clean(
         .filter(|(_, c)| is_tissue(c.class))
         .max_by_key(|(_, c)| c.pixels.len())
         .map(|(k, _)| k);
-    let Some(main) = main else { return };
+    let Some(main) = main else { return Ok(()) };
+    let main_pixels = comps[main].pixels.len();
+    let mut bodies: Vec<usize> = comps
+        .iter()
+        .filter(|c| {
+            is_tissue(c.class) && c.pixels.len() as f64 >= SECOND_BODY_FRACTION * main_pixels as f64
+        })
+        .map(|c| c.pixels.len())
+        .collect();
+    if bodies.len() > 1 {
+        bodies.sort_unstable_by(|a, b| b.cmp(a));
+        return Err(GeometryError::SeveralBodies {
+            count: bodies.len(),
+            areas: bodies
+                .iter()
+                .map(|&n| format!("{:.1}", n as f64 * pa))
+                .collect::<Vec<_>>()
+                .join(", "),
+            percent: 100.0 * SECOND_BODY_FRACTION,
+        });
+    }
     let mut detached = (0usize, 0.0f64);
     for (k, comp) in comps.iter().enumerate() {
         if k != main && is_tissue(comp.class) {
@@ -660,6 +684,7 @@ fn clean(
             loose.0, loose.1
         ));
     }
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1355,10 +1380,56 @@ mod tests {
         g.class[28 * 40 + 12] = BACKGROUND;
         g.class[40 + 1] = FIRST_REGION;
         let mut w = Vec::new();
-        clean(&mut g, 3.0, &|c| format!("class {c}"), &mut w);
+        clean(&mut g, 3.0, &|c| format!("class {c}"), &mut w).unwrap();
         assert_eq!(g.class[10 * 40 + 30], FIRST_REGION);
         assert_eq!(g.class[28 * 40 + 12], FIRST_REGION);
         assert_eq!(g.class[40 + 1], BACKGROUND);
         assert_eq!(w.len(), 3, "{w:?}");
+    }
+
+    /// Two separate bodies of tissue (two thighs in one slice) are refused with their areas;
+    /// a piece below a tenth of the largest is a speck, dropped with a warning.
+    #[test]
+    fn two_bodies_are_refused_with_their_areas() {
+        let (nx, ny) = (60, 20);
+        let mut g = ClassGrid {
+            nx,
+            ny,
+            sx: 0.5,
+            sy: 0.5,
+            origin: [0.0, 0.0],
+            class: vec![BACKGROUND; nx * ny],
+        };
+        let mut put = |i0: usize, w: usize| {
+            for j in 5..15 {
+                for i in i0..i0 + w {
+                    g.class[j * nx + i] = FIRST_REGION;
+                }
+            }
+        };
+        put(5, 20);
+        put(35, 16);
+        let mut w = Vec::new();
+        let e = clean(&mut g, 0.0, &|c| format!("class {c}"), &mut w)
+            .unwrap_err()
+            .to_string();
+        // 200 and 160 pixels of 0.25 mm².
+        assert!(e.contains("2 separate bodies of 50.0, 40.0 mm²"), "{e}");
+        // A piece of 10 x 1 pixels next to the 200-pixel body: a speck.
+        for i in 35..60 {
+            for j in 0..ny {
+                g.class[j * nx + i] = BACKGROUND;
+            }
+        }
+        for i in 40..50 {
+            g.class[10 * nx + i] = FIRST_REGION;
+        }
+        let mut w = Vec::new();
+        clean(&mut g, 0.0, &|c| format!("class {c}"), &mut w).unwrap();
+        assert_eq!(g.class[10 * nx + 45], BACKGROUND);
+        assert!(
+            w.iter().any(|m| m.contains("dropped 1 tissue piece")),
+            "{w:?}"
+        );
     }
 }

@@ -72,9 +72,21 @@ type Result<T> = std::result::Result<T, InpError>;
 /// Reads and resolves an input deck. See the [module documentation](self) for the subset.
 pub fn read_inp(path: &Path) -> Result<Deck> {
     let file = path.display().to_string();
-    let text = fs::read_to_string(path).map_err(|source| InpError::Io {
+    let bytes = fs::read(path).map_err(|source| InpError::Io {
         file: file.clone(),
         source,
+    })?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let line = 1 + e.as_bytes()[..at].iter().filter(|b| **b == b'\n').count();
+        InpError::Line {
+            file: file.clone(),
+            line,
+            message: format!(
+                "not a text deck: byte {} is not UTF-8 text (an Abaqus/CalculiX deck is a text file)",
+                at + 1
+            ),
+        }
     })?;
     parse_inp(&text, &file)
 }
@@ -693,6 +705,12 @@ impl<'f> Parser<'f> {
             }
             self.max_fields(b, r, 4, "label, x, y[, z]")?;
             let label = self.int(&r.fields[0], "a node label")?;
+            if label < 1 {
+                return Err(self.err(
+                    r.line,
+                    format!("*NODE: node label {label}: labels must be positive integers"),
+                ));
+            }
             let x = self.num(&r.fields[1])?;
             let y = self.num(&r.fields[2])?;
             self.opt_num(&r.fields, 3)?;
