@@ -341,6 +341,27 @@ fn labels(relabel: impl Fn(u32) -> u32) -> Vec<u8> {
     png(&femu_dic::GreyImage::new(w, h, data).unwrap())
 }
 
+/// Two label images of `labels` side by side (two thighs in one slice): 240 x 100 px.
+fn two_bodies() -> Vec<u8> {
+    let (w, h) = (240usize, 100usize);
+    let mut data = vec![0.0; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            let r = ((i as f64 % 120.0 - 60.0).powi(2) + (j as f64 - 50.0).powi(2)).sqrt();
+            data[j * w + i] = if r < 8.0 {
+                7.0
+            } else if r < 30.0 {
+                2.0
+            } else if r < 40.0 {
+                1.0
+            } else {
+                0.0
+            };
+        }
+    }
+    png(&femu_dic::GreyImage::new(w, h, data).unwrap())
+}
+
 fn mesh_labels(name: &'static str, image: Vec<u8>, args: &[&str], expect: &[&'static str]) -> Case {
     let mut a = vec!["mesh", "labels", "labels.png"];
     if !args.contains(&"--pixel-size") {
@@ -1241,6 +1262,174 @@ fn output_folder_cases() -> Vec<Case> {
     ]
 }
 
+/// `femu design` on `study`.
+fn design_study(name: &'static str, study: &str, expect: &[&'static str]) -> Case {
+    case(
+        name,
+        vec![text("study.toml", study)],
+        &["design", "study.toml", "--out", "out", "-q"],
+        expect,
+    )
+}
+
+/// `STUDY` with its `[measurement]` table replaced by `measurements`.
+fn study_measuring(measurements: &str) -> String {
+    study_with("[measurement]\nsource = \"virtual\"\n", measurements)
+}
+
+/// Keys checked with the whole study, before anything runs, whether or not a step uses them;
+/// a measured field given twice; binary and badly labelled decks.
+fn whole_study_cases() -> Vec<Case> {
+    let field = csv(&tissue_rows().iter().map(String::as_str).collect::<Vec<_>>());
+    vec![
+        design_study(
+            "study: design spacing far below a pixel",
+            &format!("{STUDY}[design]\nspacing_mm = 1e-4\n"),
+            &[
+                "study.toml",
+                "[design] spacing_mm (line 26)",
+                "above the limit of 2000000",
+            ],
+        ),
+        design_study(
+            "study: design of too many window sizes",
+            &format!(
+                "{STUDY}[design]\nmax_measurements = 4\nwindows_mm = [{}]\n",
+                (10..50)
+                    .map(|k| format!("[{k}, 20]"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            &[
+                "study.toml",
+                "[design] max_measurements (line 26)",
+                "above the limit of 200000",
+            ],
+        ),
+        design_study(
+            "study: design window larger than the thigh",
+            &format!("{STUDY}[design]\nwindows_mm = [[200.0, 200.0]]\n"),
+            &[
+                "study.toml",
+                "[design] windows_mm (line 26)",
+                "200 x 200 mm window",
+                "larger than the model seen from the anterior side: 140.0 mm across",
+            ],
+        ),
+        case(
+            "study: one measured file in two measurements",
+            vec![
+                text(
+                    "study.toml",
+                    &study_measuring(
+                        "[[measurement]]\nfile = \"field.csv\"\n[[measurement]]\nfile = \"./sub/../field.csv\"\n",
+                    ),
+                ),
+                text("field.csv", &field),
+                text("sub/keep.txt", "a folder"),
+            ],
+            &["run", "study.toml", "--out", "out", "-q"],
+            &[
+                "study.toml",
+                "[[measurement]] 2 file (line 21)",
+                "field.csv is already read by [[measurement]] 1 file (line 19)",
+                "count its points twice",
+            ],
+        ),
+        run_study(
+            "study: measurement window spacing larger than the window",
+            &study_measuring("[measurement]\nwindow = \"anterior\"\nspacing_mm = 500\n"),
+            &[
+                "study.toml",
+                "[measurement] spacing_mm (line 20)",
+                "larger than the 40 x 40 mm window",
+            ],
+        ),
+        case(
+            "study: measured field placed 1e300 mm away",
+            vec![
+                text(
+                    "study.toml",
+                    &study_measuring("[measurement]\nfile = \"field.csv\"\norigin_mm = [1e300, 0.0]\n"),
+                ),
+                text("field.csv", &field),
+            ],
+            &["run", "study.toml", "--out", "out", "-q"],
+            &[
+                "study.toml",
+                "[measurement] origin_mm (line 20)",
+                "beyond ±1e6 mm",
+            ],
+        ),
+        run_study(
+            "study: ultrasound frequency 0 in a virtual study",
+            &format!("{STUDY}[ultrasound]\nfrequency_mhz = 0\n"),
+            &[
+                "study.toml",
+                "[ultrasound] frequency_mhz (line 26)",
+                "outside [1, 30]",
+            ],
+        ),
+        run_study(
+            "study: ultrasound frequency 0 in an ultrasound study",
+            &format!(
+                "{}[ultrasound]\nfrequency_mhz = 0\n",
+                study_with("source = \"virtual\"", "source = \"ultrasound\"")
+            ),
+            &[
+                "study.toml",
+                "[ultrasound] frequency_mhz (line 26)",
+                "outside [1, 30]",
+            ],
+        ),
+        run_study(
+            "study: probe of 0 px per mm",
+            &format!("{STUDY}[probe]\npx_per_mm = 0\nwidth_mm = 40\n"),
+            &["study.toml", "[probe] px_per_mm (line 26)", "outside (1, 40]"],
+        ),
+        run_study(
+            "study: probe of negative width",
+            &format!("{STUDY}[probe]\nwidth_mm = -5\n"),
+            &["study.toml", "[probe] width_mm (line 26)", "outside (0, 200]"],
+        ),
+        solve_deck(
+            "deck: binary garbage",
+            "*HEADING\n\u{0}\u{1}",
+            &["deck.inp:2", "not a text deck", "not UTF-8"],
+        )
+        .with_bytes("deck.inp", b"*HEADING\n\xff\xfe\x00\x01binary\n"),
+        mesh_labels(
+            "labels: two bodies",
+            two_bodies(),
+            &["--map", "1=fat,2=quadriceps", "--bone", "7"],
+            &[
+                "labels.png",
+                "2 separate bodies of 1205.0, 1205.0 mm²",
+                "crop the image",
+            ],
+        ),
+        solve_deck(
+            "deck: node label 0",
+            &deck_with("1, 0.0, 0.0", "0, 0.0, 0.0"),
+            &["deck.inp:4", "node label 0", "positive integers"],
+        ),
+        solve_deck(
+            "deck: node label -5",
+            &deck_with("1, 0.0, 0.0", "-5, 0.0, 0.0"),
+            &["deck.inp:4", "node label -5", "positive integers"],
+        ),
+    ]
+}
+
+impl Case {
+    /// The case with the bytes of its file `name` replaced (input that is not text).
+    fn with_bytes(mut self, name: &'static str, bytes: &[u8]) -> Case {
+        let f = self.files.iter_mut().find(|f| f.0 == name).unwrap();
+        f.1 = bytes.to_vec();
+        self
+    }
+}
+
 fn catalogue() -> Vec<Case> {
     [
         deck_cases(),
@@ -1253,6 +1442,7 @@ fn catalogue() -> Vec<Case> {
         manifest_cases(),
         command_line_cases(),
         output_folder_cases(),
+        whole_study_cases(),
     ]
     .into_iter()
     .flatten()

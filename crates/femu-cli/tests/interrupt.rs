@@ -178,6 +178,56 @@ fn sigint_stops_dic_within_two_seconds() {
     assert!(stopped > 0, "no moment fell inside the correlation");
 }
 
+/// A design of many candidates: 3 tests x 4 sides x 7 window sizes, up to 3 per design (some
+/// 8e4 designs to rank after the three solves).
+const DESIGN: &str = "[model]
+elements = 3000
+[design]
+max_measurements = 3
+windows_mm = [[20.0, 20.0], [30.0, 20.0], [40.0, 20.0], [40.0, 30.0], [40.0, 40.0], [50.0, 40.0], [60.0, 40.0]]
+";
+
+#[test]
+fn sigint_stops_design_keeping_its_finished_windows() {
+    let dir = scratch("design");
+    let study = write(&dir, "study.toml", DESIGN);
+    let mut stopped = 0;
+    for (k, delay) in moments(0xbb67_ae85_84ca_a73b, 3, 300, 3500)
+        .into_iter()
+        .enumerate()
+    {
+        let out = dir.join(format!("out{k}"));
+        let args = [
+            "design",
+            study.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "-q",
+        ];
+        let s = signal_after(&args, "INT", delay);
+        if check_stopped(&format!("design at {delay:?}"), &s, &out) {
+            stopped += 1;
+            let summary = json(&out.join("summary.json"));
+            assert_eq!(summary["status"], "interrupted");
+            assert!(!out.join("designs.csv").exists(), "no ranking was finished");
+            // The windows of the tests solved, one row each, as the summary says.
+            if summary["kept"][0] == "candidates.csv" {
+                let rows = std::fs::read_to_string(out.join("candidates.csv"))
+                    .unwrap()
+                    .lines()
+                    .count()
+                    - 1;
+                let said = summary["interrupted"].as_str().unwrap();
+                assert!(
+                    rows > 0 && said.contains(&format!("the {rows} windows")),
+                    "{said}"
+                );
+            }
+        }
+    }
+    assert!(stopped > 0, "no moment fell inside the design");
+}
+
 /// SIGKILL gives no chance to clean up: what is left under a final name must still be whole.
 #[test]
 fn runs_killed_at_random_moments_leave_no_truncated_file() {

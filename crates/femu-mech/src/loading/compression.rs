@@ -36,7 +36,7 @@ pub static KIND: TestKind = TestKind {
 fn build(keys: &TestKeys) -> Result<Loading, KeyError> {
     Ok(Loading::new(Compression {
         side: super::side_key(keys, "side")?,
-        force: super::positive_key(keys, "force_n_per_mm", None)?,
+        force: super::positive_key(keys, "force_n_per_mm", None, super::MAX_FORCE_N_PER_MM)?,
     }))
 }
 

@@ -29,6 +29,10 @@ pub static KIND: TestKind = TestKind {
     build,
 };
 
+/// The largest contention pressure (mmHg): 1 000 mmHg (0.13 MPa), three times a surgical
+/// tourniquet's; the seed's garment applies 20.
+pub const MAX_PRESSURE_MMHG: f64 = 1000.0;
+
 fn build(keys: &TestKeys) -> Result<Loading, KeyError> {
     let pressure = match (keys.get("pressure_mmhg"), keys.get("pressure_mpa")) {
         (Some(_), Some(_)) => {
@@ -37,8 +41,12 @@ fn build(keys: &TestKeys) -> Result<Loading, KeyError> {
                 message: "give pressure_mmhg or pressure_mpa".into(),
             })
         }
-        (Some(_), None) => super::positive_key(keys, "pressure_mmhg", None)? * MMHG_IN_MPA,
-        (None, Some(_)) => super::positive_key(keys, "pressure_mpa", None)?,
+        (Some(_), None) => {
+            super::positive_key(keys, "pressure_mmhg", None, MAX_PRESSURE_MMHG)? * MMHG_IN_MPA
+        }
+        (None, Some(_)) => {
+            super::positive_key(keys, "pressure_mpa", None, MAX_PRESSURE_MMHG * MMHG_IN_MPA)?
+        }
         (None, None) => 20.0 * MMHG_IN_MPA,
     };
     Ok(Loading::new(Contention { pressure }))

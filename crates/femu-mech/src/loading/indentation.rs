@@ -41,8 +41,8 @@ pub static KIND: TestKind = TestKind {
 fn build(keys: &TestKeys) -> Result<Loading, KeyError> {
     Ok(Loading::new(Indentation {
         site: super::side_key(keys, "side")?,
-        radius: super::positive_key(keys, "radius_mm", Some(10.0))?,
-        force: super::positive_key(keys, "force_n_per_mm", None)?,
+        radius: super::positive_key(keys, "radius_mm", Some(10.0), super::MAX_BODY_SIZE_MM)?,
+        force: super::positive_key(keys, "force_n_per_mm", None, super::MAX_FORCE_N_PER_MM)?,
     }))
 }
 

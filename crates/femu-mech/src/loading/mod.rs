@@ -181,8 +181,21 @@ impl TestKind {
     }
 }
 
-/// `keys[name]` as a positive finite number, `default` when absent (`None`: required).
-pub fn positive_key(keys: &TestKeys, name: &str, default: Option<f64>) -> Result<f64, KeyError> {
+/// The largest force of a plate or an indenter (N per mm of thickness): 100, a thousand times
+/// the seed's 0.1 (some 10 kN on a 10 cm slice).
+pub const MAX_FORCE_N_PER_MM: f64 = 100.0;
+
+/// The largest size of a rigid body pressed on the thigh (mm): 1 m.
+pub const MAX_BODY_SIZE_MM: f64 = 1000.0;
+
+/// `keys[name]` as a positive number up to `max` (the largest the key can mean: beyond it the
+/// value is a unit or typing mistake), `default` when absent (`None`: required).
+pub fn positive_key(
+    keys: &TestKeys,
+    name: &str,
+    default: Option<f64>,
+    max: f64,
+) -> Result<f64, KeyError> {
     let bad = |message: String| KeyError {
         key: name.to_string(),
         message,
@@ -197,6 +210,9 @@ pub fn positive_key(keys: &TestKeys, name: &str, default: Option<f64>) -> Result
     };
     if !(v > 0.0 && v.is_finite()) {
         return Err(bad(format!("must be positive and finite, got {v}")));
+    }
+    if v > max {
+        return Err(bad(format!("must be positive and at most {max}, got {v}")));
     }
     Ok(v)
 }

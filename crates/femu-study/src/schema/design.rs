@@ -35,6 +35,36 @@ pub struct DesignSpec {
     pub grouped: bool,
 }
 
+/// The most points all the design's windows may hold together (every side and size): the
+/// points and one window's whitened Jacobian (2 rows per point and free parameter) are held at
+/// once, some 0.3 GB for ten parameters at the limit. The default windows hold some 6 000.
+pub const MAX_DESIGN_POINTS: usize = 2_000_000;
+
+/// The most designs ranked: each scored design is kept (its names, sds and criteria) for
+/// `designs.csv` and the two rankings; `femu design` of 78 778 designs peaked at 0.3 GB, so
+/// some 0.8 GB at the limit. The defaults make 288; 4 measurements of 3 tests x 4 sides x 2
+/// sizes some 1e4.
+pub const MAX_DESIGNS: usize = 200_000;
+
+/// The points along one side of a window of `length_mm` at `spacing_mm` (as the design's
+/// windows place them: at least one).
+fn window_points(length_mm: f64, spacing_mm: f64) -> f64 {
+    (length_mm / spacing_mm).floor().max(1.0)
+}
+
+/// How many designs of 1 to `max_size` candidates there are when `groups` groups (a test seen
+/// from one side) of `per_group` candidates each (the window sizes) do not combine within a
+/// group: `Σ_k C(groups, k) per_group^k` (as a float: it may be huge).
+pub fn design_count(groups: usize, per_group: usize, max_size: usize) -> f64 {
+    let mut total = 0.0;
+    let mut choose = 1.0;
+    for k in 1..=max_size.min(groups) {
+        choose *= (groups + 1 - k) as f64 / k as f64;
+        total += choose * (per_group as f64).powi(k as i32);
+    }
+    total
+}
+
 /// Checks `[design]`.
 pub(crate) fn parse(
     e: Option<DesignEntry>,
@@ -88,6 +118,41 @@ pub(crate) fn parse(
         Some(s) => lines.positive("design", 0, "spacing_mm", s)?,
         None => 16.0 / probe.px_per_mm,
     };
+    if let Some(w) = windows_mm.iter().find(|w| spacing_mm > w[0].min(w[1])) {
+        return Err(err(
+            if e.spacing_mm.is_some() {
+                "spacing_mm"
+            } else {
+                "windows_mm"
+            },
+            format!(
+                "{spacing_mm} mm is larger than the {} x {} mm window: its grid would hold a single point",
+                w[0], w[1]
+            ),
+        ));
+    }
+    // Every window of every side is held at once: bounded before the step allocates them.
+    let points = (sides.len() as f64)
+        * windows_mm
+            .iter()
+            .map(|w| window_points(w[0], spacing_mm) * window_points(w[1], spacing_mm))
+            .sum::<f64>();
+    if points > MAX_DESIGN_POINTS as f64 {
+        let key = if e.spacing_mm.is_some() {
+            "spacing_mm"
+        } else {
+            "windows_mm"
+        };
+        return Err(err(
+            key,
+            format!(
+                "{spacing_mm} mm gives {points:.1e} points in the {} windows ({} sides x {} sizes), above the limit of {MAX_DESIGN_POINTS}: give a larger spacing_mm",
+                sides.len() * windows_mm.len(),
+                sides.len(),
+                windows_mm.len()
+            ),
+        ));
+    }
     let max_measurements = e.max_measurements.unwrap_or(2);
     if !(1..=4).contains(&max_measurements) {
         return Err(err(
@@ -95,8 +160,31 @@ pub(crate) fn parse(
             format!("must be in [1, 4], got {max_measurements}"),
         ));
     }
+    let designs = design_count(
+        chosen.len() * sides.len(),
+        windows_mm.len(),
+        max_measurements,
+    );
+    if designs > MAX_DESIGNS as f64 {
+        return Err(err(
+            "max_measurements",
+            format!(
+                "{max_measurements} measurements per design of {} candidates ({} tests x {} sides x {} window sizes) make {designs:.1e} designs, above the limit of {MAX_DESIGNS}: give fewer window sizes, sides or measurements per design",
+                chosen.len() * sides.len() * windows_mm.len(),
+                chosen.len(),
+                sides.len(),
+                windows_mm.len()
+            ),
+        ));
+    }
     let identifiable_sd = match e.identifiable_sd {
-        Some(v) => lines.positive("design", 0, "identifiable_sd", v)?,
+        Some(v) if v > 0.0 && v <= 1.0 => v,
+        Some(v) => {
+            return Err(err(
+                "identifiable_sd",
+                format!("a relative standard deviation must be in (0, 1], got {v}"),
+            ))
+        }
         None => DEFAULT_IDENTIFIABLE_SD,
     };
     Ok(DesignSpec {

@@ -89,7 +89,7 @@ pub(crate) fn parse(
         ));
     }
     if let Some(h) = model.size_mm {
-        lines.positive("model", 0, "size_mm", h)?;
+        lines.at_most("model", 0, "size_mm", h, MAX_LENGTH_MM)?;
     }
     if let Some(n) = model.elements {
         if !ELEMENTS_RANGE.contains(&n) {
@@ -215,17 +215,22 @@ pub(crate) fn thigh_elements(t: &ThighParams, n: usize) -> Result<(), String> {
     Ok(())
 }
 
+/// The largest element or pixel size (mm): 100 mm, two thirds of the thigh's width.
+pub(crate) const MAX_LENGTH_MM: f64 = 100.0;
+
 fn check_labels(l: LabelsEntry, lines: &KeyLines, base: &Path) -> Result<LabelsSpec, StudyError> {
     if let Some(s) = l.pixel_size_mm {
-        lines.positive("labels", 0, "pixel_size_mm", s)?;
+        lines.at_most("labels", 0, "pixel_size_mm", s, MAX_LENGTH_MM)?;
     }
     let min_island = l.min_island_mm2.unwrap_or(5.0);
-    if !(min_island >= 0.0 && min_island.is_finite()) {
+    // The thigh's cross-section is some 13 000 mm²: a threshold beyond 10 000 mm² would merge
+    // whole muscles.
+    if !(0.0..=1e4).contains(&min_island) {
         return Err(lines.err(
             "labels",
             0,
             "min_island_mm2",
-            format!("must be a finite area >= 0, got {min_island}"),
+            format!("must be an area in [0, 10000] mm², got {min_island}"),
         ));
     }
     femu_geometry::LabelSpec::new(&l.map, &l.bone, l.background.as_deref().unwrap_or(&[0]))

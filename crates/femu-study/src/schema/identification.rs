@@ -52,6 +52,9 @@ pub struct IdentificationSpec {
     pub image_pairing: femu_identify::idic::Pairing,
 }
 
+/// Largest `[identification] bounds_factor`.
+pub const MAX_BOUNDS_FACTOR: f64 = 100.0;
+
 /// Default `[identification] image_normalization_px` (px): below the speckle's size, so that
 /// an interface's echo, renewed in part between load steps, is matched by its position and not
 /// its brightness (README, images → parameters: chosen on realizations 1–20, checked on 21–30).
@@ -119,10 +122,12 @@ pub(crate) fn parse(
         Some(name) => find_test(tests, name).map_err(|m| err("test", m))?,
     };
     let bounds_factor = e.bounds_factor.unwrap_or(4.0);
-    if !(bounds_factor > 1.0 && bounds_factor.is_finite()) {
+    // Beyond 100 the bounds span over four decades around the reference: wider than any soft
+    // tissue's range, and the starts drawn in them mostly fail to solve.
+    if !(bounds_factor > 1.0 && bounds_factor <= MAX_BOUNDS_FACTOR) {
         return Err(err(
             "bounds_factor",
-            format!("must be above 1, got {bounds_factor}"),
+            format!("must be above 1 and at most {MAX_BOUNDS_FACTOR}, got {bounds_factor}"),
         ));
     }
     let starts = e.starts.unwrap_or(5);

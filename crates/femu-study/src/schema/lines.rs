@@ -152,6 +152,29 @@ impl KeyLines {
     }
 }
 
+impl KeyLines {
+    /// `v` if it is positive and at most `max` (beyond, a unit or typing mistake), else an
+    /// error at the key.
+    pub(crate) fn at_most(
+        &self,
+        table: &str,
+        index: usize,
+        key: &str,
+        v: f64,
+        max: f64,
+    ) -> Result<f64, StudyError> {
+        if !(v > 0.0 && v <= max) {
+            return Err(self.err(
+                table,
+                index,
+                key,
+                format!("must be positive and at most {max}, got {v}"),
+            ));
+        }
+        Ok(v)
+    }
+}
+
 /// The tables written `[[name]]` (one entry per item).
 const ARRAY_TABLES: [&str; 3] = ["test", "fixed", "pressure"];
 

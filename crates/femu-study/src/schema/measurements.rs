@@ -21,7 +21,7 @@
 use super::identification::find_test;
 use super::lines::KeyLines;
 use super::loading_tests::TestSpec;
-use super::measurement::{check_entry, MeasurementSource, Travel};
+use super::measurement::{check_entry, GridSpec, MeasurementSource, Travel};
 use super::raw::MeasurementEntry;
 use super::ultrasound::ProbeSection;
 use super::StudyError;
@@ -148,6 +148,7 @@ pub(crate) fn parse(
         }
         measurements.push(m);
     }
+    same_file_twice(&measurements, lines)?;
     for (k, m) in measurements.iter().enumerate() {
         let twice = measurements[..k]
             .iter()
@@ -165,6 +166,109 @@ pub(crate) fn parse(
         }
     }
     Ok(Parsed { measurements, list })
+}
+
+/// The largest noise standard deviation (mm) of a measurement or an actuator's travel: 10 mm,
+/// more than the tests' largest displacements.
+pub const MAX_SIGMA_MM: f64 = 10.0;
+
+/// The magnitudes the parsers of `[grid]`, `[noise]` and the measurements' frames leave open,
+/// checked on what they return: positions within the model's coordinates
+/// ([`femu_mesh::mesh::MAX_COORDINATE_MM`]), noises up to [`MAX_SIGMA_MM`], pixels up to
+/// 100 mm.
+pub(crate) fn check_magnitudes(
+    grid: &GridSpec,
+    noise_sigma_mm: f64,
+    measurements: &[Measurement],
+    lines: &KeyLines,
+) -> Result<(), StudyError> {
+    use femu_mesh::mesh::{check_coordinate, MAX_COORDINATE_MM};
+    if let Some(o) = grid.origin {
+        for v in o {
+            check_coordinate(v).map_err(|m| lines.err("grid", 0, "origin_mm", m))?;
+        }
+    }
+    if let Some(s) = grid.spacing {
+        let span = s * (grid.counts[0].max(grid.counts[1]) - 1) as f64;
+        if span > MAX_COORDINATE_MM {
+            return Err(lines.err(
+                "grid",
+                0,
+                "spacing_mm",
+                format!(
+                    "{s} mm makes the grid {span:e} mm long, beyond the ±{MAX_COORDINATE_MM:e} mm of the model's coordinates"
+                ),
+            ));
+        }
+    }
+    lines.at_most("noise", 0, "sigma_mm", noise_sigma_mm, MAX_SIGMA_MM)?;
+    for (k, m) in measurements.iter().enumerate() {
+        lines.at_most("measurement", k, "sigma_mm", m.sigma_mm, MAX_SIGMA_MM)?;
+        if let Some(t) = &m.travel {
+            lines.at_most(
+                "measurement",
+                k,
+                "travel_sigma_mm",
+                t.sigma_mm,
+                MAX_SIGMA_MM,
+            )?;
+            // A plate's travel beyond a metre is a unit mistake.
+            if let Some(v) = t.measured_mm {
+                if v.abs() > 1000.0 {
+                    return Err(lines.err(
+                        "measurement",
+                        k,
+                        "travel_mm",
+                        format!("must be within ±1000 mm, got {v}"),
+                    ));
+                }
+            }
+        }
+        if let MeasurementSource::File { frame, .. } = &m.source {
+            lines.at_most(
+                "measurement",
+                k,
+                "pixel_size_mm",
+                frame.scale,
+                super::geometry::MAX_LENGTH_MM,
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// Refuses two measurements reading the same measured field (its points would count twice, and
+/// the intervals shrink as if the data were independent). Paths are compared canonicalized
+/// (`a/../field.csv`, a link), as written when the file does not exist (a later check says so).
+fn same_file_twice(measurements: &[Measurement], lines: &KeyLines) -> Result<(), StudyError> {
+    let files: Vec<Option<(usize, &Path, std::path::PathBuf)>> = measurements
+        .iter()
+        .enumerate()
+        .map(|(k, m)| match &m.source {
+            MeasurementSource::File { path, .. } => Some((
+                k,
+                path.as_path(),
+                std::fs::canonicalize(path).unwrap_or_else(|_| path.clone()),
+            )),
+            _ => None,
+        })
+        .collect();
+    let files: Vec<_> = files.into_iter().flatten().collect();
+    for (j, (k, path, canonical)) in files.iter().enumerate() {
+        if let Some((first, _, _)) = files[..j].iter().find(|f| &f.2 == canonical) {
+            return Err(lines.err(
+                "measurement",
+                *k,
+                "file",
+                format!(
+                    "{} is already read by {}: the same measured field given twice would count its points twice",
+                    path.display(),
+                    lines.at("measurement", *first, "file")
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// The `index`-th entry as the schema's type; an unknown or mistyped key is named with its
@@ -191,6 +295,12 @@ fn one(
         Some(name) => find_test(tests, name).map_err(|m| lines.err("measurement", k, "test", m))?,
     };
     let (source, travel) = check_entry(e, k, lines, base)?;
+    if let MeasurementSource::File { frame, .. } = &source {
+        for v in frame.origin {
+            femu_mesh::mesh::check_coordinate(v)
+                .map_err(|m| lines.err("measurement", k, "origin_mm", m))?;
+        }
+    }
     if travel.is_some() && !tests[test].loading.has_rigid_body() {
         return Err(lines.err(
             "measurement",
@@ -281,6 +391,14 @@ fn window(
         // The seed's DIC grid: 16 px apart, at the probe's pixel size.
         None => 16.0 / probe.px_per_mm,
     };
+    if spacing_mm > width_mm.min(depth_mm) {
+        return Err(err(
+            "spacing_mm",
+            format!(
+                "{spacing_mm} mm is larger than the {width_mm} x {depth_mm} mm window: its grid would hold a single point"
+            ),
+        ));
+    }
     if (width_mm / spacing_mm + 1.0) * (depth_mm / spacing_mm + 1.0) > 4e6 {
         return Err(err(
             "spacing_mm",

@@ -105,6 +105,8 @@ pub struct Study {
     groups_given: bool,
     /// The text's key lines, for the views checked later.
     lines: std::sync::Arc<KeyLines>,
+    /// The study file, when read from one (named by the errors of the checks made later).
+    file: Option<std::path::PathBuf>,
 }
 
 impl Default for Study {
@@ -156,7 +158,9 @@ pub fn read(path: &Path) -> Result<Study, StudyError> {
         error,
     })?;
     let base = path.parent().unwrap_or(Path::new("."));
-    parse(&text, base).map_err(|e| e.in_file(path))
+    let mut study = parse(&text, base).map_err(|e| e.in_file(path))?;
+    study.file = Some(path.to_path_buf());
+    Ok(study)
 }
 
 /// The typed tables of `text`, with older layouts moved into the schema (see [`legacy`]).
@@ -210,6 +214,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         identification::parse(file.identification, &tests, &geometry, resolution, &lines)?;
     let (grid, sigma_mm) = measurement::parse_grid_noise(file.grid.clone(), file.noise, &lines)?;
     let probe = file.probe.unwrap_or_default();
+    ultrasound::check_probe(&probe, &lines)?;
     let parsed = measurements::parse(
         file.measurement,
         &tests,
@@ -221,6 +226,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         &lines,
         base,
     )?;
+    measurements::check_magnitudes(&grid, sigma_mm, &parsed.measurements, &lines)?;
     let design = design::parse(file.design, &tests, &probe, &lines)?;
     let first = &parsed.measurements[0];
     let measurement = MeasurementSpec {
@@ -265,6 +271,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         tests_given: file.test.is_some(),
         groups_given,
         lines: std::sync::Arc::new(lines),
+        file: None,
     };
     if study.convergence.given {
         study.convergence_study()?;
@@ -381,7 +388,11 @@ impl Study {
     /// The error of a key found wrong after parsing (e.g. a region the built model lacks),
     /// named with its line.
     pub fn key_error(&self, table: &str, key: &str, message: String) -> StudyError {
-        self.lines.err(table, 0, key, message)
+        let e = self.lines.err(table, 0, key, message);
+        match &self.file {
+            Some(f) => e.in_file(f),
+            None => e,
+        }
     }
 }
 

@@ -107,12 +107,56 @@ impl UltrasoundSection {
     }
 }
 
-/// Checks the ranges of `[ultrasound]` that the simulator does not check itself, naming the key
-/// and its line.
+/// A parameter error of the simulator as the error of its key in `table`.
+fn key_error(
+    e: femu_ultrasound::error::UsError,
+    table: &str,
+    fallback_key: &str,
+    lines: &super::lines::KeyLines,
+) -> super::StudyError {
+    match e {
+        femu_ultrasound::error::UsError::Parameter { name, message } => {
+            let key = name.strip_prefix("probe").unwrap_or(&name).trim();
+            let key = if key.is_empty() { fallback_key } else { key };
+            lines.err(table, 0, key, message)
+        }
+        other => lines.err(table, 0, fallback_key, other.to_string()),
+    }
+}
+
+/// Checks `[probe]` in full, whether or not a step uses it: its side, and its size and pixel
+/// density as the simulator would (the same ranges and image size), naming the key and its line.
+pub(crate) fn check_probe(
+    probe: &ProbeSection,
+    lines: &super::lines::KeyLines,
+) -> Result<(), super::StudyError> {
+    femu_mech::loading::Side::parse(&probe.side).map_err(|m| lines.err("probe", 0, "side", m))?;
+    femu_ultrasound::probe::Probe::new(
+        [0.0, 0.0],
+        [0.0, 1.0],
+        probe.width_mm,
+        probe.depth_mm,
+        probe.px_per_mm,
+    )
+    .map_err(|e| key_error(e, "probe", "px_per_mm", lines))?;
+    Ok(())
+}
+
+/// Checks `[ultrasound]` in full, whether or not a step uses it: the transducer's and the
+/// scanner's ranges (as the simulator checks them), and those the simulator does not check
+/// itself, naming the key and its line.
 pub(crate) fn check(
     section: &UltrasoundSection,
     lines: &super::lines::KeyLines,
 ) -> Result<(), super::StudyError> {
+    section
+        .transducer()
+        .validate()
+        .map_err(|e| key_error(e, "ultrasound", "frequency_mhz", lines))?;
+    section
+        .scanner()
+        .validate()
+        .map_err(|e| key_error(e, "ultrasound", "gain_db", lines))?;
     if !(1..=MAX_RENDER_REFINE).contains(&section.render_refine) {
         return Err(lines.err(
             "ultrasound",

@@ -149,10 +149,14 @@ pub fn run_on(
         .iter()
         .map(|f| f.members[0].spec().name.to_string())
         .collect();
+    check_window_sizes(study, &built.model.mesh)?;
     // The windows, on the unloaded model (the measured points are reference positions).
     let mut windows = Vec::new();
     for side in &spec.sides {
         for &[width_mm, depth_mm] in &spec.windows_mm {
+            if progress.cancelled() {
+                return Err(stopped(out, &names, &[], t0, "while placing the windows"));
+            }
             let w = WindowSpec {
                 side: side.clone(),
                 width_mm,
@@ -178,11 +182,23 @@ pub fn run_on(
     let mut summaries = Vec::new();
     let mut failed_tests = Vec::new();
     for &t in &spec.tests {
-        progress.check()?;
         let loading = &study.tests[t].loading;
         let test = loading.name();
+        let stop_here = || {
+            stopped(
+                out,
+                &names,
+                &summaries,
+                t0,
+                &format!("while solving {test}"),
+            )
+        };
+        if progress.cancelled() {
+            return Err(stop_here());
+        }
         let (model, du) = match differentiate(built, loading, &free) {
             Ok(r) => r,
+            Err(e) if crate::progress::is_interrupted(&e) => return Err(stop_here()),
             Err(e) => {
                 let why = format!("{e:#}");
                 progress.warn(&format!("test {test} left out: {why}"));
@@ -191,8 +207,14 @@ pub fn run_on(
                 continue;
             }
         };
-        for (w, points) in &windows {
-            let info = information(&model, &free, &du, points, sigma);
+        let mut infos = Vec::with_capacity(windows.len());
+        for (_, points) in &windows {
+            if progress.cancelled() {
+                return Err(stop_here());
+            }
+            infos.push(information(&model, &free, &du, points, sigma));
+        }
+        for ((w, points), info) in windows.iter().zip(infos) {
             let id = femu_identify::fisher::identifiability(&info, &names);
             let name = format!("{test}, {}", w.label());
             summaries.push(CandidateSummary {
@@ -227,10 +249,27 @@ pub fn run_on(
     let solved_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let sets = design::designs(&candidates, spec.max_measurements);
-    let mut ranked: Vec<Design> = sets
-        .iter()
-        .map(|m| design::score(&candidates, m, &names, &families, spec.identifiable_sd))
-        .collect();
+    let mut ranked: Vec<Design> = Vec::with_capacity(sets.len());
+    for chunk in sets.chunks(2000) {
+        if progress.cancelled() {
+            return Err(stopped(
+                out,
+                &names,
+                &summaries,
+                t0,
+                &format!(
+                    "while ranking the designs ({} of {})",
+                    ranked.len(),
+                    sets.len()
+                ),
+            ));
+        }
+        ranked.extend(
+            chunk
+                .iter()
+                .map(|m| design::score(&candidates, m, &names, &families, spec.identifiable_sd)),
+        );
+    }
     design::rank(&mut ranked);
     let ranking_s = t1.elapsed().as_secs_f64();
     let best_single_test = best_for_each_family(&ranked, &families);
@@ -265,6 +304,81 @@ pub fn run_on(
         out.display()
     ));
     Ok(summary)
+}
+
+/// Refuses a `[design] windows_mm` size larger than the model seen from one of the sides:
+/// wider than the model across the side's direction, or deeper than it along it.
+fn check_window_sizes(study: &Study, mesh: &femu_mesh::Mesh) -> Result<()> {
+    for side in &study.design.sides {
+        let d = femu_mech::loading::Side::parse(side)
+            .map_err(|e| anyhow::anyhow!("[design] sides: {e}"))?
+            .direction();
+        let extent = |axis: [f64; 2]| {
+            let (lo, hi) = mesh.nodes.iter().fold((f64::MAX, f64::MIN), |(lo, hi), x| {
+                let v = x[0] * axis[0] + x[1] * axis[1];
+                (lo.min(v), hi.max(v))
+            });
+            hi - lo
+        };
+        let (across, along) = (extent([-d[1], d[0]]), extent(d));
+        if let Some(w) = study
+            .design
+            .windows_mm
+            .iter()
+            .find(|w| w[0] > across || w[1] > along)
+        {
+            return Err(study
+                .key_error(
+                    "design",
+                    "windows_mm",
+                    format!(
+                        "a {} x {} mm window (width x depth) is larger than the model seen from the {side} side: {across:.1} mm across, {along:.1} mm deep",
+                        w[0], w[1]
+                    ),
+                )
+                .into());
+        }
+    }
+    Ok(())
+}
+
+/// The error of a design the user stopped: `candidates.csv` of the windows of the tests that
+/// finished (when any did) and a `summary.json` that says what was stopped, then
+/// [`crate::progress::Interrupted`].
+fn stopped(
+    out: &Path,
+    names: &[String],
+    finished: &[CandidateSummary],
+    t0: Instant,
+    what: &str,
+) -> anyhow::Error {
+    let kept = femu_mesh::stop::shielded(|| -> Result<Vec<&str>> {
+        let mut kept = Vec::new();
+        if !finished.is_empty() {
+            write_candidates_csv(&out.join("candidates.csv"), finished, names)?;
+            kept.push("candidates.csv");
+        }
+        Ok(kept)
+    });
+    let message = match &kept {
+        Ok(k) if !k.is_empty() => format!(
+            "design interrupted {what}: the {} windows of the tests solved are kept in candidates.csv",
+            finished.len()
+        ),
+        _ => format!("design interrupted {what}: no window was finished"),
+    };
+    let written = crate::output::write_stopped(
+        out,
+        "design",
+        &message,
+        kept.as_deref().unwrap_or(&[]),
+        t0.elapsed().as_secs_f64(),
+    );
+    let mut e = anyhow::Error::new(crate::progress::Interrupted).context(message);
+    if let Err(w) = kept.and(written) {
+        e = e.context(format!("keeping what was finished failed: {w:#}"));
+    }
+    e
 }
 
 /// For each parameter family, the single-test design (any of its windows) with the smallest
