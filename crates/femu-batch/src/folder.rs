@@ -95,6 +95,11 @@ pub struct Plan {
     pub femu_version: String,
     /// The batch file the plan was made from.
     pub batch_file: PathBuf,
+    /// [`fingerprint`] of the batch file's text when the plan was written (`None` in a folder
+    /// written before it was recorded): tells a `--resume` with a moved copy of the same file
+    /// from one with another batch's file.
+    #[serde(default)]
+    pub batch_fingerprint: Option<String>,
     pub written_unix_s: u64,
     /// The variables (`subject`, `side`, ...) in the table's column order.
     pub variables: Vec<String>,

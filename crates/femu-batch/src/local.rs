@@ -5,14 +5,48 @@
 //! Stopping: each child runs in a process group of its own, so a Ctrl-C at the terminal reaches
 //! the runner alone; the runner then starts no new case and sends each running case one
 //! SIGTERM, which `femu run` takes as a request to stop after its current unit of work (keeping
-//! its finished steps, recording `interrupted`), and waits for them.
+//! its finished steps, recording `interrupted`), and waits for them. The groups of the running
+//! cases are recorded process-wide, so that a second Ctrl-C, which ends the runner at once, ends
+//! them too ([`end_case_groups`]: SIGTERM, then SIGKILL) instead of leaving them running.
 
 use crate::folder::{BatchDir, CaseRecord, RecordStatus};
 use anyhow::{Context, Result};
 use femu_study::Progress;
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
+
+/// The process groups (each led by its case's process) of the cases running now.
+static CASE_GROUPS: Mutex<Vec<u32>> = Mutex::new(Vec::new());
+
+fn case_groups() -> std::sync::MutexGuard<'static, Vec<u32>> {
+    CASE_GROUPS.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Ends the process group of every case this process is running: SIGTERM (a case's second stop
+/// request, which ends it at once), up to `grace` for the groups to go, then SIGKILL to those
+/// left. For the command line's second Ctrl-C, just before it exits; returns the groups ended.
+pub fn end_case_groups(grace: Duration) -> usize {
+    let groups: Vec<u32> = case_groups().clone();
+    for &g in &groups {
+        signal_group(g, Signal::Term);
+    }
+    let t0 = Instant::now();
+    while t0.elapsed() < grace && groups.iter().any(|&g| group_alive(g)) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let left: Vec<u32> = groups.iter().copied().filter(|&g| group_alive(g)).collect();
+    for &g in &left {
+        signal_group(g, Signal::Kill);
+    }
+    // SIGKILL is not refused, but the kernel takes a moment to end a process.
+    let t1 = Instant::now();
+    while t1.elapsed() < Duration::from_millis(500) && left.iter().any(|&g| group_alive(g)) {
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    groups.len()
+}
 
 /// How the local runner runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -78,9 +112,11 @@ pub fn run_local(
         }
         while !stop && running.len() < opts.jobs {
             let Some(name) = queue.next() else { break };
+            let child = spawn(dir, name, opts)?;
+            case_groups().push(child.id());
             running.push(Running {
                 name: name.clone(),
-                child: spawn(dir, name, opts)?,
+                child,
                 signalled: false,
             });
         }
@@ -94,6 +130,7 @@ pub fn run_local(
             match running[k].child.try_wait()? {
                 Some(status) => {
                     let r = running.swap_remove(k);
+                    case_groups().retain(|&g| g != r.child.id());
                     let record = settle(dir, &r.name, status)?;
                     match record.status {
                         RecordStatus::Done => out.done.push(r.name),
@@ -183,6 +220,59 @@ fn settle(dir: &BatchDir, name: &str, status: ExitStatus) -> Result<CaseRecord> 
             dir.write_record(&r)?;
             Ok(r)
         }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Signal {
+    Term,
+    Kill,
+}
+
+/// Sends `signal` to the process group `pgid` (a case's, which its process leads).
+fn signal_group(pgid: u32, signal: Signal) {
+    #[cfg(unix)]
+    if let Ok(pgid) = i32::try_from(pgid) {
+        let sig = match signal {
+            Signal::Term => libc::SIGTERM,
+            Signal::Kill => libc::SIGKILL,
+        };
+        // SAFETY: kill(2) takes plain integers and touches no memory of this process; `pgid`
+        // is positive (a group this runner created), so `-pgid` names that group alone, never
+        // 0 (this process's group) or -1 (every process).
+        if pgid > 1 {
+            unsafe {
+                libc::kill(-pgid, sig);
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    let _ = (pgid, signal);
+}
+
+/// Whether a process of group `pgid` is alive (a zombie, ended but not yet reaped by the
+/// runner, does not count).
+fn group_alive(pgid: u32) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        // The group's leader is the case's process; any process of the group counts.
+        let Ok(entries) = std::fs::read_dir("/proc") else {
+            return false;
+        };
+        entries.flatten().any(|e| {
+            let Ok(stat) = std::fs::read_to_string(e.path().join("stat")) else {
+                return false;
+            };
+            // pid (comm) state ppid pgrp ...: the fields after the last ')'.
+            let fields: Vec<&str> = stat
+                .rsplit_once(')')
+                .map_or(vec![], |(_, rest)| rest.split_whitespace().collect());
+            fields.len() > 2 && fields[0] != "Z" && fields[2] == pgid.to_string()
+        })
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        process_alive(pgid)
     }
 }
 

@@ -66,6 +66,10 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
         batch.path.display(),
         root.display()
     ));
+    let batch_fingerprint = batch_text_fingerprint(&batch.path)?;
+    if opts.resume {
+        same_batch(&dir, &batch.path, &batch_fingerprint)?;
+    }
     let (to_run, skipped) = select(&dir, &cases, opts.resume, progress)?;
     let names: Vec<String> = to_run.iter().map(|c| c.name.clone()).collect();
     if let Some(req) = opts.slurm.as_ref().filter(|r| r.dry_run) {
@@ -78,7 +82,14 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
             cases: names,
         });
     }
-    write_plan(&dir, &batch.path, &cases, &to_run, &skipped)?;
+    write_plan(
+        &dir,
+        &batch.path,
+        &batch_fingerprint,
+        &cases,
+        &to_run,
+        &skipped,
+    )?;
     if to_run.is_empty() {
         return Ok(RunOutcome::NothingToDo { skipped });
     }
@@ -106,6 +117,40 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
             Ok(RunOutcome::Local { outcome, skipped })
         }
     }
+}
+
+/// The fingerprint of the batch file's text (what `batch.json` records of it).
+fn batch_text_fingerprint(path: &Path) -> Result<String> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read batch file {}", path.display()))?;
+    Ok(crate::folder::fingerprint(&text))
+}
+
+/// `--resume` continues the batch that made the folder: the batch file recorded in its
+/// `batch.json` (the same path, whose text may have been edited since: changed and added rows
+/// are planned anew), or a copy of that file with the same text elsewhere. Another batch's
+/// file is refused: its plan would replace the folder's and drop the other batch's cases.
+fn same_batch(dir: &BatchDir, batch_file: &Path, batch_fingerprint: &str) -> Result<()> {
+    if !dir.plan_file().is_file() {
+        return Ok(()); // `select` says the folder holds no batch
+    }
+    let plan = dir.read_plan()?;
+    let canonical = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| p.to_path_buf());
+    if canonical(&plan.batch_file) == canonical(batch_file)
+        || plan.batch_fingerprint.as_deref() == Some(batch_fingerprint)
+    {
+        return Ok(());
+    }
+    bail!(
+        "--resume: {} holds the batch of {} ({} cases), not of {}: resuming would replace its plan and drop its cases. Resume that batch with femu batch run {} --out {} --resume, or give {} another --out",
+        dir.root().display(),
+        plan.batch_file.display(),
+        plan.cases.len(),
+        batch_file.display(),
+        plan.batch_file.display(),
+        dir.root().display(),
+        batch_file.display()
+    )
 }
 
 /// The femu binary named in `[slurm] femu`, else this one.
@@ -190,6 +235,7 @@ fn select<'a>(
 fn write_plan(
     dir: &BatchDir,
     batch_file: &Path,
+    batch_fingerprint: &str,
     cases: &[Case],
     to_run: &[&Case],
     skipped: &[String],
@@ -221,6 +267,7 @@ fn write_plan(
     let plan = Plan {
         femu_version: env!("CARGO_PKG_VERSION").into(),
         batch_file: batch_file.to_path_buf(),
+        batch_fingerprint: Some(batch_fingerprint.to_string()),
         written_unix_s: unix_now(),
         variables,
         cases: cases

@@ -20,7 +20,14 @@ pub fn install_stop_handler() {
     let installed = ctrlc::set_handler(move || {
         femu_mesh::stop::request();
         if flag.swap(true, Ordering::SeqCst) {
-            eprintln!("\nstopped");
+            // The cases of a batch run in process groups of their own (a Ctrl-C at the
+            // terminal does not reach them): they end with this process, not after it.
+            let ended = femu_batch::local::end_case_groups(Duration::from_millis(800));
+            if ended > 0 {
+                eprintln!("\nstopped ({ended} running cases ended)");
+            } else {
+                eprintln!("\nstopped");
+            }
             std::process::exit(130);
         }
         eprintln!("\nstopping after the current unit of work (Ctrl-C again to quit at once)");
