@@ -189,7 +189,9 @@ impl CorrelationArgs {
             bail!("--levels {l}: at most 6 pyramid levels");
         }
         if let Some(h) = self.element.filter(|&h| h < 4) {
-            bail!("--element {h}: at least 4 px (fewer pixels per element are not measurable)");
+            bail!(
+                "--element {h}: element size {h} px is below 4 px (too few pixels per element to be measurable)"
+            );
         }
         let regularization = self.regularization_setting()?;
         if let (Some(h), Setting::Given(l)) = (self.element, regularization) {
