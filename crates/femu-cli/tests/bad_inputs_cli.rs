@@ -192,6 +192,65 @@ fn a_second_ctrl_c_ends_the_running_cases_too() {
     );
 }
 
+/// One Ctrl-C while a case runs: the batch stops within 2 s (exit 130), its running case
+/// stopped cleanly (recorded `interrupted`, or done if it had just finished) and no process of
+/// it left running.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_ctrl_c_stops_the_batch_within_two_seconds_leaving_no_case_running() {
+    let dir = scratch("one-ctrl-c");
+    let batch = batch_file(&dir, "batch", "case,identification.seed\na,1\nb,2\n");
+    let out = dir.join("out");
+    let runner = Command::new(env!("CARGO_BIN_EXE_femu"))
+        .args(["batch", "run", path(&batch), "--out", path(&out), "--quiet"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let t0 = Instant::now();
+    let case_pid = loop {
+        let record = out.join("cases/a/case.json");
+        if let Ok(text) = std::fs::read_to_string(&record) {
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) {
+                if v["status"] == "running" {
+                    break v["pid"].as_u64().unwrap();
+                }
+            }
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "case a never started"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // Into the case's work.
+    std::thread::sleep(Duration::from_millis(500));
+    let s = Instant::now();
+    Command::new("kill")
+        .args(["-INT", &runner.id().to_string()])
+        .status()
+        .unwrap();
+    let o = runner.wait_with_output().unwrap();
+    let took = s.elapsed();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(
+        took < Duration::from_secs(2),
+        "stopped {took:?} after Ctrl-C"
+    );
+    assert!(!running(case_pid), "case a's process {case_pid} still runs");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("cases/a/case.json")).unwrap())
+            .unwrap();
+    assert!(
+        record["status"] == "interrupted" || record["status"] == "done",
+        "{record}"
+    );
+    assert!(
+        !out.join("cases/b/case.json").exists(),
+        "case b was started"
+    );
+}
+
 // ---------------------------------------------------------------------------------------
 // femu dic
 
