@@ -288,6 +288,24 @@ pub fn correlate_auto(
     regularization: Setting,
     criteria: &TrustCriteria,
 ) -> Result<(Measured, Choice), DicError> {
+    correlate_ladder(f, g, roi, base, element, regularization, criteria, true)
+}
+
+/// [`correlate_auto`], with `stop_on_mismatch` false for frames known to show the same
+/// tissue (consecutive frames of a sequence): there a rung whose correlation ends far from the
+/// match on the coarsest level failed, it does not prove different scenes, and the longer
+/// regularizations and larger elements of the ladder are still tried.
+#[allow(clippy::too_many_arguments)]
+pub fn correlate_ladder(
+    f: &GreyImage,
+    g: &GreyImage,
+    roi: &Roi,
+    base: &DicOptions,
+    element: Setting,
+    regularization: Setting,
+    criteria: &TrustCriteria,
+    stop_on_mismatch: bool,
+) -> Result<(Measured, Choice), DicError> {
     let bb = roi.bounding_box(f.width, f.height)?;
     let fwhm = speckle_fwhm(f, &bb);
     // An explicit element size is used as given (the mesh reports a size that does not fit);
@@ -398,7 +416,7 @@ pub fn correlate_auto(
             // Frames that do not match even on the coarsest level (different scenes, or a
             // motion far beyond the capture range): no longer regularization or larger element
             // makes them correlate; the ladder stops here instead of trying every rung.
-            let mismatch = (!ok)
+            let mismatch = (!ok && stop_on_mismatch)
                 .then(|| coarse_match(f, &bb, &m.res))
                 .flatten()
                 .filter(|&(_, z)| z < MIN_COARSE_MATCH);

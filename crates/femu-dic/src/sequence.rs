@@ -19,7 +19,7 @@
 //! its reference frame shows ([`tissue_mask`]: the bright, textured part of a B-mode frame; the
 //! coupling gel, the dark band above the skin and acoustic shadows left out).
 
-use crate::auto::{correlate_auto, Choice, Measured};
+use crate::auto::{correlate_ladder, Choice, Measured};
 use crate::command::{CorrelationSpec, RoiSpec};
 use crate::error::DicError;
 use crate::image::GreyImage;
@@ -161,25 +161,37 @@ fn measured(res: DicResult, spec: &CorrelationSpec) -> Result<Measured, DicError
     Ok(Measured { res, cov, trust })
 }
 
-/// The region of the pair `f → g` in `f`: the spec's, or the tissue `f` shows. (Not the
-/// tissue of both frames: the ROI lies in the reference frame, and the skin line that anchors a
-/// large motion sits where the deformed frame already shows gel.)
-fn pair_roi(spec: &CorrelationSpec, f: &GreyImage) -> Result<Roi, DicError> {
+/// The regions to correlate the pair `f → g` over, in `f`, in the order tried: the spec's; or
+/// the tissue `f` shows, then the tissue both frames show. (The ROI lies in the reference frame:
+/// the first keeps the skin line that anchors a large motion where the deformed frame already
+/// shows gel; the second leaves out what the deformed frame does not show, which helps when the
+/// speckle near the skin decorrelates.)
+fn pair_rois(spec: &CorrelationSpec, f: &GreyImage, g: &GreyImage) -> Result<Vec<Roi>, DicError> {
     match spec.roi {
         RoiSpec::Whole => {
-            let inside = tissue_mask(f);
-            if !inside.iter().any(|&v| v) {
+            let reference = tissue_mask(f);
+            if !reference.iter().any(|&v| v) {
                 return Err(DicError::Roi(
                     "no tissue in the frame (dark or uniform): give --roi or --mask".into(),
                 ));
             }
-            Ok(Roi::Mask {
+            let both: Vec<bool> = reference
+                .iter()
+                .zip(tissue_mask(g))
+                .map(|(a, b)| *a && b)
+                .collect();
+            let mask = |inside| Roi::Mask {
                 width: f.width,
                 height: f.height,
                 inside,
-            })
+            };
+            let mut rois = vec![mask(reference)];
+            if both.iter().any(|&v| v) {
+                rois.push(mask(both));
+            }
+            Ok(rois)
         }
-        _ => spec.roi.resolve(f.width, f.height),
+        _ => Ok(vec![spec.roi.resolve(f.width, f.height)?]),
     }
 }
 
@@ -220,7 +232,8 @@ pub fn correlate_sequence(
     for k in 1..=n {
         let t0 = std::time::Instant::now();
         let (f, g) = (&frames[k - 1], &frames[k]);
-        let roi = pair_roi(&spec, f)?;
+        let rois = pair_rois(&spec, f, g)?;
+        let roi = &rois[0];
         let pair = |e: DicError| DicError::option("frames", format!("pair {} -> {k}: {e}", k - 1));
         let warm = increments.last().and_then(|prev| {
             let opts = DicOptions {
@@ -230,7 +243,7 @@ pub fn correlate_sequence(
             };
             let prev_res = &prev.measured.res;
             let guess = |p: [f64; 2]| field_or_nearest(prev_res, p);
-            let res = correlate_from(f, g, &roi, &opts, Some(&guess)).ok()?;
+            let res = correlate_from(f, g, roi, &opts, Some(&guess)).ok()?;
             if !res.converged {
                 return None;
             }
@@ -247,16 +260,24 @@ pub fn correlate_sequence(
                     min_zncc: spec.trust.min_zncc.min(ZNCC_FLOOR),
                     ..spec.trust
                 };
-                let (m, c) = correlate_auto(
-                    f,
-                    g,
-                    &roi,
-                    &spec.options,
-                    spec.element,
-                    spec.regularization,
-                    &floor,
-                )
-                .map_err(pair)?;
+                // The first region whose ladder succeeds.
+                let mut result = Err(DicError::Roi("no region".into()));
+                for roi in &rois {
+                    result = correlate_ladder(
+                        f,
+                        g,
+                        roi,
+                        &spec.options,
+                        spec.element,
+                        spec.regularization,
+                        &floor,
+                        false,
+                    );
+                    if result.is_ok() {
+                        break;
+                    }
+                }
+                let (m, c) = result.map_err(pair)?;
                 (measured(m.res, &spec)?, c, false)
             }
         };
