@@ -12,7 +12,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{femu, scratch, write};
+use common::{femu, scratch, write, BATCH_TEMPLATE};
 
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -25,31 +25,9 @@ fn stderr(o: &Output) -> String {
 // ---------------------------------------------------------------------------------------
 // femu batch
 
-/// A small case: a coarse thigh (700 quads), the compression test, a 24 x 24 grid, two starts
-/// (a few seconds per case in a test build).
-const TEMPLATE: &str = r#"
-[model]
-elements = 700
-[[test]]
-kind = "compression"
-side = "anterior"
-force_n_per_mm = 0.1
-[grid]
-counts = [24, 24]
-[noise]
-sigma_mm = 2e-3
-[identification]
-grouped = true
-starts = 2
-seed = 3
-[run]
-forward = false
-sensitivity = false
-"#;
-
 /// A batch file `name` in `dir` over the table `cases` (written as `name`.csv).
 fn batch_file(dir: &Path, name: &str, cases: &str) -> PathBuf {
-    write(dir, "study.toml", TEMPLATE);
+    write(dir, "study.toml", BATCH_TEMPLATE);
     write(dir, &format!("{name}.csv"), cases);
     write(
         dir,

@@ -11,31 +11,7 @@ use std::process::Output;
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{femu, scratch, write};
-
-/// The template: a coarse thigh (700 quads; the built-in thigh's minimum is 622), the
-/// compression test alone, a 24 x 24 grid, D of ischio, sartorius and gracilis tied, two
-/// starts; no separate forward or sensitivity step. A few seconds per case (test build, one
-/// thread).
-const TEMPLATE: &str = r#"
-[model]
-elements = 700
-[[test]]
-kind = "compression"
-side = "anterior"
-force_n_per_mm = 0.1
-[grid]
-counts = [24, 24]
-[noise]
-sigma_mm = 2e-3
-[identification]
-grouped = true
-starts = 2
-seed = 3
-[run]
-forward = false
-sensitivity = false
-"#;
+use common::{femu, scratch, write, BATCH_TEMPLATE};
 
 /// Six cases: four subjects, two of them with both legs (each its own fat and quadriceps C10,
 /// the virtual experiment's truth, and its own noise seed); case s03-L measured from a file
@@ -54,7 +30,7 @@ const BATCH: &str = "template = \"study.toml\"\ncases = \"cases.csv\"\n\n[slurm]
 
 /// A batch folder's inputs in `dir`: the template, the table, the broken field file.
 fn inputs(dir: &Path, cases: &str) -> PathBuf {
-    write(dir, "study.toml", TEMPLATE);
+    write(dir, "study.toml", BATCH_TEMPLATE);
     write(dir, "cases.csv", cases);
     std::fs::create_dir_all(dir.join("fields")).unwrap();
     write(dir, "fields/s03-L.csv", "x,y,ux,uy\n0,0,0,0\n1,1,nan,0\n");

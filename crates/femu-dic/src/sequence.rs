@@ -103,6 +103,8 @@ pub struct Increment {
     pub choice: Choice,
     /// Whether the correlation started from the previous increment.
     pub warm_start: bool,
+    /// The ZNCC below which an element of this pair is not trusted ([`ZNCC_RELATIVE`]).
+    pub min_zncc: f64,
     pub time_s: f64,
 }
 
@@ -217,11 +219,13 @@ pub fn correlate_sequence(
         .enumerate()
         .find(|(_, f)| (f.width, f.height) != (w, h))
     {
-        return Err(DicError::SizeMismatch {
-            reference: (w, h),
-            deformed: (f.width, f.height),
-        })
-        .map_err(|e| DicError::option("frames", format!("frame {k}: {e}")));
+        return Err(DicError::option(
+            "frames",
+            format!(
+                "frame {k} is {} x {} px, frame 0 is {w} x {h} px",
+                f.width, f.height
+            ),
+        ));
     }
     let mut spec = spec.clone();
     if spec.options.pyramid_levels.is_none() {
@@ -249,7 +253,8 @@ pub fn correlate_sequence(
             }
             let m = measured(res, &spec).ok()?;
             let trusted = m.trust.iter().filter(|&&t| t == Trust::Trusted).count();
-            (2 * trusted >= m.trust.len()).then(|| (m, prev.choice.clone()))
+            (trusted as f64 >= crate::auto::MIN_TRUSTED * m.trust.len() as f64)
+                .then(|| (m, prev.choice.clone()))
         });
         let (m, choice, warm_start) = match warm {
             Some((m, c)) => (m, c, true),
@@ -297,6 +302,7 @@ pub fn correlate_sequence(
             )));
         }
         increments.push(Increment {
+            min_zncc: pair_criteria(&m.res, &spec).min_zncc,
             measured: m,
             choice,
             warm_start,
@@ -609,7 +615,7 @@ pub fn run_sequence(
                 element_size_px: inc.choice.element_size_px,
                 regularization_px: inc.choice.regularization_px,
                 warm_start: inc.warm_start,
-                min_zncc: pair_criteria(r, &job.correlation).min_zncc,
+                min_zncc: inc.min_zncc,
                 iterations: r.iterations,
                 residual_percent_of_dynamic: r.residual_percent,
                 trusted_fraction: inc

@@ -230,3 +230,27 @@ pub fn outputs_are_whole(dir: &Path) -> usize {
     }
     checked
 }
+
+/// The template of the batch tests: a coarse thigh (700 quads; the built-in thigh's minimum is 622), the
+/// compression test alone, a 24 x 24 grid, D of ischio, sartorius and gracilis tied, two
+/// starts; no separate forward or sensitivity step. A few seconds per case (test build, one
+/// thread).
+pub const BATCH_TEMPLATE: &str = r#"
+[model]
+elements = 700
+[[test]]
+kind = "compression"
+side = "anterior"
+force_n_per_mm = 0.1
+[grid]
+counts = [24, 24]
+[noise]
+sigma_mm = 2e-3
+[identification]
+grouped = true
+starts = 2
+seed = 3
+[run]
+forward = false
+sensitivity = false
+"#;
