@@ -20,6 +20,7 @@ pub mod anderson;
 pub mod auto;
 pub mod bspline;
 pub mod check;
+pub mod cine;
 pub mod command;
 pub mod consistency;
 pub mod dicom;
