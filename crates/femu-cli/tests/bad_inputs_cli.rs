@@ -3,7 +3,8 @@
 //! second Ctrl-C ends a batch's running cases with it; DIC options out of range are refused
 //! once, naming the option, before any correlation; dic-check refuses frames of different sizes
 //! and a region outside them up front, says why each failed pair failed, gives up early on
-//! frames that do not correlate, and stops within 2 s of Ctrl-C.
+//! frames that do not correlate, and stops within 2 s of Ctrl-C; `femu run` refuses recorded
+//! frames it cannot use (sizes, a missing frame, loads, frame times, a force log) up front.
 
 use femu_dic::lab::{self, Speckle};
 use femu_dic::GreyImage;
@@ -477,4 +478,104 @@ fn dic_check_on_unrelated_shared_frames_is_bounded() {
     eprintln!("dic-check on 3 unrelated {w} x {h} frames of the shared data: {took:?}\n{e}");
     assert_eq!(o.status.code(), Some(1), "{e}");
     assert!(e.contains("us1 -> sample5: "), "{e}");
+}
+
+// ---------------------------------------------------------------------------------------
+// femu run with recorded frames ([measurement] source = "frames")
+
+/// A two-frame multi-frame DICOM of `w` x `h` px without Frame Time or Frame Time Vector.
+fn cine_without_times(dir: &Path, w: usize, h: usize) -> PathBuf {
+    use dicom_core::{DataElement, PrimitiveValue, VR};
+    use dicom_dictionary_std::tags;
+    let pixels: Vec<u8> = (0..2 * w * h).map(|k| (k * 7 % 251) as u8).collect();
+    let us = |v: u16| PrimitiveValue::from(v);
+    let obj = dicom_object::InMemDicomObject::from_element_iter([
+        DataElement::new(tags::SOP_CLASS_UID, VR::UI, "1.2.840.10008.5.1.4.1.1.3.1"),
+        DataElement::new(tags::SOP_INSTANCE_UID, VR::UI, "1.2.3.4.5.6"),
+        DataElement::new(tags::SAMPLES_PER_PIXEL, VR::US, us(1)),
+        DataElement::new(tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "MONOCHROME2"),
+        DataElement::new(tags::NUMBER_OF_FRAMES, VR::IS, PrimitiveValue::from("2")),
+        DataElement::new(tags::ROWS, VR::US, us(h as u16)),
+        DataElement::new(tags::COLUMNS, VR::US, us(w as u16)),
+        DataElement::new(tags::BITS_ALLOCATED, VR::US, us(8)),
+        DataElement::new(tags::BITS_STORED, VR::US, us(8)),
+        DataElement::new(tags::HIGH_BIT, VR::US, us(7)),
+        DataElement::new(tags::PIXEL_REPRESENTATION, VR::US, us(0)),
+        DataElement::new(tags::PIXEL_DATA, VR::OB, PrimitiveValue::from(pixels)),
+    ]);
+    let p = dir.join("loop.dcm");
+    obj.with_meta(dicom_object::FileMetaTableBuilder::new().transfer_syntax("1.2.840.10008.1.2.1"))
+        .unwrap()
+        .write_to_file(&p)
+        .unwrap();
+    p
+}
+
+/// Recorded frames that cannot be used are refused by `femu run` before anything runs (no
+/// output folder), naming the study's key with its line and the file: frames of different
+/// sizes, a missing frame, loads that do not match the frames, frame times asked of a DICOM
+/// that has none, a force log that does not cover the frames, a force log without units.
+#[test]
+fn run_refuses_unusable_recorded_frames_up_front() {
+    let dir = scratch("frames");
+    speckle_png(&dir, "f0.png", 64, 48, 7, false);
+    speckle_png(&dir, "f1.png", 64, 48, 7, true);
+    speckle_png(&dir, "f2.png", 56, 48, 7, true);
+    cine_without_times(&dir, 64, 48);
+    write(
+        &dir,
+        "force.csv",
+        "# units: s, N/mm\ntime,force\n0,0\n1,0.05\n",
+    );
+    write(&dir, "force_nounits.csv", "time,force\n0,0\n5,0.1\n");
+    let head = "[[test]]\nkind = \"compression\"\nside = \"anterior\"\nforce_n_per_mm = 0.1\n\
+                [measurement]\nsource = \"frames\"\npixel_size_mm = 0.1\n";
+    let cases: [(&str, &str, &[&str]); 7] = [
+        (
+            "sizes",
+            "frames = [\"f0.png\", \"f2.png\"]\nloads_n_per_mm = [0.1]\n",
+            &["frames (line 8)", "f2.png", "56 x 48", "64 x 48"],
+        ),
+        (
+            "missing",
+            "frames = [\"f0.png\", \"gone.png\"]\nloads_n_per_mm = [0.1]\n",
+            &["frames (line 8)", "gone.png", "does not exist"],
+        ),
+        (
+            "count",
+            "frames = [\"f0.png\", \"f1.png\"]\nloads_n_per_mm = [0.05, 0.1]\n",
+            &["loads_n_per_mm (line 9)", "2 loads for 2 frames", "one per loaded frame"],
+        ),
+        (
+            "dicom times",
+            "cine = \"loop.dcm\"\nframe_times_s = [0.0, 0.5]\nloads_n_per_mm = [0.1]\n",
+            &["frame_times_s (line 9)", "loop.dcm", "no frame times", "frame_indices"],
+        ),
+        (
+            "dicom log",
+            "cine = \"loop.dcm\"\nframe_indices = [0, 1]\nforce_log = \"force.csv\"\n",
+            &["force_log (line 10)", "loop.dcm", "no frame times"],
+        ),
+        (
+            "coverage",
+            "frames = [\"f0.png\", \"f1.png\"]\nframe_times_s = [0.0, 1.5]\nforce_log = \"force.csv\"\n",
+            &["force_log (line 10)", "force.csv", "frame 1", "outside the log"],
+        ),
+        (
+            "units",
+            "frames = [\"f0.png\", \"f1.png\"]\nframe_times_s = [0.0, 1.5]\nforce_log = \"force_nounits.csv\"\n",
+            &["force_log (line 10)", "force_nounits.csv", "# units: s, N/mm"],
+        ),
+    ];
+    for (name, keys, expected) in cases {
+        let study = write(&dir, "study.toml", &format!("{head}{keys}"));
+        let out = dir.join("out");
+        let o = femu(&["run", path(&study), "--out", path(&out)]);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {e}");
+        for want in expected {
+            assert!(e.contains(want), "{name}: '{want}' not in: {e}");
+        }
+        assert!(!out.exists(), "{name}: the run wrote its folder: {e}");
+    }
 }

@@ -86,6 +86,20 @@ const ACCEPTED: &[(&str, &str, &[Bad], &str)] = &[
          expected one are data, which the fit weighs with travel_sigma_mm",
     ),
     (
+        "measurement",
+        "frame_times_s",
+        &[Bad::Zero, Bad::MinusOne],
+        "a time on the frames' clock: any finite value, the times increasing (whether the \
+         force log covers them is checked, naming frame_times_s)",
+    ),
+    (
+        "measurement",
+        "force_log_offset_s",
+        &[Bad::Zero, Bad::MinusOne],
+        "the force log's clock minus the frames': any finite value (whether the log then \
+         covers the frames is checked, naming force_log_offset_s)",
+    ),
+    (
         "identification",
         "image_normalization_px",
         &[Bad::Zero],
@@ -230,6 +244,30 @@ travel_mm = 6.99
 travel_sigma_mm = 0.01
 "#;
 
+/// Recorded frames (PNG files) with their times and a force log, placed by the frame keys.
+const FRAMES: &str = r#"
+[measurement]
+source = "frames"
+frames = ["f0.png", "f1.png", "f2.png"]
+units = "px"
+pixel_size_mm = 0.1
+origin_mm = [-20.0, 60.0]
+x_axis = [1.0, 0.0]
+y_axis = [0.0, -1.0]
+frame_times_s = [0.5, 1.0, 2.0]
+force_log = "force.csv"
+force_log_offset_s = 0.25
+"#;
+
+/// Recorded frames with a load per loaded frame.
+const FRAME_LOADS: &str = r#"
+[measurement]
+source = "frames"
+frames = ["f0.png", "f1.png", "f2.png"]
+pixel_size_mm = 0.1
+loads_n_per_mm = [0.05, 0.1]
+"#;
+
 /// A segmented image instead of the built-in thigh.
 const LABELS: &str = r#"
 [labels]
@@ -278,7 +316,9 @@ fn variants() -> Vec<(&'static str, Table)> {
     vec![
         ("example", full),
         ("window", merged(example.clone(), WINDOW)),
-        ("file", merged(example, FILE)),
+        ("file", merged(example.clone(), FILE)),
+        ("frames", merged(example.clone(), FRAMES)),
+        ("frame loads", merged(example, FRAME_LOADS)),
         ("labels", labels),
         ("convergence", merged(no_mesh, CONVERGENCE)),
         ("convergence sizes", by_size),
@@ -356,6 +396,21 @@ fn folder() -> PathBuf {
         }
     }
     std::fs::write(dir.join("field.csv"), csv).unwrap();
+    // Recorded frames and their force log (the frames at 0.75 to 2.25 s on its clock).
+    for k in 0..3 {
+        let data = (0..48 * 32)
+            .map(|i| ((i * 37 + 11 * k) % 251) as f64)
+            .collect();
+        femu_dic::GreyImage::new(48, 32, data)
+            .unwrap()
+            .save_png(&dir.join(format!("f{k}.png")))
+            .unwrap();
+    }
+    std::fs::write(
+        dir.join("force.csv"),
+        "# units: s, N/mm\ntime,force\n0,0\n1,0.04\n3,0.12\n",
+    )
+    .unwrap();
     let (w, h) = (40usize, 40usize);
     let data = (0..w * h)
         .map(|k| {

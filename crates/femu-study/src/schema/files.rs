@@ -12,11 +12,14 @@
 use std::path::{Path, PathBuf};
 
 /// `(table, key)` of every study-file key that names a file.
-pub const FILE_KEYS: [(&str, &str); 4] = [
+pub const FILE_KEYS: [(&str, &str); 7] = [
     ("model", "deck"),
     ("labels", "image"),
     ("measurement", "file"),
     ("measurement", "covariance"),
+    ("measurement", "frames"),
+    ("measurement", "cine"),
+    ("measurement", "force_log"),
 ];
 
 /// Whether the key at `path` (`["labels", "image"]`, `["measurement", "2", "file"]` for the
@@ -40,8 +43,19 @@ pub fn resolve_from(base: &Path, name: &str) -> PathBuf {
 /// (the study file's folder). Values that are not strings are left for the schema to reject.
 pub fn absolute_file_names(doc: &mut toml::Table, base: &Path) {
     let absolute = |t: &mut toml::Table, key: &str| {
-        if let Some(toml::Value::String(name)) = t.get_mut(key) {
-            *name = resolve_from(base, name).to_string_lossy().into_owned();
+        match t.get_mut(key) {
+            Some(toml::Value::String(name)) => {
+                *name = resolve_from(base, name).to_string_lossy().into_owned();
+            }
+            // A list of files (`frames`).
+            Some(toml::Value::Array(names)) => {
+                for v in names {
+                    if let toml::Value::String(name) = v {
+                        *name = resolve_from(base, name).to_string_lossy().into_owned();
+                    }
+                }
+            }
+            _ => {}
         }
     };
     for (table, key) in FILE_KEYS {

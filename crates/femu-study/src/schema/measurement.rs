@@ -38,6 +38,10 @@ pub enum MeasurementSource {
     /// loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by the DIC; the
     /// identification fits the DIC field.
     Ultrasound,
+    /// A user's recorded B-mode frames (the unloaded first) and the load of each, placed in
+    /// the model by their frame keys or `[probe]`: identified by integrated DIC from the
+    /// frames themselves ([`super::frames`]).
+    Frames(Box<super::frames::FramesSpec>),
 }
 
 /// The measured travel of the force-controlled plate or indenter (`None` for a virtual
@@ -175,6 +179,14 @@ pub(crate) fn check_entry(
                 "the virtual experiment synthesizes the travel; give only travel_sigma_mm".into(),
             ))
         }
+        (MeasurementSource::Frames(_), Some(_)) => {
+            return Err(lines.err(
+                "measurement",
+                index,
+                "travel_sigma_mm",
+                "the actuator term applies to a measured field or the virtual experiment, not to recorded frames".into(),
+            ))
+        }
         _ => {}
     }
     Ok((source, travel))
@@ -261,7 +273,18 @@ fn check_source(
         .as_deref()
         .unwrap_or(if m.file.is_some() { "file" } else { "virtual" })
         .to_ascii_lowercase();
+    if source != "frames" {
+        if let Some(key) = super::frames::given_frame_keys(m).first() {
+            return Err(err(
+                key,
+                &format!("is a key of recorded frames: give source = \"frames\" (the source is \"{source}\")"),
+            ));
+        }
+    }
     match source.as_str() {
+        "frames" => Ok(MeasurementSource::Frames(Box::new(super::frames::parse(
+            m, index, lines, base,
+        )?))),
         "ultrasound" => {
             if m.file.is_some()
                 || m.units.is_some()
@@ -357,7 +380,7 @@ fn check_source(
         }
         other => Err(err(
             "source",
-            &format!("unknown source '{other}' (virtual, file, ultrasound)"),
+            &format!("unknown source '{other}' (virtual, file, ultrasound, frames)"),
         )),
     }
 }

@@ -94,6 +94,7 @@ impl Measurement {
             (MeasurementSource::File { path, .. }, _) => {
                 format!("{test}, file {}", path.display())
             }
+            (MeasurementSource::Frames(_), _) => format!("{test}, recorded frames"),
             (_, Region::Grid) => format!("{test}, grid"),
             (_, Region::Window(w)) => format!("{test}, {}", w.label()),
         }
@@ -149,6 +150,19 @@ pub(crate) fn parse(
         measurements.push(m);
     }
     same_file_twice(&measurements, lines)?;
+    if measurements.len() > 1 {
+        if let Some(k) = measurements
+            .iter()
+            .position(|m| matches!(m.source, MeasurementSource::Frames(_)))
+        {
+            return Err(lines.err(
+                "measurement",
+                k,
+                "source",
+                "recorded frames are identified alone (integrated DIC of one test): give one [measurement]".into(),
+            ));
+        }
+    }
     for (k, m) in measurements.iter().enumerate() {
         let twice = measurements[..k]
             .iter()
@@ -301,6 +315,9 @@ fn one(
                 .map_err(|m| lines.err("measurement", k, "origin_mm", m))?;
         }
     }
+    if let MeasurementSource::Frames(f) = &source {
+        super::frames::check_with_test(f, &tests[test], k, lines)?;
+    }
     if travel.is_some() && !tests[test].loading.has_rigid_body() {
         return Err(lines.err(
             "measurement",
@@ -334,6 +351,7 @@ fn one(
             path.file_stem()
                 .map_or("file".into(), |s| s.to_string_lossy().to_string())
         ),
+        (MeasurementSource::Frames(_), _) => format!("{test_name}_frames"),
         (_, Region::Grid) => format!("{test_name}_grid"),
         (_, Region::Window(w)) => format!("{test_name}_{}", w.side.replace(' ', "")),
     };

@@ -21,6 +21,7 @@ mod deck_loads;
 mod design;
 mod error;
 pub mod files;
+pub mod frames;
 mod geometry;
 mod identification;
 mod legacy;
@@ -327,6 +328,12 @@ impl Study {
         for (table, key, path) in files {
             self.lines.existing_file(table, key, path)?;
         }
+        for (k, m) in self.measurements.iter().enumerate() {
+            if let MeasurementSource::Frames(f) = &m.source {
+                f.resolve()
+                    .map_err(|e| self.lines.err("measurement", k, e.key, e.message))?;
+            }
+        }
         let regions =
             match regions::of_geometry(&self.model.geometry, &self.model.materials, &self.lines)? {
                 Some(r) => r,
@@ -369,6 +376,9 @@ impl Study {
             {
                 files.push(path.as_path());
                 files.extend(covariance.as_deref());
+            }
+            if let MeasurementSource::Frames(f) = &m.source {
+                files.extend(f.input_files());
             }
         }
         files

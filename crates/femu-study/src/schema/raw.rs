@@ -119,6 +119,15 @@ pub(crate) struct MeasurementEntry {
     pub travel_mm: Option<f64>,
     pub travel_sigma_mm: Option<f64>,
     pub covariance: Option<String>,
+    /// Recorded frames (`source = "frames"`, `super::frames`).
+    pub frames: Option<Vec<String>>,
+    pub cine: Option<String>,
+    pub frame_indices: Option<Vec<usize>>,
+    pub frame_times_s: Option<Vec<f64>>,
+    pub loads_n_per_mm: Option<Vec<f64>>,
+    pub force_log: Option<String>,
+    pub force_log_offset_s: Option<f64>,
+    pub force_log_units: Option<Vec<String>>,
 }
 
 #[derive(Debug, Deserialize)]

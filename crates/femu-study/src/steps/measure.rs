@@ -144,6 +144,9 @@ pub fn prepare(
                     frame,
                     covariance,
                 } => PreparedData::Measured(read_measured(path, frame, covariance.as_deref())?),
+                MeasurementSource::Frames(_) => bail!(
+                    "measurement {label}: recorded frames are identified from the frames themselves by `femu run` (integrated DIC); to fit a measured field, correlate them with `femu dic F0 F1 ...` and give its field.csv with --measured"
+                ),
                 MeasurementSource::Ultrasound => {
                     let out = if study.measurement_list() {
                         dir.join(&m.name)

@@ -6,12 +6,13 @@
 //! | model | [`model::write_study_model`], [`model::mesh_thigh`], [`model::mesh_labels`] | `model/` |
 //! | forward | [`solve::solve_model`], [`solve::solve_file`], [`solve::forward`] | `forward/TEST/` |
 //! | sensitivity | [`sensitivity::run`] | `sensitivity/` |
-//! | measurement | [`identify::synth`], [`ultrasound::sim`] | `measurement/` |
+//! | measurement | [`identify::synth`], [`ultrasound::sim`], [`frames::measure`] | `measurement/` |
 //! | identification | [`identify::identify`] | `identify/GROUPING/` |
 //! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
 
 pub mod design;
 pub mod discretization;
+pub mod frames;
 pub mod identify;
 pub mod images;
 pub mod joint;

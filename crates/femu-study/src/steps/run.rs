@@ -276,16 +276,38 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     let t = begin(record, out, "measurement", Some("measurement"))?;
     let dir = out.join("measurement");
     create_dir(&dir)?;
+    if let [m] = study.measurements.as_slice() {
+        if let MeasurementSource::Frames(spec) = &m.source {
+            // Recorded frames: integrated DIC from the frames (`super::frames`).
+            super::frames::measure(study, &built, m, spec, &dir, progress)?;
+            finish(record, out, t)?;
+            for (grouped, name) in groupings(study) {
+                progress.check()?;
+                let folder = format!("identify/{name}");
+                let t = begin(
+                    record,
+                    out,
+                    &format!("identification ({name})"),
+                    Some(&folder),
+                )?;
+                super::frames::identify_frames(
+                    study,
+                    grouped,
+                    &built,
+                    &dir,
+                    &out.join(&folder),
+                    progress,
+                )?;
+                finish(record, out, t)?;
+            }
+            return Ok(());
+        }
+    }
     let prepared = measure::prepare(study, &built, &dir, progress)?;
     super::joint::write_measured(study, &built, &prepared, &dir, progress)?;
     finish(record, out, t)?;
 
-    let groupings: Vec<(bool, &str)> = match study.identification.grouping {
-        Grouping::Both => vec![(false, "ungrouped"), (true, "grouped")],
-        Grouping::Grouped => vec![(true, "grouped")],
-        Grouping::Ungrouped => vec![(false, "ungrouped")],
-    };
-    for (grouped, name) in groupings {
+    for (grouped, name) in groupings(study) {
         progress.check()?;
         let folder = format!("identify/{name}");
         let t = begin(
@@ -319,6 +341,15 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         finish(record, out, t)?;
     }
     Ok(())
+}
+
+/// The groupings the identification runs (`[identification] grouped`), with their folders.
+fn groupings(study: &Study) -> Vec<(bool, &'static str)> {
+    match study.identification.grouping {
+        Grouping::Both => vec![(false, "ungrouped"), (true, "grouped")],
+        Grouping::Grouped => vec![(true, "grouped")],
+        Grouping::Ungrouped => vec![(false, "ungrouped")],
+    }
 }
 
 /// Steps 2–3: each test solved (its forward folder written) and, unless `[run] sensitivity =

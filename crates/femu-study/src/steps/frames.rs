@@ -1,0 +1,551 @@
+//! A user's recorded B-mode frames (`[measurement] source = "frames"`): the measurement step
+//! reads them, places them in the model and gives each loaded frame its load; the identification
+//! step identifies the study's free parameters by integrated DIC from the frames themselves
+//! (`super::images::identify_images`, the engine of `source = "ultrasound"`), started from the
+//! DIC → FEMU optimum of a DIC of the sequence (`femu_dic::sequence`, as `femu dic F0 F1 ...`
+//! runs it): the grey levels alone have no capture range from starts 25–75 % off.
+//!
+//! The measurement step writes into its folder
+//!
+//! - `frames.json` — [`FramesRecord`]: the files and frames read, the crop to the DICOM's
+//!   ultrasound region, the pixel size and where it came from, the frames' placement in the
+//!   model, each frame's time, load and fraction of the test's force;
+//! - `frame_KK.png` — each frame as read (8-bit), the unloaded one `frame_00.png`;
+//! - `force_log.png` — the force log with the chosen frames marked (with `force_log`);
+//! - `measured.csv`, `sequence.csv` — the DIC of the sequence (first frame to the last, model
+//!   frame, mm) and its increments, the starting point of the identification.
+//!
+//! The identification step writes `dic/` (DIC → FEMU on `measured.csv`) and, in its own folder,
+//! what `identify_images` writes (`parameters.csv`, residual maps, `summary.json`).
+
+use crate::model::StudyModel;
+use crate::output::{create_dir, read_json, write_json};
+use crate::progress::Progress;
+use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
+use crate::schema::{Measurement, Study};
+use crate::steps::images::{identify_images, ImageRouteOptions, ImageSequence};
+use anyhow::{bail, Context, Result};
+use femu_dic::GreyImage;
+use femu_identify::idic::ImageFrame;
+use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// What the measurement step read (`frames.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct FramesRecord {
+    pub frames: ResolvedFrames,
+    /// The fraction of the test's force of each loaded frame.
+    pub load_fractions: Vec<f64>,
+    pub test: String,
+    pub test_force_n_per_mm: f64,
+    /// The frames' placement in the model, and where it came from (`origin_mm, x_axis,
+    /// y_axis` or `[probe]`).
+    pub placement: ImageFrame,
+    pub placement_from: String,
+    /// The DIC of the sequence (the identification's start), when it converged.
+    pub dic: Option<SequenceDic>,
+    pub notes: Vec<String>,
+}
+
+/// The DIC of the sequence: per increment, and the composed field.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct SequenceDic {
+    pub points: usize,
+    pub trusted: usize,
+    /// Whether the automatic DIC failed and the fixed-option chain gave the field.
+    #[serde(default)]
+    pub fallback: bool,
+    /// Per increment: element size (px), regularization (px), iterations, trusted fraction.
+    pub increments: Vec<(usize, Option<f64>, usize, f64)>,
+    pub time_s: f64,
+}
+
+/// Reads the frames `r` names: each decoded (PNG/TIFF 8/16 bit, DICOM) and cropped to the
+/// ultrasound region.
+pub fn read_frames(r: &ResolvedFrames) -> Result<Vec<GreyImage>> {
+    r.sources
+        .iter()
+        .enumerate()
+        .map(|(k, (path, frame))| {
+            let img = GreyImage::open(path, *frame)
+                .with_context(|| format!("frame {k} ({}, frame {frame})", path.display()))?;
+            Ok(match r.region {
+                Some(reg) => crop(&img, reg)?,
+                None => img,
+            })
+        })
+        .collect()
+}
+
+fn crop(img: &GreyImage, r: femu_dic::cine::Region) -> Result<GreyImage> {
+    let (w, h) = r.size();
+    let mut data = Vec::with_capacity(w * h);
+    for y in r.y0..=r.y1 {
+        data.extend_from_slice(&img.data[y * img.width + r.x0..=y * img.width + r.x1]);
+    }
+    let mut out = GreyImage::new(w, h, data)?;
+    out.pixel_size = img.pixel_size;
+    Ok(out)
+}
+
+/// Where the frames lie in the model: the study's `origin_mm`, `x_axis`, `y_axis` with the
+/// frames' pixel size, or the `[probe]` placement (`femu_ultrasound::probe::probe_on_skin` on
+/// the model's skin, the window the frames' own width and depth at their pixel size).
+pub fn placement(
+    study: &Study,
+    built: &StudyModel,
+    spec: &FramesSpec,
+    r: &ResolvedFrames,
+) -> Result<(ImageFrame, String)> {
+    let s = r.pixel_size_mm;
+    match &spec.placement {
+        Some(p) => Ok((
+            ImageFrame::new(p.origin_mm, s, p.x_axis, p.y_axis)
+                .map_err(|e| anyhow::anyhow!("[measurement] frame keys: {e}"))?,
+            "[measurement] origin_mm, x_axis, y_axis".into(),
+        )),
+        None => {
+            let mut section = study.probe.clone();
+            section.width_mm = r.width as f64 * s;
+            section.depth_mm = r.height as f64 * s;
+            section.px_per_mm = 1.0 / s;
+            let probe = super::ultrasound::place_probe(&built.model.mesh, &built.skin, &section)
+                .context("placing the frames by [probe]")?;
+            Ok((
+                super::images::image_frame(&probe),
+                format!(
+                    "[probe] side {} on the model's skin, {:.3} x {:.3} mm at {} mm/px",
+                    section.side, section.width_mm, section.depth_mm, s
+                ),
+            ))
+        }
+    }
+}
+
+/// The measurement step of recorded frames: reads and places them, gives each its load, writes
+/// the record and figures, and correlates the sequence for the identification's start (a DIC
+/// that fails is a note: the identification then starts from the Latin-hypercube starts).
+pub fn measure(
+    study: &Study,
+    built: &StudyModel,
+    m: &Measurement,
+    spec: &FramesSpec,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<FramesRecord> {
+    create_dir(out)?;
+    let resolved = spec
+        .resolve()
+        .map_err(|e| anyhow::anyhow!("[measurement] {}: {}", e.key, e.message))?;
+    let test = &study.tests[m.test];
+    let force = test_force(test).context("the frames' test has no force")?;
+    let frames = read_frames(&resolved)?;
+    let (placement, placement_from) = placement(study, built, spec, &resolved)?;
+    let mut notes = Vec::new();
+    if let Some(log) = &resolved.force_log {
+        let f0 = log.at_frames[0];
+        let fmax = log.at_frames.iter().fold(0.0f64, |a, b| a.max(b.abs()));
+        if f0.abs() > 0.02 * fmax {
+            notes.push(format!(
+                "the force log gives the first frame {f0:.4} N/mm ({:.0} % of the largest): the model takes that frame as unloaded",
+                100.0 * f0.abs() / fmax
+            ));
+        }
+        force_log_figure(&out.join("force_log.png"), log, resolved.times_s.as_deref())?;
+    }
+    for (k, f) in frames.iter().enumerate() {
+        let p = out.join(format!("frame_{k:02}.png"));
+        f.save_png(&p)
+            .with_context(|| format!("cannot write {}", p.display()))?;
+    }
+    let load_fractions = resolved.load_fractions(force);
+    progress.note(&format!(
+        "recorded frames: {} of {} x {} px at {} mm/px ({}), loads {:?} N/mm ({} at {} N/mm), placed by {}",
+        frames.len(),
+        resolved.width,
+        resolved.height,
+        resolved.pixel_size_mm,
+        resolved.pixel_size_from,
+        resolved.loads_n_per_mm,
+        test.loading.name(),
+        force,
+        placement_from
+    ));
+    let dic = match sequence_dic(&frames, &placement, out, progress) {
+        Ok(d) => Some(d),
+        Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+        Err(e) => {
+            let note = format!(
+                "the DIC of the sequence failed ({e:#}): the identification starts from the Latin-hypercube starts alone, from which the grey levels may not capture the motion"
+            );
+            progress.warn(&note);
+            notes.push(note);
+            None
+        }
+    };
+    let record = FramesRecord {
+        frames: resolved,
+        load_fractions,
+        test: test.loading.name(),
+        test_force_n_per_mm: force,
+        placement,
+        placement_from,
+        dic,
+        notes,
+    };
+    write_json(&out.join("frames.json"), &record)?;
+    Ok(record)
+}
+
+/// The force log against time (the log's clock), the chosen frames marked.
+fn force_log_figure(
+    path: &Path,
+    log: &crate::schema::frames::ForceLog,
+    times: Option<&[f64]>,
+) -> Result<()> {
+    use femu_plot::{LinePlot, LineStyle, Series};
+    let curve: Vec<(f64, f64)> = log
+        .time_s
+        .iter()
+        .zip(&log.force_n_per_mm)
+        .map(|(&t, &f)| (t, f))
+        .collect();
+    let marks: Vec<(f64, f64)> = times
+        .unwrap_or(&[])
+        .iter()
+        .zip(&log.at_frames)
+        .map(|(&t, &f)| (t + log.offset_s, f))
+        .collect();
+    femu_plot::line_plot_png(
+        path,
+        &[
+            Series::new(
+                &format!(
+                    "force log {}",
+                    log.path.file_name().unwrap_or_default().to_string_lossy()
+                ),
+                curve,
+                LineStyle::Line,
+            ),
+            Series::new(
+                "frames identified (unloaded first)",
+                marks,
+                LineStyle::Markers,
+            ),
+        ],
+        &LinePlot {
+            title: format!(
+                "Force log and the chosen frames (offset {} s)",
+                log.offset_s
+            ),
+            x_label: "time on the log's clock (s)".into(),
+            y_label: "force (N/mm)".into(),
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The DIC of the sequence (frame to frame, composed to the first: `femu dic F0 F1 ...` with
+/// its defaults), written as `measured.csv` in the model frame and `sequence.csv`.
+fn sequence_dic(
+    frames: &[GreyImage],
+    placement: &ImageFrame,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<SequenceDic> {
+    use femu_dic::command::{CorrelationSpec, RoiSpec};
+    let t0 = std::time::Instant::now();
+    let spec = CorrelationSpec {
+        roi: RoiSpec::Whole,
+        options: femu_dic::DicOptions {
+            acceleration_depth: femu_dic::anderson::DEFAULT_DEPTH,
+            ..Default::default()
+        },
+        element: femu_dic::auto::Setting::Auto,
+        regularization: femu_dic::auto::Setting::Auto,
+        trust: femu_dic::quality::TrustCriteria::default(),
+    };
+    let bar = progress.task("DIC of the sequence", Some(frames.len() - 1));
+    let seq = femu_dic::sequence::correlate_sequence(frames, &spec, None, &|_, _| bar.inc(1));
+    drop(bar);
+    progress.check()?;
+    let seq = match seq {
+        Ok(seq) => seq,
+        Err(e) => {
+            let why = format!("{e}");
+            progress.warn(&format!(
+                "the DIC of the sequence (automatic options) failed: {why}; correlating again with 16 px elements over the tissue both frames of each pair show, unconverged increments kept (a start only)"
+            ));
+            let field = plain_chain(frames)
+                .with_context(|| format!("after the automatic DIC failed ({why})"))?;
+            return finish_start(field, placement, out, Vec::new(), t0, progress);
+        }
+    };
+    let last = frames.len() - 1;
+    let px = seq.field(last, &femu_dic::output::ModelFrame::default());
+    let field = MeasuredField {
+        points: px
+            .iter()
+            .map(|g| {
+                let var = [g.s_mm[0] * g.s_mm[0], g.s_mm[1] * g.s_mm[1]];
+                MeasuredPoint {
+                    x: g.x_px,
+                    u: g.u_px,
+                    weight: var.map(|v| if v > 0.0 && v.is_finite() { g.w / v } else { 0.0 }),
+                }
+            })
+            .collect(),
+        comments: vec![format!(
+            "femu {}: DIC of the recorded frames (frame to frame, composed to the first), first frame to the last",
+            env!("CARGO_PKG_VERSION")
+        )],
+    };
+    let mut increments = Vec::new();
+    let mut csv =
+        String::from("increment,element_px,regularization_px,iterations,trusted_fraction,time_s\n");
+    for (k, inc) in seq.increments.iter().enumerate() {
+        let res = &inc.measured.res;
+        let trusted = inc
+            .measured
+            .trust
+            .iter()
+            .filter(|&&t| t == femu_dic::quality::Trust::Trusted)
+            .count() as f64
+            / inc.measured.trust.len().max(1) as f64;
+        csv += &format!(
+            "{},{},{},{},{:.4},{:.3}\n",
+            k + 1,
+            inc.choice.element_size_px,
+            inc.choice
+                .regularization_px
+                .map_or(String::new(), |r| format!("{r}")),
+            res.iterations,
+            trusted,
+            inc.time_s
+        );
+        increments.push((
+            inc.choice.element_size_px,
+            inc.choice.regularization_px,
+            res.iterations,
+            trusted,
+        ));
+    }
+    femu_mesh::atomic::write(out.join("sequence.csv"), csv)
+        .with_context(|| format!("cannot write {}", out.join("sequence.csv").display()))?;
+    finish_start(field, placement, out, increments, t0, progress)
+}
+
+/// The composed field in pixels `field` mapped to the model, written as `measured.csv`.
+fn finish_start(
+    field: MeasuredField,
+    placement: &ImageFrame,
+    out: &Path,
+    increments: Vec<(usize, Option<f64>, usize, f64)>,
+    t0: std::time::Instant,
+    progress: &dyn Progress,
+) -> Result<SequenceDic> {
+    let model = field.to_model_frame(
+        placement.mm_per_px,
+        placement.origin_mm,
+        placement.x_axis,
+        placement.y_axis,
+    );
+    let (kept, _) = model.weighted_points();
+    if kept.points.is_empty() {
+        bail!("no point of the composed field is trusted");
+    }
+    write_measured(&out.join("measured.csv"), &model)?;
+    let d = SequenceDic {
+        points: model.points.len(),
+        trusted: kept.points.len(),
+        fallback: increments.is_empty(),
+        increments,
+        time_s: t0.elapsed().as_secs_f64(),
+    };
+    progress.note(&format!(
+        "DIC of the sequence: {} increments, {} of {} points trusted, {:.1} s -> {}",
+        d.increments.len(),
+        d.trusted,
+        d.points,
+        d.time_s,
+        out.join("measured.csv").display()
+    ));
+    Ok(d)
+}
+
+/// The fallback of the sequence's DIC: each pair correlated with fixed options (16 px elements,
+/// no regularization, global brightness, three pyramid levels, as the simulated experiment
+/// correlates its frames) over the tissue both frames show (`femu_dic::sequence::tissue_mask`),
+/// an increment kept whether or not it converged (the field only starts the integrated DIC,
+/// which compares the frames themselves), the increments composed along the points of a 16-px
+/// grid over the first; a point is weighted 0 in an element any increment flags.
+fn plain_chain(frames: &[GreyImage]) -> Result<MeasuredField> {
+    use femu_dic::sequence::tissue_mask;
+    let opts = femu_dic::DicOptions {
+        element_size: 16,
+        regularization_length: None,
+        brightness: femu_dic::Brightness::Global,
+        pyramid_levels: Some(3),
+        ..Default::default()
+    };
+    let (w, h) = (frames[0].width, frames[0].height);
+    let mut dics = Vec::new();
+    for k in 1..frames.len() {
+        let inside: Vec<bool> = tissue_mask(&frames[k - 1])
+            .into_iter()
+            .zip(tissue_mask(&frames[k]))
+            .map(|(a, b)| a && b)
+            .collect();
+        let roi = femu_dic::Roi::Mask {
+            width: w,
+            height: h,
+            inside,
+        };
+        dics.push(
+            femu_dic::correlate(&frames[k - 1], &frames[k], &roi, &opts)
+                .with_context(|| format!("pair {} -> {k}", k - 1))?,
+        );
+    }
+    let grid = femu_dic::output::grid(&dics[0], &femu_dic::output::ModelFrame::default(), 16.0)?;
+    let points = grid
+        .iter()
+        .filter_map(|g| {
+            let mut p = g.x_px;
+            let mut wgt = g.w;
+            for d in &dics {
+                let (e, _, _) = d.mesh.locate(p[0], p[1])?;
+                let inc = d.mesh.interpolate(&d.displacement, p[0], p[1])?;
+                if d.flagged[e] {
+                    wgt = 0.0;
+                }
+                p = [p[0] + inc[0], p[1] + inc[1]];
+            }
+            Some(MeasuredPoint {
+                x: g.x_px,
+                u: [p[0] - g.x_px[0], p[1] - g.x_px[1]],
+                weight: [wgt, wgt],
+            })
+        })
+        .collect();
+    Ok(MeasuredField {
+        points,
+        comments: vec![format!(
+            "femu {}: DIC of the recorded frames, fixed options (16 px, three levels), unconverged increments kept, composed to the first frame; a start of the integrated DIC",
+            env!("CARGO_PKG_VERSION")
+        )],
+    })
+}
+
+/// Writes a model-frame field with its weights as `sx,sy,w` (conventions.md).
+fn write_measured(path: &Path, f: &MeasuredField) -> Result<()> {
+    let mut s = String::new();
+    for c in &f.comments {
+        s += &format!("# {c}\n");
+    }
+    s += "# units: mm\nx,y,ux,uy,sx,sy,w\n";
+    for p in &f.points {
+        let sd = p.weight.map(|w| if w > 0.0 { 1.0 / w.sqrt() } else { 1.0 });
+        let w = if p.weight.iter().any(|&w| w > 0.0) {
+            1
+        } else {
+            0
+        };
+        s += &format!(
+            "{:.12e},{:.12e},{:.12e},{:.12e},{:.6e},{:.6e},{w}\n",
+            p.x[0], p.x[1], p.u[0], p.u[1], sd[0], sd[1]
+        );
+    }
+    femu_mesh::atomic::write(path, s).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// The image sequence the measurement step recorded in `dir`: the frames read again, placed
+/// and loaded as `frames.json` says.
+pub fn read_sequence(dir: &Path) -> Result<(ImageSequence, FramesRecord)> {
+    let record: FramesRecord = read_json(&dir.join("frames.json"))?;
+    let frames = read_frames(&record.frames)?;
+    let files: Vec<String> = record
+        .frames
+        .sources
+        .iter()
+        .map(|(p, k)| match k {
+            0 => p.display().to_string(),
+            k => format!("{} frame {k}", p.display()),
+        })
+        .collect();
+    Ok((
+        ImageSequence {
+            frames,
+            load_fractions: record.load_fractions.clone(),
+            frame: record.placement,
+            source: format!(
+                "{} recorded frames ({}), {} mm/px, loads {:?} N/mm",
+                files.len(),
+                files.join(", "),
+                record.frames.pixel_size_mm,
+                record.frames.loads_n_per_mm
+            ),
+        },
+        record,
+    ))
+}
+
+/// The identification from recorded frames: DIC → FEMU on the sequence's DIC (`dic/`, its
+/// optimum the start), then integrated DIC from the frames (`out`).
+pub fn identify_frames(
+    study: &Study,
+    grouped: bool,
+    built: &StudyModel,
+    measurement: &Path,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<super::images::ImageIdentificationSummary> {
+    use crate::steps::measure::{Measured, Prepared, PreparedData};
+    let (seq, record) = read_sequence(measurement)?;
+    let m = &study.measurements[0];
+    let mut study_idic = study.clone();
+    study_idic.identification.test = m.test;
+    let mut starts = Vec::new();
+    if record.dic.is_some() {
+        let path = measurement.join("measured.csv");
+        let (field, _) = MeasuredField::read(&path)?.weighted_points();
+        let prepared = Prepared {
+            name: m.name.clone(),
+            label: m.label(&study.tests),
+            test: m.test,
+            data: PreparedData::Measured(Measured {
+                field,
+                source: format!("DIC of the recorded frames ({})", path.display()),
+                reference_known: false,
+                covariance: None,
+            }),
+            travel: None,
+        };
+        let mut squared = study_idic.clone();
+        squared.identification.loss = femu_identify::weighted::Loss::Squared;
+        progress.note("DIC -> FEMU on the sequence's DIC (the start of the integrated DIC):");
+        let a = super::identify::identify_on(
+            &squared,
+            grouped,
+            built,
+            &[prepared],
+            &out.join("dic"),
+            progress,
+        )?;
+        starts.push(a.parameters.iter().map(|p| p.identified).collect());
+        // The optimum is the start (as for simulated images): no Latin-hypercube starts.
+        study_idic.identification.starts = 0;
+    }
+    let route = ImageRouteOptions::for_study(study);
+    identify_images(
+        &study_idic,
+        grouped,
+        &seq,
+        false,
+        starts,
+        &route,
+        out,
+        progress,
+    )
+}
