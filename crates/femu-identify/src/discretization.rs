@@ -8,18 +8,19 @@
 //! standard deviations, and a small residual does not warn of it.
 //!
 //! At the optimum `φ̂` on the model's mesh (element size `h`), the same measured points are
-//! evaluated on meshes of the same geometry refined by the ratios `ρ_i = h / h_i` (e.g. √2 and
-//! 2). With `r_i` the whitened residuals on mesh `i` (the data cancel in differences), the
-//! parameter shift to mesh `i` is one Gauss–Newton step with the exact Jacobian `J_i`:
+//! evaluated on meshes of the same geometry with the ratios `ρ_i = h / h_i` (femu's studies: √2
+//! and 2; coarser meshes serve too, one of them finer than the model's). With `r_i` the
+//! whitened residuals on mesh `i` (the data cancel in differences), the parameter shift to the
+//! finest mesh `f` is one Gauss–Newton step with its exact Jacobian `J_f`:
 //!
 //! ```text
-//!   δ_i = -(J_iᵀ J_i)⁻¹ J_iᵀ (r_i - r_h)
+//!   δ_f = -(J_fᵀ J_f)⁻¹ J_fᵀ (r_f - r_h)
 //! ```
 //!
-//! With a discretization error `e(h) = C h^p`, the field differences `d_i = |r_i - r_h|` obey
-//! `d_2 / d_1 = (1 - ρ_2^-p) / (1 - ρ_1^-p)`, which gives the observed rate `p`; the bias of the
+//! With a discretization error `e(h) = C h^p`, the field differences between meshes obey
+//! `|r_i - r_j| = C |ρ_i^-p - ρ_j^-p|`, which gives the observed rate `p`; the bias of the
 //! identified log-parameters (model's mesh minus converged) is then `b = -δ_f / (1 - ρ_f^-p)`
-//! for the finest level `f` (Richardson). When `|b_k|` exceeds [`BIAS_FRACTION`] of the standard
+//! (Richardson). When `|b_k|` exceeds [`BIAS_FRACTION`] of the standard
 //! deviation the check is flagged: the caller widens the interval ([`crate::campaign::widen`])
 //! and the mesh that would make the bias negligible is `h (|b|/(f σ))^(-1/p)`.
 
@@ -122,7 +123,7 @@ impl DiscretizationCheck {
 /// Why the check could not be made.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckError {
-    #[error("the discretization check needs the model's mesh and two refined meshes")]
+    #[error("the discretization check needs the model's mesh first and two other meshes of its geometry, one of them finer")]
     Levels,
     #[error("the meshes of the check see different data ({0} and {1} residuals): give them the same measured points")]
     Rows(usize, usize),
@@ -171,10 +172,6 @@ fn fit_rate(pairs: &[(f64, f64, f64)]) -> (Option<f64>, f64) {
     (Some(p), misfit(p).exp() - 1.0)
 }
 
-fn norm(v: &[f64]) -> f64 {
-    v.iter().map(|x| x * x).sum::<f64>().sqrt()
-}
-
 /// `-(JᵀJ)⁻¹ Jᵀ d`.
 fn gauss_newton_step(j: &Columns, d: &[f64]) -> Result<Vec<f64>, CheckError> {
     use faer::linalg::solvers::Solve;
@@ -199,58 +196,110 @@ pub fn extrapolated_bias(shift: &[f64], ratio: f64, rate: f64) -> Vec<f64> {
     shift.iter().map(|s| -s * factor).collect()
 }
 
+/// One mesh of the check, evaluated at the identified parameters: its refinement ratio `h / h_i`
+/// (1 for the model's own mesh), its element count and its whitened residuals.
+pub struct Evaluated {
+    pub ratio: f64,
+    pub elements: usize,
+    pub residual: Vec<f64>,
+}
+
 /// The check at the identified parameters `theta` (model units) with relative sds `sd`, from
-/// `levels`: the model's own mesh first (ratio 1), then meshes of the same geometry refined by
-/// increasing ratios, all with the same measured points (see the module documentation).
-/// `data_from_model`: the data were made by the model's own mesh (a virtual experiment without
-/// another mesh), so the bias is reported but no interval needs widening.
+/// `levels`: the model's own mesh first (ratio 1), then meshes of the same geometry coarser or
+/// finer, all with the same measured points (see the module documentation); the finest (the
+/// largest ratio, above 1) gives the Jacobian. `data_from_model`: the data were made by the
+/// model's own mesh (a virtual experiment without another mesh), so the bias is reported but no
+/// interval needs widening.
 pub fn check(
     theta: &[f64],
     sd: &[f64],
     levels: &mut [Level],
     data_from_model: bool,
 ) -> Result<DiscretizationCheck, CheckError> {
-    if levels.len() < 3 || levels[0].ratio != 1.0 {
-        return Err(CheckError::Levels);
-    }
+    let finest = finest_level(levels.iter().map(|l| l.ratio))?;
     let phi: Vec<f64> = theta.iter().map(|t| t.ln()).collect();
-    let last = levels.len() - 1;
-    let mut residuals: Vec<Vec<f64>> = Vec::new();
+    let mut evaluated = Vec::with_capacity(levels.len());
     let mut jacobian = None;
     for (i, level) in levels.iter_mut().enumerate() {
-        let (r, j) = level.problem.evaluate(&phi, i == last)?;
-        if r.len() != residuals.first().map_or(r.len(), |r0| r0.len()) {
-            return Err(CheckError::Rows(residuals[0].len(), r.len()));
-        }
-        residuals.push(r);
-        jacobian = j.or(jacobian);
-    }
-    let distance =
-        |a: &[f64], b: &[f64]| norm(&a.iter().zip(b).map(|(x, y)| x - y).collect::<Vec<_>>());
-    let d: Vec<f64> = residuals[last]
-        .iter()
-        .zip(&residuals[0])
-        .map(|(a, b)| a - b)
-        .collect();
-    let shift = gauss_newton_step(jacobian.as_ref().ok_or(CheckError::Levels)?, &d)?;
-    let records: Vec<LevelRecord> = levels
-        .iter()
-        .enumerate()
-        .skip(1)
-        .map(|(i, level)| LevelRecord {
+        let (residual, j) = level.problem.evaluate(&phi, i == finest)?;
+        evaluated.push(Evaluated {
             ratio: level.ratio,
             elements: level.elements,
-            field_change: distance(&residuals[i], &residuals[0]),
-            change_to_finest: distance(&residuals[i], &residuals[last]),
-            shift: (i == last).then(|| shift.clone()),
+            residual,
+        });
+        jacobian = j.or(jacobian);
+    }
+    assess(
+        sd,
+        &evaluated,
+        jacobian.as_ref().ok_or(CheckError::Levels)?,
+        data_from_model,
+    )
+}
+
+/// The index of the finest level of `ratios`: the model's own mesh first (ratio 1), at least
+/// three meshes, the finest above 1.
+pub fn finest_level(ratios: impl Iterator<Item = f64>) -> Result<usize, CheckError> {
+    let ratios: Vec<f64> = ratios.collect();
+    let finest = (0..ratios.len())
+        .max_by(|&a, &b| ratios[a].total_cmp(&ratios[b]))
+        .ok_or(CheckError::Levels)?;
+    if ratios.len() < 3 || ratios[0] != 1.0 || !(ratios[finest] > 1.0) {
+        return Err(CheckError::Levels);
+    }
+    Ok(finest)
+}
+
+/// The check from meshes already evaluated at the identified parameters (see [`check`]):
+/// `evaluated[0]` the model's own mesh, `jacobian` that of the finest, with relative sds `sd`.
+/// The caller may evaluate one mesh at a time (and free it before the next).
+pub fn assess(
+    sd: &[f64],
+    evaluated: &[Evaluated],
+    jacobian: &Columns,
+    data_from_model: bool,
+) -> Result<DiscretizationCheck, CheckError> {
+    let finest = finest_level(evaluated.iter().map(|e| e.ratio))?;
+    let rows = evaluated[0].residual.len();
+    if let Some(e) = evaluated.iter().find(|e| e.residual.len() != rows) {
+        return Err(CheckError::Rows(rows, e.residual.len()));
+    }
+    let residuals: Vec<&[f64]> = evaluated.iter().map(|e| e.residual.as_slice()).collect();
+    let distance = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .map(|(x, y)| (x - y).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let d: Vec<f64> = residuals[finest]
+        .iter()
+        .zip(residuals[0])
+        .map(|(a, b)| a - b)
+        .collect();
+    let shift = gauss_newton_step(jacobian, &d)?;
+    // The refined (and coarser) meshes, the finest last.
+    let mut order: Vec<usize> = (1..evaluated.len()).filter(|&i| i != finest).collect();
+    order.push(finest);
+    let records: Vec<LevelRecord> = order
+        .iter()
+        .map(|&i| LevelRecord {
+            ratio: evaluated[i].ratio,
+            elements: evaluated[i].elements,
+            field_change: distance(residuals[i], residuals[0]),
+            change_to_finest: distance(residuals[i], residuals[finest]),
+            shift: (i == finest).then(|| shift.clone()),
         })
         .collect();
     // Every pair of meshes: |r_i - r_j| = C |ρ_i^-p - ρ_j^-p|.
-    let ratios: Vec<f64> = levels.iter().map(|l| l.ratio).collect();
     let mut pairs = Vec::new();
-    for i in 0..=last {
-        for j in i + 1..=last {
-            pairs.push((ratios[i], ratios[j], distance(&residuals[i], &residuals[j])));
+    for i in 0..evaluated.len() {
+        for j in i + 1..evaluated.len() {
+            pairs.push((
+                evaluated[i].ratio,
+                evaluated[j].ratio,
+                distance(residuals[i], residuals[j]),
+            ));
         }
     }
     let (fitted, misfit) = fit_rate(&pairs);
@@ -258,15 +307,14 @@ pub fn check(
     // A faster apparent rate is pre-asymptotic: the extrapolation uses at most the elements'
     // nominal rate.
     let rate = observed.map_or(ASSUMED_RATE, |p| p.min(NOMINAL_RATE));
-    let finest = &records[records.len() - 1];
-    let bias = extrapolated_bias(&shift, finest.ratio, rate);
+    let bias = extrapolated_bias(&shift, evaluated[finest].ratio, rate);
     let bias_over_sd: Vec<f64> = bias
         .iter()
         .zip(sd)
         .map(|(b, s)| if s.is_finite() { b.abs() / s } else { 0.0 })
         .collect();
     let worst = bias_over_sd.iter().copied().fold(0.0, f64::max);
-    let elements = levels[0].elements;
+    let elements = evaluated[0].elements;
     let recommended_elements = (worst > BIAS_FRACTION).then(|| {
         let n = elements as f64 * (worst / BIAS_FRACTION).powf(2.0 / rate);
         round_up(n)
@@ -421,43 +469,55 @@ mod tests {
         let phi_h = solve(&mesh(1.0).error);
         let phi_inf = solve(&[0.0; 8]);
         let theta: Vec<f64> = phi_h.iter().map(|v| v.exp()).collect();
-        let (mut m0, mut m1, mut m2) = (mesh(1.0), mesh(2f64.sqrt()), mesh(2.0));
-        let mut levels = [
-            Level {
-                ratio: 1.0,
-                elements: 1000,
-                problem: &mut m0,
-            },
-            Level {
-                ratio: 2f64.sqrt(),
-                elements: 2000,
-                problem: &mut m1,
-            },
-            Level {
-                ratio: 2.0,
-                elements: 4000,
-                problem: &mut m2,
-            },
-        ];
-        let c = check(&theta, &[1e-3, 1e-3], &mut levels, false).unwrap();
-        assert!(
-            c.rate_observed && (c.rate - p).abs() < 1e-9,
-            "rate {}",
-            c.rate
-        );
-        for k in 0..2 {
-            let actual = phi_h[k] - phi_inf[k];
+        // Two finer meshes (the studies'), and one coarser with one finer.
+        use std::f64::consts::{FRAC_1_SQRT_2, SQRT_2};
+        for ratios in [[1.0, SQRT_2, 2.0], [1.0, FRAC_1_SQRT_2, SQRT_2]] {
+            let mut meshes: Vec<Mesh> = ratios.iter().map(|&r| mesh(r)).collect();
+            let mut levels: Vec<Level> = meshes
+                .iter_mut()
+                .zip(ratios)
+                .map(|(m, ratio)| Level {
+                    ratio,
+                    elements: (1000.0 * ratio * ratio).round() as usize,
+                    problem: m,
+                })
+                .collect();
+            let c = check(&theta, &[1e-3, 1e-3], &mut levels, false).unwrap();
             assert!(
-                (c.bias[k] - actual).abs() < 1e-9 * actual.abs().max(1e-12),
-                "parameter {k}: bias {} vs {actual}",
-                c.bias[k]
+                c.rate_observed && (c.rate - p).abs() < 1e-9,
+                "{ratios:?}: rate {}",
+                c.rate
             );
+            assert_eq!(c.levels.last().unwrap().ratio, ratios[2]);
+            for k in 0..2 {
+                let actual = phi_h[k] - phi_inf[k];
+                assert!(
+                    (c.bias[k] - actual).abs() < 1e-9 * actual.abs().max(1e-12),
+                    "{ratios:?}, parameter {k}: bias {} vs {actual}",
+                    c.bias[k]
+                );
+            }
+            assert_eq!(c.status, "widened");
+            // The recommended mesh meets the fraction at the observed rate.
+            let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
+            let n = c.recommended_elements.unwrap() as f64;
+            assert!(worst * (n / 1000.0).powf(-p / 2.0) <= BIAS_FRACTION * 1.0001);
         }
-        assert_eq!(c.status, "widened");
-        // The recommended mesh meets the fraction at the observed rate.
-        let worst = c.bias_over_sd.iter().copied().fold(0.0, f64::max);
-        let n = c.recommended_elements.unwrap() as f64;
-        assert!(worst * (n / 1000.0).powf(-p / 2.0) <= BIAS_FRACTION * 1.0001);
+        // No mesh finer than the model's: nothing to extrapolate from.
+        let mut meshes: Vec<Mesh> = [1.0, 0.5, FRAC_1_SQRT_2].iter().map(|&r| mesh(r)).collect();
+        let mut levels: Vec<Level> = meshes
+            .iter_mut()
+            .zip([1.0, 0.5, FRAC_1_SQRT_2])
+            .map(|(m, ratio)| Level {
+                ratio,
+                elements: 1000,
+                problem: m,
+            })
+            .collect();
+        assert!(matches!(
+            check(&theta, &[1e-3, 1e-3], &mut levels, false),
+            Err(CheckError::Levels)
+        ));
     }
 
     /// A mesh 16 times finer or more is not sent to the user as advice: the message says the

@@ -56,6 +56,12 @@ pub trait LeastSquares {
     ) -> Result<(Vec<f64>, Option<Columns>), FitError>;
     /// Forward solves and Jacobian evaluations so far.
     fn counts(&self) -> (usize, usize);
+    /// The forward states of the last evaluation, one per forward model (`None` before its
+    /// first solve), to start another problem on the same meshes from them
+    /// ([`Problem::with_warm_start`]); empty for a problem without forward models.
+    fn states(&self) -> Vec<Option<Vec<f64>>> {
+        Vec::new()
+    }
 }
 
 /// Some free parameters of a problem held at given values, the others free: a
@@ -248,6 +254,16 @@ impl Problem {
         }
         self.travel = Some((travel_mm, sigma_mm));
         Ok(self)
+    }
+
+    /// Starts the first forward solve from `state` (the solution of the same mesh at nearby
+    /// parameters, [`LeastSquares::states`]) instead of the load increments; a state of another
+    /// length is ignored.
+    pub fn with_warm_start(mut self, state: Vec<f64>) -> Problem {
+        if state.len() == self.model.state_len() {
+            self.warm = Some(state);
+        }
+        self
     }
 
     /// Stops at the next forward solve with [`FitError::Interrupted`] once `flag` is set (the
@@ -491,6 +507,10 @@ impl LeastSquares for Problem {
 
     fn counts(&self) -> (usize, usize) {
         (self.forward_solves, self.jacobians)
+    }
+
+    fn states(&self) -> Vec<Option<Vec<f64>>> {
+        vec![self.warm.clone()]
     }
 }
 

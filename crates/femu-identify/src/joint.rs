@@ -224,6 +224,13 @@ impl LeastSquares for JointProblem {
             (s + bs, j + bj)
         })
     }
+
+    fn states(&self) -> Vec<Option<Vec<f64>>> {
+        self.blocks
+            .iter()
+            .flat_map(|b| b.problem.states())
+            .collect()
+    }
 }
 
 /// The free parameters of a block whose model is `block_model`, from the joint ones defined on
