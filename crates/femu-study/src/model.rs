@@ -24,6 +24,9 @@ pub struct StudyModel {
     pub thigh: Option<ThighModel>,
     /// "parametric thigh", "label image IMAGE" or "deck FILE".
     pub source: String,
+    /// The discretization check's meshes and solutions, for the next identification on this
+    /// model (`crate::steps::discretization::CheckMeshes`).
+    pub check_meshes: std::sync::Mutex<crate::steps::discretization::CheckMeshes>,
 }
 
 impl StudyModel {
@@ -212,6 +215,7 @@ fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<Stu
         skin,
         thigh: Some(thigh),
         source,
+        check_meshes: Default::default(),
     })
 }
 
@@ -246,6 +250,7 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
         skin,
         thigh: None,
         source: format!("deck {}", path.display()),
+        check_meshes: Default::default(),
     })
 }
 
