@@ -3,6 +3,7 @@
 //! of every finished step. Built from the files the steps wrote, so it can be rewritten at any
 //! time (`femu report DIR`), also for a run that stopped midway.
 
+mod frames;
 mod images;
 
 use crate::html::{esc, g, Page as Html};
@@ -612,6 +613,12 @@ fn measurement_section(html: &mut Html, dir: &Path) -> Option<MeasurementOvervie
 
 /// The identification from images of each grouping (`identify/GROUPING/` holding the routes).
 fn image_sections(html: &mut Html, dir: &Path) -> Option<BTreeMap<String, images::ImageOverview>> {
+    for g in ["ungrouped", "grouped"] {
+        let at = dir.join("identify").join(g);
+        if frames::is_frames_route(&at, &dir.join("measurement")) {
+            frames::section(html, g, &at, &dir.join("measurement"));
+        }
+    }
     let groupings: Vec<&str> = ["ungrouped", "grouped"]
         .into_iter()
         .filter(|g| images::is_image_route(&dir.join("identify").join(g)))
@@ -641,6 +648,9 @@ fn identification_section(
     let results: Vec<(String, IdentificationSummary)> = ["ungrouped", "grouped"]
         .iter()
         .filter(|g| !images::is_image_route(&dir.join("identify").join(g)))
+        .filter(|g| {
+            !frames::is_frames_route(&dir.join("identify").join(g), &dir.join("measurement"))
+        })
         .filter_map(|g| {
             html.read(&dir.join("identify").join(g).join("summary.json"))
                 .map(|s| (g.to_string(), s))
