@@ -295,6 +295,13 @@ pub fn correlate_auto(
 /// tissue (consecutive frames of a sequence): there a rung whose correlation ends far from the
 /// match on the coarsest level failed, it does not prove different scenes, and the longer
 /// regularizations and larger elements of the ladder are still tried.
+///
+/// When no rung succeeds with Anderson acceleration (`base.acceleration_depth > 0`), the ladder
+/// is run again with plain modified Gauss–Newton steps and [`PLAIN_ITERATION_FACTOR`] times the
+/// iterations: on fine speckle under strain the accelerated steps can cycle a few hundredths of
+/// a pixel from the fixed point that the plain iteration reaches, slowly (femu's own B-mode
+/// frames of a compression: 126 plain iterations where the accelerated ones stalled at
+/// 0.04 px).
 #[allow(clippy::too_many_arguments)]
 pub fn correlate_ladder(
     f: &GreyImage,
@@ -306,7 +313,82 @@ pub fn correlate_ladder(
     criteria: &TrustCriteria,
     stop_on_mismatch: bool,
 ) -> Result<(Measured, Choice), DicError> {
-    let bb = roi.bounding_box(f.width, f.height)?;
+    let first = ladder(
+        f,
+        g,
+        roi,
+        base,
+        element,
+        regularization,
+        criteria,
+        stop_on_mismatch,
+    );
+    let (first_error, accelerated_attempts) = match first {
+        Ok(r) => return Ok(r),
+        Err(LadderFailure {
+            error,
+            attempts: Some(attempts),
+        }) if base.acceleration_depth > 0 => (error, attempts),
+        Err(LadderFailure { error, .. }) => return Err(error),
+    };
+    let plain = DicOptions {
+        acceleration_depth: 0,
+        max_iterations: PLAIN_ITERATION_FACTOR * base.max_iterations,
+        ..base.clone()
+    };
+    match ladder(
+        f,
+        g,
+        roi,
+        &plain,
+        element,
+        regularization,
+        criteria,
+        stop_on_mismatch,
+    ) {
+        Ok((m, mut c)) => {
+            let mut attempts = accelerated_attempts;
+            attempts.append(&mut c.attempts);
+            c.attempts = attempts;
+            c.reason = format!(
+                "{}; with plain Gauss-Newton steps ({} iterations at most): no rung converged with Anderson acceleration",
+                c.reason, plain.max_iterations
+            );
+            Ok((m, c))
+        }
+        Err(LadderFailure {
+            attempts: Some(_), ..
+        }) => Err(match first_error {
+            DicError::Diverged(m) => DicError::Diverged(format!(
+                "{m} (tried with Anderson acceleration, then again with plain Gauss-Newton steps)"
+            )),
+            e => e,
+        }),
+        Err(LadderFailure { error, .. }) => Err(error),
+    }
+}
+
+/// How many times the iterations of an accelerated rung a plain one gets ([`correlate_ladder`]).
+pub const PLAIN_ITERATION_FACTOR: usize = 3;
+
+/// One pass of the ladder of [`correlate_ladder`] with `base`'s options; a ladder whose every
+/// rung failed returns [`DicError::Ladder`] with its attempts.
+#[allow(clippy::too_many_arguments)]
+fn ladder(
+    f: &GreyImage,
+    g: &GreyImage,
+    roi: &Roi,
+    base: &DicOptions,
+    element: Setting,
+    regularization: Setting,
+    criteria: &TrustCriteria,
+    stop_on_mismatch: bool,
+) -> Result<(Measured, Choice), LadderFailure> {
+    let fatal = |e: DicError| LadderFailure {
+        error: e,
+        attempts: None,
+    };
+    let bb = roi.bounding_box(f.width, f.height).map_err(fatal)?;
     let fwhm = speckle_fwhm(f, &bb);
     // An explicit element size is used as given (the mesh reports a size that does not fit);
     // the automatic one is kept within half the ROI.
@@ -319,7 +401,7 @@ pub fn correlate_ladder(
         .max(4),
     };
     // Element size and ROI errors (an element larger than the ROI, an empty mask) at once.
-    crate::mesh::DicMesh::new(roi, f.width, f.height, h0)?;
+    crate::mesh::DicMesh::new(roi, f.width, f.height, h0).map_err(fatal)?;
     // Options out of their range (tolerance, iterations, flag factor, levels, a given
     // regularization shorter than two elements) would fail every rung alike: refused once,
     // before the ladder.
@@ -331,7 +413,8 @@ pub fn correlate_ladder(
         },
         ..base.clone()
     }
-    .validate()?;
+    .validate()
+    .map_err(fatal)?;
     let (ratio, gradient) = texture(f, &bb, h0);
     let mut stats = ImageStatistics {
         speckle_fwhm_px: fwhm,
@@ -380,7 +463,7 @@ pub fn correlate_ladder(
                     e @ (DicError::Roi(_)
                     | DicError::SizeMismatch { .. }
                     | DicError::Interrupted(_)),
-                ) => return Err(e),
+                ) => return Err(fatal(e)),
                 Err(e) => {
                     attempts.push(Attempt {
                         element_size_px: h,
@@ -427,11 +510,11 @@ pub fn correlate_ladder(
                     1usize << level
                 ));
                 attempts.push(a);
-                return Err(DicError::Diverged(format!(
+                return Err(fatal(DicError::Diverged(format!(
                     "the images do not correlate: on the coarsest pyramid level (1/{} resolution) they match with a ZNCC of {z:.2} (< {MIN_COARSE_MATCH}) after the correlation (element {h} px, regularization {}); they may not show the same scene, or move farther than the correlation can follow. The rest of the ladder (longer regularizations, larger elements) was not tried",
                     1usize << level,
                     ladder[k].map_or("off".to_string(), |l| format!("{l} px")),
-                )));
+                ))));
             }
             attempts.push(a);
             if ok {
@@ -465,9 +548,17 @@ pub fn correlate_ladder(
             k += 1;
         }
     }
-    Err(DicError::Diverged(failure_advice(
-        f, &bb, &attempts, sizes[0],
-    )))
+    Err(LadderFailure {
+        error: DicError::Diverged(failure_advice(f, &bb, &attempts, sizes[0])),
+        attempts: Some(attempts),
+    })
+}
+
+/// Why a ladder returned no field: the error, and the attempts when every rung was tried and
+/// failed (another pass may succeed); `None` when nothing more is worth trying.
+struct LadderFailure {
+    error: DicError,
+    attempts: Option<Vec<Attempt>>,
 }
 
 /// What failed, for [`suggestions`].
