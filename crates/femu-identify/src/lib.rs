@@ -25,6 +25,7 @@
 pub mod campaign;
 pub mod design;
 pub mod discretization;
+pub mod error_model;
 pub mod fisher;
 pub mod fit;
 mod fit_error;

@@ -187,6 +187,7 @@ pub fn identify_field(
         source: source.clone(),
         reference_known: false,
         covariance: None,
+        weighting: femu_study::schema::Weighting::PerPoint,
     };
     let study = &study.study;
     let summary = running::run(py, reporter.as_ref(), |progress| {
@@ -301,6 +302,7 @@ pub fn least_squares(
                     source: "NumPy arrays (x, y, ux, uy)".into(),
                     reference_known: false,
                     covariance: None,
+                    weighting: femu_study::schema::Weighting::PerPoint,
                 };
                 identify::measured_prepared(study, measured, "NumPy arrays")?
             }

@@ -33,6 +33,7 @@ pub enum MeasurementSource {
         path: PathBuf,
         frame: Frame,
         covariance: Option<PathBuf>,
+        weighting: Weighting,
     },
     /// The virtual experiment with images (`femu us-sim`): B-mode images of the unloaded and
     /// loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by the DIC; the
@@ -42,6 +43,21 @@ pub enum MeasurementSource {
     /// the model by their frame keys or `[probe]`: identified by integrated DIC from the
     /// frames themselves ([`super::frames`]).
     Frames(Box<super::frames::FramesSpec>),
+}
+
+/// How the misfit of a measured file is weighted (`[measurement] weighting`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Weighting {
+    /// Each point by its own weight (`1/sx²`, `1/sy²` or `w`), the default without a covariance.
+    PerPoint,
+    /// By the field's full covariance alone (`covariance`): for a covariance known to hold the
+    /// field's whole error.
+    Covariance,
+    /// By the field's covariance (or, without one, its per-point variances) plus the error its
+    /// residuals show beyond it, estimated from a first fit (`femu_identify::error_model`); the
+    /// default with a covariance.
+    Estimated,
 }
 
 /// The measured travel of the force-controlled plate or indenter (`None` for a virtual
@@ -281,6 +297,14 @@ fn check_source(
             ));
         }
     }
+    if m.weighting.is_some() && source != "file" {
+        return Err(err(
+            "weighting",
+            &format!(
+                "weighs a measured file's misfit (source = \"file\"; the source is \"{source}\")"
+            ),
+        ));
+    }
     match source.as_str() {
         "frames" => Ok(MeasurementSource::Frames(Box::new(super::frames::parse(
             m, index, lines, base,
@@ -366,6 +390,30 @@ fn check_source(
             if !(origin[0].is_finite() && origin[1].is_finite()) {
                 return Err(err("origin_mm", "must be finite"));
             }
+            let weighting = match m.weighting.as_deref() {
+                None if m.covariance.is_some() => Weighting::Estimated,
+                None | Some("per-point") => Weighting::PerPoint,
+                Some("estimated") => Weighting::Estimated,
+                Some("covariance") if m.covariance.is_some() => Weighting::Covariance,
+                Some("covariance") => {
+                    return Err(err(
+                        "weighting",
+                        "weighting = \"covariance\" needs covariance (the field's covariance file)",
+                    ))
+                }
+                Some(other) => {
+                    return Err(err(
+                        "weighting",
+                        &format!("unknown weighting '{other}' (per-point, covariance, estimated)"),
+                    ))
+                }
+            };
+            if weighting == Weighting::PerPoint && m.covariance.is_some() {
+                return Err(err(
+                    "weighting",
+                    "weighting = \"per-point\" leaves the covariance unused: remove covariance or choose covariance or estimated",
+                ));
+            }
             Ok(MeasurementSource::File {
                 path: resolve(base, file),
                 frame: Frame {
@@ -376,6 +424,7 @@ fn check_source(
                     y_axis,
                 },
                 covariance: m.covariance.as_deref().map(|c| resolve(base, c)),
+                weighting,
             })
         }
         other => Err(err(

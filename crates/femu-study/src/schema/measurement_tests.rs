@@ -227,3 +227,41 @@ fn a_decks_pressure_is_kept_or_the_conflict_named() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `[measurement] weighting`: estimated by default with a covariance, per point without; the
+/// covariance alone only with one; a weighting that would leave a covariance unused, an unknown
+/// one, or one on a measurement that is not a file: named errors.
+#[test]
+fn a_measured_files_weighting_is_read_and_checked() {
+    let file = "[measurement]\nsource = \"file\"\nfile = \"f.csv\"\n";
+    let weighting = |extra: &str| {
+        let s = parse(&format!("{file}{extra}"), Path::new("/data")).unwrap();
+        match &s.measurements[0].source {
+            MeasurementSource::File { weighting, .. } => *weighting,
+            other => panic!("a file, got {other:?}"),
+        }
+    };
+    assert_eq!(weighting(""), Weighting::PerPoint);
+    assert_eq!(weighting("covariance = \"c.mtx\"\n"), Weighting::Estimated);
+    assert_eq!(
+        weighting("covariance = \"c.mtx\"\nweighting = \"covariance\"\n"),
+        Weighting::Covariance
+    );
+    assert_eq!(
+        weighting("weighting = \"estimated\"\n"),
+        Weighting::Estimated
+    );
+    let e = err(&format!("{file}weighting = \"covariance\"\n"));
+    assert!(
+        e.contains("weighting") && e.contains("needs covariance"),
+        "{e}"
+    );
+    let e = err(&format!(
+        "{file}covariance = \"c.mtx\"\nweighting = \"per-point\"\n"
+    ));
+    assert!(e.contains("weighting") && e.contains("unused"), "{e}");
+    let e = err(&format!("{file}weighting = \"robust\"\n"));
+    assert!(e.contains("unknown weighting 'robust'"), "{e}");
+    let e = err("[measurement]\nweighting = \"estimated\"\n");
+    assert!(e.contains("weighting") && e.contains("virtual"), "{e}");
+}

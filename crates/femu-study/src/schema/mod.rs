@@ -52,7 +52,9 @@ pub use identification::{
 };
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};
-pub use measurement::{Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, SEED_SIGMA_MM};
+pub use measurement::{
+    Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, Weighting, SEED_SIGMA_MM,
+};
 pub use measurements::{Measurement, Region, WindowSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};
 

@@ -119,6 +119,8 @@ pub(crate) struct MeasurementEntry {
     pub travel_mm: Option<f64>,
     pub travel_sigma_mm: Option<f64>,
     pub covariance: Option<String>,
+    /// How a measured file's misfit is weighted (`per-point`, `covariance`, `estimated`).
+    pub weighting: Option<String>,
     /// Recorded frames (`source = "frames"`, `super::frames`).
     pub frames: Option<Vec<String>>,
     pub cine: Option<String>,

@@ -519,6 +519,7 @@ pub fn identify_frames(
                 source: format!("DIC of the recorded frames ({})", path.display()),
                 reference_known: false,
                 covariance: None,
+                weighting: crate::schema::Weighting::PerPoint,
             }),
             travel: None,
         };

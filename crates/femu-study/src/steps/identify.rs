@@ -18,13 +18,15 @@ use super::parameters::free_parameters;
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
-use crate::schema::{Discretization, MeasurementSource, Study};
+use crate::schema::{Discretization, MeasurementSource, Study, Weighting};
 use anyhow::Result;
 use femu_identify::campaign::{self, CampaignOptions, Estimate, Event, StartRecord};
 use femu_identify::discretization::DiscretizationCheck;
+use femu_identify::error_model::{self, ErrorModel};
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
 use femu_identify::joint::{block_free, information_shares};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::weighted::FieldCovariance;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
 use femu_plot::{bar_chart_png, line_plot_png, BarChart, LinePlot, LineStyle, Series};
@@ -82,6 +84,10 @@ pub struct IdentificationSummary {
     /// The discretization check (`None` when `[identification] discretization = "off"`).
     #[serde(default)]
     pub discretization: Option<DiscretizationCheck>,
+    /// Weighted FEMU: the measured field's error beyond its covariance, estimated from the
+    /// residuals of the first stage (`femu_identify::error_model`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error_model: Option<ErrorModel>,
 }
 
 /// One measurement of an identification.
@@ -218,13 +224,17 @@ fn identify_measured(
         Some(p) => {
             // The file replaces the study's measured file and is read in its frame, with its
             // covariance: `--measured` and `[measurement] file` read a file alike.
-            let (frame, covariance) = match study.measurements.first().map(|m| &m.source) {
+            let (frame, covariance, weighting) = match study.measurements.first().map(|m| &m.source)
+            {
                 Some(MeasurementSource::File {
-                    frame, covariance, ..
-                }) => (*frame, covariance.as_deref()),
-                _ => (crate::schema::Frame::model(), None),
+                    frame,
+                    covariance,
+                    weighting,
+                    ..
+                }) => (*frame, covariance.as_deref(), *weighting),
+                _ => (crate::schema::Frame::model(), None, Weighting::PerPoint),
             };
-            let measured = measure::read_measured(p, &frame, covariance)?;
+            let measured = measure::read_measured(p, &frame, covariance, weighting)?;
             measured_prepared(study, measured, &format!("file {}", p.display()))?
         }
         None => measure::prepare(study, &built, out, progress)?,
@@ -317,6 +327,11 @@ fn show_events<'a>(progress: &'a dyn Progress, repeats: usize) -> impl Fn(Event)
 
 /// The fit of `prepared` on `models`; a campaign that stops keeps what finished (`starts.csv`
 /// in `out`, and the repeats finished when interrupted: returned with their number).
+///
+/// Weighted FEMU (the study's single measured field brings its covariance) is fitted in two
+/// stages (feasible generalized least squares, `femu_identify::error_model`): with the field's
+/// per-point weights first, then with its covariance plus the error its residuals show beyond
+/// it (returned with the fit).
 fn fit_or_keep(
     study: &Study,
     grouped: bool,
@@ -324,31 +339,110 @@ fn fit_or_keep(
     prepared: &[Prepared],
     out: &Path,
     progress: &dyn Progress,
-) -> Result<(JointFit, Option<usize>)> {
+) -> Result<(JointFit, Option<usize>, Option<ErrorModel>)> {
     let spec = &study.identification;
     let any_virtual = prepared
         .iter()
         .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
     let repeats = if any_virtual { spec.repeat } else { 1 };
-    let options = CampaignOptions {
+    let mut options = CampaignOptions {
         optimizer: spec.optimizer,
         starts: spec.starts,
         seed: spec.seed,
         repeats,
         travel: None,
         stop: progress.stop_flag(),
-        // The study's single measured field may bring its full covariance (weighted FEMU).
-        covariance: match prepared {
-            [Prepared {
-                data: PreparedData::Measured(m),
-                ..
-            }] => m.covariance.clone(),
-            _ => None,
-        },
+        covariance: None,
         loss: spec.loss,
     };
-    let on_event = show_events(progress, repeats);
-    match joint::fit(study, grouped, models, prepared, &options, &on_event) {
+    let measured = match prepared {
+        [Prepared {
+            data: PreparedData::Measured(m),
+            ..
+        }] => Some(m),
+        _ => None,
+    };
+    let (field, base) = match measured {
+        Some(m) if m.weighting == Weighting::Estimated => (
+            &m.field,
+            // Without a covariance: the per-point variances the file gives.
+            m.covariance
+                .clone()
+                .unwrap_or_else(|| per_point_covariance(&m.field)),
+        ),
+        Some(m) => {
+            options.covariance = m.covariance.clone();
+            let (fit, stopped) =
+                fit_once(study, grouped, models, prepared, out, progress, &options)?;
+            return Ok((fit, stopped, None));
+        }
+        None => {
+            let (fit, stopped) =
+                fit_once(study, grouped, models, prepared, out, progress, &options)?;
+            return Ok((fit, stopped, None));
+        }
+    };
+    let base = &base;
+    progress.note("weighted fit, stage 1 of 2: the field's per-point weights");
+    let (first, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+    if stopped.is_some() {
+        return Ok((first, stopped, None));
+    }
+    let residuals = error_model::raw_residuals(&models.full[0], field, &first.campaign.best[0]);
+    let model = error_model::estimate(field, &residuals, first.free.len(), Some(base));
+    options.covariance = Some(match &model {
+        Some(e) => {
+            progress.note(&format!(
+                "error of the measured field beyond its covariance, from the residuals of {} points: {}",
+                e.used_points,
+                e.describe()
+            ));
+            e.covariance(field, Some(base))
+        }
+        None => {
+            progress.note(
+                "too few points to estimate the field's error from its residuals: weighted by its covariance alone",
+            );
+            base.clone()
+        }
+    });
+    progress.note("weighted fit, stage 2 of 2: the covariance and the estimated error");
+    let (fit, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+    Ok((fit, stopped, model))
+}
+
+/// The diagonal covariance of the per-point weights of `field` (`1/w` per component).
+fn per_point_covariance(field: &MeasuredField) -> FieldCovariance {
+    let m = 2 * field.points.len();
+    let mut values = vec![0.0; m * m];
+    for (i, p) in field.points.iter().enumerate() {
+        for c in 0..2 {
+            let k = 2 * i + c;
+            values[k * m + k] = if p.weight[c] > 0.0 {
+                1.0 / p.weight[c]
+            } else {
+                0.0
+            };
+        }
+    }
+    FieldCovariance {
+        points: field.points.len(),
+        values,
+    }
+}
+
+/// One campaign of [`fit_or_keep`] with `options`.
+fn fit_once(
+    study: &Study,
+    grouped: bool,
+    models: &TestModels,
+    prepared: &[Prepared],
+    out: &Path,
+    progress: &dyn Progress,
+    options: &CampaignOptions,
+) -> Result<(JointFit, Option<usize>)> {
+    let on_event = show_events(progress, options.repeats);
+    match joint::fit(study, grouped, models, prepared, options, &on_event) {
         Ok(fit) => Ok((fit, None)),
         Err(FitFailure::Setup(e)) => Err(e),
         Err(FitFailure::Campaign(
@@ -585,9 +679,9 @@ pub fn identify_on(
         PreparedData::Measured(m) => m.reference_known,
     });
     // Whitened residuals have unit variance: the intervals need no residual scaling.
-    let weighted = prepared
-        .iter()
-        .any(|p| matches!(&p.data, PreparedData::Measured(m) if m.covariance.is_some()));
+    let weighted = prepared.iter().any(
+        |p| matches!(&p.data, PreparedData::Measured(m) if m.weighting != Weighting::PerPoint),
+    );
     let known_noise = virtual_experiment || weighted;
     let tests: Vec<String> = models
         .tests
@@ -619,7 +713,8 @@ pub fn identify_on(
             models.elements()
         ));
     }
-    let (mut fit, interrupted) = fit_or_keep(study, grouped, &models, prepared, out, progress)?;
+    let (mut fit, interrupted, error_model) =
+        fit_or_keep(study, grouped, &models, prepared, out, progress)?;
     write_starts_csv(&out.join("starts.csv"), &fit.free, &fit.campaign.starts)?;
     let (parameters, id, check) = estimate_with_check(
         study,
@@ -690,7 +785,9 @@ pub fn identify_on(
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
         warnings,
-        weighting: if weighted {
+        weighting: if weighted && error_model.is_some() {
+            "covariance and estimated error".into()
+        } else if weighted {
             "full covariance".into()
         } else if virtual_experiment {
             "one sigma".into()
@@ -710,6 +807,7 @@ pub fn identify_on(
         },
         measurements,
         discretization: check,
+        error_model,
     };
     write_json(&out.join("summary.json"), &summary)?;
     print_table(&summary, progress);

@@ -999,6 +999,11 @@ pub fn identify_image_measurement(
                 source.clone()
             },
             reference_known: true,
+            weighting: if covariance.is_some() {
+                crate::schema::Weighting::Estimated
+            } else {
+                crate::schema::Weighting::PerPoint
+            },
             covariance,
         }),
         travel: None,

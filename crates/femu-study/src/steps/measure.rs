@@ -24,6 +24,8 @@ pub struct Measured {
     /// weighted by it (weighted FEMU, `femu_identify::weighted`) instead of the per-point
     /// weights.
     pub covariance: Option<FieldCovariance>,
+    /// How the misfit is weighted (`[measurement] weighting`).
+    pub weighting: crate::schema::Weighting,
 }
 
 /// A measurement ready to fit.
@@ -143,7 +145,13 @@ pub fn prepare(
                     path,
                     frame,
                     covariance,
-                } => PreparedData::Measured(read_measured(path, frame, covariance.as_deref())?),
+                    weighting,
+                } => PreparedData::Measured(read_measured(
+                    path,
+                    frame,
+                    covariance.as_deref(),
+                    *weighting,
+                )?),
                 MeasurementSource::Frames(_) => bail!(
                     "measurement {label}: recorded frames are identified from the frames themselves by `femu run` (integrated DIC); to fit a measured field, correlate them with `femu dic F0 F1 ...` and give its field.csv with --measured"
                 ),
@@ -180,6 +188,7 @@ pub fn read_measured(
     path: &Path,
     frame: &crate::schema::Frame,
     covariance: Option<&Path>,
+    weighting: crate::schema::Weighting,
 ) -> Result<Measured> {
     let all = MeasuredField::read(path)?;
     let declared = all
@@ -242,6 +251,7 @@ pub fn read_measured(
         source: path.display().to_string(),
         reference_known: false,
         covariance,
+        weighting,
     })
 }
 
@@ -294,5 +304,6 @@ fn ultrasound_measurement(
         ),
         reference_known: true,
         covariance: None,
+        weighting: crate::schema::Weighting::PerPoint,
     })
 }
