@@ -170,3 +170,143 @@ fn region(
         y1: y1 as usize,
     }))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use dicom_core::value::DataSetSequence;
+    use dicom_core::{DataElement, PrimitiveValue, VR};
+
+    /// A 3-frame 8 x 6 px file with the given extra elements.
+    fn cine(name: &str, extra: Vec<DataElement<InMemDicomObject>>) -> std::path::PathBuf {
+        let us = |v: u16| PrimitiveValue::from(v);
+        let mut obj = InMemDicomObject::from_element_iter([
+            DataElement::new(tags::SOP_CLASS_UID, VR::UI, "1.2.840.10008.5.1.4.1.1.3.1"),
+            DataElement::new(tags::SOP_INSTANCE_UID, VR::UI, "1.2.3.4"),
+            DataElement::new(tags::SAMPLES_PER_PIXEL, VR::US, us(1)),
+            DataElement::new(tags::PHOTOMETRIC_INTERPRETATION, VR::CS, "MONOCHROME2"),
+            DataElement::new(tags::NUMBER_OF_FRAMES, VR::IS, PrimitiveValue::from("3")),
+            DataElement::new(tags::ROWS, VR::US, us(6)),
+            DataElement::new(tags::COLUMNS, VR::US, us(8)),
+            DataElement::new(tags::BITS_ALLOCATED, VR::US, us(8)),
+            DataElement::new(tags::BITS_STORED, VR::US, us(8)),
+            DataElement::new(tags::HIGH_BIT, VR::US, us(7)),
+            DataElement::new(tags::PIXEL_REPRESENTATION, VR::US, us(0)),
+            DataElement::new(
+                tags::PIXEL_DATA,
+                VR::OB,
+                PrimitiveValue::from(vec![7u8; 144]),
+            ),
+        ]);
+        for e in extra {
+            obj.put(e);
+        }
+        let path =
+            std::env::temp_dir().join(format!("femu-cine-{name}-{}.dcm", std::process::id()));
+        obj.with_meta(
+            dicom_object::FileMetaTableBuilder::new().transfer_syntax("1.2.840.10008.1.2.1"),
+        )
+        .unwrap()
+        .write_to_file(&path)
+        .unwrap();
+        path
+    }
+
+    #[test]
+    fn frame_times_and_the_region_are_read_and_checked() {
+        // Frame Time Vector wins over Frame Time; the first interval is 0.
+        let p = cine(
+            "vector",
+            vec![
+                DataElement::new(tags::FRAME_TIME, VR::DS, PrimitiveValue::from("40")),
+                DataElement::new(
+                    tags::FRAME_TIME_VECTOR,
+                    VR::DS,
+                    PrimitiveValue::from("0\\33.5\\66.5"),
+                ),
+            ],
+        );
+        let c = cine_info(&p).unwrap();
+        assert_eq!(c.times_from, Some("FrameTimeVector"));
+        let t = c.frame_times_s.unwrap();
+        assert!(
+            (t[1] - 0.0335).abs() < 1e-12 && (t[2] - 0.1).abs() < 1e-12,
+            "{t:?}"
+        );
+        assert_eq!(c.region, None);
+        // Frame Time alone; a 2-D region chosen over the first (a Doppler strip, format 3).
+        let region = |format: u16, x0: u32, x1: u32| {
+            InMemDicomObject::from_element_iter([
+                DataElement::new(
+                    tags::REGION_SPATIAL_FORMAT,
+                    VR::US,
+                    PrimitiveValue::from(format),
+                ),
+                DataElement::new(
+                    tags::REGION_LOCATION_MIN_X0,
+                    VR::UL,
+                    PrimitiveValue::from(x0),
+                ),
+                DataElement::new(
+                    tags::REGION_LOCATION_MIN_Y0,
+                    VR::UL,
+                    PrimitiveValue::from(1u32),
+                ),
+                DataElement::new(
+                    tags::REGION_LOCATION_MAX_X1,
+                    VR::UL,
+                    PrimitiveValue::from(x1),
+                ),
+                DataElement::new(
+                    tags::REGION_LOCATION_MAX_Y1,
+                    VR::UL,
+                    PrimitiveValue::from(4u32),
+                ),
+            ])
+        };
+        let p = cine(
+            "time",
+            vec![
+                DataElement::new(tags::FRAME_TIME, VR::DS, PrimitiveValue::from("40")),
+                DataElement::new(
+                    tags::SEQUENCE_OF_ULTRASOUND_REGIONS,
+                    VR::SQ,
+                    DataSetSequence::from(vec![region(3, 0, 7), region(1, 2, 6)]),
+                ),
+            ],
+        );
+        let c = cine_info(&p).unwrap();
+        assert_eq!(c.times_from, Some("FrameTime"));
+        assert_eq!(c.frame_times_s.unwrap(), vec![0.0, 0.04, 0.08]);
+        let r = c.region.unwrap();
+        assert_eq!((r.x0, r.y0, r.x1, r.y1, r.size()), (2, 1, 6, 4, (5, 4)));
+        // Errors: a vector of the wrong length, a region outside the frame; no times at all.
+        let p = cine(
+            "short",
+            vec![DataElement::new(
+                tags::FRAME_TIME_VECTOR,
+                VR::DS,
+                PrimitiveValue::from("0\\33"),
+            )],
+        );
+        let e = cine_info(&p).unwrap_err().to_string();
+        assert!(e.contains("2 values for 3 frames"), "{e}");
+        let p = cine(
+            "outside",
+            vec![DataElement::new(
+                tags::SEQUENCE_OF_ULTRASOUND_REGIONS,
+                VR::SQ,
+                DataSetSequence::from(vec![region(1, 2, 8)]),
+            )],
+        );
+        let e = cine_info(&p).unwrap_err().to_string();
+        assert!(e.contains("do not lie in the 8 x 6 px frame"), "{e}");
+        let c = cine_info(&cine("none", vec![])).unwrap();
+        assert_eq!((c.frame_times_s, c.times_from), (None, None));
+        for name in ["vector", "time", "short", "outside", "none"] {
+            let p =
+                std::env::temp_dir().join(format!("femu-cine-{name}-{}.dcm", std::process::id()));
+            std::fs::remove_file(p).ok();
+        }
+    }
+}
