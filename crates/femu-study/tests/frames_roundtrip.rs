@@ -134,6 +134,23 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
         record.notes
     );
     let (fr_seq, _) = frames::read_sequence(&measured).unwrap();
+    // Without the pose keys the frames are placed by [probe] on the model's skin: the same
+    // placement as the simulator's (its mesh is the model's here, render_refine = 1), to
+    // rounding (the probe's px/mm is the reciprocal of the frames' pixel size).
+    let mut by_probe = (**spec).clone();
+    by_probe.placement = None;
+    let (p, from) =
+        frames::placement(&study, &built, &by_probe, &by_probe.resolve().unwrap()).unwrap();
+    assert!(from.starts_with("[probe]"), "{from}");
+    let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs().max((a[1] - b[1]).abs()) < 1e-9;
+    assert!(
+        close(p.origin_mm, us_seq.frame.origin_mm)
+            && close(p.x_axis, us_seq.frame.x_axis)
+            && close(p.y_axis, us_seq.frame.y_axis)
+            && (p.mm_per_px - us_seq.frame.mm_per_px).abs() < 1e-12,
+        "{p:?} against {:?}",
+        us_seq.frame
+    );
 
     // The inputs, to the bit.
     assert_eq!(fr_seq.frames.len(), us_seq.frames.len());
