@@ -1,5 +1,6 @@
 //! Weighted FEMU through the command line: `femu identify --measured FILE` with the field's
-//! full covariance named by `[measurement] covariance` (issue 25 item 2).
+//! full covariance named by `[measurement] covariance`, and with the error estimated from the
+//! residuals (`[measurement] weighting = "estimated"`).
 
 mod common;
 use common::{femu, json, scratch, write};
@@ -28,7 +29,7 @@ fn ar1_noise(n: usize, sigma: f64, rho: f64, seed: u64) -> Vec<f64> {
     e
 }
 
-/// A 700-quad compression field on an 8 x 8 grid with AR(1) noise (σ = 5 µm, ρ = 0.9 between
+/// A 700-quad compression field on an 12 x 12 grid with AR(1) noise (σ = 5 µm, ρ = 0.9 between
 /// consecutive points, per component) and that covariance as a Matrix Market file: the weighted
 /// fit runs through `--measured`, whitens by it (its misfit χ² is near its degrees of freedom,
 /// where the file's one-σ weights of 1e-9 mm would give ~1e7 times more), recovers
@@ -38,7 +39,7 @@ fn ar1_noise(n: usize, sigma: f64, rho: f64, seed: u64) -> Vec<f64> {
 fn identify_measured_with_a_covariance_file() {
     let dir = scratch("weighted");
     let base = "[model]\nelements = 700\n[[test]]\nkind = \"compression\"\nforce_n_per_mm = 0.1\n\
-                [grid]\ncounts = [8, 8]\n[noise]\nsigma_mm = 1e-9\n\
+                [grid]\ncounts = [12, 12]\n[noise]\nsigma_mm = 1e-9\n\
                 [identification]\nstarts = 2\ngrouped = true\n";
     let study = write(&dir, "study.toml", base);
     let synth = dir.join("synth");
@@ -112,7 +113,7 @@ fn identify_measured_with_a_covariance_file() {
         "{err}"
     );
     let s = json(&out.join("summary.json"));
-    // Whitened: 2·cost ~ χ²(ν), ν = 2n − 8; its sd is √(2ν) ~ 15 for 60 points: a factor 3
+    // Whitened: 2·cost ~ χ²(ν), ν = 2n − 8; its sd is √(2ν) ~ 20 for ~100 points: a factor 3
     // either way is far outside it and far from the one-σ misfit (σ = 1e-9 mm: ~1e13).
     let nu = (2 * n - 8) as f64;
     let chi2 = 2.0 * s["best_cost"].as_f64().unwrap();
@@ -146,4 +147,42 @@ fn identify_measured_with_a_covariance_file() {
         err.contains("cov_short.mtx") && err.contains("noisy.csv") && err.contains("points"),
         "{err}"
     );
+
+    // Without the covariance file, `weighting = "estimated"` finds the noise from the residuals
+    // of a first fit: its sd within a factor 2 of the 5 µm drawn (~100 points of AR(1) noise whose
+    // correlation follows the point order, not the distance: the model's exponential is an
+    // approximation), the quadriceps' C10 inside its interval.
+    let e_study = write(
+        &dir,
+        "estimated.toml",
+        &format!("{base}[measurement]\nfile = \"noisy.csv\"\nweighting = \"estimated\"\n"),
+    );
+    let out = dir.join("e");
+    let o = femu(&[
+        "identify",
+        e_study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("stage 2 of 2"), "{err}");
+    let s = json(&out.join("summary.json"));
+    assert_eq!(s["weighting"], "covariance and estimated error");
+    for c in s["error_model"]["components"].as_array().unwrap() {
+        for sd in c["sd_mm"].as_array().unwrap() {
+            let sd = sd.as_f64().unwrap();
+            assert!(sd > 0.0025 && sd < 0.01, "band sd {sd} mm for 0.005 drawn");
+        }
+    }
+    let q = s["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["name"] == "C10_QUADRICEPS")
+        .unwrap()
+        .clone();
+    let ci = q["ci95"].as_array().unwrap();
+    let (lo, hi) = (ci[0].as_f64().unwrap(), ci[1].as_f64().unwrap());
+    assert!(lo <= 1.75e-3 && 1.75e-3 <= hi, "[{lo}, {hi}]");
 }

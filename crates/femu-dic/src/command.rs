@@ -253,7 +253,7 @@ pub fn run_dic_on(
     let mut warnings = Vec::new();
     if points.len() > output::MAX_COVARIANCE_POINTS {
         warnings.push(format!(
-            "{} grid points: field_covariance.mtx (dense) is written up to {} points; give a larger --grid-step for weighted FEMU with the full covariance (sx, sy are in field.csv)",
+            "{} grid points: field_covariance.mtx (dense) is written up to {} points; weighted FEMU runs without it ([measurement] weighting = \"estimated\": sx, sy of field.csv plus the error its residuals show), or give a larger --grid-step to write it",
             points.len(),
             output::MAX_COVARIANCE_POINTS
         ));

@@ -596,7 +596,7 @@ pub fn run_sequence(
         }
         if k == n && cov.is_none() {
             warnings.push(format!(
-                "frame {k}: {} grid points: field_covariance.mtx (dense) is written up to {} points; give a larger --grid for weighted FEMU with the full covariance (sx, sy are in field.csv)",
+                "frame {k}: {} grid points: field_covariance.mtx (dense) is written up to {} points; weighted FEMU runs without it ([measurement] weighting = \"estimated\": sx, sy of field.csv plus the error its residuals show), or give a larger --grid to write it",
                 field.len(),
                 crate::output::MAX_COVARIANCE_POINTS
             ));
