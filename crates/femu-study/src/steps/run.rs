@@ -32,7 +32,7 @@ use femu_mech::{Model, SolverOptions, StaticSolver};
 use std::path::Path;
 use std::time::Instant;
 
-/// Elements of the demo's built-in thigh: the whole demo runs in about 12 s on two cores.
+/// Elements of the demo's built-in thigh: the whole demo runs in about 7 s on two cores.
 pub const DEMO_ELEMENTS: usize = 4000;
 /// `femu demo --full`: the seed's scale.
 pub const FULL_ELEMENTS: usize = 25_000;
