@@ -313,17 +313,19 @@ pub fn correlate_ladder(
     criteria: &TrustCriteria,
     stop_on_mismatch: bool,
 ) -> Result<(Measured, Choice), DicError> {
-    let first = ladder(
-        f,
-        g,
-        roi,
-        base,
-        element,
-        regularization,
-        criteria,
-        stop_on_mismatch,
-    );
-    let (first_error, accelerated_attempts) = match first {
+    let run = |opts: &DicOptions| {
+        ladder(
+            f,
+            g,
+            roi,
+            opts,
+            element,
+            regularization,
+            criteria,
+            stop_on_mismatch,
+        )
+    };
+    let (first_error, accelerated_attempts) = match run(base) {
         Ok(r) => return Ok(r),
         Err(LadderFailure {
             error,
@@ -336,16 +338,7 @@ pub fn correlate_ladder(
         max_iterations: PLAIN_ITERATION_FACTOR * base.max_iterations,
         ..base.clone()
     };
-    match ladder(
-        f,
-        g,
-        roi,
-        &plain,
-        element,
-        regularization,
-        criteria,
-        stop_on_mismatch,
-    ) {
+    match run(&plain) {
         Ok((m, mut c)) => {
             let mut attempts = accelerated_attempts;
             attempts.append(&mut c.attempts);

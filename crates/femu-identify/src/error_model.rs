@@ -334,13 +334,9 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
 
-    /// A 24 x 24 grid (0.8 mm) with errors drawn from a known model: the estimate finds its band
-    /// sd within 15 % and its range within a factor 1.6 (576 points, an exponential field of
-    /// range 2 mm over a 19 mm square: about 20 independent patches per band).
-    #[test]
-    fn recovers_a_known_error_model() {
-        let side = 24;
-        let field = MeasuredField {
+    /// A `side x side` grid of points 0.8 mm apart, row by row.
+    fn grid_field(side: usize) -> MeasuredField {
+        MeasuredField {
             points: (0..side * side)
                 .map(|k| MeasuredPoint {
                     x: [0.8 * (k % side) as f64, 0.8 * (k / side) as f64],
@@ -349,7 +345,34 @@ mod tests {
                 })
                 .collect(),
             comments: Vec::new(),
-        };
+        }
+    }
+
+    /// `count` error fields drawn from `cov` (seeded; `L w`, `cov = L Lᵀ`), as residuals per point.
+    fn draws(cov: &FieldCovariance, seed: u64, count: usize) -> Vec<Vec<(usize, [f64; 2])>> {
+        let m = 2 * cov.points;
+        let a = faer::Mat::<f64>::from_fn(m, m, |i, j| cov.values[i * m + j]);
+        let l = a.llt(faer::Side::Lower).unwrap().L().to_owned();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        (0..count)
+            .map(|_| {
+                let w: Vec<f64> = (0..m).map(|_| StandardNormal.sample(&mut rng)).collect();
+                let e: Vec<f64> = (0..m)
+                    .map(|i| (0..=i).map(|j| l[(i, j)] * w[j]).sum())
+                    .collect();
+                (0..cov.points)
+                    .map(|i| (i, [e[2 * i], e[2 * i + 1]]))
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// A 24 x 24 grid (0.8 mm) with errors drawn from a known model: the estimate finds its band
+    /// sd within 15 % and its range within a factor 1.6 (576 points, an exponential field of
+    /// range 2 mm over a 19 mm square: about 20 independent patches per band).
+    #[test]
+    fn recovers_a_known_error_model() {
+        let field = grid_field(24);
         let truth = ErrorModel {
             components: [
                 ComponentError {
@@ -367,21 +390,10 @@ mod tests {
             used_points: field.points.len(),
         };
         let cov = truth.covariance(&field, None);
-        let m = 2 * field.points.len();
-        let a = faer::Mat::<f64>::from_fn(m, m, |i, j| cov.values[i * m + j]);
-        let l = a.llt(faer::Side::Lower).unwrap().L().to_owned();
-        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-        let mut estimates = Vec::new();
-        for _ in 0..6 {
-            let w: Vec<f64> = (0..m).map(|_| StandardNormal.sample(&mut rng)).collect();
-            let e: Vec<f64> = (0..m)
-                .map(|i| (0..=i).map(|j| l[(i, j)] * w[j]).sum())
-                .collect();
-            let residuals: Vec<(usize, [f64; 2])> = (0..field.points.len())
-                .map(|i| (i, [e[2 * i], e[2 * i + 1]]))
-                .collect();
-            estimates.push(estimate(&field, &residuals, 0, None).unwrap());
-        }
+        let estimates: Vec<ErrorModel> = draws(&cov, 11, 6)
+            .iter()
+            .map(|r| estimate(&field, r, 0, None).unwrap())
+            .collect();
         for c in 0..2 {
             for b in 0..BANDS {
                 let mean = estimates
@@ -417,17 +429,7 @@ mod tests {
     /// the error's variance) gets most of it back.
     #[test]
     fn adds_only_the_error_beyond_the_given_covariance() {
-        let side = 24;
-        let field = MeasuredField {
-            points: (0..side * side)
-                .map(|k| MeasuredPoint {
-                    x: [0.8 * (k % side) as f64, 0.8 * (k / side) as f64],
-                    u: [0.0; 2],
-                    weight: [1.0; 2],
-                })
-                .collect(),
-            comments: Vec::new(),
-        };
+        let field = grid_field(24);
         let truth = ErrorModel {
             components: [0, 1].map(|_| ComponentError {
                 sd_mm: vec![0.05; BANDS],
@@ -438,17 +440,7 @@ mod tests {
             used_points: field.points.len(),
         };
         let cov = truth.covariance(&field, None);
-        let m = 2 * field.points.len();
-        let a = faer::Mat::<f64>::from_fn(m, m, |i, j| cov.values[i * m + j]);
-        let l = a.llt(faer::Side::Lower).unwrap().L().to_owned();
-        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
-        let w: Vec<f64> = (0..m).map(|_| StandardNormal.sample(&mut rng)).collect();
-        let e: Vec<f64> = (0..m)
-            .map(|i| (0..=i).map(|j| l[(i, j)] * w[j]).sum())
-            .collect();
-        let residuals: Vec<(usize, [f64; 2])> = (0..field.points.len())
-            .map(|i| (i, [e[2 * i], e[2 * i + 1]]))
-            .collect();
+        let residuals = draws(&cov, 5, 1).remove(0);
         let whole = estimate(&field, &residuals, 0, Some(&cov)).unwrap();
         let small = FieldCovariance {
             points: cov.points,

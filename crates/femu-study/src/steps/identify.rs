@@ -362,27 +362,24 @@ fn fit_or_keep(
         }] => Some(m),
         _ => None,
     };
-    let (field, base) = match measured {
-        Some(m) if m.weighting == Weighting::Estimated => (
+    let estimated = match measured {
+        Some(m) if m.weighting == Weighting::Estimated => Some((
             &m.field,
             // Without a covariance: the per-point variances the file gives.
             m.covariance
                 .clone()
                 .unwrap_or_else(|| per_point_covariance(&m.field)),
-        ),
-        Some(m) => {
-            options.covariance = m.covariance.clone();
-            let (fit, stopped) =
-                fit_once(study, grouped, models, prepared, out, progress, &options)?;
-            return Ok((fit, stopped, None));
-        }
-        None => {
-            let (fit, stopped) =
-                fit_once(study, grouped, models, prepared, out, progress, &options)?;
-            return Ok((fit, stopped, None));
+        )),
+        // Per point, or the covariance alone: one fit.
+        m => {
+            options.covariance = m.and_then(|m| m.covariance.clone());
+            None
         }
     };
-    let base = &base;
+    let Some((field, base)) = &estimated else {
+        let (fit, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+        return Ok((fit, stopped, None));
+    };
     progress.note("weighted fit, stage 1 of 2: the field's per-point weights");
     let (first, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
     if stopped.is_some() {
