@@ -8,28 +8,33 @@
 //!   LDLᵀ when symmetric (by halves for large models), by LU otherwise.
 //! - [`split`]: the LDLᵀ of a bisected mesh by halves on two cores, coupled through a dense
 //!   Schur complement on the separator ([`SplitLdlt`]; the first level of nested dissection).
-//! - [`supernodal`]: faer's left-looking supernodal LDLᵀ stopped at the separator
-//!   ([`PartialLdlt`]), the only call into `private-gemm-x86` (unsafe, see below).
+//! - [`factor`]: [`Factor`], what the three factorizations offer (factorize on the pattern
+//!   analysed once, solve for one or several right-hand sides, solve with the transpose).
+//! - [`vendored`]: code derived from faer 0.24.4 (MIT, its licence beside it), checked by a test
+//!   against the faer in Cargo.lock: the left-looking supernodal LDLᵀ stopped at the separator
+//!   ([`PartialLdlt`]), with the only call into `private-gemm-x86` (unsafe, see below).
 //! - [`simd`]: [`with_avx2`], a safe run-time dispatch that runs a hot loop in a copy compiled
 //!   for AVX2 when the CPU has it (used by the triangular solves here and by femu-mech's
 //!   element loop), with the same results to the bit.
 //!
 //! **Unsafe code** is denied in this crate except in two places, each allowed item by item with
 //! a `SAFETY` note on every block: the AVX2 call in [`simd`] (the CPU feature is checked first)
-//! and the supernodal update kernel in [`supernodal`] (bounds asserted before the call). Every
-//! other crate of the workspace that needs none forbids it.
+//! and the supernodal update kernel in [`vendored::faer_supernodal`] (bounds asserted before the
+//! call). Every other crate of the workspace that needs none forbids it.
 
 #![deny(unsafe_code)]
 #![deny(clippy::undocumented_unsafe_blocks)]
 
+pub mod factor;
 pub mod linear;
 pub mod simd;
 pub mod solver;
 pub mod split;
-pub mod supernodal;
+pub mod vendored;
 
+pub use factor::{Factor, Factorization};
 pub use linear::{CscPattern, LinearSolveError, NodeGraph, SparseLdlt, SparseLu, MAX_RHS};
 pub use simd::{has_avx2, with_avx2};
-pub use solver::{Factorization, SparseSolver};
+pub use solver::SparseSolver;
 pub use split::{DofSplit, SplitLdlt};
-pub use supernodal::{LowerView, PartialLdlt};
+pub use vendored::faer_supernodal::{LowerView, PartialLdlt};

@@ -14,6 +14,8 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::Side;
 use faer::{Conj, MatMut, Par};
 
+use crate::factor::{rhs_rows, Factor, Factorization};
+
 /// Largest number of right-hand sides solved at once (the workspace is sized for it once).
 pub const MAX_RHS: usize = 16;
 
@@ -311,13 +313,14 @@ impl SparseLu {
             factorized: false,
         })
     }
+}
 
-    /// Numeric factorization of the matrix with `values` on `pattern`.
-    pub fn factorize(
-        &mut self,
-        pattern: &CscPattern,
-        values: &[f64],
-    ) -> Result<(), LinearSolveError> {
+impl Factor for SparseLu {
+    fn kind(&self) -> Factorization {
+        Factorization::Lu
+    }
+
+    fn factorize(&mut self, pattern: &CscPattern, values: &[f64]) -> Result<(), LinearSolveError> {
         self.factorized = false;
         let a = SparseColMatRef::new(pattern.symbolic(), values);
         let stack = MemStack::new(&mut self.mem);
@@ -333,17 +336,8 @@ impl SparseLu {
         Ok(())
     }
 
-    /// Solves `A x = rhs` in place with the last factorization.
-    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
-        self.solve_many_in_place(rhs, 1);
-    }
-
-    /// Solves `A X = B` in place for `columns` right-hand sides stored one after the other
-    /// (column-major, at most [`MAX_RHS`]).
-    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
-        assert!(self.factorized, "solve before factorize");
-        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
-        let n = rhs.len() / columns;
+    fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
+        let n = rhs_rows(self.factorized, rhs, columns);
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
         let stack = MemStack::new(&mut self.mem);
         lu.solve_in_place_with_conj(
@@ -354,10 +348,8 @@ impl SparseLu {
         );
     }
 
-    /// Solves `A^T x = rhs` in place (adjoint sensitivities).
-    pub fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
-        assert!(self.factorized, "solve before factorize");
-        let n = rhs.len();
+    fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
+        let n = rhs_rows(self.factorized, rhs, 1);
         let lu = LuRef::new_unchecked(&self.symbolic, &self.numeric);
         let stack = MemStack::new(&mut self.mem);
         lu.solve_transpose_in_place_with_conj(
@@ -424,13 +416,15 @@ impl SparseLdlt {
             factorized: false,
         })
     }
+}
 
-    /// Numeric factorization (lower triangle of `values`).
-    pub fn factorize(
-        &mut self,
-        pattern: &CscPattern,
-        values: &[f64],
-    ) -> Result<(), LinearSolveError> {
+impl Factor for SparseLdlt {
+    fn kind(&self) -> Factorization {
+        Factorization::Ldlt
+    }
+
+    /// Reads the lower triangle of `values`.
+    fn factorize(&mut self, pattern: &CscPattern, values: &[f64]) -> Result<(), LinearSolveError> {
         self.factorized = false;
         let a = SparseColMatRef::new(pattern.symbolic(), values);
         let stack = MemStack::new(&mut self.mem);
@@ -461,17 +455,8 @@ impl SparseLdlt {
         Ok(())
     }
 
-    /// Solves `A x = rhs` in place.
-    pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
-        self.solve_many_in_place(rhs, 1);
-    }
-
-    /// Solves `A X = B` in place for `columns` right-hand sides stored one after the other
-    /// (column-major, at most [`MAX_RHS`]).
-    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
-        assert!(self.factorized, "solve before factorize");
-        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
-        let n = rhs.len() / columns;
+    fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
+        let n = rhs_rows(self.factorized, rhs, columns);
         let ldlt = LdltRef::new(&self.symbolic, &self.l_values);
         let stack = MemStack::new(&mut self.mem);
         ldlt.solve_in_place_with_conj(
@@ -480,6 +465,11 @@ impl SparseLdlt {
             self.par,
             stack,
         );
+    }
+
+    /// The matrix is symmetric: `Aᵀ x = A x`.
+    fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
+        self.solve_in_place(rhs);
     }
 }
 

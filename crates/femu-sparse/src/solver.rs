@@ -5,6 +5,7 @@
 //! ([`SplitLdlt`]); an unsymmetric one (pressure on part of an outline) by sparse LU with
 //! partial pivoting ([`SparseLu`]).
 
+use crate::factor::{Factor, Factorization};
 use crate::linear::{CscPattern, LinearSolveError, SparseLdlt, SparseLu, MAX_RHS};
 use crate::split::{DofSplit, SplitLdlt};
 
@@ -32,28 +33,15 @@ fn transpose_positions(pattern: &CscPattern) -> Option<Vec<u32>> {
     Some(transpose)
 }
 
-/// Which factorization the last [`SparseSolver::factorize`] used.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Factorization {
-    Ldlt,
-    /// LDLᵀ of the two halves of a bisected mesh at once ([`crate::split::SplitLdlt`]).
-    SplitLdlt,
-    Lu,
-}
-
-/// The factorization tried first for symmetric matrices.
-enum SymmetricFactor {
-    Whole(Box<SparseLdlt>),
-    Split(Box<SplitLdlt>),
-}
-
 /// Factorizes matrices on one pattern (Newton tangents in femu-mech), choosing LDLᵀ for
 /// symmetric values and LU otherwise; both symbolic analyses are made at most once.
 pub struct SparseSolver {
     /// Position of the transposed entry of each stored entry (32 bits: half the memory
     /// traffic of the asymmetry check before every factorization).
     transpose: Vec<u32>,
-    ldlt: SymmetricFactor,
+    /// The factorization tried first, for symmetric matrices ([`SparseLdlt`] or [`SplitLdlt`]).
+    ldlt: Box<dyn Factor>,
+    /// Analysed at the first unsymmetric (or not LDLᵀ-factorizable) matrix.
     lu: Option<SparseLu>,
     last: Option<Factorization>,
     /// Relative asymmetry above which LU is used.
@@ -73,7 +61,7 @@ impl SparseSolver {
     /// order for the LDLᵀ (see [`SparseLdlt::new`]).
     pub fn new(pattern: &CscPattern, order: Option<&[usize]>) -> Result<Self, LinearSolveError> {
         Self::with_symmetric_factor(pattern, || {
-            SparseLdlt::new(pattern, order).map(|f| SymmetricFactor::Whole(Box::new(f)))
+            SparseLdlt::new(pattern, order).map(|f| Box::new(f) as Box<dyn Factor>)
         })
     }
 
@@ -81,7 +69,7 @@ impl SparseSolver {
     /// ([`SplitLdlt`]).
     pub fn new_split(pattern: &CscPattern, split: &DofSplit) -> Result<Self, LinearSolveError> {
         Self::with_symmetric_factor(pattern, || {
-            SplitLdlt::new(pattern, split).map(|f| SymmetricFactor::Split(Box::new(f)))
+            SplitLdlt::new(pattern, split).map(|f| Box::new(f) as Box<dyn Factor>)
         })
     }
 
@@ -89,7 +77,7 @@ impl SparseSolver {
     /// thread each.
     fn with_symmetric_factor(
         pattern: &CscPattern,
-        factor: impl FnOnce() -> Result<SymmetricFactor, LinearSolveError> + Send,
+        factor: impl FnOnce() -> Result<Box<dyn Factor>, LinearSolveError> + Send,
     ) -> Result<Self, LinearSolveError> {
         if pattern.nnz() > u32::MAX as usize {
             return Err(LinearSolveError::Other(format!(
@@ -135,65 +123,44 @@ impl SparseSolver {
         values: &[f64],
     ) -> Result<Factorization, LinearSolveError> {
         self.last = None;
-        if self.asymmetry(values) <= self.symmetry_tolerance {
-            let done = match &mut self.ldlt {
-                SymmetricFactor::Whole(f) => {
-                    f.factorize(pattern, values).map(|_| Factorization::Ldlt)
-                }
-                SymmetricFactor::Split(f) => f.factorize(values).map(|_| Factorization::SplitLdlt),
-            };
-            if let Ok(kind) = done {
-                self.last = Some(kind);
-                return Ok(kind);
-            }
+        if self.asymmetry(values) <= self.symmetry_tolerance
+            && self.ldlt.factorize(pattern, values).is_ok()
+        {
+            self.last = Some(self.ldlt.kind());
+            return Ok(self.ldlt.kind());
         }
-        if self.lu.is_none() {
-            self.lu = Some(SparseLu::new(pattern)?);
-        }
-        self.lu
-            .as_mut()
-            .expect("created above")
-            .factorize(pattern, values)?;
+        let lu = match &mut self.lu {
+            Some(lu) => lu,
+            None => self.lu.insert(SparseLu::new(pattern)?),
+        };
+        lu.factorize(pattern, values)?;
         self.last = Some(Factorization::Lu);
         Ok(Factorization::Lu)
     }
 
+    /// The factorization used last, through which the solves go.
+    fn factor(&mut self) -> &mut dyn Factor {
+        match self.last {
+            Some(Factorization::Lu) => self.lu.as_mut().expect("factorized"),
+            Some(_) => self.ldlt.as_mut(),
+            None => panic!("solve before factorize"),
+        }
+    }
+
     /// Solves `A x = rhs` in place with the last factorization.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) {
-        self.solve_many_in_place(rhs, 1);
+        self.factor().solve_in_place(rhs);
     }
 
     /// Solves `A X = B` in place for `columns` (≤ [`MAX_RHS`]) right-hand sides stored one
     /// after the other: one pass over the factors for all of them.
     pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
-        match self.last {
-            Some(Factorization::Ldlt | Factorization::SplitLdlt) => match &mut self.ldlt {
-                SymmetricFactor::Whole(f) => f.solve_many_in_place(rhs, columns),
-                SymmetricFactor::Split(f) => f.solve_many_in_place(rhs, columns),
-            },
-            Some(Factorization::Lu) => self
-                .lu
-                .as_mut()
-                .expect("factorized")
-                .solve_many_in_place(rhs, columns),
-            None => panic!("solve before factorize"),
-        }
+        self.factor().solve_many_in_place(rhs, columns);
     }
 
     /// Solves `Aᵀ x = rhs` in place with the last factorization.
     pub fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
-        match self.last {
-            Some(Factorization::Ldlt | Factorization::SplitLdlt) => match &mut self.ldlt {
-                SymmetricFactor::Whole(f) => f.solve_in_place(rhs),
-                SymmetricFactor::Split(f) => f.solve_many_in_place(rhs, 1),
-            },
-            Some(Factorization::Lu) => self
-                .lu
-                .as_mut()
-                .expect("factorized")
-                .solve_transpose_in_place(rhs),
-            None => panic!("solve before factorize"),
-        }
+        self.factor().solve_transpose_in_place(rhs);
     }
 
     /// `Y = A X` for `cols` vectors stored interleaved (as [`CscPattern::mul_many_interleaved`]),

@@ -16,17 +16,18 @@
 //! Each half `M_A = [K_AA K_AS; K_SA K_SS]` (a principal submatrix of `K`, so as definite as
 //! `K`) is analysed by faer (supernodal symbolic LDLᵀ) with its interior in AMD's order and the
 //! separator last (the same factor entries as AMD's whole factorization, so no extra fill), and
-//! factorized by [`crate::supernodal::PartialLdlt`] up to the separator: its interior columns
-//! hold `L_AA`, `D_A` and `L_SA`, and its separator columns are left holding
-//! `Ŝ_A = K_SS - K_SA K_AA⁻¹ K_AS`. The Schur complement of `K` on the separator is then
+//! factorized by [`PartialLdlt`] (derived from faer's, [`crate::vendored`]) up to the separator:
+//! its interior columns hold `L_AA`, `D_A` and `L_SA`, and its separator columns are left
+//! holding `Ŝ_A = K_SS - K_SA K_AA⁻¹ K_AS`. The Schur complement of `K` on the separator is then
 //! `S̃ = Ŝ_A + Ŝ_B - K_SS` (dense: Cholesky when definite, LU with partial pivoting otherwise),
 //! and a solve is the block forward substitution through the interiors of both factors (in
 //! parallel), a dense solve on the separator, and the block back substitution (in parallel).
 //! This is the first level of a nested-dissection multifrontal factorization (George 1973;
 //! Duff & Reid 1983).
 
+use crate::factor::{rhs_rows, Factor, Factorization};
 use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
-use crate::supernodal::{LowerView, PartialLdlt};
+use crate::vendored::faer_supernodal::{LowerView, PartialLdlt};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::reborrow::ReborrowMut;
 use faer::sparse::linalg::cholesky::supernodal::{SupernodalLdltRef, SymbolicSupernodalCholesky};
@@ -657,8 +658,33 @@ impl SplitLdlt {
         })
     }
 
-    /// Numeric factorization of the symmetric `values` on the pattern given to [`Self::new`].
-    pub fn factorize(&mut self, values: &[f64]) -> Result<(), LinearSolveError> {
+    /// `S̃ = Ŝ_A + Ŝ_B - K_SS` into `dense` (both triangles), from the halves' Schur
+    /// complements (lower triangles) and the tangent `values`.
+    fn assemble_dense(&mut self, values: &[f64]) {
+        let s = self.separator.len();
+        let [a, b] = &self.halves;
+        for ((d, x), y) in self.dense.iter_mut().zip(&a.schur).zip(&b.schur) {
+            *d = x + y;
+        }
+        for &(k, idx) in &self.k_ss {
+            self.dense[idx] -= values[k];
+        }
+        for j in 0..s {
+            for i in j + 1..s {
+                self.dense[i * s + j] = self.dense[j * s + i];
+            }
+        }
+    }
+}
+
+impl Factor for SplitLdlt {
+    fn kind(&self) -> Factorization {
+        Factorization::SplitLdlt
+    }
+
+    /// Reads the symmetric `values` on the pattern given to [`SplitLdlt::new`].
+    fn factorize(&mut self, pattern: &CscPattern, values: &[f64]) -> Result<(), LinearSolveError> {
+        debug_assert_eq!(values.len(), pattern.nnz());
         self.factorized = false;
         let [a, b] = &mut self.halves;
         let (ra, rb) = rayon::join(|| a.factorize(values), || b.factorize(values));
@@ -714,30 +740,8 @@ impl SplitLdlt {
         Ok(())
     }
 
-    /// `S̃ = Ŝ_A + Ŝ_B - K_SS` into `dense` (both triangles), from the halves' Schur
-    /// complements (lower triangles) and the tangent `values`.
-    fn assemble_dense(&mut self, values: &[f64]) {
-        let s = self.separator.len();
-        let [a, b] = &self.halves;
-        for ((d, x), y) in self.dense.iter_mut().zip(&a.schur).zip(&b.schur) {
-            *d = x + y;
-        }
-        for &(k, idx) in &self.k_ss {
-            self.dense[idx] -= values[k];
-        }
-        for j in 0..s {
-            for i in j + 1..s {
-                self.dense[i * s + j] = self.dense[j * s + i];
-            }
-        }
-    }
-
-    /// Solves `A X = B` in place for `columns` (≤ [`MAX_RHS`]) right-hand sides stored one
-    /// after the other.
-    pub fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
-        assert!(self.factorized, "solve before factorize");
-        assert!((1..=MAX_RHS).contains(&columns) && rhs.len() / columns * columns == rhs.len());
-        let n = rhs.len() / columns;
+    fn solve_many_in_place(&mut self, rhs: &mut [f64], columns: usize) {
+        let n = rhs_rows(self.factorized, rhs, columns);
         let k = columns;
         let s = self.separator.len();
         {
@@ -782,6 +786,11 @@ impl SplitLdlt {
                 rhs[j * n + q] = x_s[j * s + i];
             }
         }
+    }
+
+    /// The matrix is symmetric: `Aᵀ x = A x`.
+    fn solve_transpose_in_place(&mut self, rhs: &mut [f64]) {
+        self.solve_in_place(rhs);
     }
 }
 
@@ -983,7 +992,7 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
         let (pattern, split, values, n_total) = grid_system(shift, with_border, &mut rng);
         let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
-        split_ldlt.factorize(&values).unwrap();
+        split_ldlt.factorize(&pattern, &values).unwrap();
         // The definite matrix's S̃ is factorized by Cholesky, the indefinite one's by LU.
         assert_eq!(split_ldlt.dense_cholesky, shift == 0.0);
         let mut whole = SparseLdlt::new(&pattern, None).unwrap();
@@ -1087,7 +1096,7 @@ mod tests {
         let (pattern, split, values, _) = grid_system(8.0, false, &mut rng);
         let mut split_ldlt = SplitLdlt::new(&pattern, &split).unwrap();
         split_ldlt
-            .factorize(&values)
+            .factorize(&pattern, &values)
             .expect("finite values factorize");
         let interior = &split.interiors[0];
         let (q0, q1) = (interior[0], interior[interior.len() / 2]);
@@ -1104,7 +1113,7 @@ mod tests {
             bad[pattern.position(r, c).unwrap()] = f64::NAN;
             bad[pattern.position(c, r).unwrap()] = f64::NAN;
             assert!(
-                split_ldlt.factorize(&bad).is_err(),
+                split_ldlt.factorize(&pattern, &bad).is_err(),
                 "NaN at ({r}, {c}) not reported"
             );
         }
@@ -1121,7 +1130,7 @@ mod tests {
         values[pattern.position(q, q).unwrap()] = 0.0;
         let err = SplitLdlt::new(&pattern, &split)
             .unwrap()
-            .factorize(&values)
+            .factorize(&pattern, &values)
             .unwrap_err();
         assert!(
             matches!(err, LinearSolveError::Singular(e) if e == q),

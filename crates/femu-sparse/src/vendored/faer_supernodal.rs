@@ -1,12 +1,31 @@
+//! **Derived from faer 0.24.4** (<https://codeberg.org/sarah-quinones/faer>), MIT licence,
+//! copyright sarah quiñones el kazdadi: the licence text is `LICENSE-faer` beside this file.
+//! [`super::FAER_VERSION`] names the release this copy was checked against, and a test fails
+//! when Cargo.lock moves faer (or `private-gemm-x86`, whose kernel is called here) to another
+//! one.
+//!
+//! The source is faer's `factorize_supernodal_numeric_ldlt` (`faer/src/sparse/linalg/
+//! cholesky.rs`, module `supernodal`): the same left-looking loop over the supernodes, the same
+//! assembly of a supernode's columns through a global-to-local row map, the same descendant
+//! update `L_s -= L_d D_d L_dᵀ` on the lower triangle by the kernel faer's `spicy_matmul`
+//! calls (`private_gemm_x86::gemm`, `faer/src/linalg/matmul/internal/mod.rs`), and the same
+//! dense LDLᵀ, unit triangular solve and `D⁻¹` scaling of each supernode. Changed here:
+//!
+//! - the factorization stops at the separator (`n_interior` columns; see below);
+//! - the matrix is read through a [`LowerView`] (the entries of a half read from the whole
+//!   tangent's values) instead of a `SparseColMatRef`;
+//! - `f64` and `usize` only; no regularization, no parallelism (one half per core already);
+//! - the descendants of each supernode are listed once per pattern ([`PartialLdlt::new`])
+//!   instead of read from faer's row structure, and the workspace is kept between calls;
+//! - without AVX2 and FMA the update runs in plain loops (faer uses its own portable matmul).
+//!
 //! Left-looking supernodal LDLᵀ stopped at the separator: the interior columns of a half are
 //! factorized and the separator's columns only receive the interior's updates, so that they hold
 //! the Schur complement `Ŝ = K_SS - K_SA K_AA⁻¹ K_AS` (lower triangle) when it returns.
 //!
-//! This is faer 0.24's `factorize_supernodal_numeric_ldlt` (MIT; same supernode loop, same
-//! update kernel from `private-gemm-x86`, same dense LDLᵀ of the diagonal blocks) with a stop:
-//! the whole factorization would go on to factorize the dense separator block
-//! (`s³/3` flops) and [`crate::split`] then multiplied it back into `Ŝ = L_SS D_S L_SSᵀ`
-//! (another `s³/3`); both are skipped. For supernode `s` (columns `[s₀, s₁)`, rows: its
+//! The whole factorization would go on to factorize the dense separator block (`s³/3` flops)
+//! and [`crate::split`] then multiply it back into `Ŝ = L_SS D_S L_SSᵀ` (another `s³/3`); both
+//! are skipped. For supernode `s` (columns `[s₀, s₁)`, rows: its
 //! diagonal block then its pattern), every descendant `d` with rows in `s` subtracts
 //! `L_{rows ≥ s₀, d} D_d L_{[s₀, s₁), d}ᵀ` (Duff & Reid 1983; the lower triangle only),
 //! limited to `d`'s interior columns; then an interior supernode is factorized in place
