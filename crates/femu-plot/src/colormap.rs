@@ -46,6 +46,20 @@ pub enum ColorMap {
 }
 
 impl ColorMap {
+    /// The map of values in `lo..hi`: blue–white–red symmetric about zero over the larger of
+    /// `|lo|` and `|hi|` if `diverging`, viridis over `lo..hi` (widened if empty) otherwise.
+    pub fn new(lo: f64, hi: f64, diverging: bool) -> Self {
+        if diverging {
+            let a = lo.abs().max(hi.abs());
+            ColorMap::Diverging {
+                a: if a > 0.0 { a } else { 1.0 },
+            }
+        } else {
+            let (lo, hi) = crate::widen(lo, hi);
+            ColorMap::Viridis { lo, hi }
+        }
+    }
+
     /// The range the map spans.
     pub fn range(&self) -> (f64, f64) {
         match *self {

@@ -6,9 +6,10 @@
 //! interpolated value, a quad being split along its 1–3 diagonal), so a nodal field is smooth
 //! and a cell field has no seams between elements. Axes keep 1 mm = 1 mm (x right, y up).
 
-use crate::colormap::{ColorMap, MISSING};
+use crate::colorbar::{draw_color_bar, ColorBarPlace};
+use crate::colormap::ColorMap;
 use crate::text::{draw_title, font, tick_label, Sizes};
-use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
+use crate::{check_range, check_size, de, finite_min_max, Canvas, PlotError};
 use femu_mesh::Mesh;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
@@ -241,15 +242,7 @@ fn color_map(values: &[f64], opts: &FieldPlot) -> Result<ColorMap, PlotError> {
             PlotError::InvalidData("every value is NaN or infinite; give a range".into())
         })?,
     };
-    Ok(if opts.diverging {
-        let a = lo.abs().max(hi.abs());
-        ColorMap::Diverging {
-            a: if a > 0.0 { a } else { 1.0 },
-        }
-    } else {
-        let (lo, hi) = widen(lo, hi);
-        ColorMap::Viridis { lo, hi }
-    })
+    Ok(ColorMap::new(lo, hi, opts.diverging))
 }
 
 /// The edges of the mesh, each with the element(s) that share it.
@@ -285,10 +278,8 @@ struct FieldLayout {
     /// Label area sizes (px): left of and below the plot.
     yla: u32,
     xla: u32,
-    /// Colour bar: left edge, bar width, label area width (px).
-    cb_left: u32,
-    cb_w: u32,
-    cb_la: u32,
+    /// The colour bar (beside the plot rectangle).
+    bar: ColorBarPlace,
 }
 
 fn layout(bbox: ([f64; 2], [f64; 2]), opts: &FieldPlot, s: Sizes) -> FieldLayout {
@@ -327,9 +318,13 @@ fn layout(bbox: ([f64; 2], [f64; 2]), opts: &FieldPlot, s: Sizes) -> FieldLayout
         ph,
         yla,
         xla,
-        cb_left: left + pw + cb_gap,
-        cb_w,
-        cb_la,
+        bar: ColorBarPlace {
+            left: left + pw + cb_gap,
+            top,
+            width: cb_w,
+            height: ph,
+            label_width: cb_la,
+        },
     }
 }
 
@@ -463,7 +458,7 @@ fn draw_field(
             .draw()
             .map_err(de)?;
 
-        draw_color_bar(root, &cmap, &opts.value_label, any_nan, &lay, s)
+        draw_color_bar(root, &cmap, &opts.value_label, any_nan, lay.bar, s)
     })
 }
 
@@ -644,69 +639,4 @@ fn draw_overlay_label(
         font(s.legend()).pos(Pos::new(hp, vp)),
     ))
     .map_err(de)
-}
-
-/// The vertical colour bar right of the plot, with ticks, the value label and, if some values
-/// are missing, a grey swatch "no value" below it.
-fn draw_color_bar(
-    root: &DrawingArea<BitMapBackend<'_>, Shift>,
-    cmap: &ColorMap,
-    label: &str,
-    any_nan: bool,
-    lay: &FieldLayout,
-    s: Sizes,
-) -> Result<(), String> {
-    let (lo, hi) = cmap.range();
-    let area = root
-        .clone()
-        .shrink((lay.cb_left, lay.top), (lay.cb_w + lay.cb_la, lay.ph));
-    let mut bar = ChartBuilder::on(&area)
-        .margin(0)
-        .right_y_label_area_size(lay.cb_la)
-        .build_cartesian_2d(0.0..1.0, lo..hi)
-        .map_err(de)?;
-    let steps = lay.ph.max(2) as usize;
-    bar.draw_series((0..steps).map(|i| {
-        let a = lo + (hi - lo) * i as f64 / steps as f64;
-        let b = lo + (hi - lo) * (i + 1) as f64 / steps as f64;
-        Rectangle::new([(0.0, a), (1.0, b)], cmap.color(0.5 * (a + b)).filled())
-    }))
-    .map_err(de)?;
-    bar.draw_series(std::iter::once(Rectangle::new(
-        [(0.0, lo), (1.0, hi)],
-        BLACK.stroke_width(1),
-    )))
-    .map_err(de)?;
-    bar.configure_mesh()
-        .set_all_tick_mark_size(s.px(7.0))
-        .disable_mesh()
-        .disable_x_axis()
-        .y_desc(label)
-        .label_style(font(s.tick()))
-        .axis_desc_style(font(s.desc()))
-        .y_labels(((lay.ph / s.px(60.0)) as usize).clamp(3, 11))
-        .y_label_formatter(&|v| tick_label(*v, lo, hi))
-        .draw()
-        .map_err(de)?;
-    if any_nan {
-        let (x, y) = (
-            lay.cb_left as i32,
-            (lay.top + lay.ph) as i32 + s.px(18.0) as i32,
-        );
-        let d = s.px(18.0) as i32;
-        root.draw(&Rectangle::new([(x, y), (x + d, y + d)], MISSING.filled()))
-            .map_err(de)?;
-        root.draw(&Rectangle::new(
-            [(x, y), (x + d, y + d)],
-            BLACK.stroke_width(1),
-        ))
-        .map_err(de)?;
-        root.draw(&Text::new(
-            "no value",
-            (x + d + s.px(8.0) as i32, y + d / 2),
-            font(s.tick()).pos(Pos::new(HPos::Left, VPos::Center)),
-        ))
-        .map_err(de)?;
-    }
-    Ok(())
 }

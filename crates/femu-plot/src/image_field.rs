@@ -2,8 +2,9 @@
 //! per-pixel value drawn over it in colour where it is defined, and a colour bar. Axes are in
 //! image pixels, y pointing down as in the image.
 
+use crate::colorbar::{draw_color_bar, ColorBarPlace};
 use crate::colormap::ColorMap;
-use crate::text::{draw_title, font, tick_label, Sizes};
+use crate::text::{draw_title, font, Sizes};
 use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
 use plotters::prelude::*;
 use std::path::Path;
@@ -86,14 +87,7 @@ pub fn image_field_png(
             widen(r.0, r.1)
         }
     };
-    let cmap = if opts.diverging {
-        let a = lo.abs().max(hi.abs());
-        ColorMap::Diverging {
-            a: if a > 0.0 { a } else { 1.0 },
-        }
-    } else {
-        ColorMap::Viridis { lo, hi }
-    };
+    let cmap = ColorMap::new(lo, hi, opts.diverging);
     let s = Sizes::new(opts.width, opts.height);
     // Layout: image on the left keeping its aspect ratio, colour bar on the right.
     let (yla, xla) = (s.px(90.0), s.px(70.0));
@@ -155,39 +149,15 @@ pub fn image_field_png(
             .x_label_formatter(&|v| format!("{}", v.round()))
             .draw()
             .map_err(de)?;
-        // Colour bar.
-        let (blo, bhi) = cmap.range();
-        let cb_left = left + pw + cb_gap;
-        let bar_area = root.clone().shrink((cb_left, top), (cb_w + cb_la, ph));
-        let mut bar = ChartBuilder::on(&bar_area)
-            .margin(0)
-            .right_y_label_area_size(cb_la)
-            .build_cartesian_2d(0.0..1.0, blo..bhi)
-            .map_err(de)?;
-        let steps = ph.max(2) as usize;
-        bar.draw_series((0..steps).map(|i| {
-            let a = blo + (bhi - blo) * i as f64 / steps as f64;
-            let b = blo + (bhi - blo) * (i + 1) as f64 / steps as f64;
-            Rectangle::new([(0.0, a), (1.0, b)], cmap.color(0.5 * (a + b)).filled())
-        }))
-        .map_err(de)?;
-        bar.draw_series(std::iter::once(Rectangle::new(
-            [(0.0, blo), (1.0, bhi)],
-            BLACK.stroke_width(1),
-        )))
-        .map_err(de)?;
-        bar.configure_mesh()
-            .set_all_tick_mark_size(s.px(7.0))
-            .disable_mesh()
-            .disable_x_axis()
-            .y_desc(opts.value_label.as_str())
-            .label_style(font(s.tick()))
-            .axis_desc_style(font(s.desc()))
-            .y_labels(((ph / s.px(60.0)) as usize).clamp(3, 11))
-            .y_label_formatter(&|v| tick_label(*v, blo, bhi))
-            .draw()
-            .map_err(de)?;
-        Ok(())
+        let place = ColorBarPlace {
+            left: left + pw + cb_gap,
+            top,
+            width: cb_w,
+            height: ph,
+            label_width: cb_la,
+        };
+        // NaN pixels show the grey image: no "no value" swatch.
+        draw_color_bar(root, &cmap, &opts.value_label, false, place, s)
     })
 }
 

@@ -28,6 +28,7 @@
 mod axis;
 mod boxplot;
 mod chart;
+mod colorbar;
 pub mod colormap;
 mod field;
 mod forest;
