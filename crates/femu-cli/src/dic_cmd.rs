@@ -301,11 +301,8 @@ impl CorrelationArgs {
     }
 }
 
-/// `femu dic`.
+/// `femu dic` on one pair of frames (a sequence goes to `dic_seq::run`).
 pub fn run(a: &DicArgs, quiet: bool) -> Result<()> {
-    if !a.then.is_empty() {
-        return crate::dic_seq::run(a, quiet);
-    }
     let origin = parse_pair("origin", &a.origin)?;
     let job = DicJob {
         reference: a.reference.clone(),

@@ -426,7 +426,8 @@ fn main() -> ExitCode {
         } => study_with(study.as_deref(), elements, None, None)
             .and_then(|s| femu_study::commands::design(&s, &out, &progress).map(|_| ())),
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
-        Command::Dic(args) => dic_cmd::run(&args, quiet),
+        Command::Dic(args) if args.then.is_empty() => dic_cmd::run(&args, quiet),
+        Command::Dic(args) => dic_seq::run(&args, quiet),
         Command::DicNoise(args) => dic_cmd::run_noise(&args, quiet),
         Command::DicCheck(args) => dic_cmd::run_dic_check(&args, quiet),
         Command::UsSim(args) => us_cmd::sim(&args, quiet),

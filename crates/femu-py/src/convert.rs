@@ -3,9 +3,11 @@
 //! mirror dataclasses of `python/femu/results.py`), and flat vectors out as NumPy arrays.
 
 use crate::errors;
+use anyhow::Context;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
+use std::path::Path;
 
 /// A Python value as a TOML value; `at` names it in errors (`model.elements`).
 pub fn toml_value(obj: &Bound<'_, PyAny>, at: &str) -> PyResult<toml::Value> {
@@ -122,4 +124,15 @@ pub fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
         return Err(errors::input(format!("{name}[{k}] is not finite")));
     }
     Ok(v)
+}
+
+/// A summary file checked against its typed struct (it must read back into the struct that
+/// wrote it), as its JSON text: the numbers exactly as written (shortest round-trip decimals,
+/// which Python's `json` reads back to the same doubles).
+pub fn read_typed<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<String> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    femu_study::json::from_str::<T>(&text)
+        .with_context(|| format!("{} is not a femu result", path.display()))?;
+    Ok(text)
 }

@@ -36,6 +36,7 @@ fn _femu(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<identify::PyLeastSquares>()?;
     m.add_function(wrap_pyfunction!(study::read_run, m)?)?;
     m.add_function(wrap_pyfunction!(model::model_from_label_array, m)?)?;
+    m.add_function(wrap_pyfunction!(model::model_of_study, m)?)?;
     m.add_function(wrap_pyfunction!(dic::dic, m)?)?;
     m.add_function(wrap_pyfunction!(dic::read_image, m)?)?;
     m.add_function(wrap_pyfunction!(identify::identify_field, m)?)?;

@@ -346,7 +346,7 @@ impl PyModel {
                 0.0,
                 progress,
             )?;
-            crate::study::read_typed::<femu_study::report::ModelSummary>(&out.join("summary.json"))
+            convert::read_typed::<femu_study::report::ModelSummary>(&out.join("summary.json"))
         })
     }
 
@@ -405,13 +405,15 @@ pub fn model_from_label_array(
     Ok(PyModel { built, spec })
 }
 
-/// The model `study` describes, built as `femu run` builds it.
+/// The model `study` describes (mesh and materials, no load), built as `femu run` builds it.
+#[pyfunction]
+#[pyo3(signature = (study, reporter = None))]
 pub fn model_of_study(
     py: Python<'_>,
-    study: &PyStudy,
-    reporter: Option<&Bound<'_, PyAny>>,
+    study: PyRef<'_, PyStudy>,
+    reporter: Option<Bound<'_, PyAny>>,
 ) -> PyResult<PyModel> {
     let spec = study.study.model.clone();
-    let built = running::run(py, reporter, |_| femu_study::model::build(&spec))?;
+    let built = running::run(py, reporter.as_ref(), |_| femu_study::model::build(&spec))?;
     Ok(PyModel { built, spec })
 }

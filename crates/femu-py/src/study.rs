@@ -2,11 +2,9 @@
 //! run whole (`femu run`) or one step at a time; and the typed summaries a run folder holds,
 //! read back as JSON text for the dataclasses of `python/femu/results.py`.
 
-use crate::convert;
+use crate::convert::{self, read_typed};
 use crate::errors::{self, IntoPy};
-use crate::model::PyModel;
 use crate::running;
-use anyhow::Context;
 use femu_study::report::{ModelSummary, RunSummary};
 use femu_study::schema::{self, Study};
 use femu_study::steps::identify::IdentificationSummary;
@@ -203,12 +201,6 @@ impl PyStudy {
         }
     }
 
-    /// The study's model (mesh and materials, no load), built as `femu run` builds it.
-    #[pyo3(signature = (reporter = None))]
-    fn model(&self, py: Python<'_>, reporter: Option<Bound<'_, PyAny>>) -> PyResult<PyModel> {
-        crate::model::model_of_study(py, self, reporter.as_ref())
-    }
-
     fn __repr__(&self) -> String {
         format!(
             "femu.Study({}; tests {}; identification on {})",
@@ -254,17 +246,6 @@ fn forward_step(
         summaries.push(format!("{}:{text}", serde_json::to_string(&name)?));
     }
     Ok(format!("{{{}}}", summaries.join(",")))
-}
-
-/// A summary file checked against its typed struct (it must read back into the struct that
-/// wrote it), as its JSON text: the numbers exactly as written (shortest round-trip decimals,
-/// which Python's `json` reads back to the same doubles).
-pub fn read_typed<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<String> {
-    let text =
-        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    femu_study::json::from_str::<T>(&text)
-        .with_context(|| format!("{} is not a femu result", path.display()))?;
-    Ok(text)
 }
 
 /// The typed summaries of a run folder (`femu run`, `femu demo`, `Study.run`), each as JSON

@@ -25,8 +25,30 @@ pub struct StudyModel {
     /// "parametric thigh", "label image IMAGE" or "deck FILE".
     pub source: String,
     /// The discretization check's meshes and solutions, for the next identification on this
-    /// model (`crate::steps::discretization::CheckMeshes`).
-    pub check_meshes: std::sync::Mutex<crate::steps::discretization::CheckMeshes>,
+    /// model.
+    pub check_meshes: std::sync::Mutex<CheckMeshes>,
+}
+
+/// The meshes of a discretization check and their last solutions, kept with the study's model
+/// ([`StudyModel::check_meshes`], filled by `crate::steps::discretization::check`) for the
+/// next check on it (the demo's grouped identification after the ungrouped one): the refined
+/// meshes are built once, and Newton on each mesh starts from the solution at the earlier
+/// check's parameters instead of the load increments.
+#[derive(Default)]
+pub struct CheckMeshes {
+    pub(crate) levels: Vec<CachedLevel>,
+}
+
+/// One mesh of [`CheckMeshes`].
+pub(crate) struct CachedLevel {
+    pub(crate) ratio: f64,
+    /// The measured tests' loadings (as printed) the models carry.
+    pub(crate) tests: Vec<String>,
+    pub(crate) elements: usize,
+    /// The models of the measured tests on this mesh (none kept for the model's own mesh).
+    pub(crate) models: Vec<Model>,
+    /// Their last solved states.
+    pub(crate) states: Vec<Option<Vec<f64>>>,
 }
 
 impl StudyModel {

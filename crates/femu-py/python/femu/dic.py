@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _femu, results
 from ._progress import reporter
-from .study import _Scratch
+from ._scratch import Scratch
 
 
 @dataclass
@@ -82,7 +82,7 @@ def dic(reference, deformed, out=None, progress: Any = False, **options) -> DicR
         deformed = os.fspath(deformed)
     if "regularization" in options and options["regularization"] in ("auto",):
         options["regularization"] = None
-    with _Scratch(out) as folder:
+    with Scratch(out) as folder:
         d = _femu.dic(
             reference, deformed, os.fspath(folder), reporter=reporter(progress), **options
         )

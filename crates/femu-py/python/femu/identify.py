@@ -8,44 +8,9 @@ import numpy as np
 
 from . import _femu, results
 from ._progress import reporter
-from .study import Study, _Scratch
-
-
-class Field:
-    """A measured displacement field (conventions.md): points ``x, y`` and displacements
-    ``ux, uy`` in the model frame (mm), weighted by standard deviations ``sx, sy`` (mm), a
-    weight ``w`` per point, or ``weights`` per component (points x 2, the inverse variances
-    femu keeps); unweighted without any."""
-
-    def __init__(self, x, y, ux, uy, sx=None, sy=None, w=None, weights=None):
-        self.x, self.y, self.ux, self.uy = (np.asarray(v, dtype=float) for v in (x, y, ux, uy))
-        self.sx = None if sx is None else np.asarray(sx, dtype=float)
-        self.sy = None if sy is None else np.asarray(sy, dtype=float)
-        self.w = None if w is None else np.asarray(w, dtype=float)
-        self.weights = None if weights is None else np.asarray(weights, dtype=float)
-
-    @classmethod
-    def read(cls, path) -> "Field":
-        """A measured-field CSV (``x,y,ux,uy[,sx,sy][,w]``, ``#`` comment lines), read by
-        femu (``femu_identify::measured``; a bad row is an :class:`femu.InputError` naming its
-        line)."""
-        x, y, ux, uy, weights = _femu.read_field(os.fspath(path))
-        return cls(x, y, ux, uy, weights=weights)
-
-    def columns(self):
-        """The columns femu takes (those given)."""
-        c = dict(x=self.x, y=self.y, ux=self.ux, uy=self.uy)
-        for k in ("sx", "sy", "w", "weights"):
-            if getattr(self, k) is not None:
-                c[k] = getattr(self, k)
-        return c
-
-    def __len__(self) -> int:
-        return len(self.x)
-
-    def __repr__(self) -> str:
-        given = [k for k in ("sx", "sy", "w", "weights") if getattr(self, k) is not None]
-        return f"femu.Field({len(self)} points, {', '.join(given) or 'unweighted'})"
+from ._scratch import Scratch
+from .field import Field
+from .study import Study
 
 
 def identify(
@@ -61,7 +26,7 @@ def identify(
     (``parameters.csv``, ``starts.csv``, figures, ``summary.json``); without it a temporary one.
     Releases the GIL; Ctrl-C stops it at the next forward solve."""
     c = field.columns()
-    with _Scratch(out) as folder:
+    with Scratch(out) as folder:
         text = _femu.identify_field(
             study._inner,
             c["x"],

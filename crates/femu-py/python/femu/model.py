@@ -11,7 +11,6 @@ import numpy as np
 
 from . import _femu, _tables, results
 from ._progress import reporter
-from .study import Study
 
 TestArg = Union[str, Mapping[str, Any]]
 
@@ -23,9 +22,16 @@ class Model:
     ``Study.model()``. Parameters are in model units (C10 in MPa, D in MPa⁻¹), named as femu
     names them (``C10_FAT``, ``D_QUADRICEPS``)."""
 
-    def __init__(self, inner: "_femu.Model", study: Study):
+    def __init__(self, inner: "_femu.Model", study: "_femu.Study"):
         self._inner = inner
+        # The checked study the model was built from: its tests are the ones solved by name.
         self._study = study
+
+    @classmethod
+    def _of(cls, data: Dict[str, Any]) -> "Model":
+        """The model of a study given as a dict of the study file's tables."""
+        study = _femu.Study.from_dict(data, None)
+        return cls(_femu.model_of_study(study, reporter(False)), study)
 
     # --- building -------------------------------------------------------------------------
 
@@ -50,7 +56,7 @@ class Model:
             data["thigh"] = dict(dimensions)
         if materials:
             data["materials"] = {k: dict(v) for k, v in materials.items()}
-        return Study.from_dict(data).model()
+        return cls._of(data)
 
     @classmethod
     def from_labels(
@@ -85,8 +91,8 @@ class Model:
         data: Dict[str, Any] = {"model": model, "labels": entry}
         if materials:
             data["materials"] = {k: dict(v) for k, v in materials.items()}
-        study = Study.from_dict(data)
-        return cls(_femu.model_from_label_array(study._inner, labels), study)
+        study = _femu.Study.from_dict(data, None)
+        return cls(_femu.model_from_label_array(study, labels), study)
 
     @classmethod
     def from_deck(
@@ -98,7 +104,7 @@ class Model:
         data: Dict[str, Any] = {"model": {"deck": os.path.abspath(os.fspath(path))}}
         if materials:
             data["materials"] = {k: dict(v) for k, v in materials.items()}
-        return Study.from_dict(data).model()
+        return cls._of(data)
 
     # --- the mesh ---------------------------------------------------------------------------
 
@@ -135,9 +141,10 @@ class Model:
         return self._inner.source
 
     @property
-    def study(self) -> Study:
-        """The study the model was built from (its tests are the default ones to solve)."""
-        return self._study
+    def tests(self) -> List[str]:
+        """The names of the loading tests of the study the model was built from: the tests
+        :meth:`solve` and :meth:`sensitivities` take by name."""
+        return list(self._study.tests)
 
     @property
     def parameters(self) -> Dict[str, float]:
@@ -164,12 +171,11 @@ class Model:
         (``compression``, ``compression-anterior``), or a ``[[test]]`` entry given as a dict
         (``{"kind": "indentation", "radius_mm": 5}``)."""
         if isinstance(test, str):
-            names = self._study.tests
-            for k, n in enumerate(names):
+            for k, n in enumerate(self.tests):
                 if n.lower() == test.lower() or n.split("-")[0].lower() == test.lower():
-                    return self._study._inner, k
+                    return self._study, k
             test = {"kind": test}
-        return Study.from_dict({"test": [dict(test)]})._inner, 0
+        return _femu.Study.from_dict({"test": [dict(test)]}, None), 0
 
     def solve(
         self,

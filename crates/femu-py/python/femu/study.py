@@ -3,13 +3,14 @@ run whole as ``femu run`` runs it or one step at a time, and the typed results o
 
 import json
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, Optional, Union
 
 from . import _femu, results
 from ._progress import reporter
+from .field import Field
+from .model import Model
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -98,24 +99,18 @@ class Study:
         if name == "sensitivity":
             return results.parse(results.SensitivitySummary, text)
         if name == "measurement":
-            from .identify import Field
-
             return Field.read(json.loads(text))
         return results.parse(results.IdentificationSummary, text)
 
     def model(self, progress: Any = False):
         """The study's model (mesh and materials, no load), built as ``femu run`` builds it."""
-        from .model import Model
-
-        return Model(self._inner.model(reporter(progress)), self)
+        return Model(_femu.model_of_study(self._inner, reporter(progress)), self._inner)
 
     def virtual_field(self):
         """The study's measurement as its identification fits it in the first repeat (``femu
         synth``: the test at the reference parameters on the measurement's points plus the
         seeded noise) as a :class:`femu.Field`; a study with a list of measurements gives a
         dict ``{name: Field}``."""
-        from .identify import Field
-
         fields = {
             name: Field(x, y, ux, uy, weights=weights)
             for name, (x, y, ux, uy, weights) in _femu.virtual_field(self._inner)
@@ -153,8 +148,6 @@ class RunResult:
         d = _femu.read_run(os.fspath(folder))
         measured = None
         if "measured" in d:
-            from .identify import Field
-
             measured = Field.read(d["measured"])
         return cls(
             folder=Path(folder),
@@ -183,19 +176,3 @@ class RunResult:
 def demo(out: PathLike, elements: Optional[int] = None, progress: Any = True) -> RunResult:
     """``femu demo --out OUT [--elements N]``: the seed's numerical example end to end."""
     return Study.demo(elements).run(out, progress)
-
-
-class _Scratch:
-    """An output folder for a call: ``out`` if given (kept), else a temporary one removed once
-    the results are read."""
-
-    def __init__(self, out: Optional[PathLike]):
-        self._tmp = None if out is not None else tempfile.TemporaryDirectory(prefix="femu-")
-        self.path = Path(out) if out is not None else Path(self._tmp.name)
-
-    def __enter__(self) -> Path:
-        return self.path
-
-    def __exit__(self, *exc) -> None:
-        if self._tmp is not None:
-            self._tmp.cleanup()

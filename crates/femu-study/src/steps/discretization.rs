@@ -6,7 +6,7 @@
 
 use super::joint::{JointFit, TestModels};
 use super::measure::{Prepared, PreparedData};
-use crate::model::{build_refined, StudyModel};
+use crate::model::{build_refined, CachedLevel, CheckMeshes, StudyModel};
 use crate::progress::Progress;
 use crate::schema::{Discretization, Geometry, Study};
 use anyhow::{Context, Result};
@@ -39,27 +39,6 @@ pub fn data_from_model(study: &Study, prepared: &[Prepared]) -> bool {
         PreparedData::Virtual { .. } => study.identification.data_refinement == 1.0,
         PreparedData::Measured(m) => m.reference_known && study.ultrasound.render_refine == 1,
     })
-}
-
-/// The meshes of a discretization check and their last solutions, kept with the study's model
-/// ([`StudyModel::check_meshes`]) for the next check on it (the demo's grouped identification
-/// after the ungrouped one): the refined meshes are built once, and Newton on each mesh starts
-/// from the solution at the earlier check's parameters instead of the load increments.
-#[derive(Default)]
-pub struct CheckMeshes {
-    levels: Vec<CachedLevel>,
-}
-
-/// One mesh of [`CheckMeshes`].
-struct CachedLevel {
-    ratio: f64,
-    /// The measured tests' loadings (as printed) the models carry.
-    tests: Vec<String>,
-    elements: usize,
-    /// The models of the measured tests on this mesh (none kept for the model's own mesh).
-    models: Vec<Model>,
-    /// Their last solved states.
-    states: Vec<Option<Vec<f64>>>,
 }
 
 /// What the check found, and the problem of the finest mesh (for `"refine"`).
