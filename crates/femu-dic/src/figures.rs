@@ -6,7 +6,8 @@ use crate::auto::Measured;
 use crate::error::DicError;
 use crate::image::GreyImage;
 use crate::output::{self, ModelFrame};
-use crate::quality::Trust;
+use crate::quality::{NodalCovariance, Trust};
+use rayon::prelude::*;
 use std::path::Path;
 
 /// The files [`write_maps`] writes.
@@ -74,16 +75,24 @@ fn per_pixel(
     m: &Measured,
     w: usize,
     h: usize,
-    value: impl Fn(usize, usize, usize) -> f64,
+    value: impl Fn(usize, usize, usize) -> f64 + Sync,
 ) -> Vec<f64> {
     let mesh = &m.res.mesh;
+    // The elements' blocks in parallel, then copied into the image.
+    let blocks: Vec<Vec<f64>> = (0..mesh.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let (px, py) = mesh.element_origin(e);
+            (0..mesh.h * mesh.h)
+                .map(|k| value(e, px + k % mesh.h, py + k / mesh.h))
+                .collect()
+        })
+        .collect();
     let mut v = vec![f64::NAN; w * h];
-    for e in 0..mesh.n_elements() {
+    for (e, block) in blocks.iter().enumerate() {
         let (px, py) = mesh.element_origin(e);
-        for j in 0..mesh.h {
-            for i in 0..mesh.h {
-                v[(py + j) * w + px + i] = value(e, px + i, py + j);
-            }
+        for (j, row) in block.chunks_exact(mesh.h).enumerate() {
+            v[(py + j) * w + px..(py + j) * w + px + mesh.h].copy_from_slice(row);
         }
     }
     v
@@ -128,9 +137,9 @@ pub fn write_maps(
     };
     let es = output::element_strains(res, frame);
     let strain = |c: usize| per_pixel(m, w, h, |e, _, _| es[e][c]);
+    let blocks = m.cov.element_blocks(res);
     let sd = per_pixel(m, w, h, |_, x, y| {
-        m.cov
-            .point_sd(res, x as f64, y as f64)
+        NodalCovariance::point_sd_with(res, &blocks, x as f64, y as f64)
             .map_or(f64::NAN, |s| s[0].max(s[1]))
     });
     let untrusted = m.trust.iter().filter(|&&t| t != Trust::Trusted).count();
@@ -218,8 +227,5 @@ pub fn write_maps(
         },
     ];
     let crop = crop_of(m, w, h);
-    for map in &maps {
-        draw(out, f, map, crop)?;
-    }
-    Ok(())
+    maps.par_iter().try_for_each(|map| draw(out, f, map, crop))
 }

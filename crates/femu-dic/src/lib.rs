@@ -35,6 +35,7 @@ pub mod noise;
 pub mod output;
 pub mod quality;
 pub mod read;
+pub mod selected;
 pub mod sequence;
 pub mod solver;
 pub mod sparse;

@@ -424,7 +424,7 @@ pub fn read_matrix_market(path: &Path) -> Result<(crate::sparse::CscPattern, Vec
         .iter()
         .flat_map(|&(r, c, _)| [(r, c), (c, r)])
         .collect();
-    let pattern = crate::sparse::CscPattern::from_pairs(n, pairs);
+    let pattern = crate::sparse::pattern_from_pairs(n, pairs);
     let mut values = vec![0.0; pattern.nnz()];
     for &(r, c, v) in &entries {
         values[pattern.position(r, c).expect("entry in the pattern")] = v;

@@ -435,7 +435,7 @@ impl Level {
                 }
             }
         }
-        let pattern = CscPattern::from_pairs(n_eq, pairs);
+        let pattern = crate::sparse::pattern_from_pairs(n_eq, pairs);
         let mut m_values = vec![0.0; pattern.nnz()];
         for (d, me) in dofs.iter().zip(&elem_m) {
             for i in 0..8 {
@@ -471,8 +471,8 @@ impl Level {
                         (k * p[q % 2]).sin()
                     })
                     .collect();
-                let vkv = pattern.quadratic_form(&k_values, &v);
-                let vmv = pattern.quadratic_form(&m_values, &v);
+                let vkv = crate::sparse::quadratic_form(&pattern, &k_values, &v);
+                let vmv = crate::sparse::quadratic_form(&pattern, &m_values, &v);
                 if laplacian.is_empty() || !(vkv > 0.0) {
                     None
                 } else {
@@ -1338,7 +1338,7 @@ mod tests {
         let (kv, lambda) = level.reg.clone().expect("regularized");
         let cost = |level: &mut Level, a: &[f64]| {
             let r2: f64 = residuals(level, &g, a).iter().map(|r| r * r).sum();
-            r2 + lambda * level.pattern.quadratic_form(&kv, a)
+            r2 + lambda * crate::sparse::quadratic_form(&level.pattern, &kv, a)
         };
         let a0: Vec<f64> = (0..n).map(|q| if q % 2 == 0 { tx } else { ty }).collect();
         let eps = 1e-3;

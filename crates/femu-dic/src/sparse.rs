@@ -1,5 +1,5 @@
 //! The sparse symmetric positive definite system of the Gauss–Newton iterations: a CSC pattern
-//! built once per mesh and faer's supernodal Cholesky (`L Lᵀ`, approximate-minimum-degree
+//! built once per mesh (femu-sparse's [`CscPattern`]) and faer's supernodal Cholesky (`L Lᵀ`, approximate-minimum-degree
 //! ordering), symbolic analysis and numeric factorization done once, solves in place with a
 //! workspace allocated once (no allocation per iteration).
 
@@ -11,73 +11,47 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, MatMut, Par, Side};
 
-/// A square compressed-sparse-column pattern with sorted row indices.
-#[derive(Debug, Clone)]
-pub struct CscPattern {
-    pub n: usize,
-    pub col_ptr: Vec<usize>,
-    pub row_idx: Vec<usize>,
+pub use femu_sparse::CscPattern;
+
+/// The square pattern of the (row, col) pairs (duplicates allowed), rows sorted in each column.
+pub fn pattern_from_pairs(n: usize, mut pairs: Vec<(usize, usize)>) -> CscPattern {
+    pairs.sort_unstable_by_key(|&(r, c)| (c, r));
+    pairs.dedup();
+    let mut col_ptr = vec![0usize; n + 1];
+    let mut row_idx = Vec::with_capacity(pairs.len());
+    for &(r, c) in &pairs {
+        col_ptr[c + 1] += 1;
+        row_idx.push(r);
+    }
+    for c in 0..n {
+        col_ptr[c + 1] += col_ptr[c];
+    }
+    CscPattern {
+        n,
+        col_ptr,
+        row_idx,
+    }
 }
 
-impl CscPattern {
-    /// The pattern of the (row, col) pairs (duplicates allowed).
-    pub fn from_pairs(n: usize, mut pairs: Vec<(usize, usize)>) -> Self {
-        pairs.sort_unstable_by_key(|&(r, c)| (c, r));
-        pairs.dedup();
-        let mut col_ptr = vec![0usize; n + 1];
-        let mut row_idx = Vec::with_capacity(pairs.len());
-        for &(r, c) in &pairs {
-            col_ptr[c + 1] += 1;
-            row_idx.push(r);
-        }
-        for c in 0..n {
-            col_ptr[c + 1] += col_ptr[c];
-        }
-        CscPattern {
-            n,
-            col_ptr,
-            row_idx,
+/// `xᵀ A x` for `A` stored in full on `pattern`.
+pub fn quadratic_form(pattern: &CscPattern, values: &[f64], x: &[f64]) -> f64 {
+    let mut s = 0.0;
+    for c in 0..pattern.n {
+        for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
+            s += x[pattern.row_idx[k]] * values[k] * x[c];
         }
     }
+    s
+}
 
-    /// Number of stored entries.
-    pub fn nnz(&self) -> usize {
-        self.row_idx.len()
-    }
-
-    /// Position of entry (r, c) in the value array.
-    pub fn position(&self, r: usize, c: usize) -> Option<usize> {
-        let range = self.col_ptr[c]..self.col_ptr[c + 1];
-        self.row_idx[range.clone()]
-            .binary_search(&r)
-            .ok()
-            .map(|k| range.start + k)
-    }
-
-    fn symbolic(&self) -> SymbolicSparseColMatRef<'_, usize> {
-        SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx)
-    }
-
-    /// `y = A x` for a symmetric matrix stored in full on this pattern.
-    pub fn mul_vec(&self, values: &[f64], x: &[f64], y: &mut [f64]) {
-        y.fill(0.0);
-        for c in 0..self.n {
-            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                y[self.row_idx[k]] += values[k] * x[c];
-            }
-        }
-    }
-
-    /// `xᵀ A x`.
-    pub fn quadratic_form(&self, values: &[f64], x: &[f64]) -> f64 {
-        let mut s = 0.0;
-        for c in 0..self.n {
-            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                s += x[self.row_idx[k]] * values[k] * x[c];
-            }
-        }
-        s
-    }
+fn pattern_symbolic(pattern: &CscPattern) -> SymbolicSparseColMatRef<'_, usize> {
+    SymbolicSparseColMatRef::new_checked(
+        pattern.n,
+        pattern.n,
+        &pattern.col_ptr,
+        None,
+        &pattern.row_idx,
+    )
 }
 
 /// Sparse Cholesky factorization with its workspace.
@@ -103,7 +77,7 @@ impl Cholesky {
     /// the equation (`2 node + component`).
     pub fn factorize(pattern: &CscPattern, values: &[f64]) -> Result<Self, DicError> {
         let symbolic = factorize_symbolic_cholesky(
-            pattern.symbolic(),
+            pattern_symbolic(pattern),
             Side::Lower,
             SymmetricOrdering::Amd,
             Default::default(),
@@ -117,7 +91,7 @@ impl Cholesky {
         ]);
         let mut mem = MemBuffer::new(req);
         let mut l_values = vec![0.0; symbolic.len_val()];
-        let a = SparseColMatRef::new(pattern.symbolic(), values);
+        let a = SparseColMatRef::new(pattern_symbolic(pattern), values);
         symbolic
             .factorize_numeric_llt(
                 &mut l_values,
@@ -198,7 +172,7 @@ mod tests {
                 pairs.push((i + 1, i));
             }
         }
-        let p = CscPattern::from_pairs(n, pairs);
+        let p = pattern_from_pairs(n, pairs);
         let mut v = vec![0.0; p.nnz()];
         for c in 0..n {
             for k in p.col_ptr[c]..p.col_ptr[c + 1] {
@@ -216,7 +190,7 @@ mod tests {
         let mut ax = vec![0.0; n];
         p.mul_vec(&v, &x, &mut ax);
         let xax: f64 = x.iter().zip(&ax).map(|(a, b)| a * b).sum();
-        assert!((p.quadratic_form(&v, &x) - xax).abs() < 1e-12);
+        assert!((quadratic_form(&p, &v, &x) - xax).abs() < 1e-12);
         // Singular: a zero row.
         let z = vec![0.0; p.nnz()];
         assert!(matches!(
