@@ -7,12 +7,12 @@ mod frames;
 mod images;
 
 use crate::html::{esc, g, Page as Html};
-use crate::output::{read_json, write_json, write_text};
-use crate::steps::identify::IdentificationSummary;
+use crate::output::{read_json, write_json, write_text, ParameterEntry};
+use crate::steps::identify::{FreeParameterSummary, IdentificationSummary};
 use crate::steps::model::{DeckModelSummary, MeshSummary};
 use crate::steps::record::RunRecord;
 use crate::steps::sensitivity::SensitivitySummary;
-use crate::steps::solve::{RigidBodySummary, SolveSummary};
+use crate::steps::solve::{MaterialSummary, RigidBodySummary, SolveSummary};
 use crate::steps::ultrasound::SimSummary;
 use anyhow::Result;
 use femu_identify::campaign::Estimate;
@@ -47,6 +47,10 @@ pub struct RankingOverview {
     pub grouping: String,
     pub worst_c10_relative_sd: f64,
     pub worst_d_relative_sd: f64,
+    /// The worst predicted relative sd of every family of law parameters (`C10`, `C20`, `D`,
+    /// ...).
+    #[serde(default)]
+    pub worst_relative_sd: Vec<(String, f64)>,
 }
 
 /// One test's sensitivity indices in the run's summary.
@@ -63,6 +67,9 @@ pub struct SensitivityOverview {
     pub finding: Vec<String>,
     pub ranking: Vec<RankingOverview>,
     pub tests: Vec<TestOverview>,
+    /// Every parameter of the model as its law declares it (law, unit, key, value).
+    #[serde(default)]
+    pub parameters: Vec<ParameterEntry>,
 }
 
 /// A simulated ultrasound measurement in the run's summary.
@@ -76,7 +83,12 @@ pub struct MeasurementOverview {
 /// One identification in the run's summary.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct IdentificationOverview {
+    /// The estimates (internal units: MPa, MPa⁻¹).
     pub parameters: Vec<Estimate>,
+    /// The free parameters in the same order: the law parameters each moves and the unit the
+    /// report shows it in.
+    #[serde(default)]
+    pub free_parameters: Vec<FreeParameterSummary>,
     pub best_cost: f64,
     pub forward_solves_per_start: Vec<usize>,
     pub wall_time_s: f64,
@@ -93,6 +105,10 @@ pub struct RunSummary {
     pub run: Option<RunRecord>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelSummary>,
+    /// The model's materials as the loading tests were solved with them: each one's law and
+    /// every parameter by its study-file key.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub materials: Option<Vec<MaterialSummary>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub forward: Option<BTreeMap<String, ForwardOverview>>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -127,9 +143,12 @@ pub fn write(dir: &Path) -> Result<PathBuf> {
     if let Some(r) = &record {
         html.steps(r);
     }
+    let model = model_section(&mut html, &dir.join("model"));
+    let materials = materials_section(&mut html, &dir.join("forward"));
     let summary = RunSummary {
         run: record.clone(),
-        model: model_section(&mut html, &dir.join("model")),
+        model,
+        materials,
         forward: forward_section(&mut html, &dir.join("forward")),
         sensitivity: sensitivity_section(&mut html, &dir.join("sensitivity")),
         measurement: measurement_section(&mut html, &dir.join("measurement")),
@@ -185,10 +204,11 @@ impl Html {
         };
         let _ = write!(self.body, "<h1>{}</h1>", esc(&title));
         self.p(
-            "Finite element model updating of thigh tissues: a plane-strain Neo-Hookean model of \
-             the thigh cross-section, loading tests, the displacement field measured on a grid, \
-             and C10 and D of every tissue identified from it (the seed study's method; \
-             equations and figures cited as in the seed).",
+            "Finite element model updating of thigh tissues: a plane-strain hyperelastic model of \
+             the thigh cross-section (each tissue's law and parameters as the study gives them), \
+             loading tests, the displacement field measured on a grid, and the parameters of \
+             every tissue identified from it (the seed study's method; equations and figures \
+             cited as in the seed).",
         );
     }
 
@@ -387,6 +407,63 @@ fn model_section(html: &mut Html, dir: &Path) -> Option<ModelSummary> {
     Some(s)
 }
 
+/// The materials the loading tests were solved with (the first test's summary: every test
+/// solves the same model): one row per material, its law and each parameter of the law with
+/// its unit, whatever the law.
+fn materials_section(html: &mut Html, dir: &Path) -> Option<Vec<MaterialSummary>> {
+    let (_, first) = forward_summaries(html, dir).into_iter().next()?;
+    let materials = first.materials;
+    if materials.iter().all(|m| m.parameters.is_empty()) {
+        return Some(materials); // written before the summaries listed every parameter
+    }
+    html.h2("Materials");
+    html.p(
+        "Each tissue's law and its parameters as the loading tests were solved with them (the \
+         reference values; study-file keys and their units).",
+    );
+    let rows: Vec<Vec<String>> = materials
+        .iter()
+        .map(|m| {
+            let values: Vec<String> = m
+                .parameters
+                .iter()
+                .map(|(key, v)| format!("{} = {}", parameter_label(key), g(*v)))
+                .collect();
+            vec![
+                m.name.clone(),
+                m.law.clone(),
+                values.join(", "),
+                m.elements.to_string(),
+            ]
+        })
+        .collect();
+    html.table(&["tissue", "law", "parameters", "elements"], &rows);
+    Some(materials)
+}
+
+/// A study-file key as a label: `c20_kpa` → `C20 (kPa)`, `d_per_mpa` → `D (MPa⁻¹)`, from the
+/// registered laws' declarations (the key itself when no law knows it).
+fn parameter_label(key: &str) -> String {
+    femu_mech::material::LAWS
+        .iter()
+        .flat_map(|l| l.spec.parameters.iter())
+        .find(|p| crate::output::shown_key(p) == key)
+        .map_or(key.to_string(), |p| {
+            format!("{} ({})", p.name, p.unit.report().0)
+        })
+}
+
+/// The internal unit (MPa, MPa⁻¹) of a model parameter named `KIND_MATERIAL` (or a tied group
+/// of them), from the registered laws; empty when no law declares its kind.
+pub(crate) fn internal_unit(name: &str) -> &'static str {
+    let kind = name.split('_').next().unwrap_or("");
+    femu_mech::material::LAWS
+        .iter()
+        .flat_map(|l| l.spec.parameters.iter())
+        .find(|p| p.name == kind)
+        .map_or("", |p| p.unit.symbol())
+}
+
 fn forward_section(html: &mut Html, dir: &Path) -> Option<BTreeMap<String, ForwardOverview>> {
     let summaries = forward_summaries(html, dir);
     if summaries.is_empty() {
@@ -494,45 +571,67 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
     );
     html.figure(
         &dir.join("sensitivity_quadriceps.png"),
-        "Sensitivity maps of C10 and D of the quadriceps per test (the seed's Fig. 8); colour \
-         scale shared per row.",
+        "Sensitivity maps of every parameter of the quadriceps per test (the seed's Fig. 8); \
+         colour scale shared per row.",
     );
     html.figure(
         &dir.join("sensitivity_maps.png"),
         "Sensitivity maps of every parameter (rows) in every test (columns).",
     );
+    law_parameters_table(html, &s.law_parameters);
     html.h3("Which test to measure: predicted parameter errors (Cramér–Rao)");
+    // The families of law parameters (C10, C20, C01, D, ...); a summary written before they
+    // were listed has C10 and D.
+    let mut families: Vec<String> = Vec::new();
+    for r in &s.ranking {
+        for (f, _) in &r.worst_relative_sd {
+            if !families.contains(f) {
+                families.push(f.clone());
+            }
+        }
+    }
+    let worst_of = |r: &crate::steps::sensitivity::Ranking, f: &str| {
+        r.worst_relative_sd
+            .iter()
+            .find(|w| w.0 == f)
+            .map(|w| w.1)
+            .or(match f {
+                "C10" => Some(r.worst_c10_relative_sd),
+                "D" => Some(r.worst_d_relative_sd),
+                _ => None,
+            })
+    };
+    if families.is_empty() {
+        families = vec!["C10".into(), "D".into()];
+    }
     html.p(&format!(
         "Fisher information of the {} grid points in the tissue ({} mm apart) with noise \
-         σ = {} mm; the worst predicted relative standard deviation of C10 and of D; best \
-         first within each grouping.",
+         σ = {} mm; the worst predicted relative standard deviation of each family of \
+         parameters ({}); best first within each grouping.",
         s.grid_points_in_tissue,
         g(s.grid_spacing_mm),
-        g(s.noise_sigma_mm)
+        g(s.noise_sigma_mm),
+        families.join(", ")
     ));
     let rows: Vec<Vec<String>> = s
         .ranking
         .iter()
         .map(|r| {
-            vec![
-                r.measurement.clone(),
-                r.grouping.clone(),
-                pct(r.worst_c10_relative_sd),
-                pct(r.worst_d_relative_sd),
-                g(r.condition),
-            ]
+            let mut row = vec![r.measurement.clone(), r.grouping.clone()];
+            row.extend(
+                families
+                    .iter()
+                    .map(|f| worst_of(r, f).map_or("-".into(), pct)),
+            );
+            row.push(g(r.condition));
+            row
         })
         .collect();
-    html.table(
-        &[
-            "measured test(s)",
-            "grouping",
-            "worst C10 sd",
-            "worst D sd",
-            "condition number",
-        ],
-        &rows,
-    );
+    let worst_headers: Vec<String> = families.iter().map(|f| format!("worst {f} sd")).collect();
+    let mut header = vec!["measured test(s)", "grouping"];
+    header.extend(worst_headers.iter().map(String::as_str));
+    header.push("condition number");
+    html.table(&header, &rows);
     Some(SensitivityOverview {
         finding: s.finding,
         ranking: s
@@ -543,6 +642,7 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
                 grouping: x.grouping,
                 worst_c10_relative_sd: x.worst_c10_relative_sd,
                 worst_d_relative_sd: x.worst_d_relative_sd,
+                worst_relative_sd: x.worst_relative_sd,
             })
             .collect(),
         tests: s
@@ -554,7 +654,33 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
                 sensitivity_over_solve: x.sensitivity_over_solve,
             })
             .collect(),
+        parameters: s.law_parameters,
     })
+}
+
+/// Every parameter of the model with its law, value and unit (the units reports show: C10 in
+/// kPa, D in MPa⁻¹, as the seed's Table 1).
+fn law_parameters_table(html: &mut Html, parameters: &[ParameterEntry]) {
+    if parameters.is_empty() {
+        return;
+    }
+    let rows: Vec<Vec<String>> = parameters
+        .iter()
+        .map(|p| {
+            vec![
+                p.name.clone(),
+                p.material.clone(),
+                p.law.clone(),
+                g(p.shown),
+                p.shown_unit.clone(),
+                if p.log_scale { "log" } else { "linear" }.to_string(),
+            ]
+        })
+        .collect();
+    html.table(
+        &["parameter", "tissue", "law", "value", "unit", "scale"],
+        &rows,
+    );
 }
 
 /// The images of a simulated ultrasound measurement (`femu us-sim`) and the DIC's error
@@ -709,6 +835,7 @@ fn identification_section(
             grouping.clone(),
             IdentificationOverview {
                 parameters: s.parameters.clone(),
+                free_parameters: s.free_parameters.clone(),
                 best_cost: s.best_cost,
                 forward_solves_per_start: s.forward_solves_per_start.clone(),
                 wall_time_s: s.wall_time_s,
@@ -751,7 +878,7 @@ fn parameters_table(html: &mut Html, s: &IdentificationSummary) {
         .map(|(p, f)| {
             let mut row = vec![
                 p.name.clone(),
-                esc(&f.unit),
+                f.unit.clone(),
                 p.reference.map(|v| g(f.shown(v))).unwrap_or("-".into()),
                 g(f.shown(p.identified)),
                 p.relative_error.map(pct).unwrap_or("-".into()),

@@ -198,6 +198,8 @@ class MaterialSummary:
     c10_kpa: Optional[float]
     d_per_mpa: Optional[float]
     elements: int
+    law: str = ""
+    parameters: Dict[str, float] = field(default_factory=dict)
     extra: Dict[str, Any] = _extra()
 
 
@@ -340,6 +342,24 @@ class Ranking:
     worst_d_relative_sd: float
     condition: float
     identifiability: Identifiability
+    worst_relative_sd: List[Tuple[str, float]] = field(default_factory=list)
+    extra: Dict[str, Any] = _extra()
+
+
+@dataclass
+class ParameterEntry:
+    """A model parameter as its law declares it: ``femu_study::output::ParameterEntry``."""
+
+    name: str
+    kind: str
+    material: str
+    law: str
+    value: float
+    unit: str
+    key: str
+    shown: float
+    shown_unit: str
+    log_scale: bool
     extra: Dict[str, Any] = _extra()
 
 
@@ -362,6 +382,7 @@ class SensitivitySummary:
     finding: List[str]
     wall_time_s: float
     failed_tests: List[Tuple[str, str]] = field(default_factory=list)
+    law_parameters: List[ParameterEntry] = field(default_factory=list)
     extra: Dict[str, Any] = _extra()
 
     def identifiability_table(self):

@@ -64,7 +64,12 @@ pub fn section(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path) 
         .enumerate()
         .map(|(k, p)| {
             vec![
-                format!("{}{}", p.name, if p.seen { "" } else { " (not seen)" }),
+                format!(
+                    "{} ({}){}",
+                    p.name,
+                    super::internal_unit(&p.name),
+                    if p.seen { "" } else { " (not seen)" }
+                ),
                 format!("{} [{}, {}]", g(p.identified), g(p.ci95[0]), g(p.ci95[1])),
                 format!("{:.1} %", 100.0 * p.relative_sd),
                 dic.as_ref()
@@ -75,7 +80,7 @@ pub fn section(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path) 
         .collect();
     html.table(
         &[
-            "parameter (C10 MPa, D 1/MPa)",
+            "parameter (unit)",
             "I-DIC [95 % interval]",
             "relative sd",
             "DIC → FEMU (the start)",

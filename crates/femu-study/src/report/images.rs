@@ -156,7 +156,12 @@ pub fn section(
         .iter()
         .map(|r| {
             vec![
-                format!("{}{}", r.name, if r.idic_seen { "" } else { " *" }),
+                format!(
+                    "{} ({}){}",
+                    r.name,
+                    super::internal_unit(&r.name),
+                    if r.idic_seen { "" } else { " *" }
+                ),
                 r.reference.map(g).unwrap_or("-".into()),
                 cell(r.idic, r.idic_error, r.idic_ci95),
                 dic_cell(r.dic, r.dic_error, r.dic_ci95, &r.dic_width_from),
@@ -171,7 +176,7 @@ pub fn section(
         .collect();
     html.table(
         &[
-            "parameter (C10 MPa, D 1/MPa)",
+            "parameter (unit)",
             "reference",
             "I-DIC (error) [95 % interval]",
             "DIC → FEMU, one weight per point",

@@ -3,7 +3,7 @@
 //! Fig. 8), and the identifiability of the parameters from the measurement grid (Fisher
 //! information).
 
-use crate::output::{create_dir, write_json};
+use crate::output::{create_dir, write_json, ParameterEntry};
 use crate::progress::Progress;
 use crate::schema::Study;
 use anyhow::{bail, Context, Result};
@@ -66,10 +66,26 @@ pub struct TestSummary {
 pub struct Ranking {
     pub measurement: String,
     pub grouping: String,
+    /// The worst of the C10 and of the D family (every registered law has both): also in
+    /// [`Ranking::worst_relative_sd`].
     pub worst_c10_relative_sd: f64,
     pub worst_d_relative_sd: f64,
+    /// The worst predicted relative sd of each family of law parameters (`C10`, `C20`, `C01`,
+    /// `D`, ...) in the order the model's materials declare them.
+    #[serde(default)]
+    pub worst_relative_sd: Vec<(String, f64)>,
     pub condition: f64,
     pub identifiability: Identifiability,
+}
+
+impl Ranking {
+    /// The worst predicted relative sd of any parameter (what the ranking sorts by).
+    pub fn worst(&self) -> f64 {
+        self.worst_relative_sd.iter().map(|w| w.1).fold(
+            self.worst_c10_relative_sd.max(self.worst_d_relative_sd),
+            f64::max,
+        )
+    }
 }
 
 /// `summary.json` of the sensitivity step.
@@ -80,7 +96,12 @@ pub struct SensitivitySummary {
     pub elements: usize,
     pub nodes: usize,
     pub element: String,
+    /// Every parameter's name and value (internal units: MPa, MPa⁻¹).
     pub parameters: Vec<(String, f64)>,
+    /// The same parameters as their laws declare them: law, unit, study-file key, value in
+    /// the unit reports show, scale.
+    #[serde(default)]
+    pub law_parameters: Vec<ParameterEntry>,
     pub tests: Vec<TestSummary>,
     pub grid_points: usize,
     pub grid_points_in_tissue: usize,
@@ -243,14 +264,8 @@ pub fn run_on(
         }
     }
     ranking.sort_by(|a, b| {
-        (
-            a.grouping.as_str(),
-            a.worst_c10_relative_sd.max(a.worst_d_relative_sd),
-        )
-            .partial_cmp(&(
-                b.grouping.as_str(),
-                b.worst_c10_relative_sd.max(b.worst_d_relative_sd),
-            ))
+        (a.grouping.as_str(), a.worst())
+            .partial_cmp(&(b.grouping.as_str(), b.worst()))
             .unwrap_or(std::cmp::Ordering::Equal)
     });
     write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
@@ -266,6 +281,7 @@ pub fn run_on(
         nodes: base.node_count(),
         element: format!("{:?}", study.model.element).to_uppercase(),
         parameters: names.iter().cloned().zip(thetas.iter().cloned()).collect(),
+        law_parameters: ParameterEntry::all(base),
         tests: results
             .iter()
             .map(|r| TestSummary {
@@ -300,11 +316,26 @@ pub fn run_on(
     for line in &finding {
         progress.note(line);
     }
-    progress.note("best measurements (predicted relative sd, worst C10 / worst D):");
+    let family_names: Vec<&str> = summary
+        .ranking
+        .first()
+        .map(|r| r.worst_relative_sd.iter().map(|w| w.0.as_str()).collect())
+        .unwrap_or_default();
+    progress.note(&format!(
+        "best measurements (predicted relative sd, worst {}):",
+        family_names.join(" / worst ")
+    ));
     for r in summary.ranking.iter().take(6) {
+        let worst: Vec<String> = r
+            .worst_relative_sd
+            .iter()
+            .map(|w| format!("{:>9.2e}", w.1))
+            .collect();
         progress.note(&format!(
-            "  {:<40} {:<9} {:>9.2e} / {:>9.2e}",
-            r.measurement, r.grouping, r.worst_c10_relative_sd, r.worst_d_relative_sd
+            "  {:<40} {:<9} {}",
+            r.measurement,
+            r.grouping,
+            worst.join(" / ")
         ));
     }
     progress.note(&format!("wrote {}", args.out.display()));
@@ -315,6 +346,17 @@ fn max_norm(u: &[f64]) -> f64 {
     u.chunks_exact(2)
         .map(|c| c[0].hypot(c[1]))
         .fold(0.0, f64::max)
+}
+
+/// The distinct families of `families`, in order of first appearance.
+fn distinct<'a>(families: &[&'a str]) -> Vec<&'a str> {
+    let mut out: Vec<&str> = Vec::new();
+    for f in families {
+        if !out.contains(f) {
+            out.push(f);
+        }
+    }
+    out
 }
 
 /// The predicted identifiability of a measurement with information `f`; `families` names
@@ -340,6 +382,10 @@ fn rank(
         grouping: grouping.to_string(),
         worst_c10_relative_sd: worst("C10"),
         worst_d_relative_sd: worst("D"),
+        worst_relative_sd: distinct(families)
+            .into_iter()
+            .map(|family| (family.to_string(), worst(family)))
+            .collect(),
         condition: id.condition,
         identifiability: id,
     }
@@ -504,7 +550,7 @@ fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
     let mut w = crate::output::create_file(path)?;
     writeln!(
         w,
-        "measurement,grouping,worst_c10_relative_sd,worst_d_relative_sd,condition,parameter_relative_sd"
+        "measurement,grouping,worst_c10_relative_sd,worst_d_relative_sd,condition,parameter_relative_sd,worst_relative_sd"
     )?;
     for r in ranking {
         let per: Vec<String> = r
@@ -514,23 +560,31 @@ fn write_ranking_csv(path: &Path, ranking: &[Ranking]) -> Result<()> {
             .zip(&r.identifiability.relative_sd)
             .map(|(n, s)| format!("{n}={s:.3e}"))
             .collect();
+        let worst: Vec<String> = r
+            .worst_relative_sd
+            .iter()
+            .map(|(f, s)| format!("{f}={s:.3e}"))
+            .collect();
         writeln!(
             w,
-            "{},{},{:.4e},{:.4e},{:.4e},{}",
+            "{},{},{:.4e},{:.4e},{:.4e},{},{}",
             r.measurement,
             r.grouping,
             r.worst_c10_relative_sd,
             r.worst_d_relative_sd,
             r.condition,
-            per.join(" ")
+            per.join(" "),
+            worst.join(" ")
         )?;
     }
     crate::output::commit(w)
 }
 
-/// The seed's qualitative finding, restated from the numbers: per test, whether the C10 or the
-/// D family is the more sensitive (mean of Eq. 3 over the five tissues).
+/// The seed's qualitative finding, restated from the numbers: per test, which family of law
+/// parameters (C10, D, and C20, C01, ... of the other laws) is the most sensitive (mean of Eq. 3
+/// over the tissues), and by which factor over the next.
 fn findings(results: &[TestResult], families: &[&str]) -> Vec<String> {
+    let kinds = distinct(families);
     results
         .iter()
         .map(|r| {
@@ -543,11 +597,22 @@ fn findings(results: &[TestResult], families: &[&str]) -> Vec<String> {
                     .collect();
                 v.iter().sum::<f64>() / v.len().max(1) as f64
             };
-            let (c, d) = (mean("C10"), mean("D"));
-            let (best, ratio) = if c >= d { ("C10", c / d) } else { ("D", d / c) };
+            let means: Vec<(&str, f64)> = kinds.iter().map(|&k| (k, mean(k))).collect();
+            // Largest first; a tie keeps the declared order (C10 before D).
+            let mut order: Vec<usize> = (0..means.len()).collect();
+            order.sort_by(|&a, &b| means[b].1.total_cmp(&means[a].1));
+            let listed: Vec<String> = means.iter().map(|(k, m)| format!("{k} {m:.3e}")).collect();
+            let (Some(&first), Some(&next)) = (order.first(), order.get(1)) else {
+                return format!("{}: mean Eq. 3 index {}", r.name, listed.join(", "));
+            };
+            let best = means[first];
             format!(
-                "{}: the {best} family is the more sensitive (mean Eq. 3 index C10 {c:.3e}, D {d:.3e}; ratio {ratio:.1})",
-                r.name
+                "{}: the {} family is the {} sensitive (mean Eq. 3 index {}; ratio {:.1})",
+                r.name,
+                best.0,
+                if means.len() == 2 { "more" } else { "most" },
+                listed.join(", "),
+                best.1 / means[next].1
             )
         })
         .collect()
@@ -626,4 +691,66 @@ fn write_figures(
     progress
         .note("figures: sensitivity_maps.png, sensitivity_quadriceps.png, sensitivity_index.png");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The worst relative sd of every family of law parameters: with a diagonal information
+    /// `F = diag(1/s_k²)` the predicted relative sds are the `s_k` themselves, so each family's
+    /// worst is known; the C10 and D keys equal their families', and C20 and C01 (a Yeoh and a
+    /// Mooney–Rivlin tissue) have theirs, the worst of all of them setting the ranking's order.
+    #[test]
+    fn every_family_has_its_worst_sd() {
+        let names: Vec<String> = [
+            "C10_FAT",
+            "C20_FAT",
+            "C30_FAT",
+            "D_FAT",
+            "C10_QUADRICEPS",
+            "C01_QUADRICEPS",
+            "D_QUADRICEPS",
+        ]
+        .map(String::from)
+        .to_vec();
+        let families: Vec<&str> = names.iter().map(|n| n.split('_').next().unwrap()).collect();
+        let sd = [0.01, 0.3, 2.0, 0.02, 0.05, 0.4, 0.005];
+        let f: Vec<Vec<f64>> = (0..sd.len())
+            .map(|i| {
+                (0..sd.len())
+                    .map(|j| if i == j { 1.0 / (sd[i] * sd[i]) } else { 0.0 })
+                    .collect()
+            })
+            .collect();
+        let r = rank(
+            "compression",
+            "ungrouped",
+            &f,
+            &Tied::none(&names),
+            &families,
+        );
+        let got: Vec<(&str, f64)> = r
+            .worst_relative_sd
+            .iter()
+            .map(|(k, s)| (k.as_str(), *s))
+            .collect();
+        let expected = [
+            ("C10", 0.05),
+            ("C20", 0.3),
+            ("C30", 2.0),
+            ("D", 0.02),
+            ("C01", 0.4),
+        ];
+        assert_eq!(got.len(), expected.len(), "{got:?}");
+        for ((k, s), (ek, es)) in got.iter().zip(expected) {
+            assert_eq!(*k, ek);
+            // The inverse of a diagonal matrix: exact up to the rounding of 1/s² and its
+            // square root.
+            assert!((s / es - 1.0).abs() < 1e-12, "{k}: {s} against {es}");
+        }
+        assert_eq!(r.worst_c10_relative_sd, got[0].1);
+        assert_eq!(r.worst_d_relative_sd, got[3].1);
+        assert_eq!(r.worst(), got[2].1);
+    }
 }

@@ -20,6 +20,13 @@ pub struct MaterialSummary {
     pub c10_kpa: Option<f64>,
     pub d_per_mpa: Option<f64>,
     pub elements: usize,
+    /// The material's law (`neo-hookean`, `mooney-rivlin`, `yeoh`).
+    #[serde(default)]
+    pub law: String,
+    /// Every parameter of its law by its study-file key, in the unit the key names
+    /// (`c10_kpa`, `c20_kpa`, `c30_kpa`, `d_per_mpa`).
+    #[serde(default)]
+    pub parameters: BTreeMap<String, f64>,
 }
 
 /// A rigid body of a solved model.
@@ -301,6 +308,8 @@ fn summary(
             c10_kpa: parameter_named(&*nm.law, "C10").map(|c| c * 1e3),
             d_per_mpa: parameter_named(&*nm.law, "D"),
             elements: model.element_material.iter().filter(|&&x| x == m).count(),
+            law: nm.law.spec().name.to_string(),
+            parameters: crate::output::keyed_parameters(&*nm.law),
         })
         .collect();
     let r = &solution.report;
