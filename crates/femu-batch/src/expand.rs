@@ -189,13 +189,33 @@ fn toml_value(text: &str) -> Option<toml::Value> {
     t.remove("v")
 }
 
+/// The key of `doc` (the table at dotted path `at`) that `key` names: itself, or under
+/// `[materials]`, whose tables the study names by region whatever their case (`fat`, `FAT`),
+/// the template's table of that region in the template's case, so that a column
+/// `materials.fat.c20_kpa` sets the template's `[materials.FAT]` instead of adding a second
+/// table of the region beside it.
+fn key_in(doc: &toml::Table, key: &str, at: &str) -> String {
+    if at != "materials" || doc.contains_key(key) {
+        return key.to_string();
+    }
+    doc.keys()
+        .find(|k| k.eq_ignore_ascii_case(key))
+        .cloned()
+        .unwrap_or_else(|| key.to_string())
+}
+
 /// The value at a dotted path (`test.2.side`: entry 2, from 1, of the `[[test]]` array).
 fn get_path<'a>(doc: &'a toml::Table, path: &[&str]) -> Option<&'a toml::Value> {
     let (first, rest) = path.split_first()?;
     let mut v = doc.get(*first)?;
+    let mut at = first.to_string();
     for seg in rest {
         v = match v {
-            toml::Value::Table(t) => t.get(*seg)?,
+            toml::Value::Table(t) => {
+                let key = key_in(t, seg, &at);
+                at = format!("{at}.{seg}");
+                t.get(&key)?
+            }
             toml::Value::Array(a) => a.get(seg.parse::<usize>().ok()?.checked_sub(1)?)?,
             _ => return None,
         };
@@ -213,6 +233,9 @@ fn set_path(
     at: &str,
 ) -> Result<(), String> {
     let (first, rest) = path.split_first().ok_or("an empty key")?;
+    let key = key_in(doc, first, at);
+    let key: &str = &key;
+    let first = &key;
     if rest.is_empty() {
         doc.insert(first.to_string(), value);
         return Ok(());
@@ -391,6 +414,32 @@ mod tests {
             jobs: None,
         };
         (b, dir)
+    }
+
+    /// A column names a region's table in any case, as the study does: its value goes into
+    /// the template's table of the region (with the law the template gives it), not into a
+    /// second table beside it; other keys keep their case.
+    #[test]
+    fn a_column_sets_the_templates_table_of_its_region_whatever_its_case() {
+        let mut doc: toml::Table =
+            "[materials.FAT]\nlaw = \"yeoh\"\nc20_kpa = 0.3\n[model]\nelements = 700\n"
+                .parse()
+                .unwrap();
+        let path = ["materials", "fat", "c20_kpa"];
+        assert_eq!(get_path(&doc, &path).and_then(|v| v.as_float()), Some(0.3));
+        set_path(&mut doc, &path, toml::Value::Float(0.35), "").unwrap();
+        let materials = doc["materials"].as_table().unwrap();
+        assert_eq!(materials.len(), 1, "{materials:?}");
+        assert_eq!(materials["FAT"]["c20_kpa"].as_float(), Some(0.35));
+        assert_eq!(materials["FAT"]["law"].as_str(), Some("yeoh"));
+        set_path(
+            &mut doc,
+            &["Model", "elements"],
+            toml::Value::Integer(800),
+            "",
+        )
+        .unwrap();
+        assert_eq!(doc["model"]["elements"].as_integer(), Some(700));
     }
 
     #[test]

@@ -374,13 +374,18 @@ fn subjects(
             }
         }
         // A logarithmic axis when the ratios span a factor 3 or more (C10 and D of very
-        // different spreads side by side), else a linear one (which labels a narrow range).
-        let (lo, hi) = rows
-            .iter()
-            .flat_map(|r| [r.low, r.high, r.estimate])
-            .filter(|v| v.is_finite() && *v > 0.0)
+        // different spreads side by side), else a linear one (which labels a narrow range);
+        // linear also when an interval reaches 0 (a parameter the data cannot see has the
+        // interval [0, ∞)), which no logarithmic axis shows.
+        let values = || {
+            rows.iter()
+                .flat_map(|r| [r.low, r.high, r.estimate])
+                .filter(|v| v.is_finite())
+        };
+        let (lo, hi) = values()
+            .filter(|v| *v > 0.0)
             .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
-        let log_x = hi / lo >= 3.0;
+        let log_x = hi / lo >= 3.0 && values().all(|v| v > 0.0);
         let path = figures.join(format!(
             "{}_subject_{}.png",
             file_safe(grouping),
