@@ -153,13 +153,12 @@ pub(crate) fn parse(
             ),
         ));
     }
-    let max_measurements = e.max_measurements.unwrap_or(2);
-    if !(1..=4).contains(&max_measurements) {
-        return Err(err(
-            "max_measurements",
-            format!("must be in [1, 4], got {max_measurements}"),
-        ));
-    }
+    let max_measurements = super::keys::check_int(
+        "design",
+        "max_measurements",
+        e.max_measurements.unwrap_or(2),
+    )
+    .map_err(|m| err("max_measurements", m))?;
     let designs = design_count(
         chosen.len() * sides.len(),
         windows_mm.len(),
@@ -177,16 +176,17 @@ pub(crate) fn parse(
             ),
         ));
     }
-    let identifiable_sd = match e.identifiable_sd {
-        Some(v) if v > 0.0 && v <= 1.0 => v,
-        Some(v) => {
-            return Err(err(
-                "identifiable_sd",
-                format!("a relative standard deviation must be in (0, 1], got {v}"),
-            ))
-        }
-        None => DEFAULT_IDENTIFIABLE_SD,
-    };
+    let identifiable_sd = super::keys::check_real(
+        "design",
+        "identifiable_sd",
+        e.identifiable_sd.unwrap_or(DEFAULT_IDENTIFIABLE_SD),
+    )
+    .map_err(|m| {
+        err(
+            "identifiable_sd",
+            format!("a relative standard deviation {m}"),
+        )
+    })?;
     Ok(DesignSpec {
         tests: chosen,
         sides: sides

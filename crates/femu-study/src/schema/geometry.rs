@@ -92,21 +92,16 @@ pub(crate) fn parse(
         lines.at_most("model", 0, "size_mm", h, MAX_LENGTH_MM)?;
     }
     if let Some(n) = model.elements {
-        if !ELEMENTS_RANGE.contains(&n) {
-            return Err(lines.err(
-                "model",
-                0,
-                "elements",
-                format!("must be in [100, 500000], got {n}"),
-            ));
-        }
+        super::keys::check_int("model", "elements", n)
+            .map_err(|m| lines.err("model", 0, "elements", m))?;
     }
-    let element = match model
+    let element = model
         .element
         .as_deref()
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
+        .map(|v| super::keys::word("model", "element", v))
+        .transpose()
+        .map_err(|m| lines.err("model", 0, "element", m))?;
+    let element = match element {
         None | Some("cpe4h") => QuadElement::Cpe4h,
         Some("cpe4") => QuadElement::Cpe4,
         Some(other) => {
@@ -114,7 +109,7 @@ pub(crate) fn parse(
                 "model",
                 0,
                 "element",
-                format!("unknown element type '{other}' (cpe4, cpe4h)"),
+                super::keys::unhandled("model", "element", other),
             ))
         }
     };
@@ -222,17 +217,11 @@ fn check_labels(l: LabelsEntry, lines: &KeyLines, base: &Path) -> Result<LabelsS
     if let Some(s) = l.pixel_size_mm {
         lines.at_most("labels", 0, "pixel_size_mm", s, MAX_LENGTH_MM)?;
     }
-    let min_island = l.min_island_mm2.unwrap_or(5.0);
-    // The thigh's cross-section is some 13 000 mm²: a threshold beyond 10 000 mm² would merge
-    // whole muscles.
-    if !(0.0..=1e4).contains(&min_island) {
-        return Err(lines.err(
-            "labels",
-            0,
-            "min_island_mm2",
-            format!("must be an area in [0, 10000] mm², got {min_island}"),
-        ));
-    }
+    // The thigh's cross-section is some 13 000 mm²: a threshold beyond 10 000 mm² (the
+    // declared maximum) would merge whole muscles.
+    let min_island =
+        super::keys::check_real("labels", "min_island_mm2", l.min_island_mm2.unwrap_or(5.0))
+            .map_err(|m| lines.err("labels", 0, "min_island_mm2", m))?;
     femu_geometry::LabelSpec::new(&l.map, &l.bone, l.background.as_deref().unwrap_or(&[0]))
         .map_err(|e| lines.err("labels", 0, "map", e.to_string()))?;
     Ok(LabelsSpec {

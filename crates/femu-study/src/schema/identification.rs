@@ -1,6 +1,7 @@
 //! `[parameters]`, `[identification]`, `[run]`: what is identified, how, and which steps run.
 
 use super::geometry::{thigh_elements, Geometry, Resolution, DEFAULT_ELEMENTS};
+use super::keys;
 use super::lines::KeyLines;
 use super::loading_tests::TestSpec;
 use super::raw::{GroupedEntry, IdentificationEntry, RunEntry};
@@ -121,23 +122,22 @@ pub(crate) fn parse(
             .unwrap_or(0),
         Some(name) => find_test(tests, name).map_err(|m| err("test", m))?,
     };
-    let bounds_factor = e.bounds_factor.unwrap_or(4.0);
-    // Beyond 100 the bounds span over four decades around the reference: wider than any soft
-    // tissue's range, and the starts drawn in them mostly fail to solve.
-    if !(bounds_factor > 1.0 && bounds_factor <= MAX_BOUNDS_FACTOR) {
-        return Err(err(
-            "bounds_factor",
-            format!("must be above 1 and at most {MAX_BOUNDS_FACTOR}, got {bounds_factor}"),
-        ));
-    }
-    let starts = e.starts.unwrap_or(5);
-    if !(1..=64).contains(&starts) {
-        return Err(err("starts", format!("must be in [1, 64], got {starts}")));
-    }
-    let repeat = e.repeat.unwrap_or(1);
-    if !(1..=1000).contains(&repeat) {
-        return Err(err("repeat", format!("must be in [1, 1000], got {repeat}")));
-    }
+    let int =
+        |key: &str, v: usize| keys::check_int("identification", key, v).map_err(|m| err(key, m));
+    let real =
+        |key: &str, v: f64| keys::check_real("identification", key, v).map_err(|m| err(key, m));
+    let word = |key: &str, v: Option<&str>| {
+        v.map(|v| keys::word("identification", key, v))
+            .transpose()
+            .map_err(|m| err(key, m))
+    };
+    let unhandled = |key: &str, v: &str| err(key, keys::unhandled("identification", key, v));
+    // Beyond 100 (MAX_BOUNDS_FACTOR, its declared maximum) the bounds span over four decades
+    // around the reference: wider than any soft tissue's range, and the starts drawn in them
+    // mostly fail to solve.
+    let bounds_factor = real("bounds_factor", e.bounds_factor.unwrap_or(4.0))?;
+    let starts = int("starts", e.starts.unwrap_or(5))?;
+    let repeat = int("repeat", e.repeat.unwrap_or(1))?;
     let grouping = match e.grouped {
         None => Grouping::Both,
         Some(GroupedEntry::Flag(true)) => Grouping::Grouped,
@@ -150,21 +150,11 @@ pub(crate) fn parse(
             ))
         }
     };
-    let optimizer = match e
-        .optimizer
-        .as_deref()
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
+    let optimizer = match word("optimizer", e.optimizer.as_deref())? {
         None | Some("lm") => Optimizer::LevenbergMarquardt,
         Some("bfgs") => Optimizer::Bfgs,
         Some("bfgs-fd") => Optimizer::BfgsFiniteDifference,
-        Some(other) => {
-            return Err(err(
-                "optimizer",
-                format!("unknown optimizer '{other}' (lm, bfgs, bfgs-fd)"),
-            ))
-        }
+        Some(other) => return Err(unhandled("optimizer", other)),
     };
     let coarse_elements = match e.coarse_elements {
         None => None,
@@ -193,64 +183,53 @@ pub(crate) fn parse(
             Some(n)
         }
     };
-    let loss = match e.loss.as_deref().map(str::to_ascii_lowercase).as_deref() {
+    let loss = match word("loss", e.loss.as_deref())? {
         None | Some("squared") => femu_identify::weighted::Loss::Squared,
         Some("huber") => femu_identify::weighted::Loss::Huber {
             k: femu_identify::weighted::HUBER_K,
         },
-        Some(other) => {
-            return Err(err(
-                "loss",
-                format!("unknown loss '{other}' (squared, huber)"),
-            ))
-        }
+        Some(other) => return Err(unhandled("loss", other)),
     };
-    let discretization = match e
-        .discretization
-        .as_deref()
-        .map(str::to_ascii_lowercase)
-        .as_deref()
-    {
+    let discretization = match word("discretization", e.discretization.as_deref())? {
         None | Some("check") => Discretization::Check,
         Some("refine") => Discretization::Refine,
         Some("off") => Discretization::Off,
-        Some(other) => {
-            return Err(err(
-                "discretization",
-                format!("unknown choice '{other}' (check, refine, off)"),
-            ))
-        }
+        Some(other) => return Err(unhandled("discretization", other)),
     };
-    let data_refinement = e.data_refinement.unwrap_or(1.0);
-    if !(1.0..=4.0).contains(&data_refinement) {
-        return Err(err(
+    let data_refinement = keys::check_real(
+        "identification",
+        "data_refinement",
+        e.data_refinement.unwrap_or(1.0),
+    )
+    .map_err(|m| {
+        err(
             "data_refinement",
-            format!("must be in [1, 4] (the element size of the virtual data's mesh divided by it), got {data_refinement}"),
-        ));
-    }
+            format!("{m} (the element size of the virtual data's mesh is divided by it)"),
+        )
+    })?;
     if data_refinement > 1.0 && matches!(geometry, Geometry::Deck(_)) {
         return Err(err(
             "data_refinement",
             "femu cannot refine a deck; virtual data on another mesh need the built-in thigh or a label image".into(),
         ));
     }
-    let normalization = e
-        .image_normalization_px
-        .unwrap_or(DEFAULT_IMAGE_NORMALIZATION_PX);
-    if !(normalization == 0.0
-        || (MIN_IMAGE_NORMALIZATION_PX..=MAX_IMAGE_NORMALIZATION_PX).contains(&normalization))
-    {
-        return Err(err(
+    let normalization = keys::check_real(
+        "identification",
+        "image_normalization_px",
+        e.image_normalization_px
+            .unwrap_or(DEFAULT_IMAGE_NORMALIZATION_PX),
+    )
+    .map_err(|m| {
+        err(
             "image_normalization_px",
-            format!("must be 0 or in [{MIN_IMAGE_NORMALIZATION_PX}, {MAX_IMAGE_NORMALIZATION_PX}] px (0: the grey levels as recorded; default {DEFAULT_IMAGE_NORMALIZATION_PX}), got {normalization}"),
-        ));
-    }
-    let image_pairing = match &e.image_pairing {
+            format!(
+                "{m} (0: the grey levels as recorded; default {DEFAULT_IMAGE_NORMALIZATION_PX})"
+            ),
+        )
+    })?;
+    let image_pairing = match word("image_pairing", e.image_pairing.as_deref())? {
         None => DEFAULT_IMAGE_PAIRING,
-        Some(name) => name
-            .to_ascii_lowercase()
-            .parse()
-            .map_err(|why| err("image_pairing", why))?,
+        Some(name) => name.parse().map_err(|why| err("image_pairing", why))?,
     };
     Ok(IdentificationSpec {
         image_normalization_px: (normalization > 0.0).then_some(normalization),

@@ -284,11 +284,14 @@ fn check_source(
     base: &Path,
 ) -> Result<MeasurementSource, StudyError> {
     let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
-    let source = m
-        .source
-        .as_deref()
-        .unwrap_or(if m.file.is_some() { "file" } else { "virtual" })
-        .to_ascii_lowercase();
+    let source = super::keys::word(
+        "measurement",
+        "source",
+        m.source
+            .as_deref()
+            .unwrap_or(if m.file.is_some() { "file" } else { "virtual" }),
+    )
+    .map_err(|e| err("source", &e))?;
     if source != "frames" {
         if let Some(key) = super::frames::given_frame_keys(m).first() {
             return Err(err(
@@ -305,7 +308,7 @@ fn check_source(
             ),
         ));
     }
-    match source.as_str() {
+    match source {
         "frames" => Ok(MeasurementSource::Frames(Box::new(super::frames::parse(
             m, index, lines, base,
         )?))),
@@ -355,7 +358,10 @@ fn check_source(
                 .file
                 .as_deref()
                 .ok_or_else(|| err("source", "source = \"file\" needs file"))?;
-            let scale = match m.units.as_deref().unwrap_or("mm") {
+            let units =
+                super::keys::word("measurement", "units", m.units.as_deref().unwrap_or("mm"))
+                    .map_err(|e| err("units", &e))?;
+            let scale = match units {
                 "mm" => match m.pixel_size_mm {
                     Some(_) => return Err(err("pixel_size_mm", "a field in mm has no pixel size")),
                     None => 1.0,
@@ -368,7 +374,10 @@ fn check_source(
                         .ok_or_else(|| err("units", "units = \"px\" needs pixel_size_mm"))?,
                 )?,
                 other => {
-                    return Err(err("units", &format!("unknown units '{other}' (mm, px)")));
+                    return Err(err(
+                        "units",
+                        &super::keys::unhandled("measurement", "units", other),
+                    ));
                 }
             };
             let unit = |v: [f64; 2], key: &str| -> Result<[f64; 2], StudyError> {
@@ -390,24 +399,29 @@ fn check_source(
             if !(origin[0].is_finite() && origin[1].is_finite()) {
                 return Err(err("origin_mm", "must be finite"));
             }
-            let weighting = match m.weighting.as_deref() {
-                None if m.covariance.is_some() => Weighting::Estimated,
-                None | Some("per-point") => Weighting::PerPoint,
-                Some("estimated") => Weighting::Estimated,
-                Some("covariance") if m.covariance.is_some() => Weighting::Covariance,
-                Some("covariance") => {
-                    return Err(err(
+            let weighting = m
+                .weighting
+                .as_deref()
+                .map(|w| super::keys::word("measurement", "weighting", w))
+                .transpose()
+                .map_err(|e| err("weighting", &e))?;
+            let weighting =
+                match weighting {
+                    None if m.covariance.is_some() => Weighting::Estimated,
+                    None | Some("per-point") => Weighting::PerPoint,
+                    Some("estimated") => Weighting::Estimated,
+                    Some("covariance") if m.covariance.is_some() => Weighting::Covariance,
+                    Some("covariance") => return Err(err(
                         "weighting",
                         "weighting = \"covariance\" needs covariance (the field's covariance file)",
-                    ))
-                }
-                Some(other) => {
-                    return Err(err(
-                        "weighting",
-                        &format!("unknown weighting '{other}' (per-point, covariance, estimated)"),
-                    ))
-                }
-            };
+                    )),
+                    Some(other) => {
+                        return Err(err(
+                            "weighting",
+                            &super::keys::unhandled("measurement", "weighting", other),
+                        ))
+                    }
+                };
             if weighting == Weighting::PerPoint && m.covariance.is_some() {
                 return Err(err(
                     "weighting",
@@ -418,7 +432,7 @@ fn check_source(
                 path: resolve(base, file),
                 frame: Frame {
                     scale,
-                    pixels: m.units.as_deref() == Some("px"),
+                    pixels: units == "px",
                     origin,
                     x_axis,
                     y_axis,
@@ -429,7 +443,7 @@ fn check_source(
         }
         other => Err(err(
             "source",
-            &format!("unknown source '{other}' (virtual, file, ultrasound, frames)"),
+            &super::keys::unhandled("measurement", "source", other),
         )),
     }
 }

@@ -24,6 +24,7 @@ pub mod files;
 pub mod frames;
 mod geometry;
 mod identification;
+pub mod keys;
 mod legacy;
 mod lines;
 mod loading_tests;
@@ -408,6 +409,8 @@ impl Study {
     }
 }
 
+#[cfg(test)]
+mod keys_tests;
 #[cfg(test)]
 mod measurement_tests;
 #[cfg(test)]

@@ -157,27 +157,15 @@ pub(crate) fn check(
         .scanner()
         .validate()
         .map_err(|e| key_error(e, "ultrasound", "gain_db", lines))?;
-    if !(1..=MAX_RENDER_REFINE).contains(&section.render_refine) {
-        return Err(lines.err(
-            "ultrasound",
-            0,
-            "render_refine",
-            format!(
-                "must be an integer in [1, {MAX_RENDER_REFINE}], got {}",
-                section.render_refine
-            ),
-        ));
-    }
-    if !(0.0..=0.9).contains(&section.decorrelation) {
-        return Err(lines.err(
+    super::keys::check_int("ultrasound", "render_refine", section.render_refine)
+        .map_err(|m| lines.err("ultrasound", 0, "render_refine", m))?;
+    super::keys::check_real("ultrasound", "decorrelation", section.decorrelation).map_err(|m| {
+        lines.err(
             "ultrasound",
             0,
             "decorrelation",
-            format!(
-                "the fraction of scatterers renewed per load step must be in [0, 0.9], got {}",
-                section.decorrelation
-            ),
-        ));
-    }
+            format!("the fraction of scatterers renewed per load step {m}"),
+        )
+    })?;
     Ok(())
 }
