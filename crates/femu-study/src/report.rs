@@ -424,10 +424,20 @@ fn materials_section(html: &mut Html, dir: &Path) -> Option<Vec<MaterialSummary>
     let rows: Vec<Vec<String>> = materials
         .iter()
         .map(|m| {
-            let values: Vec<String> = m
-                .parameters
+            // In the law's order (C10, C01, D), else the keys' (alphabetical).
+            let mut keyed: Vec<(&String, &f64)> = m.parameters.iter().collect();
+            if let Ok(law) = femu_mech::material::law(&m.law) {
+                let order: Vec<String> = law
+                    .spec
+                    .parameters
+                    .iter()
+                    .map(crate::output::shown_key)
+                    .collect();
+                keyed.sort_by_key(|(key, _)| order.iter().position(|k| k == *key));
+            }
+            let values: Vec<String> = keyed
                 .iter()
-                .map(|(key, v)| format!("{} = {}", parameter_label(key), g(*v)))
+                .map(|(key, v)| format!("{} = {}", parameter_label(key), g(**v)))
                 .collect();
             vec![
                 m.name.clone(),

@@ -254,10 +254,14 @@ fn check_laws(name: &str, materials: &[Material], families: &[&str]) {
     for (tissue, law, keys) in materials {
         // (The model's table of regions has rows of the tissues too: the one with the law.)
         let r = row(&format!("{tissue}</td><td>{law}"));
+        let mut at = 0;
         for (key, _) in *keys {
             let kind = kind_of(key);
+            // Each parameter with its unit, in the law's order (as the keys are listed here).
             let label = format!("{kind} ({})", units(&kind).0);
-            assert!(r.contains(&label), "{label}: {r}");
+            let found = r.find(&label).unwrap_or_else(|| panic!("{label}: {r}"));
+            assert!(found >= at, "{label} out of the law's order: {r}");
+            at = found;
             let r = row(&format!("{kind}_{tissue}"));
             assert!(r.contains(&format!("<td>{}</td>", units(&kind).0)), "{r}");
         }
