@@ -187,4 +187,5 @@ fn a_yeoh_population_lists_c10_c20_c30_and_d_of_every_tissue() {
         let caption = format!("{kind} ({unit}) of each tissue across the cases");
         assert!(html.contains(&caption), "{caption}");
     }
+    std::fs::remove_dir_all(&dir).ok();
 }

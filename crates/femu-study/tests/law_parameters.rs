@@ -272,6 +272,7 @@ fn check_laws(name: &str, materials: &[Material], families: &[&str]) {
             "worst {kind} sd"
         );
     }
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]
