@@ -131,6 +131,14 @@ struct Step {
     dstate: Vec<Vec<f64>>,
 }
 
+/// One load step solved on a refined mesh, at the problem's pixels (px; `None` where that
+/// mesh does not cover a pixel).
+struct RefinedStep {
+    displacement: Vec<Option<[f64; 2]>>,
+    /// Per free parameter, `∂d/∂ln θ_j` (empty unless asked for).
+    sensitivity: Vec<Vec<Option<[f64; 2]>>>,
+}
+
 /// Grey levels and gradients of one frame pair at the pixels, for the current parameters.
 #[derive(Debug, Clone, Default)]
 struct PairSamples {
@@ -697,29 +705,32 @@ impl IdicProblem {
         cols
     }
 
+    /// Per free parameter, the nodal field `Σ_m θ_m ∂u/∂θ_m` (the derivative along `ln θ`)
+    /// from the members' derivatives `dstate` of a step solved on `model`.
+    fn free_fields(&self, model: &Model, dstate: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        let mut k = 0;
+        self.free
+            .iter()
+            .map(|f| {
+                let mut sum = vec![0.0; dstate[0].len()];
+                for m in &f.members {
+                    let theta = m.value(model);
+                    for (s, d) in sum.iter_mut().zip(&dstate[k]) {
+                        *s += theta * d;
+                    }
+                    k += 1;
+                }
+                sum
+            })
+            .collect()
+    }
+
     /// The Jacobian columns `∂r/∂φ_j` (2) at the last solved state.
     fn jacobian_columns(&self) -> Columns {
-        // Per step and free parameter, the nodal field Σ_m θ_m ∂u/∂θ_m.
         let fields: Vec<Vec<Vec<f64>>> = self
             .steps
             .iter()
-            .map(|st| {
-                let mut k = 0;
-                self.free
-                    .iter()
-                    .map(|f| {
-                        let mut sum = vec![0.0; st.dstate[0].len()];
-                        for m in &f.members {
-                            let theta = m.value(&st.model);
-                            for (s, d) in sum.iter_mut().zip(&st.dstate[k]) {
-                                *s += theta * d;
-                            }
-                            k += 1;
-                        }
-                        sum
-                    })
-                    .collect()
-            })
+            .map(|st| self.free_fields(&st.model, &st.dstate))
             .collect();
         let (pixels, frame) = (&self.pixels, &self.frame);
         let dir = |i: usize, p: usize, out: &mut [[f64; 2]]| {
@@ -752,6 +763,21 @@ impl IdicProblem {
         &self,
         refined: Vec<Model>,
     ) -> Result<Vec<Vec<Option<[f64; 2]>>>, FitError> {
+        Ok(self
+            .solve_refined(refined, false)?
+            .into_iter()
+            .map(|s| s.displacement)
+            .collect())
+    }
+
+    /// Every load step solved on the `refined` models at the parameters of the last
+    /// evaluation (see [`Self::displacements_on`]), with the pixel sensitivities
+    /// `∂d/∂ln θ_j` of that mesh when `sensitivities` (empty otherwise).
+    fn solve_refined(
+        &self,
+        refined: Vec<Model>,
+        sensitivities: bool,
+    ) -> Result<Vec<RefinedStep>, FitError> {
         if refined.len() != self.steps.len() {
             return Err(FitError::Solve(format!(
                 "{} refined models for {} load steps",
@@ -789,22 +815,43 @@ impl IdicProblem {
                 .map_err(|e| {
                     FitError::from_solve_at(e, &format!("refined mesh, load step {}", i + 1))
                 })?;
+            let fields = if sensitivities {
+                let mut dstate = Vec::new();
+                DirectSensitivity::new()
+                    .compute(&mut solver, &model, &sol.state, &self.members, &mut dstate)
+                    .map_err(|e| {
+                        FitError::Sensitivity(format!("refined mesh, load step {}: {e}", i + 1))
+                    })?;
+                self.free_fields(&model, &dstate)
+            } else {
+                Vec::new()
+            };
             let locator = femu_mesh::locate::PointLocator::new(&model.mesh);
-            let d: Vec<Option<[f64; 2]>> = self
+            let located: Vec<_> = self
                 .pixels
                 .px
                 .par_iter()
-                .map(|p| {
-                    let x = self.frame.pixel_to_model([p[0] as f64, p[1] as f64]);
-                    locator.locate(x).map(|l| {
-                        self.frame.displacement_to_pixels([
-                            l.interpolate(&sol.u, 2, 0),
-                            l.interpolate(&sol.u, 2, 1),
-                        ])
-                    })
-                })
+                .map(|p| locator.locate(self.frame.pixel_to_model([p[0] as f64, p[1] as f64])))
                 .collect();
-            out.push(d);
+            let at = |l: &femu_mesh::locate::PointLocation, u: &[f64]| {
+                self.frame
+                    .displacement_to_pixels([l.interpolate(u, 2, 0), l.interpolate(u, 2, 1)])
+            };
+            out.push(RefinedStep {
+                displacement: located
+                    .par_iter()
+                    .map(|l| l.as_ref().map(|l| at(l, &sol.u)))
+                    .collect(),
+                sensitivity: fields
+                    .iter()
+                    .map(|field| {
+                        located
+                            .par_iter()
+                            .map(|l| l.as_ref().map(|l| at(l, field)))
+                            .collect()
+                    })
+                    .collect(),
+            });
             warm = Some(sol.state);
         }
         Ok(out)
@@ -822,27 +869,62 @@ impl IdicProblem {
     /// The one-step Gauss–Newton shift of `ln θ` (eq. 3 of [`super::uncertainty`]) that the
     /// `refined` models (the same load steps on a finer mesh of the same geometry and
     /// materials) imply at the parameters of the last Jacobian evaluation: each refined step
-    /// solved there, its displacement at the problem's pixels compared with the problem's own.
-    /// Pixels the refined mesh does not cover keep their displacement. The parameters with
-    /// `moving[k] == false` are held ([`Self::shift_for`]).
+    /// solved and differentiated there, the residual with its pixel displacements (to first
+    /// order) and its Jacobian with its sensitivities. Pixels the refined mesh does not cover
+    /// keep the model's displacement and sensitivities. The parameters with
+    /// `moving[k] == false` are held ([`super::uncertainty::gauss_newton_shift`]).
     pub fn discretization_shift(
         &self,
         refined: Vec<Model>,
         moving: &[bool],
     ) -> Result<Vec<f64>, FitError> {
-        let fine = self.displacements_on(refined)?;
+        let fine = self.solve_refined(refined, true)?;
         let delta: Vec<Vec<[f64; 2]>> = fine
             .iter()
             .enumerate()
             .map(|(i, f)| {
                 let own = self.model_displacement(i + 1);
-                f.iter()
+                f.displacement
+                    .iter()
                     .zip(&own)
                     .map(|(f, d0)| f.map_or([0.0, 0.0], |f| [f[0] - d0[0], f[1] - d0[1]]))
                     .collect()
             })
             .collect();
-        Ok(self.shift_for(&delta, moving))
+        // The refined mesh's residual (first order in the displacement change) and its
+        // Jacobian: the same image terms, the refined mesh's sensitivities (the model's own
+        // where the refined mesh does not cover a pixel). With the whole residual, not only
+        // its change: the model's residual is orthogonal to its own sensitivities at the
+        // optimum, not to the refined mesh's (`crate::discretization`).
+        let own: Vec<Vec<Vec<f64>>> = self
+            .steps
+            .iter()
+            .map(|st| self.free_fields(&st.model, &st.dstate))
+            .collect();
+        let (pixels, frame) = (&self.pixels, &self.frame);
+        let dir = |i: usize, p: usize, out: &mut [[f64; 2]]| {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = fine[i - 1].sensitivity[j][p].unwrap_or_else(|| {
+                    let l = &pixels.loc[p];
+                    let field = &own[i - 1][j];
+                    frame.displacement_to_pixels([
+                        l.interpolate(field, 2, 0),
+                        l.interpolate(field, 2, 1),
+                    ])
+                });
+            }
+        };
+        let jacobian = self.directional(self.free.len(), &dir);
+        let change = self.residual_change(&delta);
+        let residual: Vec<f64> = self
+            .residual_vector()
+            .iter()
+            .zip(&change)
+            .map(|(r, c)| r + c)
+            .collect();
+        Ok(super::uncertainty::gauss_newton_shift(
+            &jacobian, &residual, moving,
+        ))
     }
 
     /// The unweighted residual maps of every pair at the last evaluation (grey levels, NaN out

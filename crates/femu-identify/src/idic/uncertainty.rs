@@ -28,13 +28,16 @@
 //! **Discretization.** The finite-element field of the identification mesh differs from the
 //! continuum by its discretization error, a systematic displacement that the parameters absorb
 //! in part (it is invisible in the residual). A refined mesh solved at `φ̂` changes the pixel
-//! displacements by `δd`; the one-step Gauss–Newton shift
+//! displacements by `δd`; with its own sensitivities, `J_f = (∂r/∂d) ∂d_f/∂φ`, the one-step
+//! Gauss–Newton shift from its residual (first order in `δd`)
 //!
 //! ```text
-//!   δφ = −H⁻¹ Jᵀ (∂r/∂d) δd                                                               (3)
+//!   δφ = −H_f⁻¹ J_fᵀ (r + (∂r/∂d) δd),    H_f = J_fᵀ J_f                                  (3)
 //! ```
 //!
-//! estimates what re-identifying on the refined mesh would give. It is reported and enters the
+//! estimates what re-identifying on the refined mesh would give (the whole residual, not its
+//! change alone: `Jᵀ r = 0` at the optimum, `J_fᵀ r` not; see `crate::discretization`).
+//! [`gauss_newton_shift`] gives (3) for any residual and Jacobian. It is reported and enters the
 //! interval as a systematic term, `sd² = (H⁻¹ V̂ H⁻¹)_jj + δφ_j²`.
 
 use crate::fisher::pseudo_inverse;
@@ -180,7 +183,7 @@ pub fn group_jackknife(
     (sd, g_count)
 }
 
-/// The one-step Gauss–Newton shift (3) of the log-parameters for a residual change `dr`, the
+/// The one-step Gauss–Newton shift (3) of the log-parameters for a residual `dr`, the
 /// parameters with `moving[k] == false` held (their shift 0), as the identification holds the
 /// parameters the images do not see or that sit at a bound: left free here, a direction the
 /// images hardly constrain would take up the change (shifts of `ln θ` of −15 to −18 measured
