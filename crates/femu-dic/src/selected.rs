@@ -250,12 +250,16 @@ impl Ldl {
                 w[r] = Dual::default();
                 l_of[r] = l;
             }
+            let last = rows.last().copied().unwrap_or(0);
             for (&k, &l_kj) in rows.iter().zip(ls) {
                 // The diagonal term Z_kk L_kj of row k.
                 w[k] = w[k].sub_mul(zd[k], l_kj);
-                // Z_rk for r > k in L_j (all of them lie in L_k): rows r and k.
+                // Z_rk for r > k in L_j (all of them lie in L_k, rows ascending): rows r and k.
                 for p in lp[k]..lp[k + 1] {
                     let r = li[p];
+                    if r > last {
+                        break;
+                    }
                     if mark[r] == j {
                         let z = zl[p];
                         w[r] = w[r].sub_mul(z, l_kj);
