@@ -10,7 +10,7 @@
 //! | `field.csv` | the measured-field CSV of conventions.md: `x,y,ux,uy,sx,sy,w` on a regular grid; `sx, sy` standard deviations from the nodal covariance, `w` = 0 in the elements the trust mask rejects |
 //! | `nodes.csv` | `node,x_px,y_px,ux_px,uy_px,x_mm,y_mm,ux_mm,uy_mm,sd_ux_px,sd_uy_px,corr_xy,w` |
 //! | `elements.csv` | strain, residual, ZNCC, grey-level std, structure-tensor eigenvalues, `trust` (reason) and `w` per element |
-//! | `covariance.mtx` | the nodal covariance `C = A⁻¹ M_σ A⁻¹` (px²) on the pattern of `A` (nodal 2 x 2 blocks and the pairs of nodes sharing an element or a regularization row), Matrix Market, lower triangle, equation `2 (node − 1) + c + 1` |
+//! | `covariance.mtx` | the nodal covariance `C = A⁻¹ M_σ A⁻¹` (px²; `M_σ` by its symmetric part) on the pattern of `A` (nodal 2 x 2 blocks and the pairs of nodes sharing an element or a regularization row), Matrix Market, lower triangle, equation `2 (node − 1) + c + 1` |
 //! | `hessian.mtx` | `A = M + λK`, the Gauss–Newton matrix of the iterations (grey levels² / px²) |
 //! | `hessian_noise.mtx` | `M_σ`, the covariance of the right-hand side under the residual's noise (grey levels⁴ / px²): with `A`, the factors of `C` |
 //! | `field_covariance.mtx` | the full covariance of `field.csv`'s components (mm², dense symmetric Matrix Market array, ux and uy of each row in its order), `N C Nᵀ` at the grid points; written up to [`output::MAX_COVARIANCE_POINTS`] points: `[measurement] covariance` of a study reads it for weighted FEMU |
