@@ -579,13 +579,23 @@ fn test_kinds() -> String {
         let _ = write!(
             out,
             "\n### `kind = \"{}\"`\n\n{}.\n\n| key | description |\n|---|---|\n",
-            kind.name, kind.doc
+            kind.name,
+            capitalized(kind.doc)
         );
         for k in kind.keys {
             let _ = writeln!(out, "| `{}` | {} |", k.name, cell(k.doc));
         }
     }
     out
+}
+
+/// `text` with its first letter upper case.
+fn capitalized(text: &str) -> String {
+    let mut chars = text.chars();
+    match chars.next() {
+        Some(first) => first.to_uppercase().chain(chars).collect(),
+        None => String::new(),
+    }
 }
 
 /// The parameter keys of each material law (`femu_mech::material::LAWS`).
@@ -595,7 +605,7 @@ fn laws() -> String {
         let spec = law.spec;
         let _ = write!(
             out,
-            "\n### `law = \"{}\"`\n\n{}\n\n| keys | internal unit | allowed | description |\n|---|---|---|---|\n",
+            "\n### `law = \"{}\"`\n\n{}\n\n| keys | unit of the range | allowed | description |\n|---|---|---|---|\n",
             spec.name, spec.doc
         );
         for p in spec.parameters {
@@ -959,7 +969,7 @@ force_n_per_mm = 0.1
                     Ty::Text,
                     "",
                     Allowed::Rule("a physical curve of the mesh"),
-                    Def::Text("the skin"),
+                    Def::Text("the skin; required for a Gmsh mesh's rigid test"),
                     "the physical curve of a Gmsh mesh the test acts on (`femu solve MESH.msh --study`)",
                 )
                 .example("\"skin\"", "a Gmsh mesh's physical curve it acts on"),

@@ -63,7 +63,8 @@ use lines::KeyLines;
 use serde::Deserialize;
 use std::path::Path;
 
-/// The commented example study that `femu init` writes (every key, with its default).
+/// The commented example study that `femu init` writes (every key, with its default): the file
+/// [`keys::init_file`] generates from the declarations (the `study_keys` test keeps it so).
 pub const EXAMPLE_STUDY: &str = include_str!("example_study.toml");
 
 /// The model a study describes, before it is built (see [`crate::model`]).
