@@ -5,7 +5,20 @@
 //! Implemented by [`crate::SparseLu`], [`crate::SparseLdlt`] and [`crate::SplitLdlt`];
 //! [`crate::SparseSolver`] chooses one for each matrix and solves through this trait.
 
-use crate::linear::{CscPattern, LinearSolveError, MAX_RHS};
+use crate::pattern::CscPattern;
+
+/// Largest number of right-hand sides solved at once (the workspace is sized for it once).
+pub const MAX_RHS: usize = 16;
+
+/// The linear solve failed (in femu-mech, a singular tangent: a mechanism, or a structural
+/// instability). The messages speak of "the tangent", the matrix this crate factorizes for femu.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum LinearSolveError {
+    #[error("the tangent matrix is singular (no pivot at column {0})")]
+    Singular(usize),
+    #[error("sparse factorization failed: {0}")]
+    Other(String),
+}
 
 /// Which factorization a [`Factor`] is (and which one [`crate::SparseSolver::factorize`] used
 /// last).

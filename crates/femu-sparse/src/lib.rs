@@ -27,13 +27,15 @@
 
 pub mod factor;
 pub mod linear;
+pub mod pattern;
 pub mod simd;
 pub mod solver;
 pub mod split;
 pub mod vendored;
 
-pub use factor::{Factor, Factorization};
-pub use linear::{CscPattern, LinearSolveError, NodeGraph, SparseLdlt, SparseLu, MAX_RHS};
+pub use factor::{Factor, Factorization, LinearSolveError, MAX_RHS};
+pub use linear::{NodeGraph, SparseLdlt, SparseLu};
+pub use pattern::CscPattern;
 pub use simd::{has_avx2, with_avx2};
 pub use solver::SparseSolver;
 pub use split::{DofSplit, SplitLdlt};

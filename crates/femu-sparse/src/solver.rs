@@ -6,7 +6,9 @@
 //! partial pivoting ([`SparseLu`]).
 
 use crate::factor::{Factor, Factorization};
-use crate::linear::{CscPattern, LinearSolveError, SparseLdlt, SparseLu, MAX_RHS};
+use crate::factor::{LinearSolveError, MAX_RHS};
+use crate::linear::{SparseLdlt, SparseLu};
+use crate::pattern::CscPattern;
 use crate::split::{DofSplit, SplitLdlt};
 
 /// Position of the transposed entry of each stored entry of `pattern` (rows sorted in each

@@ -26,7 +26,9 @@
 //! Duff & Reid 1983).
 
 use crate::factor::{rhs_rows, Factor, Factorization};
-use crate::linear::{CscPattern, LinearSolveError, NodeGraph, MAX_RHS};
+use crate::factor::{LinearSolveError, MAX_RHS};
+use crate::linear::NodeGraph;
+use crate::pattern::CscPattern;
 use crate::vendored::faer_supernodal::{LowerView, PartialLdlt};
 use faer::dyn_stack::{MemBuffer, MemStack, StackReq};
 use faer::reborrow::ReborrowMut;

@@ -33,7 +33,7 @@
 //! columns and the first separator ones is factorized up to the boundary and Schur-updates the
 //! rest of its columns.
 
-use crate::linear::LinearSolveError;
+use crate::factor::LinearSolveError;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::ldlt::factor::{
     cholesky_in_place, cholesky_in_place_scratch, LdltError,

@@ -1,5 +1,6 @@
 //! `[model]`, `[thigh]`, `[labels]`: where the model's mesh comes from, and its size.
 
+use super::keys::ELEMENTS_RANGE;
 use super::lines::{resolve, KeyLines};
 use super::raw::{LabelsEntry, ModelEntry};
 use super::StudyError;
@@ -68,9 +69,6 @@ pub enum Resolution {
 pub const DEFAULT_ELEMENTS: usize = 6000;
 /// Element size of a meshed label image when the study gives none (mm).
 pub const DEFAULT_LABEL_SIZE_MM: f64 = 1.0;
-
-/// The accepted target element counts of the built-in thigh.
-pub const ELEMENTS_RANGE: std::ops::RangeInclusive<usize> = 100..=femu_geometry::MAX_ELEMENTS;
 
 /// Checks `[model]` and the geometry tables.
 pub(crate) fn parse(

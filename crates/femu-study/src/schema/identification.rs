@@ -53,9 +53,6 @@ pub struct IdentificationSpec {
     pub image_pairing: femu_identify::idic::Pairing,
 }
 
-/// Largest `[identification] bounds_factor`.
-pub const MAX_BOUNDS_FACTOR: f64 = 100.0;
-
 /// Default `[identification] image_normalization_px` (px): below the speckle's size, so that
 /// an interface's echo, renewed in part between load steps, is matched by its position and not
 /// its brightness (README, images → parameters: chosen on realizations 1–20, checked on 21–30).
@@ -65,14 +62,6 @@ pub const DEFAULT_IMAGE_NORMALIZATION_PX: f64 = 0.75;
 /// images → parameters: on realizations 1–30, D_FAT's largest error 5.7 % against 7.0 % with
 /// "both", for 1.4 times the pairs).
 pub const DEFAULT_IMAGE_PAIRING: femu_identify::idic::Pairing = femu_identify::idic::Pairing::All;
-
-/// Smallest nonzero `image_normalization_px` (px): below, the Gaussian window is narrower than a
-/// pixel, the local mean is the pixel itself and nothing is left to compare.
-pub const MIN_IMAGE_NORMALIZATION_PX: f64 = 0.5;
-
-/// Largest `image_normalization_px` (px): beyond, the window spans the fat's thickness and the
-/// normalization no longer separates an interface's position from its brightness.
-pub const MAX_IMAGE_NORMALIZATION_PX: f64 = 32.0;
 
 /// `[identification] discretization`: the discretization check of every identification.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

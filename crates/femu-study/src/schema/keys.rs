@@ -11,12 +11,26 @@
 //! its [`KeySpec`] here, and its check in the table's parser; then regenerate the two files with
 //! `FEMU_BLESS=1 cargo test -p femu-study --test study_keys`.
 
-use super::geometry::ELEMENTS_RANGE;
-use super::identification::{
-    MAX_BOUNDS_FACTOR, MAX_IMAGE_NORMALIZATION_PX, MIN_IMAGE_NORMALIZATION_PX,
-};
-use super::ultrasound::MAX_RENDER_REFINE;
 use std::fmt::Write;
+
+// The limits the parsers of several tables check, declared here with the keys they bound.
+
+/// The accepted target element counts of the built-in thigh.
+pub const ELEMENTS_RANGE: std::ops::RangeInclusive<usize> = 100..=femu_geometry::MAX_ELEMENTS;
+
+/// Largest `[identification] bounds_factor`.
+pub const MAX_BOUNDS_FACTOR: f64 = 100.0;
+
+/// Smallest nonzero `image_normalization_px` (px): below, the Gaussian window is narrower than a
+/// pixel, the local mean is the pixel itself and nothing is left to compare.
+pub const MIN_IMAGE_NORMALIZATION_PX: f64 = 0.5;
+
+/// Largest `image_normalization_px` (px): beyond, the window spans the fat's thickness and the
+/// normalization no longer separates an interface's position from its brightness.
+pub const MAX_IMAGE_NORMALIZATION_PX: f64 = 32.0;
+
+/// Largest `render_refine`: 4 makes 16 times the elements of `[model]`.
+pub const MAX_RENDER_REFINE: usize = 4;
 
 /// The TOML type of a key's value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -45,11 +45,14 @@ pub use files::{absolute_file_names, is_file_key, FILE_KEYS};
 pub(crate) use geometry::thigh_elements;
 pub use geometry::{
     Geometry, LabelsSpec, QuadElement, Resolution, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
-    ELEMENTS_RANGE,
 };
 pub use identification::{
     Discretization, Grouping, IdentificationSpec, Steps, DEFAULT_IMAGE_NORMALIZATION_PX,
-    DEFAULT_IMAGE_PAIRING, MAX_IMAGE_NORMALIZATION_PX, MIN_IMAGE_NORMALIZATION_PX,
+    DEFAULT_IMAGE_PAIRING,
+};
+pub use keys::{
+    ELEMENTS_RANGE, MAX_BOUNDS_FACTOR, MAX_IMAGE_NORMALIZATION_PX, MAX_RENDER_REFINE,
+    MIN_IMAGE_NORMALIZATION_PX,
 };
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};

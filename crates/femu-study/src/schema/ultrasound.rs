@@ -61,9 +61,6 @@ pub struct UltrasoundSection {
     pub decorrelation: f64,
 }
 
-/// Largest `render_refine`: 4 makes 16 times the elements of `[model]`.
-pub const MAX_RENDER_REFINE: usize = 4;
-
 impl Default for UltrasoundSection {
     fn default() -> Self {
         let (t, s) = (Transducer::default(), Scanner::default());
