@@ -420,11 +420,11 @@ pub fn read_matrix_market(path: &Path) -> Result<(crate::sparse::CscPattern, Vec
         }
     }
     let (n, _) = size.ok_or_else(|| bad(1, "no size line".into()))?;
-    let pairs: Vec<(usize, usize)> = entries
+    let mut pairs: Vec<(usize, usize)> = entries
         .iter()
         .flat_map(|&(r, c, _)| [(r, c), (c, r)])
         .collect();
-    let pattern = crate::sparse::pattern_from_pairs(n, pairs);
+    let pattern = femu_sparse::CscPattern::from_pairs(n, &mut pairs);
     let mut values = vec![0.0; pattern.nnz()];
     for &(r, c, v) in &entries {
         values[pattern.position(r, c).expect("entry in the pattern")] = v;

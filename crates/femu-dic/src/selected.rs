@@ -359,7 +359,7 @@ mod tests {
                 }
             }
         }
-        let p = crate::sparse::pattern_from_pairs(n, pairs);
+        let p = femu_sparse::CscPattern::from_pairs(n, &mut pairs);
         // Deterministic pseudo-random symmetric values, A diagonally dominant.
         let val = |r: usize, c: usize, s: f64| {
             let (i, j) = (r.min(c) as f64, r.max(c) as f64);

@@ -435,7 +435,7 @@ impl Level {
                 }
             }
         }
-        let pattern = crate::sparse::pattern_from_pairs(n_eq, pairs);
+        let pattern = femu_sparse::CscPattern::from_pairs(n_eq, &mut pairs);
         let mut m_values = vec![0.0; pattern.nnz()];
         for (d, me) in dofs.iter().zip(&elem_m) {
             for i in 0..8 {

@@ -13,26 +13,6 @@ use faer::{Conj, MatMut, Par, Side};
 
 pub use femu_sparse::CscPattern;
 
-/// The square pattern of the (row, col) pairs (duplicates allowed), rows sorted in each column.
-pub fn pattern_from_pairs(n: usize, mut pairs: Vec<(usize, usize)>) -> CscPattern {
-    pairs.sort_unstable_by_key(|&(r, c)| (c, r));
-    pairs.dedup();
-    let mut col_ptr = vec![0usize; n + 1];
-    let mut row_idx = Vec::with_capacity(pairs.len());
-    for &(r, c) in &pairs {
-        col_ptr[c + 1] += 1;
-        row_idx.push(r);
-    }
-    for c in 0..n {
-        col_ptr[c + 1] += col_ptr[c];
-    }
-    CscPattern {
-        n,
-        col_ptr,
-        row_idx,
-    }
-}
-
 /// `xᵀ A x` for `A` stored in full on `pattern`.
 pub fn quadratic_form(pattern: &CscPattern, values: &[f64], x: &[f64]) -> f64 {
     let mut s = 0.0;
@@ -172,7 +152,7 @@ mod tests {
                 pairs.push((i + 1, i));
             }
         }
-        let p = pattern_from_pairs(n, pairs);
+        let p = CscPattern::from_pairs(n, &mut pairs);
         let mut v = vec![0.0; p.nnz()];
         for c in 0..n {
             for k in p.col_ptr[c]..p.col_ptr[c + 1] {

@@ -12,9 +12,9 @@ pub struct CscPattern {
 }
 
 impl CscPattern {
-    /// Builds the pattern from (row, col) pairs (duplicates allowed); for small hand-made
-    /// matrices in tests (meshes use [`NodeGraph::dof_pattern`]).
-    #[cfg(test)]
+    /// Builds the pattern from (row, col) pairs (duplicates allowed), rows sorted in each
+    /// column: the DIC's element couplings, small hand-made matrices (a finite-element mesh
+    /// uses [`crate::NodeGraph::dof_pattern`]).
     pub fn from_pairs(n: usize, pairs: &mut Vec<(usize, usize)>) -> Self {
         pairs.sort_unstable_by_key(|&(r, c)| (c, r));
         pairs.dedup();
