@@ -442,16 +442,34 @@ mod tests {
         }
     }
 
-    #[test]
-    fn rate_and_bias_of_a_linear_model_are_recovered() {
-        let free: Vec<FreeParameter> = (0..2)
+    /// Two free parameters (the Neo-Hookean C10 and D of one material), bounds wide open.
+    fn two_free() -> Vec<FreeParameter> {
+        (0..2)
             .map(|k| FreeParameter {
                 name: format!("P{k}"),
                 members: vec![Parameter::new(k, &NeoHookean::SPEC, 0).unwrap()],
                 lower: 1e-3,
                 upper: 1e3,
             })
-            .collect();
+            .collect()
+    }
+
+    /// The check's levels of `meshes` refined by `ratios` (1 000 elements at ratio 1).
+    fn levels_of<'a>(meshes: &'a mut [Mesh], ratios: &[f64]) -> Vec<Level<'a>> {
+        meshes
+            .iter_mut()
+            .zip(ratios)
+            .map(|(m, &ratio)| Level {
+                ratio,
+                elements: (1000.0 * ratio * ratio).round() as usize,
+                problem: m,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn rate_and_bias_of_a_linear_model_are_recovered() {
+        let free = two_free();
         let a = vec![
             (0..8).map(|i| (i as f64 * 0.7).sin()).collect::<Vec<_>>(),
             (0..8).map(|i| (i as f64 * 0.3).cos()).collect(),
@@ -477,15 +495,7 @@ mod tests {
         use std::f64::consts::{FRAC_1_SQRT_2, SQRT_2};
         for ratios in [[1.0, SQRT_2, 2.0], [1.0, FRAC_1_SQRT_2, SQRT_2]] {
             let mut meshes: Vec<Mesh> = ratios.iter().map(|&r| mesh(r)).collect();
-            let mut levels: Vec<Level> = meshes
-                .iter_mut()
-                .zip(ratios)
-                .map(|(m, ratio)| Level {
-                    ratio,
-                    elements: (1000.0 * ratio * ratio).round() as usize,
-                    problem: m,
-                })
-                .collect();
+            let mut levels = levels_of(&mut meshes, &ratios);
             let c = check(&theta, &[1e-3, 1e-3], &mut levels, false).unwrap();
             assert!(
                 c.rate_observed && (c.rate - p).abs() < 1e-9,
@@ -530,14 +540,7 @@ mod tests {
     /// where the residual's change `r_f - r_h` misses the part `(J_f - J_h)ᵀ r_h` — far off here.
     #[test]
     fn the_shift_holds_when_the_sensitivities_depend_on_the_mesh() {
-        let free: Vec<FreeParameter> = (0..2)
-            .map(|k| FreeParameter {
-                name: format!("P{k}"),
-                members: vec![Parameter::new(k, &NeoHookean::SPEC, 0).unwrap()],
-                lower: 1e-3,
-                upper: 1e3,
-            })
-            .collect();
+        let free = two_free();
         let rows = 12;
         let a: Vec<Vec<f64>> = vec![
             (0..rows).map(|i| (i as f64 * 0.7).sin()).collect(),
@@ -574,15 +577,7 @@ mod tests {
         let phi_h = optimum(&mut meshes[0]);
         let phi_f = optimum(&mut meshes[2]);
         let theta: Vec<f64> = phi_h.iter().map(|v| v.exp()).collect();
-        let mut levels: Vec<Level> = meshes
-            .iter_mut()
-            .zip(ratios)
-            .map(|(m, ratio)| Level {
-                ratio,
-                elements: (1000.0 * ratio * ratio).round() as usize,
-                problem: m,
-            })
-            .collect();
+        let mut levels = levels_of(&mut meshes, &ratios);
         let c = check(&theta, &[1e-3, 1e-3], &mut levels, false).unwrap();
         let shift = c.levels.last().unwrap().shift.clone().unwrap();
         for k in 0..2 {
