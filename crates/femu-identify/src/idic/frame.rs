@@ -82,6 +82,12 @@ impl ImageFrame {
         ]
     }
 
+    /// The nodal displacement field `u` (2 components per node, mm) at location `l`, in pixels.
+    #[inline]
+    pub fn field_to_pixels(&self, l: &femu_mesh::locate::PointLocation, u: &[f64]) -> [f64; 2] {
+        self.displacement_to_pixels([l.interpolate(u, 2, 0), l.interpolate(u, 2, 1)])
+    }
+
     /// A displacement in pixels as a model displacement (mm).
     pub fn displacement_to_model(&self, d: [f64; 2]) -> [f64; 2] {
         let s = self.mm_per_px;

@@ -532,8 +532,7 @@ impl IdicProblem {
                 .zip(pixels.loc.par_iter())
                 .enumerate()
                 .for_each(|(p, (d, l))| {
-                    *d = frame
-                        .displacement_to_pixels([l.interpolate(u, 2, 0), l.interpolate(u, 2, 1)]);
+                    *d = frame.field_to_pixels(l, u);
                     if let Some(c) = c {
                         d[0] += c[p][0];
                         d[1] += c[p][1];
@@ -725,21 +724,21 @@ impl IdicProblem {
             .collect()
     }
 
-    /// The Jacobian columns `∂r/∂φ_j` (2) at the last solved state.
-    fn jacobian_columns(&self) -> Columns {
-        let fields: Vec<Vec<Vec<f64>>> = self
-            .steps
+    /// Per load step, [`Self::free_fields`] of its last Jacobian evaluation.
+    fn step_free_fields(&self) -> Vec<Vec<Vec<f64>>> {
+        self.steps
             .iter()
             .map(|st| self.free_fields(&st.model, &st.dstate))
-            .collect();
+            .collect()
+    }
+
+    /// The Jacobian columns `∂r/∂φ_j` (2) at the last solved state.
+    fn jacobian_columns(&self) -> Columns {
+        let fields = self.step_free_fields();
         let (pixels, frame) = (&self.pixels, &self.frame);
         let dir = |i: usize, p: usize, out: &mut [[f64; 2]]| {
-            let l = &pixels.loc[p];
             for (o, field) in out.iter_mut().zip(&fields[i - 1]) {
-                *o = frame.displacement_to_pixels([
-                    l.interpolate(field, 2, 0),
-                    l.interpolate(field, 2, 1),
-                ]);
+                *o = frame.field_to_pixels(&pixels.loc[p], field);
             }
         };
         self.directional(self.free.len(), &dir)
@@ -833,21 +832,17 @@ impl IdicProblem {
                 .par_iter()
                 .map(|p| locator.locate(self.frame.pixel_to_model([p[0] as f64, p[1] as f64])))
                 .collect();
-            let at = |l: &femu_mesh::locate::PointLocation, u: &[f64]| {
-                self.frame
-                    .displacement_to_pixels([l.interpolate(u, 2, 0), l.interpolate(u, 2, 1)])
-            };
             out.push(RefinedStep {
                 displacement: located
                     .par_iter()
-                    .map(|l| l.as_ref().map(|l| at(l, &sol.u)))
+                    .map(|l| l.as_ref().map(|l| self.frame.field_to_pixels(l, &sol.u)))
                     .collect(),
                 sensitivity: fields
                     .iter()
                     .map(|field| {
                         located
                             .par_iter()
-                            .map(|l| l.as_ref().map(|l| at(l, field)))
+                            .map(|l| l.as_ref().map(|l| self.frame.field_to_pixels(l, field)))
                             .collect()
                     })
                     .collect(),
@@ -896,22 +891,12 @@ impl IdicProblem {
         // where the refined mesh does not cover a pixel). With the whole residual, not only
         // its change: the model's residual is orthogonal to its own sensitivities at the
         // optimum, not to the refined mesh's (`crate::discretization`).
-        let own: Vec<Vec<Vec<f64>>> = self
-            .steps
-            .iter()
-            .map(|st| self.free_fields(&st.model, &st.dstate))
-            .collect();
+        let own = self.step_free_fields();
         let (pixels, frame) = (&self.pixels, &self.frame);
         let dir = |i: usize, p: usize, out: &mut [[f64; 2]]| {
             for (j, o) in out.iter_mut().enumerate() {
-                *o = fine[i - 1].sensitivity[j][p].unwrap_or_else(|| {
-                    let l = &pixels.loc[p];
-                    let field = &own[i - 1][j];
-                    frame.displacement_to_pixels([
-                        l.interpolate(field, 2, 0),
-                        l.interpolate(field, 2, 1),
-                    ])
-                });
+                *o = fine[i - 1].sensitivity[j][p]
+                    .unwrap_or_else(|| frame.field_to_pixels(&pixels.loc[p], &own[i - 1][j]));
             }
         };
         let jacobian = self.directional(self.free.len(), &dir);
