@@ -276,35 +276,26 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     let t = begin(record, out, "measurement", Some("measurement"))?;
     let dir = out.join("measurement");
     create_dir(&dir)?;
-    if let [m] = study.measurements.as_slice() {
-        if let MeasurementSource::Frames(spec) = &m.source {
-            // Recorded frames: integrated DIC from the frames (`super::frames`).
+    // Recorded frames are measured and identified by integrated DIC (`super::frames`); any
+    // other measurement is prepared once for the identifications.
+    let (frames, images) = match study.measurements.as_slice() {
+        [m] => match &m.source {
+            MeasurementSource::Frames(spec) => (Some((m, spec)), false),
+            source => (None, *source == MeasurementSource::Ultrasound),
+        },
+        _ => (None, false),
+    };
+    let prepared = match frames {
+        Some((m, spec)) => {
             super::frames::measure(study, &built, m, spec, &dir, progress)?;
-            finish(record, out, t)?;
-            for (grouped, name) in groupings(study) {
-                progress.check()?;
-                let folder = format!("identify/{name}");
-                let t = begin(
-                    record,
-                    out,
-                    &format!("identification ({name})"),
-                    Some(&folder),
-                )?;
-                super::frames::identify_frames(
-                    study,
-                    grouped,
-                    &built,
-                    &dir,
-                    &out.join(&folder),
-                    progress,
-                )?;
-                finish(record, out, t)?;
-            }
-            return Ok(());
+            None
         }
-    }
-    let prepared = measure::prepare(study, &built, &dir, progress)?;
-    super::joint::write_measured(study, &built, &prepared, &dir, progress)?;
+        None => {
+            let prepared = measure::prepare(study, &built, &dir, progress)?;
+            super::joint::write_measured(study, &built, &prepared, &dir, progress)?;
+            Some(prepared)
+        }
+    };
     finish(record, out, t)?;
 
     for (grouped, name) in groupings(study) {
@@ -316,28 +307,19 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
             &format!("identification ({name})"),
             Some(&folder),
         )?;
-        if let [m] = study.measurements.as_slice() {
-            if m.source == MeasurementSource::Ultrasound {
-                // Images: integrated DIC, beside DIC -> FEMU plain and weighted.
-                super::images::identify_image_measurement(
-                    study,
-                    grouped,
-                    &out.join("measurement"),
-                    &out.join(&folder),
-                    progress,
-                )?;
-                finish(record, out, t)?;
-                continue;
+        let into = out.join(&folder);
+        match &prepared {
+            None => {
+                super::frames::identify_frames(study, grouped, &built, &dir, &into, progress)?;
+            }
+            // Images: integrated DIC, beside DIC -> FEMU plain and weighted.
+            Some(_) if images => {
+                super::images::identify_image_measurement(study, grouped, &dir, &into, progress)?;
+            }
+            Some(prepared) => {
+                identify::identify_on(study, grouped, &built, prepared, &into, progress)?;
             }
         }
-        identify::identify_on(
-            study,
-            grouped,
-            &built,
-            &prepared,
-            &out.join(&folder),
-            progress,
-        )?;
         finish(record, out, t)?;
     }
     Ok(())
