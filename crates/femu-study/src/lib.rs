@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub mod commands;
+pub mod error;
 pub(crate) mod figures;
 pub mod html;
 pub mod json;
@@ -29,5 +30,6 @@ pub mod report;
 pub mod schema;
 pub mod steps;
 
+pub use error::{Error, ErrorKind};
 pub use progress::{Progress, Quiet};
 pub use schema::{load, parse, read, Study, StudyError};
