@@ -30,6 +30,17 @@ pub enum Error {
     /// The user asked to stop; what was finished is kept.
     #[error(transparent)]
     Interrupted(#[from] crate::progress::Interrupted),
+    /// The user asked to stop a step that kept part of its work (`message` says what).
+    #[error("{message}")]
+    Stopped {
+        message: String,
+        kept: Kept,
+        #[source]
+        source: crate::progress::Interrupted,
+    },
+    /// An output folder that would hold one of the inputs.
+    #[error(transparent)]
+    InputInOutput(#[from] femu_mesh::folder::InputInOutput),
     /// A sentence in front of an error (which step, which file, which test).
     #[error("{context}")]
     Context {
@@ -86,6 +97,15 @@ pub enum Error {
     Json(#[from] serde_json::Error),
 }
 
+/// What a step the user stopped kept (see [`Error::Stopped`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Kept {
+    /// Its summary, which says what was stopped.
+    Summary,
+    /// These files of its folder.
+    Files(Vec<String>),
+}
+
 /// `Result` with femu-study's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
@@ -117,11 +137,13 @@ impl Error {
             Error::Context { source, .. } => source.kind(),
             Error::Study(_) => ErrorKind::Study,
             Error::Interrupted(_)
+            | Error::Stopped { .. }
             | Error::Solve(femu_mech::SolveError::Interrupted(_))
             | Error::Fit(FitError::Interrupted)
             | Error::IdicRun(IdicRunError::Interrupted) => ErrorKind::Interrupted,
             Error::Input(_)
             | Error::Io(_)
+            | Error::InputInOutput(_)
             | Error::Model(_)
             | Error::Material(_)
             | Error::Loading(_)
@@ -156,6 +178,24 @@ impl Error {
         Error::Context {
             context: context.to_string(),
             source: Box::new(self),
+        }
+    }
+
+    /// The user asked to stop; `message` says what was stopped and what was kept.
+    pub fn stopped(message: impl Into<String>, kept: Kept) -> Error {
+        Error::Stopped {
+            message: message.into(),
+            kept,
+            source: crate::progress::Interrupted,
+        }
+    }
+
+    /// What a step the user stopped kept, if this is such a stop (under any context).
+    pub fn kept(&self) -> Option<&Kept> {
+        match self {
+            Error::Context { source, .. } => source.kept(),
+            Error::Stopped { kept, .. } => Some(kept),
+            _ => None,
         }
     }
 
