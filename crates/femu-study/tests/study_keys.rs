@@ -1,6 +1,6 @@
 //! The study file's keys are declared once (`femu_study::schema::keys`): `femu init`'s file
 //! (`example_study.toml`, [`schema::EXAMPLE_STUDY`]) and the reference page
-//! (`docs/reference/study-file.md`) are generated from the declarations, and a key declared
+//! (`docs/guide/src/reference/study-file.md`) are generated from the declarations, and a key declared
 //! there appears in both without touching either by hand.
 //!
 //! When a declaration changed, regenerate the two files with
@@ -58,7 +58,7 @@ fn femu_init_file_is_generated_from_the_declarations() {
 #[test]
 fn reference_page_is_generated_from_the_declarations() {
     check_generated(
-        "docs/reference/study-file.md",
+        "docs/guide/src/reference/study-file.md",
         &keys::generated_reference_page(),
     );
 }

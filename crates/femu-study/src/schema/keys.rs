@@ -1,11 +1,11 @@
 //! Every key of the study file, declared once: its table, name, type, unit, allowed values,
 //! default and documentation ([`TABLES`]). From these declarations come `femu init`'s commented
 //! study file ([`init_file`], committed as `example_study.toml`), the reference page
-//! `docs/reference/study-file.md` ([`reference_page`]) and the parser's range and choice checks
-//! ([`check_int`], [`check_real`], [`word`]), so that a declared range and the checked one cannot
-//! differ. The keys of a `[[test]]` kind and of a `[materials.REGION]` law are declared with the
-//! kind (`femu_mech::loading::TEST_KINDS`) and the law (`femu_mech::material::LAWS`); the
-//! reference page lists them from there.
+//! `docs/guide/src/reference/study-file.md` ([`reference_page`]) and the parser's range and
+//! choice checks ([`check_int`], [`check_real`], [`word`]), so that a declared range and the
+//! checked one cannot differ. The keys of a `[[test]]` kind and of a `[materials.REGION]` law
+//! are declared with the kind (`femu_mech::loading::TEST_KINDS`) and the law
+//! (`femu_mech::material::LAWS`); the reference page lists them from there.
 //!
 //! To add a key: its field in the serde struct of its table (`raw.rs` or the table's own file),
 //! its [`KeySpec`] here, and its check in the table's parser; then regenerate the two files with
