@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Measures the runs behind docs/guide/src/measured/runs.md and rewrites that page from them.
+#
+#   bash scripts/guide/measure.sh FEMU_BINARY [OUT_DIR]
+#
+# Runs `femu demo`, `femu convergence` (its defaults) and, when CalculiX (`ccx`) is installed,
+# `femu bench --repeat 5`, one after the other, each into OUT_DIR (default out/measured) with a
+# provenance.json beside its outputs: the date, the machine (CPU model, cores, memory), the commit
+# of the sources (COMMIT=... when the binary was built from another one than this clone's HEAD),
+# the load average when it started and the command. Then scripts/guide/tables.py writes the page.
+# A release build is what the page is about: `cargo build --release --bin femu`.
+set -euo pipefail
+femu=$(readlink -f "${1:?usage: measure.sh FEMU_BINARY [OUT_DIR]}")
+out=${2:-out/measured}
+cd "$(dirname "$0")/../.."
+commit=${COMMIT:-$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- crates Cargo.toml Cargo.lock || echo " with uncommitted changes")}
+build=${BUILD:-release build}
+cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
+mem=$(awk '/MemTotal/ {printf "%.0f GiB", $2 / 1048576}' /proc/meminfo)
+machine="$cpu, $(nproc) cores, $mem, $(uname -sr)"
+
+run() { # NAME COMMAND...
+    local dir=$out/$1
+    shift
+    rm -rf "$dir"
+    mkdir -p "$dir"
+    python3 - "$dir/provenance.json" "$machine" "$commit" "$build" "$*" <<'PY'
+import datetime, json, os, sys
+path, machine, commit, build, command = sys.argv[1:]
+json.dump({
+    "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+    "machine": machine, "commit": commit, "build": build,
+    "load": "%.1f" % os.getloadavg()[0], "command": command.replace(os.environ.get("FEMU_BIN", ""), "femu"),
+}, open(path, "w"), indent=1)
+PY
+    "$@" >"$dir.log" 2>&1
+}
+
+export FEMU_BIN=$femu
+run demo "$femu" demo --out "$out/demo" --quiet
+run convergence "$femu" convergence --out "$out/convergence" --quiet
+bench=""
+if command -v ccx >/dev/null 2>&1; then
+    run bench "$femu" bench --repeat 5 --out "$out/bench"
+    bench=$out/bench
+fi
+python3 scripts/guide/tables.py page "$out/demo" "$out/convergence" $bench \
+    >docs/guide/src/measured/runs.md
+echo "wrote docs/guide/src/measured/runs.md from $out"
