@@ -203,6 +203,19 @@ impl Error {
     pub fn is_interrupted(&self) -> bool {
         self.kind() == ErrorKind::Interrupted
     }
+
+    /// The message and every cause after it, `context: cause: cause's cause` (what `{:#}` of
+    /// an `anyhow::Error` shows), for a message kept in a file or a warning.
+    pub fn chain(&self) -> String {
+        let mut text = self.to_string();
+        let mut cause = std::error::Error::source(self);
+        while let Some(c) = cause {
+            text.push_str(": ");
+            text.push_str(&c.to_string());
+            cause = c.source();
+        }
+        text
+    }
 }
 
 /// A sentence in front of an error, as `anyhow::Context` does, keeping the typed cause.
@@ -260,8 +273,10 @@ mod tests {
     fn context_keeps_the_kind_and_prints_the_chain() {
         let e = solve_failure().context("test contention").unwrap_err();
         assert_eq!(e.kind(), ErrorKind::Solve);
+        let chained = e.chain();
         let shown = format!("{:#}", anyhow::Error::from(e));
         assert!(shown.starts_with("test contention: "), "{shown}");
+        assert_eq!(chained, shown);
         let bare = Error::input("x").context("y");
         assert_eq!(bare.kind(), ErrorKind::Input);
         assert_eq!(format!("{bare}"), "y");

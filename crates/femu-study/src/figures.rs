@@ -1,7 +1,7 @@
 //! The pictures of a solve: the deformed shape coloured by LE11 (the seed's Fig. 3.D–F), and
 //! for each rigid body the contact pressure along the skin and the force–travel curve.
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use femu_mech::output::element_fields;
 use femu_mech::{Model, Solution};
 use femu_plot::{line_plot_png, mesh_field_png, FieldPlot, LinePlot, LineStyle, Overlay, Series};

@@ -6,6 +6,8 @@
 mod frames;
 mod images;
 
+use crate::bail;
+use crate::error::Result;
 use crate::html::{esc, g, Page as Html};
 use crate::output::{read_json, write_json, write_text, ParameterEntry};
 use crate::steps::identify::{FreeParameterSummary, IdentificationSummary};
@@ -14,7 +16,6 @@ use crate::steps::record::RunRecord;
 use crate::steps::sensitivity::SensitivitySummary;
 use crate::steps::solve::{MaterialSummary, RigidBodySummary, SolveSummary};
 use crate::steps::ultrasound::SimSummary;
-use anyhow::Result;
 use femu_identify::campaign::Estimate;
 use femu_plot::{bar_chart_png, BarChart};
 use serde::{Deserialize, Serialize};
@@ -127,12 +128,12 @@ pub struct RunSummary {
 /// Writes `DIR/report.html` and `DIR/summary.json`; returns the report's path.
 pub fn write(dir: &Path) -> Result<PathBuf> {
     if !dir.is_dir() {
-        anyhow::bail!("{} is not an output folder of femu run", dir.display());
+        bail!("{} is not an output folder of femu run", dir.display());
     }
     // Only a run's folder: elsewhere the report's summary.json would replace another
     // command's (femu dic, identify, convergence write their own).
     if !dir.join("steps.json").is_file() {
-        anyhow::bail!(
+        bail!(
             "{} is not the folder of a femu run or demo (no steps.json): femu report rewrites the report of a run's output folder",
             dir.display()
         );
@@ -187,7 +188,7 @@ impl Html {
                 self.p(&format!(
                     "<span class=\"bad\">{} could not be read</span>: {}.",
                     esc(&path.display().to_string()),
-                    esc(&format!("{e:#}"))
+                    esc(&e.chain())
                 ));
                 None
             }
@@ -1077,7 +1078,7 @@ pub fn write_design(dir: &Path) -> Result<PathBuf> {
     let mut html = Html::default();
     let _ = write!(html.body, "<h1>femu design</h1>");
     if design_section(&mut html, dir).is_none() {
-        anyhow::bail!("{} holds no design summary", dir.display());
+        bail!("{} holds no design summary", dir.display());
     }
     let path = dir.join("report.html");
     write_text(&path, &html.finish("femu design"))?;

@@ -2,7 +2,8 @@
 //! applied: the study check reads its materials' laws, the model is built from it.
 
 use super::MaterialSpec;
-use anyhow::{bail, Context, Result};
+use crate::bail;
+use crate::error::{Context, Result};
 use femu_mech::model::ModelSpec as MechSpec;
 use std::path::Path;
 

@@ -349,7 +349,7 @@ impl Study {
                         unreachable!("of_geometry knows every other geometry")
                     };
                     let (deck, _) = read_deck(&self.model.materials, path)
-                        .map_err(|e| self.lines.err("model", 0, "deck", format!("{e:#}")))?;
+                        .map_err(|e| self.lines.err("model", 0, "deck", e.chain()))?;
                     deck.materials
                         .iter()
                         .map(|m| regions::RegionLaw {

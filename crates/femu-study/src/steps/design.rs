@@ -15,11 +15,12 @@
 
 use super::measure::window_points;
 use super::parameters::free_parameters;
+use crate::bail;
+use crate::error::{Context, Error, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::{Study, WindowSpec};
-use anyhow::{Context, Result};
 use femu_identify::design::{self, Candidate, Design};
 use femu_identify::fit::FreeParameter;
 use femu_mech::sensitivity::{DirectSensitivity, Parameter};
@@ -86,7 +87,7 @@ fn differentiate(
 ) -> Result<(Model, Vec<Vec<f64>>)> {
     let model = built.loaded(loading)?;
     let mut solver = StaticSolver::new(&model, SolverOptions::default())?;
-    let solution = solver.solve(&model).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let solution = solver.solve(&model)?;
     let members: Vec<Parameter> = free.iter().flat_map(|f| f.members.clone()).collect();
     let mut dstate = Vec::new();
     DirectSensitivity::new()
@@ -200,7 +201,7 @@ pub fn run_on(
             Ok(r) => r,
             Err(e) if crate::progress::is_interrupted(&e) => return Err(stop_here()),
             Err(e) => {
-                let why = format!("{e:#}");
+                let why = e.chain();
                 progress.warn(&format!("test {test} left out: {why}"));
                 failed_tests.push((test, why));
                 bar.inc(1);
@@ -237,7 +238,7 @@ pub fn run_on(
     }
     drop(bar);
     if candidates.is_empty() {
-        anyhow::bail!(
+        bail!(
             "no test could be solved: {}",
             failed_tests
                 .iter()
@@ -311,7 +312,7 @@ pub fn run_on(
 fn check_window_sizes(study: &Study, mesh: &femu_mesh::Mesh) -> Result<()> {
     for side in &study.design.sides {
         let d = femu_mech::loading::Side::parse(side)
-            .map_err(|e| anyhow::anyhow!("[design] sides: {e}"))?
+            .map_err(|e| crate::input!("[design] sides: {e}"))?
             .direction();
         let extent = |axis: [f64; 2]| {
             let (lo, hi) = mesh.nodes.iter().fold((f64::MAX, f64::MIN), |(lo, hi), x| {
@@ -351,7 +352,7 @@ fn stopped(
     finished: &[CandidateSummary],
     t0: Instant,
     what: &str,
-) -> anyhow::Error {
+) -> Error {
     let kept = femu_mesh::stop::shielded(|| -> Result<Vec<&str>> {
         let mut kept = Vec::new();
         if !finished.is_empty() {
@@ -374,9 +375,9 @@ fn stopped(
         kept.as_deref().unwrap_or(&[]),
         t0.elapsed().as_secs_f64(),
     );
-    let mut e = anyhow::Error::new(crate::progress::Interrupted).context(message);
+    let mut e = Error::from(crate::progress::Interrupted).context(message);
     if let Err(w) = kept.and(written) {
-        e = e.context(format!("keeping what was finished failed: {w:#}"));
+        e = e.context(format!("keeping what was finished failed: {}", w.chain()));
     }
     e
 }

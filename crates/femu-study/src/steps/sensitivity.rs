@@ -3,10 +3,11 @@
 //! Fig. 8), and the identifiability of the parameters from the measurement grid (Fisher
 //! information).
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::output::{create_dir, write_json, ParameterEntry};
 use crate::progress::Progress;
 use crate::schema::Study;
-use anyhow::{bail, Context, Result};
 use femu_identify::fisher::{self, Identifiability, Tied};
 use femu_mech::loading::apply_loading;
 use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
@@ -195,8 +196,10 @@ pub fn run_on(
             // A stop is not a failure of the test.
             Err(e) if crate::progress::is_interrupted(&e) => return Err(e),
             Err(e) => {
-                let why =
-                    format!("{e:#} (refine the mesh, [model] elements, or lower the test's load)");
+                let why = format!(
+                    "{} (refine the mesh, [model] elements, or lower the test's load)",
+                    e.chain()
+                );
                 progress.warn(&format!("test {} left out: {why}", loading.name()));
                 failed_tests.push((loading.name(), why));
                 bar.inc(1);
@@ -420,7 +423,7 @@ fn run_test(
     let t = Instant::now();
     let solution = solver
         .solve(&model)
-        .map_err(|e| anyhow::anyhow!("test {name}: {e}"))?;
+        .with_context(|| format!("test {name}"))?;
     let solve_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let mut dd = DirectSensitivity::new();
@@ -452,11 +455,11 @@ fn run_test(
             p.set(&mut model, theta * (1.0 + h));
             let plus = solver
                 .solve_with(&model, Some(&solution.state), &mut |_| {})
-                .map_err(|e| anyhow::anyhow!("test {name}, finite difference: {e}"))?;
+                .with_context(|| format!("test {name}, finite difference"))?;
             p.set(&mut model, theta * (1.0 - h));
             let minus = solver
                 .solve_with(&model, Some(&solution.state), &mut |_| {})
-                .map_err(|e| anyhow::anyhow!("test {name}, finite difference: {e}"))?;
+                .with_context(|| format!("test {name}, finite difference"))?;
             p.set(&mut model, theta);
             let mut dmax = 0.0f64;
             let mut smax = 0.0f64;
