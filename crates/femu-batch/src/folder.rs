@@ -65,7 +65,7 @@ impl BatchDir {
                 self.0.display()
             );
         }
-        femu_study::output::read_json(&path)
+        Ok(femu_study::output::read_json(&path)?)
     }
 
     pub fn write_plan(&self, plan: &Plan) -> Result<()> {
@@ -78,7 +78,7 @@ impl BatchDir {
         if !path.exists() {
             return Ok(None);
         }
-        femu_study::output::read_json(&path).map(Some)
+        Ok(Some(femu_study::output::read_json(&path)?))
     }
 
     pub fn write_record(&self, record: &CaseRecord) -> Result<()> {

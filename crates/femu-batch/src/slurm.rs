@@ -148,7 +148,7 @@ impl Submissions {
         if !path.exists() {
             return Ok(Submissions::default());
         }
-        femu_study::output::read_json(&path)
+        Ok(femu_study::output::read_json(&path)?)
     }
 
     fn save(&self, dir: &BatchDir) -> Result<()> {

@@ -61,9 +61,10 @@ pub fn run_case(dir: &BatchDir, name: &str, progress: &dyn Progress) -> Result<C
             } else {
                 RecordStatus::Failed
             };
-            record.error = Some(format!("{e:#}"));
+            record.error = Some(e.chain());
         }
     }
     dir.write_record(&record)?;
-    result.map(|_| record)
+    result?;
+    Ok(record)
 }

@@ -342,14 +342,20 @@ fn main() -> ExitCode {
             out,
             full,
             elements,
-        } => run::demo(&out, full, elements, &progress).map(|_| ()),
-        Command::Run { study, out } => run::run(&study, &out, &progress).map(|_| ()),
+        } => run::demo(&out, full, elements, &progress)
+            .map(|_| ())
+            .map_err(Into::into),
+        Command::Run { study, out } => run::run(&study, &out, &progress)
+            .map(|_| ())
+            .map_err(Into::into),
         Command::Init { path, force } => init(&path, force, quiet),
-        Command::Report { dir } => femu_study::report::write(&dir).map(|p| {
-            if !quiet {
-                eprintln!("wrote {}", p.display());
-            }
-        }),
+        Command::Report { dir } => femu_study::report::write(&dir)
+            .map(|p| {
+                if !quiet {
+                    eprintln!("wrote {}", p.display());
+                }
+            })
+            .map_err(Into::into),
         Command::Forward {
             out,
             element,
@@ -357,7 +363,7 @@ fn main() -> ExitCode {
             tests,
         } => demo_tests(&tests).and_then(|t| {
             let kind = femu_study::schema::QuadElement::from(element).kind();
-            solve::forward(&out, kind, elements, &t, &progress)
+            Ok(solve::forward(&out, kind, elements, &t, &progress)?)
         }),
         Command::Solve {
             input,
@@ -372,7 +378,8 @@ fn main() -> ExitCode {
             newton_table,
             !no_figures,
             &progress,
-        ),
+        )
+        .map_err(Into::into),
         Command::Bench {
             out,
             elements,
@@ -385,7 +392,7 @@ fn main() -> ExitCode {
             out,
             elements,
         } => study_with(study.as_deref(), elements, None, None)
-            .and_then(|s| identify::synth(&s, &out, &progress)),
+            .and_then(|s| Ok(identify::synth(&s, &out, &progress)?)),
         Command::Identify {
             study,
             out,
@@ -393,8 +400,10 @@ fn main() -> ExitCode {
             elements,
             repeat,
             starts,
-        } => study_with(study.as_deref(), elements, repeat, starts)
-            .and_then(|s| identify::identify(&s, measured.as_deref(), &out, &progress).map(|_| ())),
+        } => study_with(study.as_deref(), elements, repeat, starts).and_then(|s| {
+            identify::identify(&s, measured.as_deref(), &out, &progress)?;
+            Ok(())
+        }),
         Command::Sensitivity {
             study,
             out,
@@ -423,8 +432,10 @@ fn main() -> ExitCode {
             study,
             out,
             elements,
-        } => study_with(study.as_deref(), elements, None, None)
-            .and_then(|s| femu_study::commands::design(&s, &out, &progress).map(|_| ())),
+        } => study_with(study.as_deref(), elements, None, None).and_then(|s| {
+            femu_study::commands::design(&s, &out, &progress)?;
+            Ok(())
+        }),
         Command::Convergence { study, out } => convergence_cmd::run(study.as_deref(), &out, quiet),
         Command::Dic(args) if args.then.is_empty() => dic_cmd::run(&args, quiet),
         Command::Dic(args) => dic_seq::run(&args, quiet),
@@ -438,7 +449,7 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) if femu_study::progress::is_interrupted(&e) => {
+        Err(e) if femu_study::progress::chain_is_interrupted(e.as_ref()) => {
             eprintln!("interrupted ({e:#}); what was finished is kept");
             ExitCode::from(130)
         }

@@ -99,7 +99,7 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
                 params_file: params,
                 element: element.into(),
             };
-            model::mesh_thigh(&req, &out, &progress)
+            Ok(model::mesh_thigh(&req, &out, &progress)?)
         }
         MeshCommand::Labels {
             image,
@@ -130,7 +130,7 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
                 min_island_mm2: min_island,
                 element: element.into(),
             };
-            model::mesh_labels(&req, &out, &progress)
+            Ok(model::mesh_labels(&req, &out, &progress)?)
         }
     }
 }

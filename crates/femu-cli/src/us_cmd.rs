@@ -86,7 +86,8 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
         levels: args.levels,
         steps: args.steps,
     };
-    ultrasound::sim(&study, &options, &args.out, &Terminal { quiet }).map(|_| ())
+    ultrasound::sim(&study, &options, &args.out, &Terminal { quiet })?;
+    Ok(())
 }
 
 /// `femu us-scan`: images of the unloaded built-in thigh over a grid of settings, with the
@@ -101,7 +102,12 @@ pub fn scan(args: &UsScanArgs, quiet: bool) -> Result<()> {
         correlation: args.correlation,
         subjects: args.subjects,
     };
-    ultrasound::scan(&study, &options, &args.out, &Terminal { quiet })
+    Ok(ultrasound::scan(
+        &study,
+        &options,
+        &args.out,
+        &Terminal { quiet },
+    )?)
 }
 
 /// Region options shared by us-settings and us-noise.

@@ -3,7 +3,7 @@
 //! mirror dataclasses of `python/femu/results.py`), and flat vectors out as NumPy arrays.
 
 use crate::errors;
-use anyhow::Context;
+use femu_study::error::Context;
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple};
@@ -129,7 +129,9 @@ pub fn floats(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
 /// A summary file checked against its typed struct (it must read back into the struct that
 /// wrote it), as its JSON text: the numbers exactly as written (shortest round-trip decimals,
 /// which Python's `json` reads back to the same doubles).
-pub fn read_typed<T: serde::de::DeserializeOwned>(path: &Path) -> anyhow::Result<String> {
+pub fn read_typed<T: serde::de::DeserializeOwned>(
+    path: &Path,
+) -> femu_study::error::Result<String> {
     let text =
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     femu_study::json::from_str::<T>(&text)

@@ -63,73 +63,27 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     Ok(())
 }
 
-/// The kind of a failure, from the first typed error of its chain (outermost first).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kind {
-    Study,
-    Input,
-    Solve,
-    Dic,
-    Identification,
-    Interrupted,
-    Other,
-}
-
-/// The kind of `e`.
-pub fn kind(e: &anyhow::Error) -> Kind {
-    if femu_study::progress::is_interrupted(e) {
-        return Kind::Interrupted;
-    }
-    for cause in e.chain() {
-        let is = |k: Kind| Some(k);
-        let found = if cause.is::<femu_study::StudyError>() {
-            is(Kind::Study)
-        } else if cause.is::<femu_mech::SolveError>() {
-            is(Kind::Solve)
-        } else if cause.is::<femu_dic::error::DicError>() {
-            is(Kind::Dic)
-        } else if cause.is::<femu_identify::fit::FitError>()
-            || cause.is::<femu_identify::campaign::CampaignError>()
-            || cause.is::<femu_identify::fisher::FisherError>()
-        {
-            match cause.downcast_ref::<femu_identify::fit::FitError>() {
-                Some(femu_identify::fit::FitError::Interrupted) => is(Kind::Interrupted),
-                _ => is(Kind::Identification),
-            }
-        } else if cause.is::<femu_identify::measured::MeasuredError>()
-            || cause.is::<femu_mesh::inp::InpError>()
-            || cause.is::<femu_mesh::msh::MshError>()
-            || cause.is::<femu_mesh::mesh::MeshError>()
-            || cause.is::<femu_geometry::GeometryError>()
-            || cause.is::<femu_mech::ModelError>()
-            || cause.is::<femu_mech::material::MaterialError>()
-            || cause.is::<femu_mech::loading::LoadingError>()
-            || cause.is::<std::io::Error>()
-        {
-            is(Kind::Input)
-        } else {
-            None
-        };
-        if let Some(k) = found {
-            return k;
-        }
-    }
-    Kind::Other
-}
-
-/// `e` as the Python exception of its kind, with the command line's message.
-pub fn to_py(e: anyhow::Error) -> PyErr {
-    let message = format!("{e:#}");
-    match kind(&e) {
-        Kind::Study => StudyError::new_err(message),
-        Kind::Input => InputError::new_err(message),
-        Kind::Solve => SolveError::new_err(message),
-        Kind::Dic => DicError::new_err(message),
-        Kind::Identification => IdentificationError::new_err(message),
-        Kind::Interrupted => {
+/// `e` as the Python exception of its kind ([`femu_study::Error::kind`]), with the command
+/// line's message. A computation that ends after a stop request is an interruption, also when
+/// a part of it reports the stop as its own failure.
+pub fn to_py(e: femu_study::Error) -> PyErr {
+    use femu_study::ErrorKind;
+    let message = e.chain();
+    let kind = if femu_study::progress::is_interrupted(&e) {
+        ErrorKind::Interrupted
+    } else {
+        e.kind()
+    };
+    match kind {
+        ErrorKind::Study => StudyError::new_err(message),
+        ErrorKind::Input => InputError::new_err(message),
+        ErrorKind::Solve => SolveError::new_err(message),
+        ErrorKind::Dic => DicError::new_err(message),
+        ErrorKind::Identification => IdentificationError::new_err(message),
+        ErrorKind::Interrupted => {
             PyKeyboardInterrupt::new_err(format!("{message}; what was finished is kept"))
         }
-        Kind::Other => FemuError::new_err(message),
+        ErrorKind::Other => FemuError::new_err(message),
     }
 }
 
@@ -138,12 +92,13 @@ pub fn input(message: impl Into<String>) -> PyErr {
     InputError::new_err(message.into())
 }
 
-/// `Result<T, anyhow::Error>` into a `PyResult<T>`.
+/// A femu result into a `PyResult<T>`: femu-study's errors, and the errors of the computing
+/// crates (each of which femu-study's error holds as its own kind).
 pub trait IntoPy<T> {
     fn py_err(self) -> PyResult<T>;
 }
 
-impl<T, E: Into<anyhow::Error>> IntoPy<T> for Result<T, E> {
+impl<T, E: Into<femu_study::Error>> IntoPy<T> for Result<T, E> {
     fn py_err(self) -> PyResult<T> {
         self.map_err(|e| to_py(e.into()))
     }

@@ -228,13 +228,13 @@ pub fn virtual_field(
 }
 
 /// Refuses a study whose measurements simulate ultrasound images (a whole run's work).
-fn no_ultrasound(study: &femu_study::schema::Study) -> anyhow::Result<()> {
+fn no_ultrasound(study: &femu_study::schema::Study) -> femu_study::error::Result<()> {
     if study
         .measurements
         .iter()
         .any(|m| m.source == MeasurementSource::Ultrasound)
     {
-        anyhow::bail!(
+        femu_study::bail!(
             "[measurement] source = \"ultrasound\": the images are simulated by Study.run or `femu us-sim`; give its measured.csv as a Field"
         );
     }
@@ -309,7 +309,7 @@ pub fn least_squares(
             None => {
                 no_ultrasound(study)?;
                 if study.measurements.len() > 1 {
-                    anyhow::bail!(
+                    femu_study::bail!(
                         "the study has {} measurements: LeastSquares fits one field (give it as arrays)",
                         study.measurements.len()
                     );
@@ -331,7 +331,7 @@ pub fn least_squares(
         let mut problem = Problem::new(model, SolverOptions::default(), &field, free.clone())?;
         if let Some(t) = p.travel {
             let Some(measured) = t.measured_mm else {
-                anyhow::bail!(
+                femu_study::bail!(
                     "[measurement] travel_sigma_mm without travel_mm: the virtual experiment's travel is drawn per repeat inside femu's identification; give travel_mm to use the actuator term here"
                 );
             };
@@ -370,7 +370,7 @@ impl PyLeastSquares {
             return Err(errors::input(format!("phi[{k}] is not finite")));
         }
         py.check_signals()?;
-        let out = py.detach(|| -> anyhow::Result<T> {
+        let out = py.detach(|| -> femu_study::error::Result<T> {
             let mut state = self.state.lock().unwrap_or_else(|p| p.into_inner());
             let hit = state.cached.as_ref().is_some_and(|c| c.phi == phi);
             if !hit {

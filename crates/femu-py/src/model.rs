@@ -7,11 +7,11 @@ use crate::convert;
 use crate::errors;
 use crate::running;
 use crate::study::PyStudy;
-use anyhow::Context;
 use femu_mech::loading::Loading;
 use femu_mech::material::Bound as LawBound;
 use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
 use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
+use femu_study::error::Context;
 use femu_study::model::StudyModel;
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -77,7 +77,7 @@ fn loaded(
     built: &StudyModel,
     load: &Loading,
     parameters: &[(Parameter, f64)],
-) -> anyhow::Result<Model> {
+) -> femu_study::error::Result<Model> {
     let mut model = built.loaded(load)?;
     for (p, v) in parameters {
         p.set(&mut model, *v);
@@ -119,7 +119,10 @@ fn loading(tests: &PyStudy, index: usize) -> PyResult<Loading> {
 }
 
 /// `model` (loaded) solved; each increment is a note.
-fn solve(model: &Model, progress: &dyn femu_study::Progress) -> anyhow::Result<Solution> {
+fn solve(
+    model: &Model,
+    progress: &dyn femu_study::Progress,
+) -> femu_study::error::Result<Solution> {
     let mut solver = StaticSolver::new(model, SolverOptions::default())?;
     let solution = solver.solve_with(model, None, &mut |rec| {
         progress.note(&format!(

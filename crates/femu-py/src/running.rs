@@ -125,7 +125,7 @@ fn next_event(py: Python<'_>, rx: Receiver<Event>) -> (Receiver<Event>, Option<E
 pub fn run<T: Send>(
     py: Python<'_>,
     reporter: Option<&Bound<'_, PyAny>>,
-    work: impl FnOnce(&dyn Progress) -> anyhow::Result<T> + Send,
+    work: impl FnOnce(&dyn Progress) -> femu_study::error::Result<T> + Send,
 ) -> PyResult<T> {
     let (tx, rx) = channel();
     let progress = ChannelProgress {
@@ -189,7 +189,7 @@ pub fn run<T: Send>(
         // own failure (a forward solve inside an optimizer start; the command line reads it the
         // same way: `femu_study::progress::is_interrupted`).
         (Some(e), Err(w)) if e.is_instance_of::<PyKeyboardInterrupt>(py) => Err(
-            PyKeyboardInterrupt::new_err(format!("{w:#}; what was finished is kept")),
+            PyKeyboardInterrupt::new_err(format!("{}; what was finished is kept", w.chain())),
         ),
         // The request came as the work finished: its results are whole.
         (Some(e), Ok(_)) if e.is_instance_of::<PyKeyboardInterrupt>(py) => {

@@ -219,7 +219,7 @@ fn forward_step(
     study: &Study,
     out: &Path,
     progress: &dyn femu_study::Progress,
-) -> anyhow::Result<String> {
+) -> femu_study::error::Result<String> {
     let t = Instant::now();
     let built = femu_study::model::build(&study.model)?;
     let read_s = t.elapsed().as_secs_f64();
@@ -275,22 +275,23 @@ pub fn read_run<'py>(py: Python<'py>, dir: PathBuf) -> PyResult<Bound<'py, PyDic
     if model.is_file() {
         d.set_item("model", read_typed::<ModelSummary>(&model).py_err()?)?;
     }
-    let per_folder = |sub: &str, read: fn(&Path) -> anyhow::Result<String>| -> PyResult<_> {
-        let folder = PyDict::new(py);
-        let Ok(entries) = std::fs::read_dir(dir.join(sub)) else {
-            return Ok(folder);
-        };
-        let mut names: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
-        names.sort();
-        for path in names {
-            let summary = path.join("summary.json");
-            if summary.is_file() {
-                let name = path.file_name().map(|n| n.to_string_lossy().to_string());
-                folder.set_item(name, read(&summary).py_err()?)?;
+    let per_folder =
+        |sub: &str, read: fn(&Path) -> femu_study::error::Result<String>| -> PyResult<_> {
+            let folder = PyDict::new(py);
+            let Ok(entries) = std::fs::read_dir(dir.join(sub)) else {
+                return Ok(folder);
+            };
+            let mut names: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+            names.sort();
+            for path in names {
+                let summary = path.join("summary.json");
+                if summary.is_file() {
+                    let name = path.file_name().map(|n| n.to_string_lossy().to_string());
+                    folder.set_item(name, read(&summary).py_err()?)?;
+                }
             }
-        }
-        Ok(folder)
-    };
+            Ok(folder)
+        };
     d.set_item(
         "forward",
         per_folder("forward", read_typed::<SolveSummary>)?,

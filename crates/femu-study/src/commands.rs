@@ -1,10 +1,10 @@
 //! Commands that run a pipeline step and then write its report: a layer above `steps` and
 //! `report`, so that the report, which reads the steps' summaries, is never called from a step.
 
+use crate::error::Result;
 use crate::progress::Progress;
 use crate::schema::Study;
 use crate::steps::design::{self, DesignSummary};
-use anyhow::Result;
 use std::path::Path;
 
 /// `femu design`: the study's model built, its designs ranked into `out`, and `report.html`

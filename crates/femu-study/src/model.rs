@@ -2,12 +2,13 @@
 //! materials (Table 1 or the deck's, with the study's `[materials]`), the femur fixed, no load
 //! yet; and the skin faces the loading tests act on.
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::schema::read_deck;
 use crate::schema::{
     Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
     DEFAULT_LABEL_SIZE_MM,
 };
-use anyhow::{bail, Context, Result};
 use femu_geometry::{MeshOptions, ThighModel};
 use femu_mech::loading::apply_loading;
 use femu_mech::model::{ModelSpec as MechSpec, NamedMaterial};

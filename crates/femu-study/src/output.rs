@@ -1,7 +1,7 @@
 //! Writing an output folder: files with the path in every error, each written whole or not at
 //! all (a temporary name renamed when complete: [`femu_mesh::atomic`]).
 
-use anyhow::{Context, Result};
+use crate::error::{Context, Result};
 use femu_mesh::atomic::AtomicFile;
 use serde::{Deserialize, Serialize};
 use std::path::Path;

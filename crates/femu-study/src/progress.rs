@@ -11,11 +11,29 @@ use std::sync::Arc;
 /// is [`femu_mesh::stop`], set by the command line's signal handler).
 pub use femu_mesh::stop::Interrupted;
 
-/// Whether an error is the end of an interruption: its chain holds [`Interrupted`], or the
-/// user asked to stop before it was returned (a computation that stopped midway may report
-/// the stop as its own failure, e.g. a forward solve inside an optimizer start).
-pub fn is_interrupted(e: &anyhow::Error) -> bool {
-    e.chain().any(|c| c.is::<Interrupted>()) || femu_mesh::stop::requested()
+/// Whether an error is the end of an interruption: it is of kind
+/// [`ErrorKind::Interrupted`](crate::ErrorKind::Interrupted) or its chain holds [`Interrupted`],
+/// or the user asked to stop before it was returned (a computation that stopped midway may
+/// report the stop as its own failure, e.g. a forward solve inside an optimizer start).
+pub fn is_interrupted(e: &crate::Error) -> bool {
+    chain_is_interrupted(e)
+}
+
+/// [`is_interrupted`] for any error chain (a caller's, which may hold femu-study's errors among
+/// others): a link is [`Interrupted`] or a femu-study error of that kind, or the user asked to
+/// stop.
+pub fn chain_is_interrupted(e: &(dyn std::error::Error + 'static)) -> bool {
+    let mut link = Some(e);
+    while let Some(c) = link {
+        if c.is::<Interrupted>()
+            || c.downcast_ref::<crate::Error>()
+                .is_some_and(crate::Error::is_interrupted)
+        {
+            return true;
+        }
+        link = c.source();
+    }
+    femu_mesh::stop::requested()
 }
 
 /// The user's side of a running computation.

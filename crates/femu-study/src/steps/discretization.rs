@@ -6,10 +6,10 @@
 
 use super::joint::{JointFit, TestModels};
 use super::measure::{Prepared, PreparedData};
+use crate::error::{Context, Result};
 use crate::model::{build_refined, CachedLevel, CheckMeshes, StudyModel};
 use crate::progress::Progress;
 use crate::schema::{Discretization, Geometry, Study};
-use anyhow::{Context, Result};
 use femu_identify::discretization::{self, DiscretizationCheck, Evaluated};
 use femu_identify::fit::{
     levenberg_marquardt, FitResult, FreeParameter, LeastSquares, LmOptions, Problem,
@@ -192,7 +192,7 @@ fn level_problem(
             segments: Vec::new(),
         });
     }
-    JointProblem::new(fit.free.clone(), blocks).map_err(|e| anyhow::anyhow!("{e}"))
+    JointProblem::new(fit.free.clone(), blocks).map_err(|e| crate::input!("{e}"))
 }
 
 /// The points of `field` inside every mesh of `models` (a point near the skin can fall outside

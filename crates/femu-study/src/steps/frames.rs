@@ -18,13 +18,14 @@
 //! The identification step writes `dic/` (DIC → FEMU on `measured.csv`) and, in its own folder,
 //! what `identify_images` writes (`parameters.csv`, residual maps, `summary.json`).
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, read_json, write_json};
 use crate::progress::Progress;
 use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
 use crate::schema::{Measurement, Study};
 use crate::steps::images::{identify_images, ImageRouteOptions, ImageSequence};
-use anyhow::{bail, Context, Result};
 use femu_dic::GreyImage;
 use femu_identify::idic::ImageFrame;
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
@@ -102,7 +103,7 @@ pub fn placement(
     match &spec.placement {
         Some(p) => Ok((
             ImageFrame::new(p.origin_mm, s, p.x_axis, p.y_axis)
-                .map_err(|e| anyhow::anyhow!("[measurement] frame keys: {e}"))?,
+                .map_err(|e| crate::input!("[measurement] frame keys: {e}"))?,
             "[measurement] origin_mm, x_axis, y_axis".into(),
         )),
         None => {
@@ -137,7 +138,7 @@ pub fn measure(
     create_dir(out)?;
     let resolved = spec
         .resolve()
-        .map_err(|e| anyhow::anyhow!("[measurement] {}: {}", e.key, e.message))?;
+        .map_err(|e| crate::input!("[measurement] {}: {}", e.key, e.message))?;
     let test = &study.tests[m.test];
     let force = test_force(test).context("the frames' test has no force")?;
     let frames = read_frames(&resolved)?;
@@ -174,10 +175,11 @@ pub fn measure(
     ));
     let dic = match sequence_dic(&frames, &placement, out, progress) {
         Ok(d) => Some(d),
-        Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+        Err(e) if e.is_interrupted() => return Err(e),
         Err(e) => {
             let note = format!(
-                "the DIC of the sequence failed ({e:#}): the identification starts from the Latin-hypercube starts alone, from which the grey levels may not capture the motion"
+                "the DIC of the sequence failed ({}): the identification starts from the Latin-hypercube starts alone, from which the grey levels may not capture the motion",
+                e.chain()
             );
             progress.warn(&note);
             notes.push(note);

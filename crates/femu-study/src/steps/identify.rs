@@ -15,11 +15,11 @@ use super::discretization;
 use super::joint::{self, FitFailure, JointFit, TestModels};
 use super::measure::{self, Measured, Prepared, PreparedData};
 use super::parameters::free_parameters;
+use crate::error::{Kept, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::{Discretization, MeasurementSource, Study, Weighting};
-use anyhow::Result;
 use femu_identify::campaign::{self, CampaignOptions, Estimate, Event, StartRecord};
 use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::error_model::{self, ErrorModel};
@@ -182,16 +182,16 @@ pub fn identify(
     if let Err(e) = &result {
         if crate::progress::is_interrupted(e) {
             // Stopped before a summary was written: one that says so.
-            let kept: &[&str] = match e.downcast_ref::<Stopped>() {
-                Some(Stopped::RepeatsKept(_)) => return result,
-                Some(Stopped::BeforeARepeat(_)) => &["starts.csv"],
-                None => &[],
+            let kept: Vec<&str> = match e.kept() {
+                Some(Kept::Summary) => return result,
+                Some(Kept::Files(files)) => files.iter().map(String::as_str).collect(),
+                None => Vec::new(),
             };
             crate::output::write_stopped(
                 out,
                 "identify",
-                &format!("{e:#}"),
-                kept,
+                &e.chain(),
+                &kept,
                 t0.elapsed().as_secs_f64(),
             )?;
         }
@@ -215,7 +215,7 @@ fn identify_measured(
         .any(|m| m.source == MeasurementSource::Ultrasound)
         && measured.is_none()
     {
-        anyhow::bail!(
+        crate::bail!(
             "[measurement] source = \"ultrasound\": `femu run` identifies from the images (integrated DIC, beside DIC -> FEMU); for DIC -> FEMU alone, simulate the images with `femu us-sim` and pass its measured.csv with --measured (its measured_covariance.mtx as [measurement] covariance for the weighted fit)"
         );
     }
@@ -254,7 +254,7 @@ fn identify_measured(
 /// --measured`'s data.
 pub fn measured_prepared(study: &Study, measured: Measured, what: &str) -> Result<Vec<Prepared>> {
     if study.measurements.len() > 1 {
-        anyhow::bail!(
+        crate::bail!(
             "--measured replaces the one measurement of a study, and this study has {}: name the file in its [[measurement]]",
             study.measurements.len()
         );
@@ -448,12 +448,13 @@ fn fit_once(
         )) => {
             if finished.best.is_empty() {
                 write_starts_csv(&out.join("starts.csv"), &free, &finished.starts)?;
-                return Err(anyhow::Error::new(crate::progress::Interrupted).context(
-                    Stopped::BeforeARepeat(format!(
+                return Err(crate::Error::stopped(
+                    format!(
                         "identification: no repeat finished ({} finished starts in {})",
                         finished.starts.len(),
                         out.join("starts.csv").display()
-                    )),
+                    ),
+                    Kept::Files(vec!["starts.csv".into()]),
                 ));
             }
             let (_, reference) = free_parameters(study, &models.full[0], grouped)?;
@@ -477,7 +478,7 @@ fn fit_once(
             // What finished is kept: every start's outcome.
             write_starts_csv(&out.join("starts.csv"), &free, &starts)?;
             Err(
-                anyhow::Error::new(campaign::CampaignError::AllStartsFailed {
+                crate::Error::from(campaign::CampaignError::AllStartsFailed {
                     repeat,
                     reasons,
                     starts,
@@ -814,22 +815,12 @@ pub fn identify_on(
         summary.wall_time_s
     ));
     if let Some(note) = &summary.interrupted {
-        return Err(anyhow::Error::new(crate::progress::Interrupted).context(
-            Stopped::RepeatsKept(format!("identification: {note} in {}", out.display())),
+        return Err(crate::Error::stopped(
+            format!("identification: {note} in {}", out.display()),
+            Kept::Summary,
         ));
     }
     Ok(summary)
-}
-
-/// How an identification stopped by the user ended (the context of its error).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-enum Stopped {
-    /// Before a repeat finished: `starts.csv` holds the starts that finished.
-    #[error("{0}")]
-    BeforeARepeat(String),
-    /// After some repeats: their results are written (summary.json says so).
-    #[error("{0}")]
-    RepeatsKept(String),
 }
 
 /// `errors.png`, `cost_history.png` and the field figure of each measurement (`fields.png`,

@@ -16,13 +16,14 @@
 //!   the unloaded image;
 //! - `summary.json` — [`ImageIdentificationSummary`].
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::output::{create_dir, read_json, write_json};
 use crate::progress::Progress;
 use crate::schema::Study;
 use crate::steps::identify::FreeParameterSummary;
 use crate::steps::parameters::free_parameters;
 use crate::steps::ultrasound::SimSummary;
-use anyhow::{bail, Context, Result};
 use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
 use femu_identify::fit::FreeParameter;
@@ -418,20 +419,20 @@ pub struct MeshCorrection {
 
 /// An optimizer's error as the step's: a stop request becomes [`crate::progress::Interrupted`]
 /// (what `femu run` keeps finished work for).
-fn fit_error(e: femu_identify::fit::FitError) -> anyhow::Error {
+fn fit_error(e: femu_identify::fit::FitError) -> crate::Error {
     match e {
         femu_identify::fit::FitError::Interrupted => {
-            anyhow::Error::new(crate::progress::Interrupted)
+            crate::Error::from(crate::progress::Interrupted)
         }
-        e => anyhow::Error::new(e),
+        e => crate::Error::from(e),
     }
 }
 
 /// [`fit_error`] for an integrated-DIC run's error.
-fn run_error(e: idic::IdicRunError) -> anyhow::Error {
+fn run_error(e: idic::IdicRunError) -> crate::Error {
     match e {
-        idic::IdicRunError::Interrupted => anyhow::Error::new(crate::progress::Interrupted),
-        e => anyhow::Error::new(e),
+        idic::IdicRunError::Interrupted => crate::Error::from(crate::progress::Interrupted),
+        e => crate::Error::from(e),
     }
 }
 
@@ -669,10 +670,11 @@ pub fn identify_images(
     } else if !route.mesh_correction {
         match discretization_shift(study, seq, &problem, &moving_parameters(&free, &outcome)) {
             Ok(m) => Some(m),
-            Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+            Err(e) if e.is_interrupted() => return Err(e),
             Err(e) => {
                 notes.push(format!(
-                    "the discretization check failed ({e:#}): the intervals leave the mesh's error out"
+                    "the discretization check failed ({}): the intervals leave the mesh's error out",
+                    e.chain()
                 ));
                 None
             }
@@ -700,10 +702,11 @@ pub fn identify_images(
                 ));
                 Some(m)
             }
-            Err(e) if e.is::<crate::progress::Interrupted>() => return Err(e),
+            Err(e) if e.is_interrupted() => return Err(e),
             Err(e) => {
                 notes.push(format!(
-                    "the discretization correction failed ({e:#}): the estimate is the mesh's own and the intervals leave the mesh's error out"
+                    "the discretization correction failed ({}): the estimate is the mesh's own and the intervals leave the mesh's error out",
+                    e.chain()
                 ));
                 None
             }

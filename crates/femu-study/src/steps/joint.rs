@@ -4,10 +4,10 @@
 
 use super::measure::{Prepared, PreparedData};
 use super::parameters::free_parameters;
+use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::progress::Progress;
 use crate::schema::Study;
-use anyhow::{Context, Result};
 use femu_identify::campaign::{
     self, BlockSpec, Campaign, CampaignOptions, Data, Event, FieldBlock,
 };
@@ -152,7 +152,7 @@ pub fn fit(
 /// write what finished).
 #[derive(Debug)]
 pub enum FitFailure {
-    Setup(anyhow::Error),
+    Setup(crate::Error),
     Campaign(campaign::CampaignError, Vec<FreeParameter>),
 }
 

@@ -2,10 +2,11 @@
 //! (the `[grid]`, or a probe window's grid), a file's field in the model frame, or the DIC of
 //! simulated B-mode images of its window. The identification (`identify_on`) fits them all.
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::progress::Progress;
 use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
-use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, TravelTerm};
 use femu_identify::measured::{DeclaredUnits, MeasuredField};
 use femu_identify::weighted::FieldCovariance;
@@ -68,7 +69,7 @@ impl Prepared {
 /// The points of a probe window in the tissue of `built` (on the side of `w`, its width and
 /// depth, a grid `spacing_mm` apart centred in it), and the number of grid points.
 pub fn window_points(built: &StudyModel, w: &WindowSpec) -> Result<(Vec<[f64; 2]>, usize)> {
-    let side = Side::parse(&w.side).map_err(|e| anyhow::anyhow!("window side: {e}"))?;
+    let side = Side::parse(&w.side).map_err(|e| crate::input!("window side: {e}"))?;
     // The probe's image is only used for its frame: 10 px/mm keeps it within its limits.
     let probe = femu_ultrasound::probe::probe_on_skin(
         &built.model.mesh,
@@ -193,7 +194,7 @@ pub fn read_measured(
     let all = MeasuredField::read(path)?;
     let declared = all
         .declared_units()
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        .map_err(|e| crate::input!("{}: {e}", path.display()))?;
     match declared {
         Some(DeclaredUnits::Px) if !frame.pixels => bail!(
             "{}: the file says its coordinates are pixels ('# units: px': no pixel size was known when it was written), and the study reads it in mm: give [measurement] units = \"px\" with pixel_size_mm (and origin_mm, x_axis, y_axis to place the image in the model)",
@@ -227,7 +228,7 @@ pub fn read_measured(
             };
             // Checked here, where the file can be named, not first at the fit.
             femu_identify::weighted::Whitening::new(&cov).map_err(|e| {
-                anyhow::anyhow!(
+                crate::input!(
                     "[measurement] covariance {}: {e} (of the {} points of {} that weigh something)",
                     c.display(),
                     kept.len(),

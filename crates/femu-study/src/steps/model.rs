@@ -10,11 +10,12 @@
 //!
 //! or, for a deck, its mesh with the materials (VTU), the element quality and a summary.
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json, write_text};
 use crate::progress::Progress;
 use crate::schema::{Geometry, QuadElement};
-use anyhow::{bail, Context, Result};
 use femu_geometry::{
     contention_deck, mesh_label_image, parametric_thigh, quality_report, read_label_image,
     table1_materials, write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec,

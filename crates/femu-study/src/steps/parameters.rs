@@ -2,8 +2,8 @@
 //! the fixed ones left out, bounds from `[identification] bounds_factor`. Shared by the
 //! identification, the joint fit, the measurement and the design steps.
 
+use crate::error::Result;
 use crate::schema::Study;
-use anyhow::Result;
 use femu_identify::campaign;
 use femu_identify::fit::FreeParameter;
 use femu_mech::Model;
@@ -29,7 +29,7 @@ pub fn free_parameters(
         campaign::CampaignError::UnknownParameter { .. }
         | campaign::CampaignError::PartlyFixed(_)
         | campaign::CampaignError::NothingFree => {
-            anyhow::anyhow!("[identification] fixed: {e}")
+            crate::input!("[identification] fixed: {e}")
         }
         e => e.into(),
     })

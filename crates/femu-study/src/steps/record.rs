@@ -1,8 +1,8 @@
 //! The record of a run (`steps.json`): every step's status and time, written after each step so
 //! that a run that stops keeps an account of what it finished.
 
+use crate::error::Result;
 use crate::output::write_json;
-use anyhow::Result;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 use std::time::Instant;

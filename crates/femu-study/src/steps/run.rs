@@ -23,11 +23,12 @@ use super::measure;
 use super::record::{begin, finish, skip, RunRecord};
 use super::sensitivity::{self, SensitivityOptions};
 use super::solve::{write_solved, SolveContext};
+use crate::bail;
+use crate::error::Result;
 use crate::model::{build, StudyModel};
 use crate::output::{create_dir, write_text};
 use crate::progress::Progress;
 use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
-use anyhow::{bail, Result};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use std::path::Path;
 use std::time::Instant;
@@ -60,9 +61,9 @@ pub fn demo(
 ) -> Result<RunRecord> {
     let n = elements.unwrap_or(if full { FULL_ELEMENTS } else { DEMO_ELEMENTS });
     schema::thigh_elements(&femu_geometry::ThighParams::default(), n)
-        .map_err(|m| anyhow::anyhow!("--elements: {m}"))?;
+        .map_err(|m| crate::input!("--elements: {m}"))?;
     let text = demo_study(n);
-    let study = schema::parse(&text, out).map_err(|e| anyhow::anyhow!("the demo study: {e}"))?;
+    let study = schema::parse(&text, out).map_err(|e| crate::input!("the demo study: {e}"))?;
     if study.model.resolution != schema::Resolution::Elements(n)
         || (n > 6000) != study.identification.coarse_elements.is_some()
     {
@@ -137,7 +138,7 @@ fn own_folder(out: &Path, study_file: Option<&Path>) -> Result<()> {
             std::fs::remove_file(&path)
         };
         removed.map_err(|e| {
-            anyhow::anyhow!("cannot clear {} of the earlier run: {e}", path.display())
+            crate::input!("cannot clear {} of the earlier run: {e}", path.display())
         })?;
     }
     Ok(())
@@ -180,7 +181,7 @@ pub fn run_study(
             Some(last) if last.status == "running" => {
                 last.status = if interrupted { "interrupted" } else { "failed" }.into();
                 last.seconds = seconds;
-                last.error = Some(format!("{e:#}"));
+                last.error = Some(e.chain());
             }
             // Stopped between two steps: the record says where.
             _ if interrupted => record.steps.push(super::record::StepRecord {
@@ -399,7 +400,7 @@ fn forward_and_sensitivity(
                     ts.elapsed().as_secs_f64(),
                 )?,
                 Err(femu_mech::SolveError::Interrupted(stop)) => {
-                    return Err(anyhow::Error::new(stop).context("forward tests"))
+                    return Err(crate::Error::from(stop).context("forward tests"))
                 }
                 Err(e) => {
                     let why = format!(

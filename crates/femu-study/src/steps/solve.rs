@@ -1,9 +1,9 @@
 //! One solve and its output folder: `displacements.csv`, `result.vtu`, contact results,
 //! pictures and `summary.json` (conventions.md: `femu solve DECK.inp --out DIR`).
 
+use crate::error::{Context, Result};
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
-use anyhow::{Context, Result};
 use femu_mech::output::{peak_memory_mb, write_displacements_csv, write_result_vtu};
 use femu_mech::solver::IncrementRecord;
 use femu_mech::{Model, Solution, SolveError, SolveReport, SolverOptions, StaticSolver};
@@ -272,7 +272,7 @@ pub fn write_solved(
     }
     match error {
         None => Ok(()),
-        Some(e) => Err(anyhow::Error::new(e).context(format!(
+        Some(e) => Err(crate::Error::from(e).context(format!(
             "the solve stopped at load factor {:.4}; the last converged state is in {}",
             r.lambda,
             out.display()
@@ -400,7 +400,7 @@ pub fn solve_file(
     let model = match ext.as_str() {
         "inp" => {
             if study_file.is_some() {
-                anyhow::bail!(
+                crate::bail!(
                     "--study is for .msh inputs; a deck carries its own materials and loads"
                 );
             }
@@ -409,7 +409,7 @@ pub fn solve_file(
         }
         "msh" => {
             let Some(sf) = study_file else {
-                anyhow::bail!(
+                crate::bail!(
                     "{name}: a Gmsh mesh needs --study STUDY.toml naming materials and loads"
                 );
             };
@@ -417,7 +417,7 @@ pub fn solve_file(
             crate::model::gmsh_model(&study, input)
                 .with_context(|| format!("setting up {name} with {}", sf.display()))?
         }
-        _ => anyhow::bail!("{name}: unknown input type (expected .inp or .msh)"),
+        _ => crate::bail!("{name}: unknown input type (expected .inp or .msh)"),
     };
     let read_s = t0.elapsed().as_secs_f64();
     solve_model(

@@ -2,12 +2,13 @@
 //! source = "ultrasound"` of `femu run`): B-mode images of the thigh under the study's
 //! `[probe]` and `[ultrasound]`, everything numerical in `femu-ultrasound`.
 
+use crate::bail;
+use crate::error::{Context, Result};
 use crate::output::create_dir;
 use crate::progress::Progress;
 use crate::schema::{
     Geometry, ModelSpec, ProbeSection, Resolution, Study, DEFAULT_ELEMENTS, DEFAULT_LABEL_SIZE_MM,
 };
-use anyhow::{bail, Context, Result};
 use femu_dic::{Brightness, DicOptions};
 use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::{apply_loading, Side};
@@ -63,7 +64,7 @@ pub fn place_probe(
     skin: &[(usize, usize)],
     section: &ProbeSection,
 ) -> Result<Probe> {
-    let side = Side::parse(&section.side).map_err(|e| anyhow::anyhow!("[probe] side: {e}"))?;
+    let side = Side::parse(&section.side).map_err(|e| crate::input!("[probe] side: {e}"))?;
     Ok(probe::probe_on_skin(
         mesh,
         skin,
@@ -207,7 +208,7 @@ pub fn sim(
         let sol = solver
             .solve_with(&m, stages.last().map(|v| v.as_slice()), &mut |_| {})
             .map_err(|e| {
-                anyhow::anyhow!(
+                crate::input!(
                     "test {} at {}/{} of the load: {e}",
                     test.name(),
                     k + 1,
