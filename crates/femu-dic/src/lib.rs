@@ -9,7 +9,9 @@
 //! - [`mesh`]: ROI (rectangle or mask) and the structured Q4 mesh ([`DicMesh`]).
 //! - [`bspline`]: cubic B-spline interpolation of the deformed image.
 //! - [`solver`]: modified Gauss–Newton with the sparse Hessian factorized once
-//!   ([`correlate`]), pyramid and FFT initialization, Tikhonov regularization.
+//!   ([`correlate`]), pyramid and FFT initialization.
+//! - [`regularize`]: the regularization behind the [`regularize::Regularizer`] trait (the
+//!   Laplacian penalty of a regularization length).
 //! - [`output`]: model frame (mm), the measured-field CSV of `conventions.md`, nodal CSV, VTU.
 //! - [`lab`]: the virtual lab (speckle images warped by known displacement fields).
 //! - [`noise`]: random error from pairs of images of an unloaded specimen.
@@ -35,6 +37,7 @@ pub mod noise;
 pub mod output;
 pub mod quality;
 pub mod read;
+pub mod regularize;
 pub mod selected;
 pub mod sequence;
 pub mod solver;

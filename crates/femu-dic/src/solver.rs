@@ -28,7 +28,8 @@
 //! affine fields are not penalized), is added to (1), giving `(M + λK) δa = b − λ K a`. The
 //! weight follows Tomičević, Hild & Roux (2013): `λ = vᵀMv / vᵀKv` for a plane wave `v` of the
 //! regularization length `ℓ`, so that waves shorter than `ℓ` are damped (as `(ℓ/λ_w)⁴`) and
-//! longer ones are left to the images.
+//! longer ones are left to the images. The penalty is a [`crate::regularize::Regularizer`]
+//! ([`crate::regularize::Laplacian`] here), which gives the system `K` and `λ`.
 //!
 //! **Initialization**: an integer shift from FFT phase correlation on the coarsest level of a
 //! 2x2 image pyramid, then Gauss–Newton on each level from coarse to fine, each level
@@ -421,19 +422,9 @@ impl Level {
                 }
             }
         }
-        let laplacian = if reg_length.is_some() {
-            laplacian_rows(&mesh)
-        } else {
-            Vec::new()
-        };
-        for row in &laplacian {
-            for &(p, _) in row {
-                for &(q, _) in row {
-                    for c in 0..2 {
-                        pairs.push((2 * p + c, 2 * q + c));
-                    }
-                }
-            }
+        let regularizer = crate::regularize::regularizer_for(&mesh, reg_length);
+        if let Some(r) = &regularizer {
+            r.pattern_pairs(&mut pairs);
         }
         let pattern = femu_sparse::CscPattern::from_pairs(n_eq, &mut pairs);
         let mut m_values = vec![0.0; pattern.nnz()];
@@ -447,39 +438,11 @@ impl Level {
                 }
             }
         }
-        let reg = match reg_length {
-            None => None,
-            Some(ell) => {
-                let mut k_values = vec![0.0; pattern.nnz()];
-                for row in &laplacian {
-                    for &(p, wp) in row {
-                        for &(q, wq) in row {
-                            for c in 0..2 {
-                                let pos = pattern
-                                    .position(2 * p + c, 2 * q + c)
-                                    .expect("Laplacian entry in the pattern");
-                                k_values[pos] += wp * wq;
-                            }
-                        }
-                    }
-                }
-                // λ from a plane wave of wavelength ℓ (ux varying along x, uy along y).
-                let k = std::f64::consts::TAU / ell;
-                let v: Vec<f64> = (0..n_eq)
-                    .map(|q| {
-                        let p = mesh.nodes[q / 2];
-                        (k * p[q % 2]).sin()
-                    })
-                    .collect();
-                let vkv = crate::sparse::quadratic_form(&pattern, &k_values, &v);
-                let vmv = crate::sparse::quadratic_form(&pattern, &m_values, &v);
-                if laplacian.is_empty() || !(vkv > 0.0) {
-                    None
-                } else {
-                    Some((k_values, vmv / vkv))
-                }
-            }
-        };
+        let reg = regularizer.and_then(|r| {
+            let k_values = r.k_values(&pattern);
+            r.weight(&pattern, &m_values, &k_values)
+                .map(|lambda| (k_values, lambda))
+        });
         let a_values: Vec<f64> = match &reg {
             None => m_values.clone(),
             Some((kv, lambda)) => m_values
@@ -822,38 +785,6 @@ fn noise_matrices(level: &Level, variance: &[f64], rho: &ResidualCorrelation) ->
             m
         })
         .collect()
-}
-
-/// Rows of the regularization operator `L`: the 5-point Laplacian (weights `−4, 1, 1, 1, 1`)
-/// at the nodes whose four neighbours are nodes, and at the other nodes the 1D second
-/// difference (`1, −2, 1`) along each grid direction in which both neighbours exist (so edge
-/// and corner nodes are regularized too). Affine fields are in the kernel of every row.
-fn laplacian_rows(mesh: &DicMesh) -> Vec<Vec<(usize, f64)>> {
-    let w = mesh.nx + 1;
-    let at = |i: isize, j: isize| {
-        if i < 0 || j < 0 || i > mesh.nx as isize || j > mesh.ny as isize {
-            usize::MAX
-        } else {
-            mesh.grid_node[j as usize * w + i as usize]
-        }
-    };
-    let mut rows = Vec::new();
-    for (n, &(i, j)) in mesh.node_grid.iter().enumerate() {
-        let (i, j) = (i as isize, j as isize);
-        let (l, r, d, u) = (at(i - 1, j), at(i + 1, j), at(i, j - 1), at(i, j + 1));
-        let ok = |q: usize| q != usize::MAX;
-        if ok(l) && ok(r) && ok(d) && ok(u) {
-            rows.push(vec![(n, -4.0), (l, 1.0), (r, 1.0), (d, 1.0), (u, 1.0)]);
-            continue;
-        }
-        if ok(l) && ok(r) {
-            rows.push(vec![(n, -2.0), (l, 1.0), (r, 1.0)]);
-        }
-        if ok(d) && ok(u) {
-            rows.push(vec![(n, -2.0), (d, 1.0), (u, 1.0)]);
-        }
-    }
-    rows
 }
 
 /// Number of automatic pyramid levels: up to 2 while the reduced ROI holds 2 x 2 elements.
