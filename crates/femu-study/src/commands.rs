@@ -11,7 +11,8 @@ use std::path::Path;
 /// with the design section.
 pub fn design(study: &Study, out: &Path, progress: &dyn Progress) -> Result<DesignSummary> {
     let built = crate::model::build(&study.model)?;
-    let summary = design::run_on(study, &built, out, progress)?;
+    let inputs = design::DesignInputs::of(study, &built)?;
+    let summary = design::run_on(&inputs, &built, out, progress)?;
     let report = crate::report::write_design(out)?;
     progress.note(&format!("wrote {}", report.display()));
     Ok(summary)

@@ -52,61 +52,68 @@ pub(crate) fn write_solve_figures(
     )
     .with_context(|| format!("cannot draw {}", path.display()))?;
     for (b, dir) in body_dirs.iter().enumerate() {
-        let c = &model.contacts[b];
-        let mut profile: Vec<(f64, f64)> = femu_mech::output::contact_profile(model, solution, b)
-            .iter()
-            .map(|p| (p.angle_deg, 1e3 * p.pressure))
-            .collect();
-        profile.sort_by(|a, b| a.0.total_cmp(&b.0));
-        // Zoom on the contact zone (with a margin of a few nodes on each side).
-        let active: Vec<f64> = profile.iter().filter(|p| p.1 > 0.0).map(|p| p.0).collect();
-        let x_range = match (
-            active.iter().copied().reduce(f64::min),
-            active.iter().copied().reduce(f64::max),
-        ) {
-            (Some(a), Some(z)) => {
-                let m = (0.3 * (z - a)).max(2.0);
-                Some((a - m, z + m))
-            }
-            _ => None,
-        };
-        let path = dir.join("contact_pressure.png");
-        line_plot_png(
-            &path,
-            &[Series::new(
-                "contact pressure",
-                profile,
-                LineStyle::LineAndMarkers,
-            )],
-            &LinePlot {
-                title: format!("{}: contact pressure along the skin", c.name),
-                x_label: "position around the section centre (deg)".into(),
-                y_label: "contact pressure (kPa)".into(),
-                x_range,
-                ..Default::default()
-            },
-        )
-        .with_context(|| format!("cannot draw {}", path.display()))?;
-        let mut curve = vec![(0.0, 0.0)];
-        curve.extend(
-            solution
-                .report
-                .force_travel(b)
-                .into_iter()
-                .map(|[t, f]| (t, f)),
-        );
-        let path = dir.join("force_displacement.png");
-        line_plot_png(
-            &path,
-            &[Series::new(&c.name, curve, LineStyle::LineAndMarkers)],
-            &LinePlot {
-                title: format!("{}: force against travel beyond first contact", c.name),
-                x_label: "travel (mm)".into(),
-                y_label: "force (N per mm of thickness)".into(),
-                ..Default::default()
-            },
-        )
-        .with_context(|| format!("cannot draw {}", path.display()))?;
+        write_body_figures(dir, model, solution, b)?;
     }
+    Ok(())
+}
+
+/// Writes `contact_pressure.png` (zoomed on the contact zone) and `force_displacement.png` of
+/// rigid body `b` into `dir`.
+fn write_body_figures(dir: &Path, model: &Model, solution: &Solution, b: usize) -> Result<()> {
+    let c = &model.contacts[b];
+    let mut profile: Vec<(f64, f64)> = femu_mech::output::contact_profile(model, solution, b)
+        .iter()
+        .map(|p| (p.angle_deg, 1e3 * p.pressure))
+        .collect();
+    profile.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Zoom on the contact zone (with a margin of a few nodes on each side).
+    let active: Vec<f64> = profile.iter().filter(|p| p.1 > 0.0).map(|p| p.0).collect();
+    let x_range = match (
+        active.iter().copied().reduce(f64::min),
+        active.iter().copied().reduce(f64::max),
+    ) {
+        (Some(a), Some(z)) => {
+            let m = (0.3 * (z - a)).max(2.0);
+            Some((a - m, z + m))
+        }
+        _ => None,
+    };
+    let path = dir.join("contact_pressure.png");
+    line_plot_png(
+        &path,
+        &[Series::new(
+            "contact pressure",
+            profile,
+            LineStyle::LineAndMarkers,
+        )],
+        &LinePlot {
+            title: format!("{}: contact pressure along the skin", c.name),
+            x_label: "position around the section centre (deg)".into(),
+            y_label: "contact pressure (kPa)".into(),
+            x_range,
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("cannot draw {}", path.display()))?;
+    let mut curve = vec![(0.0, 0.0)];
+    curve.extend(
+        solution
+            .report
+            .force_travel(b)
+            .into_iter()
+            .map(|[t, f]| (t, f)),
+    );
+    let path = dir.join("force_displacement.png");
+    line_plot_png(
+        &path,
+        &[Series::new(&c.name, curve, LineStyle::LineAndMarkers)],
+        &LinePlot {
+            title: format!("{}: force against travel beyond first contact", c.name),
+            x_label: "travel (mm)".into(),
+            y_label: "force (N per mm of thickness)".into(),
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("cannot draw {}", path.display()))?;
     Ok(())
 }

@@ -559,23 +559,7 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
         .map(|l| format!("<li>{}</li>", esc(l)))
         .collect();
     let _ = write!(html.body, "<ul>{items}</ul>");
-    if let Some(first) = s.tests.first() {
-        let mut header = vec!["test".to_string()];
-        header.extend(first.sensitivity_index.iter().map(|p| p.0.clone()));
-        header.push("sensitivities / solve".into());
-        let rows: Vec<Vec<String>> = s
-            .tests
-            .iter()
-            .map(|t| {
-                let mut r = vec![t.test.clone()];
-                r.extend(t.sensitivity_index.iter().map(|p| g(p.1)));
-                r.push(format!("{:.0} %", 100.0 * t.sensitivity_over_solve));
-                r
-            })
-            .collect();
-        let h: Vec<&str> = header.iter().map(String::as_str).collect();
-        html.table(&h, &rows);
-    }
+    test_sensitivity_table(html, &s.tests);
     html.figure(
         &dir.join("sensitivity_index.png"),
         "Global sensitivity index of each parameter in each test (Eq. 3).",
@@ -591,6 +575,57 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
     );
     law_parameters_table(html, &s.law_parameters);
     html.h3("Which test to measure: predicted parameter errors (Cramér–Rao)");
+    ranking_table(html, &s);
+    Some(SensitivityOverview {
+        finding: s.finding,
+        ranking: s
+            .ranking
+            .into_iter()
+            .map(|x| RankingOverview {
+                measurement: x.measurement,
+                grouping: x.grouping,
+                worst_c10_relative_sd: x.worst_c10_relative_sd,
+                worst_d_relative_sd: x.worst_d_relative_sd,
+                worst_relative_sd: x.worst_relative_sd,
+            })
+            .collect(),
+        tests: s
+            .tests
+            .into_iter()
+            .map(|x| TestOverview {
+                test: x.test,
+                sensitivity_index: x.sensitivity_index,
+                sensitivity_over_solve: x.sensitivity_over_solve,
+            })
+            .collect(),
+        parameters: s.law_parameters,
+    })
+}
+
+/// The global sensitivity index of each parameter in each test, and the cost of the
+/// sensitivities against the solve's.
+fn test_sensitivity_table(html: &mut Html, tests: &[crate::steps::sensitivity::TestSummary]) {
+    if let Some(first) = tests.first() {
+        let mut header = vec!["test".to_string()];
+        header.extend(first.sensitivity_index.iter().map(|p| p.0.clone()));
+        header.push("sensitivities / solve".into());
+        let rows: Vec<Vec<String>> = tests
+            .iter()
+            .map(|t| {
+                let mut r = vec![t.test.clone()];
+                r.extend(t.sensitivity_index.iter().map(|p| g(p.1)));
+                r.push(format!("{:.0} %", 100.0 * t.sensitivity_over_solve));
+                r
+            })
+            .collect();
+        let h: Vec<&str> = header.iter().map(String::as_str).collect();
+        html.table(&h, &rows);
+    }
+}
+
+/// The predicted parameter errors (Cramér–Rao) of each measurement, per grouping: the worst
+/// relative sd of each family of law parameters.
+fn ranking_table(html: &mut Html, s: &SensitivitySummary) {
     // The families of law parameters (C10, C20, C01, D, ...); a summary written before they
     // were listed has C10 and D.
     let mut families: Vec<String> = Vec::new();
@@ -643,30 +678,6 @@ fn sensitivity_section(html: &mut Html, dir: &Path) -> Option<SensitivityOvervie
     header.extend(worst_headers.iter().map(String::as_str));
     header.push("condition number");
     html.table(&header, &rows);
-    Some(SensitivityOverview {
-        finding: s.finding,
-        ranking: s
-            .ranking
-            .into_iter()
-            .map(|x| RankingOverview {
-                measurement: x.measurement,
-                grouping: x.grouping,
-                worst_c10_relative_sd: x.worst_c10_relative_sd,
-                worst_d_relative_sd: x.worst_d_relative_sd,
-                worst_relative_sd: x.worst_relative_sd,
-            })
-            .collect(),
-        tests: s
-            .tests
-            .into_iter()
-            .map(|x| TestOverview {
-                test: x.test,
-                sensitivity_index: x.sensitivity_index,
-                sensitivity_over_solve: x.sensitivity_over_solve,
-            })
-            .collect(),
-        parameters: s.law_parameters,
-    })
 }
 
 /// Every parameter of the model with its law, value and unit (the units reports show: C10 in

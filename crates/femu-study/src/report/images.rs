@@ -61,8 +61,36 @@ pub fn section(
         html.read(&dir.join("dic-weighted").join("summary.json"))?;
     let sim: Option<SimSummary> = html.read(&measurement.join("summary.json"));
     html.h3(&format!("{grouping}: integrated DIC beside DIC → FEMU"));
-    let dic_route = sim.as_ref().map_or(0.0, |s| s.timings_s.dic) + dic.wall_time_s;
-    html.p(&format!(
+    let dic_s = sim.as_ref().map_or(0.0, |s| s.timings_s.dic);
+    let dic_route = dic_s + dic.wall_time_s;
+    html.p(&method(&idic, dic_s, dic.wall_time_s));
+    let rows = route_rows(&idic, &dic, &weighted);
+    route_table(html, &rows);
+    if !idic.notes.is_empty() {
+        html.p(&format!(
+            "* {}",
+            idic.notes
+                .iter()
+                .map(|n| esc(n))
+                .collect::<Vec<_>>()
+                .join(" ")
+        ));
+    }
+    figures(html, grouping, dir, measurement, idic.load_fractions.len());
+    Some(ImageOverview {
+        parameters: rows,
+        idic_s: idic.wall_time_s,
+        dic_femu_s: dic_route,
+        dic_weighted_s: weighted.wall_time_s,
+        notes: idic.notes,
+    })
+}
+
+/// The paragraph on how the images were compared and the intervals made, and the times of
+/// the two routes (`dic_s`: the DIC's, `femu_s`: the FEMU's on its field).
+fn method(idic: &ImageIdentificationSummary, dic_s: f64, femu_s: f64) -> String {
+    let dic_route = dic_s + femu_s;
+    format!(
         "Integrated DIC (I-DIC, Leclerc et al. 2009): the parameters from the grey levels of the {} \
          frames ({}) directly, each load step's frame compared with {} at the \
          material points the finite-element model of that step moves ({} elements; {} pixels in \
@@ -109,12 +137,19 @@ pub fn section(
         idic.identification_s,
         idic.discretization_s,
         dic_route,
-        sim.as_ref().map_or(0.0, |s| s.timings_s.dic),
-        dic.wall_time_s,
+        dic_s,
+        femu_s,
         idic.wall_time_s / dic_route.max(1e-9),
-    ));
-    let rows: Vec<RouteRow> = idic
-        .parameters
+    )
+}
+
+/// Each parameter by the three routes.
+fn route_rows(
+    idic: &ImageIdentificationSummary,
+    dic: &IdentificationSummary,
+    weighted: &IdentificationSummary,
+) -> Vec<RouteRow> {
+    idic.parameters
         .iter()
         .zip(&dic.parameters)
         .zip(&weighted.parameters)
@@ -134,7 +169,11 @@ pub fn section(
             weighted_ci95: w.ci95,
             weighted_width_from: w.width_from.clone(),
         })
-        .collect();
+        .collect()
+}
+
+/// The table of the three routes: value (error) [95 % interval] of each parameter.
+fn route_table(html: &mut Html, rows: &[RouteRow]) {
     let cell = |v: f64, e: Option<f64>, ci: [f64; 2]| {
         format!(
             "{}{} [{}, {}]",
@@ -184,17 +223,11 @@ pub fn section(
         ],
         &table,
     );
-    if !idic.notes.is_empty() {
-        html.p(&format!(
-            "* {}",
-            idic.notes
-                .iter()
-                .map(|n| esc(n))
-                .collect::<Vec<_>>()
-                .join(" ")
-        ));
-    }
-    let last = idic.load_fractions.len();
+}
+
+/// The frames, the grey-level residuals and the identified and measured displacements
+/// (`last`: the index of the frame at the full load).
+fn figures(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path, last: usize) {
     for (path, caption) in [
         (
             measurement.join("frame_00.png"),
@@ -232,11 +265,4 @@ pub fn section(
     ] {
         html.figure(&path, &format!("{grouping}: {caption}"));
     }
-    Some(ImageOverview {
-        parameters: rows,
-        idic_s: idic.wall_time_s,
-        dic_femu_s: dic_route,
-        dic_weighted_s: weighted.wall_time_s,
-        notes: idic.notes,
-    })
 }

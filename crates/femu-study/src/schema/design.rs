@@ -74,23 +74,8 @@ pub(crate) fn parse(
 ) -> Result<DesignSpec, StudyError> {
     let err = |key: &str, message: String| lines.err("design", 0, key, message);
     let e = e.unwrap_or_default();
-    let chosen = match &e.tests {
-        None => (0..tests.len()).collect(),
-        Some(names) => {
-            let mut v = Vec::new();
-            for n in names {
-                let k = find_test(tests, n).map_err(|m| err("tests", m))?;
-                if !v.contains(&k) {
-                    v.push(k);
-                }
-            }
-            v
-        }
-    };
-    if chosen.is_empty() {
-        return Err(err("tests", "name at least one [[test]]".into()));
-    }
-    let sides: Vec<String> = e.sides.unwrap_or_else(|| {
+    let chosen = chosen_tests(&e, tests, lines)?;
+    let sides: Vec<String> = e.sides.clone().unwrap_or_else(|| {
         ["anterior", "lateral", "medial", "posterior"]
             .map(String::from)
             .to_vec()
@@ -101,81 +86,16 @@ pub(crate) fn parse(
     for s in &sides {
         Side::parse(s).map_err(|m| err("sides", m))?;
     }
-    let windows_mm = e.windows_mm.unwrap_or(vec![[40.0, 40.0], [60.0, 40.0]]);
-    if windows_mm.is_empty() {
-        return Err(err("windows_mm", "give at least one window size".into()));
-    }
-    if let Some(w) = windows_mm
-        .iter()
-        .find(|w| !(w[0] > 0.0 && w[0] <= 200.0 && w[1] > 0.0 && w[1] <= 200.0))
-    {
-        return Err(err(
-            "windows_mm",
-            format!("{w:?}: width and depth must be in (0, 200] mm"),
-        ));
-    }
-    let spacing_mm = match e.spacing_mm {
-        Some(s) => lines.positive("design", 0, "spacing_mm", s)?,
-        None => 16.0 / probe.px_per_mm,
-    };
-    if let Some(w) = windows_mm.iter().find(|w| spacing_mm > w[0].min(w[1])) {
-        return Err(err(
-            if e.spacing_mm.is_some() {
-                "spacing_mm"
-            } else {
-                "windows_mm"
-            },
-            format!(
-                "{spacing_mm} mm is larger than the {} x {} mm window: its grid would hold a single point",
-                w[0], w[1]
-            ),
-        ));
-    }
-    // Every window of every side is held at once: bounded before the step allocates them.
-    let points = (sides.len() as f64)
-        * windows_mm
-            .iter()
-            .map(|w| window_points(w[0], spacing_mm) * window_points(w[1], spacing_mm))
-            .sum::<f64>();
-    if points > MAX_DESIGN_POINTS as f64 {
-        let key = if e.spacing_mm.is_some() {
-            "spacing_mm"
-        } else {
-            "windows_mm"
-        };
-        return Err(err(
-            key,
-            format!(
-                "{spacing_mm} mm gives {points:.1e} points in the {} windows ({} sides x {} sizes), above the limit of {MAX_DESIGN_POINTS}: give a larger spacing_mm",
-                sides.len() * windows_mm.len(),
-                sides.len(),
-                windows_mm.len()
-            ),
-        ));
-    }
+    let (windows_mm, spacing_mm) = windows(&e, probe, lines)?;
+    check_point_count(&e, sides.len(), &windows_mm, spacing_mm, lines)?;
     let max_measurements = super::keys::check_int(
         "design",
         "max_measurements",
         e.max_measurements.unwrap_or(2),
     )
     .map_err(|m| err("max_measurements", m))?;
-    let designs = design_count(
-        chosen.len() * sides.len(),
-        windows_mm.len(),
-        max_measurements,
-    );
-    if designs > MAX_DESIGNS as f64 {
-        return Err(err(
-            "max_measurements",
-            format!(
-                "{max_measurements} measurements per design of {} candidates ({} tests x {} sides x {} window sizes) make {designs:.1e} designs, above the limit of {MAX_DESIGNS}: give fewer window sizes, sides or measurements per design",
-                chosen.len() * sides.len() * windows_mm.len(),
-                chosen.len(),
-                sides.len(),
-                windows_mm.len()
-            ),
-        ));
-    }
+    let candidates = [chosen.len(), sides.len(), windows_mm.len()];
+    check_design_count(candidates, max_measurements, lines)?;
     let identifiable_sd = super::keys::check_real(
         "design",
         "identifiable_sd",
@@ -199,4 +119,131 @@ pub(crate) fn parse(
         identifiable_sd,
         grouped: e.grouped.unwrap_or(false),
     })
+}
+
+/// The indices of the `[[test]]`s `[design] tests` names (each once), all by default.
+fn chosen_tests(
+    e: &DesignEntry,
+    tests: &[TestSpec],
+    lines: &KeyLines,
+) -> Result<Vec<usize>, StudyError> {
+    let err = |key: &str, message: String| lines.err("design", 0, key, message);
+    let chosen = match &e.tests {
+        None => (0..tests.len()).collect(),
+        Some(names) => {
+            let mut v = Vec::new();
+            for n in names {
+                let k = find_test(tests, n).map_err(|m| err("tests", m))?;
+                if !v.contains(&k) {
+                    v.push(k);
+                }
+            }
+            v
+        }
+    };
+    if chosen.is_empty() {
+        return Err(err("tests", "name at least one [[test]]".into()));
+    }
+    Ok(chosen)
+}
+
+/// The window sizes (width, depth in mm) and the spacing of their grids: each window holds
+/// more than one point.
+fn windows(
+    e: &DesignEntry,
+    probe: &ProbeSection,
+    lines: &KeyLines,
+) -> Result<(Vec<[f64; 2]>, f64), StudyError> {
+    let err = |key: &str, message: String| lines.err("design", 0, key, message);
+    let windows_mm = e
+        .windows_mm
+        .clone()
+        .unwrap_or(vec![[40.0, 40.0], [60.0, 40.0]]);
+    if windows_mm.is_empty() {
+        return Err(err("windows_mm", "give at least one window size".into()));
+    }
+    if let Some(w) = windows_mm
+        .iter()
+        .find(|w| !(w[0] > 0.0 && w[0] <= 200.0 && w[1] > 0.0 && w[1] <= 200.0))
+    {
+        return Err(err(
+            "windows_mm",
+            format!("{w:?}: width and depth must be in (0, 200] mm"),
+        ));
+    }
+    let spacing_mm = match e.spacing_mm {
+        Some(s) => lines.positive("design", 0, "spacing_mm", s)?,
+        None => 16.0 / probe.px_per_mm,
+    };
+    if let Some(w) = windows_mm.iter().find(|w| spacing_mm > w[0].min(w[1])) {
+        return Err(err(
+            spacing_or_windows(e),
+            format!(
+                "{spacing_mm} mm is larger than the {} x {} mm window: its grid would hold a single point",
+                w[0], w[1]
+            ),
+        ));
+    }
+    Ok((windows_mm, spacing_mm))
+}
+
+/// The key to blame for too fine a grid: `spacing_mm` when given, else `windows_mm`.
+fn spacing_or_windows(e: &DesignEntry) -> &'static str {
+    if e.spacing_mm.is_some() {
+        "spacing_mm"
+    } else {
+        "windows_mm"
+    }
+}
+
+/// Refuses more than [`MAX_DESIGN_POINTS`] points in all the windows of every side: every
+/// window of every side is held at once, bounded before the step allocates them.
+fn check_point_count(
+    e: &DesignEntry,
+    sides: usize,
+    windows_mm: &[[f64; 2]],
+    spacing_mm: f64,
+    lines: &KeyLines,
+) -> Result<(), StudyError> {
+    let points = (sides as f64)
+        * windows_mm
+            .iter()
+            .map(|w| window_points(w[0], spacing_mm) * window_points(w[1], spacing_mm))
+            .sum::<f64>();
+    if points > MAX_DESIGN_POINTS as f64 {
+        return Err(lines.err(
+            "design",
+            0,
+            spacing_or_windows(e),
+            format!(
+                "{spacing_mm} mm gives {points:.1e} points in the {} windows ({} sides x {} sizes), above the limit of {MAX_DESIGN_POINTS}: give a larger spacing_mm",
+                sides * windows_mm.len(),
+                sides,
+                windows_mm.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses more than [`MAX_DESIGNS`] designs of up to `max_measurements` of the candidates
+/// (`[tests, sides, window sizes]`, no test seen twice from one side).
+fn check_design_count(
+    [tests, sides, sizes]: [usize; 3],
+    max_measurements: usize,
+    lines: &KeyLines,
+) -> Result<(), StudyError> {
+    let designs = design_count(tests * sides, sizes, max_measurements);
+    if designs > MAX_DESIGNS as f64 {
+        return Err(lines.err(
+            "design",
+            0,
+            "max_measurements",
+            format!(
+                "{max_measurements} measurements per design of {} candidates ({tests} tests x {sides} sides x {sizes} window sizes) make {designs:.1e} designs, above the limit of {MAX_DESIGNS}: give fewer window sizes, sides or measurements per design",
+                tests * sides * sizes,
+            ),
+        ));
+    }
+    Ok(())
 }

@@ -156,135 +156,18 @@ pub(crate) fn parse(
     lines: &KeyLines,
     base: &Path,
 ) -> Result<FramesSpec, StudyError> {
-    let err = |key: &str, message: String| lines.err("measurement", index, key, message);
-    for (key, given) in [
-        ("file", m.file.is_some()),
-        ("covariance", m.covariance.is_some()),
-        ("window", m.window.is_some()),
-        ("window_mm", m.window_mm.is_some()),
-        ("spacing_mm", m.spacing_mm.is_some()),
-        ("sigma_mm", m.sigma_mm.is_some()),
-    ] {
-        if given {
-            return Err(err(
-                key,
-                "does not apply to recorded frames (source = \"frames\"): the frames are compared themselves, placed by origin_mm, x_axis, y_axis or [probe]".into(),
-            ));
-        }
-    }
+    let at = At { lines, index };
+    refuse_field_keys(m, at)?;
     if let Some(u) = m.units.as_deref() {
         if u != "px" {
-            return Err(err(
+            return Err(at.err(
                 "units",
                 format!("frames are images, in pixels: units = \"px\" or leave it out, got '{u}'"),
             ));
         }
     }
-    let count_ok = |key: &str, n: usize| -> Result<(), StudyError> {
-        if !(2..=MAX_FRAMES).contains(&n) {
-            return Err(err(
-                key,
-                format!("needs the unloaded frame and at least one loaded frame, at most {MAX_FRAMES} in all; got {n}"),
-            ));
-        }
-        Ok(())
-    };
-    let times = match &m.frame_times_s {
-        None => None,
-        Some(t) => {
-            if let Some((k, v)) = t.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                return Err(err(
-                    "frame_times_s",
-                    format!("time {} is {v}: must be finite", k + 1),
-                ));
-            }
-            if let Some(k) = (1..t.len()).find(|&k| t[k] <= t[k - 1]) {
-                return Err(err(
-                    "frame_times_s",
-                    format!(
-                        "must increase (the unloaded frame first): time {} ({} s) is not after time {} ({} s)",
-                        k + 1,
-                        t[k],
-                        k,
-                        t[k - 1]
-                    ),
-                ));
-            }
-            Some(t.clone())
-        }
-    };
-    let images = match (&m.frames, &m.cine) {
-        (Some(_), Some(_)) => {
-            return Err(err(
-                "cine",
-                "give frames (one file per frame) or cine (one multi-frame DICOM), not both".into(),
-            ))
-        }
-        (None, None) => {
-            return Err(err(
-                "source",
-                "source = \"frames\" needs frames = [\"f0.png\", ...] (the unloaded frame first) or cine = \"loop.dcm\"".into(),
-            ))
-        }
-        (Some(files), None) => {
-            if m.frame_indices.is_some() {
-                return Err(err(
-                    "frame_indices",
-                    "chooses frames of a cine; with frames = [...] every listed file is a frame"
-                        .into(),
-                ));
-            }
-            count_ok("frames", files.len())?;
-            if let Some(t) = &times {
-                if t.len() != files.len() {
-                    return Err(err(
-                        "frame_times_s",
-                        format!(
-                            "{} times for the {} files of frames: one per file",
-                            t.len(),
-                            files.len()
-                        ),
-                    ));
-                }
-            }
-            FrameImages::Files(files.iter().map(|f| resolve(base, f)).collect())
-        }
-        (None, Some(cine)) => {
-            let indices = match (&m.frame_indices, &times) {
-                (Some(_), Some(_)) => {
-                    return Err(err(
-                        "frame_times_s",
-                        "give frame_indices or frame_times_s to choose the cine's frames, not both"
-                            .into(),
-                    ))
-                }
-                (None, None) => {
-                    return Err(err(
-                        "cine",
-                        "choose its frames with frame_indices = [...] or frame_times_s = [...] (the unloaded frame first)".into(),
-                    ))
-                }
-                (Some(ix), None) => {
-                    count_ok("frame_indices", ix.len())?;
-                    if let Some(k) = (1..ix.len()).find(|&k| ix[..k].contains(&ix[k])) {
-                        return Err(err(
-                            "frame_indices",
-                            format!("frame {} is given twice", ix[k]),
-                        ));
-                    }
-                    Some(ix.clone())
-                }
-                (None, Some(t)) => {
-                    count_ok("frame_times_s", t.len())?;
-                    None
-                }
-            };
-            FrameImages::Cine {
-                path: resolve(base, cine),
-                indices,
-            }
-        }
-    };
+    let times = frame_times(m, at)?;
+    let images = frame_images(m, times.as_deref(), at, base)?;
     let n_frames = match &images {
         FrameImages::Files(f) => f.len(),
         FrameImages::Cine {
@@ -305,81 +188,26 @@ pub(crate) fn parse(
     let placement = placement(m, index, lines)?;
     let loads = match (&m.loads_n_per_mm, &m.force_log) {
         (Some(_), Some(_)) => {
-            return Err(err(
+            return Err(at.err(
                 "force_log",
                 "give loads_n_per_mm or force_log, not both".into(),
             ))
         }
         (None, None) => {
-            return Err(err(
+            return Err(at.err(
                 "source",
                 "recorded frames need their loads: loads_n_per_mm = [...] (one per loaded frame) or force_log = \"force.csv\"".into(),
             ))
         }
-        (Some(loads), None) => {
-            for key in ["force_log_offset_s", "force_log_units"] {
-                if given_frame_keys(m).contains(&key) {
-                    return Err(err(key, "applies to force_log only".into()));
-                }
-            }
-            if loads.len() + 1 != n_frames {
-                return Err(err(
-                    "loads_n_per_mm",
-                    format!(
-                        "{} loads for {n_frames} frames: give one per loaded frame ({}; the first frame is the unloaded one)",
-                        loads.len(),
-                        n_frames - 1
-                    ),
-                ));
-            }
-            if let Some((k, v)) = loads
-                .iter()
-                .enumerate()
-                .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_FORCE_N_PER_MM))
-            {
-                return Err(err(
-                    "loads_n_per_mm",
-                    format!(
-                        "the load of frame {} is {v}: each loaded frame's force must be positive and at most {MAX_FORCE_N_PER_MM} N/mm (the unloaded frame is the first and has no entry)",
-                        k + 1
-                    ),
-                ));
-            }
-            FrameLoads::PerFrame(loads.clone())
-        }
+        (Some(loads), None) => per_frame_loads(m, loads, n_frames, at)?,
         (None, Some(log)) => {
             if matches!(images, FrameImages::Files(_)) && times.is_none() {
-                return Err(err(
+                return Err(at.err(
                     "force_log",
                     "needs the frames' times: give frame_times_s (one per file), or read the frames from a cine whose Frame Time the log is interpolated at".into(),
                 ));
             }
-            let offset_s = m.force_log_offset_s.unwrap_or(0.0);
-            if !offset_s.is_finite() {
-                return Err(err("force_log_offset_s", "must be finite".into()));
-            }
-            let units = match &m.force_log_units {
-                None => None,
-                Some(u) => match u.as_slice() {
-                    [t, f] => Some(
-                        LogUnits::parse(t, f).map_err(|e| err("force_log_units", e))?,
-                    ),
-                    _ => {
-                        return Err(err(
-                            "force_log_units",
-                            format!(
-                                "give the time's and the force's unit, e.g. [\"s\", \"N/mm\"]; got {} values",
-                                u.len()
-                            ),
-                        ))
-                    }
-                },
-            };
-            FrameLoads::ForceLog {
-                path: resolve(base, log),
-                offset_s,
-                units,
-            }
+            force_log_loads(m, resolve(base, log), at)?
         }
     };
     Ok(FramesSpec {
@@ -388,6 +216,223 @@ pub(crate) fn parse(
         placement,
         loads,
         frame_times_s: times,
+    })
+}
+
+/// Where in the study a `[measurement]` key is: its table's index and the lines of the keys.
+#[derive(Clone, Copy)]
+struct At<'a> {
+    lines: &'a KeyLines,
+    index: usize,
+}
+
+impl At<'_> {
+    /// The error `message` at `key` of this `[measurement]`.
+    fn err(self, key: &str, message: String) -> StudyError {
+        self.lines.err("measurement", self.index, key, message)
+    }
+
+    /// Refuses a number of frames `n` out of `2..=MAX_FRAMES` (given by `key`).
+    fn count_ok(self, key: &str, n: usize) -> Result<(), StudyError> {
+        if !(2..=MAX_FRAMES).contains(&n) {
+            return Err(self.err(
+                key,
+                format!("needs the unloaded frame and at least one loaded frame, at most {MAX_FRAMES} in all; got {n}"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Refuses the keys of a measured field, which recorded frames do not have.
+fn refuse_field_keys(m: &MeasurementEntry, at: At) -> Result<(), StudyError> {
+    for (key, given) in [
+        ("file", m.file.is_some()),
+        ("covariance", m.covariance.is_some()),
+        ("window", m.window.is_some()),
+        ("window_mm", m.window_mm.is_some()),
+        ("spacing_mm", m.spacing_mm.is_some()),
+        ("sigma_mm", m.sigma_mm.is_some()),
+    ] {
+        if given {
+            return Err(at.err(
+                key,
+                "does not apply to recorded frames (source = \"frames\"): the frames are compared themselves, placed by origin_mm, x_axis, y_axis or [probe]".into(),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `frame_times_s`, when given: finite and increasing.
+fn frame_times(m: &MeasurementEntry, at: At) -> Result<Option<Vec<f64>>, StudyError> {
+    let Some(t) = &m.frame_times_s else {
+        return Ok(None);
+    };
+    if let Some((k, v)) = t.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+        return Err(at.err(
+            "frame_times_s",
+            format!("time {} is {v}: must be finite", k + 1),
+        ));
+    }
+    if let Some(k) = (1..t.len()).find(|&k| t[k] <= t[k - 1]) {
+        return Err(at.err(
+            "frame_times_s",
+            format!(
+                "must increase (the unloaded frame first): time {} ({} s) is not after time {} ({} s)",
+                k + 1,
+                t[k],
+                k,
+                t[k - 1]
+            ),
+        ));
+    }
+    Ok(Some(t.clone()))
+}
+
+/// The frames' images: one file per frame (`frames`), or a cine (`cine`) whose frames are
+/// chosen by `frame_indices` or by the frame `times`.
+fn frame_images(
+    m: &MeasurementEntry,
+    times: Option<&[f64]>,
+    at: At,
+    base: &Path,
+) -> Result<FrameImages, StudyError> {
+    match (&m.frames, &m.cine) {
+        (Some(_), Some(_)) => Err(at.err(
+            "cine",
+            "give frames (one file per frame) or cine (one multi-frame DICOM), not both".into(),
+        )),
+        (None, None) => Err(at.err(
+            "source",
+            "source = \"frames\" needs frames = [\"f0.png\", ...] (the unloaded frame first) or cine = \"loop.dcm\"".into(),
+        )),
+        (Some(files), None) => {
+            if m.frame_indices.is_some() {
+                return Err(at.err(
+                    "frame_indices",
+                    "chooses frames of a cine; with frames = [...] every listed file is a frame"
+                        .into(),
+                ));
+            }
+            at.count_ok("frames", files.len())?;
+            if let Some(t) = times {
+                if t.len() != files.len() {
+                    return Err(at.err(
+                        "frame_times_s",
+                        format!(
+                            "{} times for the {} files of frames: one per file",
+                            t.len(),
+                            files.len()
+                        ),
+                    ));
+                }
+            }
+            Ok(FrameImages::Files(
+                files.iter().map(|f| resolve(base, f)).collect(),
+            ))
+        }
+        (None, Some(cine)) => Ok(FrameImages::Cine {
+            path: resolve(base, cine),
+            indices: cine_indices(m, times, at)?,
+        }),
+    }
+}
+
+/// The cine's frames chosen by `frame_indices` (distinct), or `None` when the frame `times`
+/// choose them.
+fn cine_indices(
+    m: &MeasurementEntry,
+    times: Option<&[f64]>,
+    at: At,
+) -> Result<Option<Vec<usize>>, StudyError> {
+    match (&m.frame_indices, times) {
+        (Some(_), Some(_)) => Err(at.err(
+            "frame_times_s",
+            "give frame_indices or frame_times_s to choose the cine's frames, not both".into(),
+        )),
+        (None, None) => Err(at.err(
+            "cine",
+            "choose its frames with frame_indices = [...] or frame_times_s = [...] (the unloaded frame first)".into(),
+        )),
+        (Some(ix), None) => {
+            at.count_ok("frame_indices", ix.len())?;
+            if let Some(k) = (1..ix.len()).find(|&k| ix[..k].contains(&ix[k])) {
+                return Err(at.err(
+                    "frame_indices",
+                    format!("frame {} is given twice", ix[k]),
+                ));
+            }
+            Ok(Some(ix.clone()))
+        }
+        (None, Some(t)) => {
+            at.count_ok("frame_times_s", t.len())?;
+            Ok(None)
+        }
+    }
+}
+
+/// `loads_n_per_mm`: one positive force per loaded frame (of `n_frames`).
+fn per_frame_loads(
+    m: &MeasurementEntry,
+    loads: &[f64],
+    n_frames: usize,
+    at: At,
+) -> Result<FrameLoads, StudyError> {
+    for key in ["force_log_offset_s", "force_log_units"] {
+        if given_frame_keys(m).contains(&key) {
+            return Err(at.err(key, "applies to force_log only".into()));
+        }
+    }
+    if loads.len() + 1 != n_frames {
+        return Err(at.err(
+            "loads_n_per_mm",
+            format!(
+                "{} loads for {n_frames} frames: give one per loaded frame ({}; the first frame is the unloaded one)",
+                loads.len(),
+                n_frames - 1
+            ),
+        ));
+    }
+    if let Some((k, v)) = loads
+        .iter()
+        .enumerate()
+        .find(|(_, v)| !(v.is_finite() && **v > 0.0 && **v <= MAX_FORCE_N_PER_MM))
+    {
+        return Err(at.err(
+            "loads_n_per_mm",
+            format!(
+                "the load of frame {} is {v}: each loaded frame's force must be positive and at most {MAX_FORCE_N_PER_MM} N/mm (the unloaded frame is the first and has no entry)",
+                k + 1
+            ),
+        ));
+    }
+    Ok(FrameLoads::PerFrame(loads.to_vec()))
+}
+
+/// `force_log` (at `path`) with its offset and units.
+fn force_log_loads(m: &MeasurementEntry, path: PathBuf, at: At) -> Result<FrameLoads, StudyError> {
+    let offset_s = m.force_log_offset_s.unwrap_or(0.0);
+    if !offset_s.is_finite() {
+        return Err(at.err("force_log_offset_s", "must be finite".into()));
+    }
+    let units = match &m.force_log_units {
+        None => None,
+        Some(u) => match u.as_slice() {
+            [t, f] => Some(LogUnits::parse(t, f).map_err(|e| at.err("force_log_units", e))?),
+            _ => return Err(at.err(
+                "force_log_units",
+                format!(
+                    "give the time's and the force's unit, e.g. [\"s\", \"N/mm\"]; got {} values",
+                    u.len()
+                ),
+            )),
+        },
+    };
+    Ok(FrameLoads::ForceLog {
+        path,
+        offset_s,
+        units,
     })
 }
 
@@ -704,41 +749,7 @@ impl FramesSpec {
             ));
         }
         let info = femu_dic::cine::cine_info(path).map_err(|e| ferr("cine", e.to_string()))?;
-        let n = info.info.frames;
-        let (chosen, times) = match indices {
-            Some(ix) => {
-                if let Some(&bad) = ix.iter().find(|&&i| i >= n) {
-                    return Err(ferr(
-                        "frame_indices",
-                        format!(
-                            "frame {bad} asked for, but {} holds {n} frame(s) (indices from 0)",
-                            path.display()
-                        ),
-                    ));
-                }
-                let times = info
-                    .frame_times_s
-                    .as_ref()
-                    .map(|t| ix.iter().map(|&i| t[i]).collect());
-                (ix.to_vec(), times)
-            }
-            None => {
-                let asked = self.frame_times_s.as_deref().unwrap_or(&[]);
-                let t = info.frame_times_s.as_ref().ok_or_else(|| {
-                    ferr(
-                        "frame_times_s",
-                        format!(
-                            "{} gives no frame times (neither Frame Time (0018,1063) nor Frame Time Vector (0018,1065)): choose its frames with frame_indices",
-                            path.display()
-                        ),
-                    )
-                })?;
-                let chosen = frames_at_times(t, asked)
-                    .map_err(|m| ferr("frame_times_s", format!("{}: {m}", path.display())))?;
-                let times = chosen.iter().map(|&i| t[i]).collect();
-                (chosen, Some(times))
-            }
-        };
+        let (chosen, times) = self.cine_frames(&info, path, indices)?;
         if matches!(self.loads, FrameLoads::ForceLog { .. }) && times.is_none() {
             return Err(ferr(
                 "force_log",
@@ -755,18 +766,8 @@ impl FramesSpec {
             .info
             .pixel_size
             .map(|p| (p.dx_mm, format!("{} of {}", p.source, path.display())));
-        if let Some(p) = info.info.pixel_size {
-            if (p.dx_mm - p.dy_mm).abs() > 1e-6 * p.dx_mm && self.pixel_size_mm.is_none() {
-                return Err(ferr(
-                    "pixel_size_mm",
-                    format!(
-                        "{} has pixels of {} x {} mm; integrated DIC needs square pixels: resample the loop, or give pixel_size_mm if the header is wrong",
-                        path.display(),
-                        p.dx_mm,
-                        p.dy_mm
-                    ),
-                ));
-            }
+        if self.pixel_size_mm.is_none() {
+            square_pixels(&info.info, path)?;
         }
         Ok((
             chosen.iter().map(|&i| (path.to_path_buf(), i)).collect(),
@@ -776,6 +777,70 @@ impl FramesSpec {
             times,
         ))
     }
+
+    /// The cine's frames to compare (`indices`, or the frames at the study's frame times) and
+    /// their times when the cine gives them.
+    fn cine_frames(
+        &self,
+        info: &femu_dic::cine::CineInfo,
+        path: &Path,
+        indices: Option<&[usize]>,
+    ) -> Result<(Vec<usize>, Option<Vec<f64>>), FramesError> {
+        let n = info.info.frames;
+        match indices {
+            Some(ix) => {
+                if let Some(&bad) = ix.iter().find(|&&i| i >= n) {
+                    return Err(ferr(
+                        "frame_indices",
+                        format!(
+                            "frame {bad} asked for, but {} holds {n} frame(s) (indices from 0)",
+                            path.display()
+                        ),
+                    ));
+                }
+                let times = info
+                    .frame_times_s
+                    .as_ref()
+                    .map(|t| ix.iter().map(|&i| t[i]).collect());
+                Ok((ix.to_vec(), times))
+            }
+            None => {
+                let asked = self.frame_times_s.as_deref().unwrap_or(&[]);
+                let t = info.frame_times_s.as_ref().ok_or_else(|| {
+                    ferr(
+                        "frame_times_s",
+                        format!(
+                            "{} gives no frame times (neither Frame Time (0018,1063) nor Frame Time Vector (0018,1065)): choose its frames with frame_indices",
+                            path.display()
+                        ),
+                    )
+                })?;
+                let chosen = frames_at_times(t, asked)
+                    .map_err(|m| ferr("frame_times_s", format!("{}: {m}", path.display())))?;
+                let times = chosen.iter().map(|&i| t[i]).collect();
+                Ok((chosen, Some(times)))
+            }
+        }
+    }
+}
+
+/// Refuses a cine whose header gives pixels that are not square (integrated DIC needs square
+/// pixels; `pixel_size_mm` in the study overrides the header).
+fn square_pixels(info: &femu_dic::dicom::DicomInfo, path: &Path) -> Result<(), FramesError> {
+    if let Some(p) = info.pixel_size {
+        if (p.dx_mm - p.dy_mm).abs() > 1e-6 * p.dx_mm {
+            return Err(ferr(
+                    "pixel_size_mm",
+                    format!(
+                        "{} has pixels of {} x {} mm; integrated DIC needs square pixels: resample the loop, or give pixel_size_mm if the header is wrong",
+                        path.display(),
+                        p.dx_mm,
+                        p.dy_mm
+                    ),
+                ));
+        }
+    }
+    Ok(())
 }
 
 /// The frames of a loop with frame times `t` (s) nearest to the times `asked`: each must lie
@@ -812,22 +877,14 @@ fn frames_at_times(t: &[f64], asked: &[f64]) -> Result<Vec<usize>, String> {
     Ok(out)
 }
 
-/// Reads a force log (`time,force` rows; comments `#`; an optional header row; units from
-/// `units` or a `# units: TIME, FORCE` line) and interpolates it linearly at `frame_times + offset`.
-fn read_force_log(
-    path: &Path,
-    units: Option<LogUnits>,
-    offset_s: f64,
-    frame_times: &[f64],
-    times_from: &str,
-) -> Result<ForceLog, FramesError> {
-    let at = |m: String| ferr("force_log", format!("{}: {m}", path.display()));
-    if !path.is_file() {
-        return Err(at(
-            "does not exist (relative names start from the study file's folder)".into(),
-        ));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| at(format!("cannot read it: {e}")))?;
+/// The rows `(time, force, line)` of a force log's `text` (comments `#` and an optional header
+/// row skipped; times increasing) and the units of its `# units: TIME, FORCE` line, if any
+/// (`at` makes the error of a message).
+#[allow(clippy::type_complexity)]
+fn force_log_rows(
+    text: &str,
+    at: &dyn Fn(String) -> FramesError,
+) -> Result<(Vec<(f64, f64, usize)>, Option<LogUnits>), FramesError> {
     let mut declared = None;
     let mut rows: Vec<(f64, f64, usize)> = Vec::new();
     let mut header_seen = false;
@@ -872,6 +929,26 @@ fn read_force_log(
         }
         rows.push((*t, *f, n));
     }
+    Ok((rows, declared))
+}
+
+/// Reads a force log (`time,force` rows; comments `#`; an optional header row; units from
+/// `units` or a `# units: TIME, FORCE` line) and interpolates it linearly at `frame_times + offset`.
+fn read_force_log(
+    path: &Path,
+    units: Option<LogUnits>,
+    offset_s: f64,
+    frame_times: &[f64],
+    times_from: &str,
+) -> Result<ForceLog, FramesError> {
+    let at = |m: String| ferr("force_log", format!("{}: {m}", path.display()));
+    if !path.is_file() {
+        return Err(at(
+            "does not exist (relative names start from the study file's folder)".into(),
+        ));
+    }
+    let text = std::fs::read_to_string(path).map_err(|e| at(format!("cannot read it: {e}")))?;
+    let (rows, declared) = force_log_rows(&text, &at)?;
     if rows.len() < 2 {
         return Err(at(format!("{} rows: needs at least two", rows.len())));
     }

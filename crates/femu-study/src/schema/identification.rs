@@ -115,19 +115,13 @@ pub(crate) fn parse(
         |key: &str, v: usize| keys::check_int("identification", key, v).map_err(|m| err(key, m));
     let real =
         |key: &str, v: f64| keys::check_real("identification", key, v).map_err(|m| err(key, m));
-    let word = |key: &str, v: Option<&str>| {
-        v.map(|v| keys::word("identification", key, v))
-            .transpose()
-            .map_err(|m| err(key, m))
-    };
-    let unhandled = |key: &str, v: &str| err(key, keys::unhandled("identification", key, v));
     // Beyond 100 (MAX_BOUNDS_FACTOR, its declared maximum) the bounds span over four decades
     // around the reference: wider than any soft tissue's range, and the starts drawn in them
     // mostly fail to solve.
     let bounds_factor = real("bounds_factor", e.bounds_factor.unwrap_or(4.0))?;
     let starts = int("starts", e.starts.unwrap_or(5))?;
     let repeat = int("repeat", e.repeat.unwrap_or(1))?;
-    let grouping = match e.grouped {
+    let grouping = match &e.grouped {
         None => Grouping::Both,
         Some(GroupedEntry::Flag(true)) => Grouping::Grouped,
         Some(GroupedEntry::Flag(false)) => Grouping::Ungrouped,
@@ -139,69 +133,145 @@ pub(crate) fn parse(
             ))
         }
     };
-    let optimizer = match word("optimizer", e.optimizer.as_deref())? {
-        None | Some("lm") => Optimizer::LevenbergMarquardt,
-        Some("bfgs") => Optimizer::Bfgs,
-        Some("bfgs-fd") => Optimizer::BfgsFiniteDifference,
-        Some(other) => return Err(unhandled("optimizer", other)),
-    };
+    let optimizer = Choices::optimizer(&e, lines)?;
     let coarse_elements = match e.coarse_elements {
         None => None,
-        Some(n) => {
-            let Geometry::Thigh(thigh) = geometry else {
-                return Err(err(
-                    "coarse_elements",
-                    "multilevel identification needs the built-in thigh ([thigh])".into(),
-                ));
-            };
-            thigh_elements(thigh, n).map_err(|m| err("coarse_elements", m))?;
-            let fine = match resolution {
-                Resolution::Elements(m) => m,
-                Resolution::Default => DEFAULT_ELEMENTS,
-                Resolution::SizeMm(_) => usize::MAX,
-            };
-            if n >= fine {
-                return Err(err(
-                    "coarse_elements",
-                    format!(
-                        "{n} is not coarser than the model's {fine} elements: the starts run on the coarse mesh and the best is refined on [model]'s; give fewer (e.g. {})",
-                        (fine / 3).max(thigh.min_target_elements())
-                    ),
-                ));
-            }
-            Some(n)
+        Some(n) => Some(coarse_elements(n, geometry, resolution, lines)?),
+    };
+    let choices = Choices::parse(&e, lines)?;
+    let data_refinement = data_refinement(&e, geometry, lines)?;
+    let (image_normalization_px, image_pairing) = image_settings(&e, lines)?;
+    Ok(IdentificationSpec {
+        image_normalization_px,
+        image_pairing,
+        loss: choices.loss,
+        test,
+        discretization: choices.discretization,
+        data_refinement,
+        fixed: e.fixed,
+        bounds_factor,
+        starts,
+        seed: e.seed.unwrap_or(1),
+        repeat,
+        grouping,
+        optimizer,
+        coarse_elements,
+    })
+}
+
+/// The `[identification]` keys that choose a method by a word.
+struct Choices {
+    loss: femu_identify::weighted::Loss,
+    discretization: Discretization,
+}
+
+impl Choices {
+    /// `optimizer`.
+    fn optimizer(e: &IdentificationEntry, lines: &KeyLines) -> Result<Optimizer, StudyError> {
+        let err = |m: String| lines.err("identification", 0, "optimizer", m);
+        let word = e
+            .optimizer
+            .as_deref()
+            .map(|v| keys::word("identification", "optimizer", v))
+            .transpose()
+            .map_err(err)?;
+        match word {
+            None | Some("lm") => Ok(Optimizer::LevenbergMarquardt),
+            Some("bfgs") => Ok(Optimizer::Bfgs),
+            Some("bfgs-fd") => Ok(Optimizer::BfgsFiniteDifference),
+            Some(other) => Err(err(keys::unhandled("identification", "optimizer", other))),
         }
+    }
+
+    /// `loss` and `discretization`.
+    fn parse(e: &IdentificationEntry, lines: &KeyLines) -> Result<Choices, StudyError> {
+        let err = |key: &str, message: String| lines.err("identification", 0, key, message);
+        let word = |key: &str, v: Option<&str>| {
+            v.map(|v| keys::word("identification", key, v))
+                .transpose()
+                .map_err(|m| err(key, m))
+        };
+        let unhandled = |key: &str, v: &str| err(key, keys::unhandled("identification", key, v));
+        let loss = match word("loss", e.loss.as_deref())? {
+            None | Some("squared") => femu_identify::weighted::Loss::Squared,
+            Some("huber") => femu_identify::weighted::Loss::Huber {
+                k: femu_identify::weighted::HUBER_K,
+            },
+            Some(other) => return Err(unhandled("loss", other)),
+        };
+        let discretization = match word("discretization", e.discretization.as_deref())? {
+            None | Some("check") => Discretization::Check,
+            Some("refine") => Discretization::Refine,
+            Some("off") => Discretization::Off,
+            Some(other) => return Err(unhandled("discretization", other)),
+        };
+        Ok(Choices {
+            loss,
+            discretization,
+        })
+    }
+}
+
+/// `coarse_elements = n`: a built-in thigh of `n` elements, coarser than the model's.
+fn coarse_elements(
+    n: usize,
+    geometry: &Geometry,
+    resolution: Resolution,
+    lines: &KeyLines,
+) -> Result<usize, StudyError> {
+    let err = |message: String| lines.err("identification", 0, "coarse_elements", message);
+    let Geometry::Thigh(thigh) = geometry else {
+        return Err(err(
+            "multilevel identification needs the built-in thigh ([thigh])".into(),
+        ));
     };
-    let loss = match word("loss", e.loss.as_deref())? {
-        None | Some("squared") => femu_identify::weighted::Loss::Squared,
-        Some("huber") => femu_identify::weighted::Loss::Huber {
-            k: femu_identify::weighted::HUBER_K,
-        },
-        Some(other) => return Err(unhandled("loss", other)),
+    thigh_elements(thigh, n).map_err(err)?;
+    let fine = match resolution {
+        Resolution::Elements(m) => m,
+        Resolution::Default => DEFAULT_ELEMENTS,
+        Resolution::SizeMm(_) => usize::MAX,
     };
-    let discretization = match word("discretization", e.discretization.as_deref())? {
-        None | Some("check") => Discretization::Check,
-        Some("refine") => Discretization::Refine,
-        Some("off") => Discretization::Off,
-        Some(other) => return Err(unhandled("discretization", other)),
-    };
+    if n >= fine {
+        return Err(err(format!(
+            "{n} is not coarser than the model's {fine} elements: the starts run on the coarse mesh and the best is refined on [model]'s; give fewer (e.g. {})",
+            (fine / 3).max(thigh.min_target_elements())
+        )));
+    }
+    Ok(n)
+}
+
+/// `data_refinement`: in its range, and above 1 only for a geometry femu can refine.
+fn data_refinement(
+    e: &IdentificationEntry,
+    geometry: &Geometry,
+    lines: &KeyLines,
+) -> Result<f64, StudyError> {
+    let err = |message: String| lines.err("identification", 0, "data_refinement", message);
     let data_refinement = keys::check_real(
         "identification",
         "data_refinement",
         e.data_refinement.unwrap_or(1.0),
     )
     .map_err(|m| {
-        err(
-            "data_refinement",
-            format!("{m} (the element size of the virtual data's mesh is divided by it)"),
-        )
+        err(format!(
+            "{m} (the element size of the virtual data's mesh is divided by it)"
+        ))
     })?;
     if data_refinement > 1.0 && matches!(geometry, Geometry::Deck(_)) {
         return Err(err(
-            "data_refinement",
             "femu cannot refine a deck; virtual data on another mesh need the built-in thigh or a label image".into(),
         ));
     }
+    Ok(data_refinement)
+}
+
+/// The identification from images: the grey levels' normalization window (`None`: as
+/// recorded) and the frames compared.
+fn image_settings(
+    e: &IdentificationEntry,
+    lines: &KeyLines,
+) -> Result<(Option<f64>, femu_identify::idic::Pairing), StudyError> {
+    let err = |key: &str, message: String| lines.err("identification", 0, key, message);
     let normalization = keys::check_real(
         "identification",
         "image_normalization_px",
@@ -216,26 +286,20 @@ pub(crate) fn parse(
             ),
         )
     })?;
-    let image_pairing = match word("image_pairing", e.image_pairing.as_deref())? {
+    let image_pairing = match e
+        .image_pairing
+        .as_deref()
+        .map(|v| keys::word("identification", "image_pairing", v))
+        .transpose()
+        .map_err(|m| err("image_pairing", m))?
+    {
         None => DEFAULT_IMAGE_PAIRING,
         Some(name) => name.parse().map_err(|why| err("image_pairing", why))?,
     };
-    Ok(IdentificationSpec {
-        image_normalization_px: (normalization > 0.0).then_some(normalization),
+    Ok((
+        (normalization > 0.0).then_some(normalization),
         image_pairing,
-        loss,
-        test,
-        discretization,
-        data_refinement,
-        fixed: e.fixed,
-        bounds_factor,
-        starts,
-        seed: e.seed.unwrap_or(1),
-        repeat,
-        grouping,
-        optimizer,
-        coarse_elements,
-    })
+    ))
 }
 
 /// The test of `tests` named `name` (its full name, `compression-lateral`, or its kind,

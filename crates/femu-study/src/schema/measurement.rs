@@ -326,124 +326,160 @@ fn check_source(
             Ok(MeasurementSource::Ultrasound)
         }
         "virtual" => {
-            if m.file.is_some() {
-                return Err(err("file", "a virtual measurement reads no file"));
-            }
-            // A file's frame on a measurement without a file would be silently unused (and
-            // `femu identify --measured` would read its file in the model frame).
-            for (key, given) in [
-                ("units", m.units.is_some()),
-                ("pixel_size_mm", m.pixel_size_mm.is_some()),
-                ("origin_mm", m.origin_mm.is_some()),
-                ("x_axis", m.x_axis.is_some()),
-                ("y_axis", m.y_axis.is_some()),
-            ] {
-                if given {
-                    return Err(err(
-                        key,
-                        "is the frame of a measured file, and this measurement is virtual: give file (femu identify --measured FILE replaces it) or remove the frame keys",
-                    ));
-                }
-            }
-            if m.covariance.is_some() {
-                return Err(err(
-                    "covariance",
-                    "a virtual measurement has the noise of [noise]",
-                ));
-            }
+            check_virtual(m, index, lines)?;
             Ok(MeasurementSource::Virtual)
         }
-        "file" => {
-            let file = m
-                .file
-                .as_deref()
-                .ok_or_else(|| err("source", "source = \"file\" needs file"))?;
-            let units =
-                super::keys::word("measurement", "units", m.units.as_deref().unwrap_or("mm"))
-                    .map_err(|e| err("units", &e))?;
-            let scale = match units {
-                "mm" => match m.pixel_size_mm {
-                    Some(_) => return Err(err("pixel_size_mm", "a field in mm has no pixel size")),
-                    None => 1.0,
-                },
-                "px" => lines.positive(
-                    "measurement",
-                    index,
-                    "pixel_size_mm",
-                    m.pixel_size_mm
-                        .ok_or_else(|| err("units", "units = \"px\" needs pixel_size_mm"))?,
-                )?,
-                other => {
-                    return Err(err(
-                        "units",
-                        &super::keys::unhandled("measurement", "units", other),
-                    ));
-                }
-            };
-            let unit = |v: [f64; 2], key: &str| -> Result<[f64; 2], StudyError> {
-                let n = v[0].hypot(v[1]);
-                if !((n - 1.0).abs() < 1e-6) {
-                    return Err(err(key, &format!("must be a unit vector, got {v:?}")));
-                }
-                Ok(v)
-            };
-            let x_axis = unit(m.x_axis.unwrap_or([1.0, 0.0]), "x_axis")?;
-            let y_axis = unit(m.y_axis.unwrap_or([0.0, 1.0]), "y_axis")?;
-            if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
-                return Err(err(
-                    "y_axis",
-                    &format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
-                ));
-            }
-            let origin = m.origin_mm.unwrap_or([0.0, 0.0]);
-            if !(origin[0].is_finite() && origin[1].is_finite()) {
-                return Err(err("origin_mm", "must be finite"));
-            }
-            let weighting = m
-                .weighting
-                .as_deref()
-                .map(|w| super::keys::word("measurement", "weighting", w))
-                .transpose()
-                .map_err(|e| err("weighting", &e))?;
-            let weighting =
-                match weighting {
-                    None if m.covariance.is_some() => Weighting::Estimated,
-                    None | Some("per-point") => Weighting::PerPoint,
-                    Some("estimated") => Weighting::Estimated,
-                    Some("covariance") if m.covariance.is_some() => Weighting::Covariance,
-                    Some("covariance") => return Err(err(
-                        "weighting",
-                        "weighting = \"covariance\" needs covariance (the field's covariance file)",
-                    )),
-                    Some(other) => {
-                        return Err(err(
-                            "weighting",
-                            &super::keys::unhandled("measurement", "weighting", other),
-                        ))
-                    }
-                };
-            if weighting == Weighting::PerPoint && m.covariance.is_some() {
-                return Err(err(
-                    "weighting",
-                    "weighting = \"per-point\" leaves the covariance unused: remove covariance or choose covariance or estimated",
-                ));
-            }
-            Ok(MeasurementSource::File {
-                path: resolve(base, file),
-                frame: Frame {
-                    scale,
-                    pixels: units == "px",
-                    origin,
-                    x_axis,
-                    y_axis,
-                },
-                covariance: m.covariance.as_deref().map(|c| resolve(base, c)),
-                weighting,
-            })
-        }
+        "file" => file_source(m, index, lines, base),
         other => Err(err(
             "source",
             &super::keys::unhandled("measurement", "source", other),
         )),
     }
+}
+
+/// Refuses a file's keys on a virtual measurement.
+fn check_virtual(m: &MeasurementEntry, index: usize, lines: &KeyLines) -> Result<(), StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
+    if m.file.is_some() {
+        return Err(err("file", "a virtual measurement reads no file"));
+    }
+    // A file's frame on a measurement without a file would be silently unused (and
+    // `femu identify --measured` would read its file in the model frame).
+    for (key, given) in [
+        ("units", m.units.is_some()),
+        ("pixel_size_mm", m.pixel_size_mm.is_some()),
+        ("origin_mm", m.origin_mm.is_some()),
+        ("x_axis", m.x_axis.is_some()),
+        ("y_axis", m.y_axis.is_some()),
+    ] {
+        if given {
+            return Err(err(
+                key,
+                "is the frame of a measured file, and this measurement is virtual: give file (femu identify --measured FILE replaces it) or remove the frame keys",
+            ));
+        }
+    }
+    if m.covariance.is_some() {
+        return Err(err(
+            "covariance",
+            "a virtual measurement has the noise of [noise]",
+        ));
+    }
+    Ok(())
+}
+
+/// A measured file (`source = "file"`): its path, frame, covariance and weighting.
+fn file_source(
+    m: &MeasurementEntry,
+    index: usize,
+    lines: &KeyLines,
+    base: &Path,
+) -> Result<MeasurementSource, StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
+    let file = m
+        .file
+        .as_deref()
+        .ok_or_else(|| err("source", "source = \"file\" needs file"))?;
+    let frame = file_frame(m, index, lines)?;
+    let weighting = weighting(m, index, lines)?;
+    Ok(MeasurementSource::File {
+        path: resolve(base, file),
+        frame,
+        covariance: m.covariance.as_deref().map(|c| resolve(base, c)),
+        weighting,
+    })
+}
+
+/// The frame of a measured file: its units (mm, or px of `pixel_size_mm`), origin and axes in
+/// the model.
+fn file_frame(m: &MeasurementEntry, index: usize, lines: &KeyLines) -> Result<Frame, StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
+    let units = super::keys::word("measurement", "units", m.units.as_deref().unwrap_or("mm"))
+        .map_err(|e| err("units", &e))?;
+    let scale = match units {
+        "mm" => match m.pixel_size_mm {
+            Some(_) => return Err(err("pixel_size_mm", "a field in mm has no pixel size")),
+            None => 1.0,
+        },
+        "px" => lines.positive(
+            "measurement",
+            index,
+            "pixel_size_mm",
+            m.pixel_size_mm
+                .ok_or_else(|| err("units", "units = \"px\" needs pixel_size_mm"))?,
+        )?,
+        other => {
+            return Err(err(
+                "units",
+                &super::keys::unhandled("measurement", "units", other),
+            ));
+        }
+    };
+    let unit = |v: [f64; 2], key: &str| -> Result<[f64; 2], StudyError> {
+        let n = v[0].hypot(v[1]);
+        if !((n - 1.0).abs() < 1e-6) {
+            return Err(err(key, &format!("must be a unit vector, got {v:?}")));
+        }
+        Ok(v)
+    };
+    let x_axis = unit(m.x_axis.unwrap_or([1.0, 0.0]), "x_axis")?;
+    let y_axis = unit(m.y_axis.unwrap_or([0.0, 1.0]), "y_axis")?;
+    if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
+        return Err(err(
+            "y_axis",
+            &format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
+        ));
+    }
+    let origin = m.origin_mm.unwrap_or([0.0, 0.0]);
+    if !(origin[0].is_finite() && origin[1].is_finite()) {
+        return Err(err("origin_mm", "must be finite"));
+    }
+    Ok(Frame {
+        scale,
+        pixels: units == "px",
+        origin,
+        x_axis,
+        y_axis,
+    })
+}
+
+/// How a measured file's misfit is weighed (`weighting`, by default estimated with a
+/// covariance and per point without).
+fn weighting(
+    m: &MeasurementEntry,
+    index: usize,
+    lines: &KeyLines,
+) -> Result<Weighting, StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
+    let weighting = m
+        .weighting
+        .as_deref()
+        .map(|w| super::keys::word("measurement", "weighting", w))
+        .transpose()
+        .map_err(|e| err("weighting", &e))?;
+    let weighting = match weighting {
+        None if m.covariance.is_some() => Weighting::Estimated,
+        None | Some("per-point") => Weighting::PerPoint,
+        Some("estimated") => Weighting::Estimated,
+        Some("covariance") if m.covariance.is_some() => Weighting::Covariance,
+        Some("covariance") => {
+            return Err(err(
+                "weighting",
+                "weighting = \"covariance\" needs covariance (the field's covariance file)",
+            ))
+        }
+        Some(other) => {
+            return Err(err(
+                "weighting",
+                &super::keys::unhandled("measurement", "weighting", other),
+            ))
+        }
+    };
+    if weighting == Weighting::PerPoint && m.covariance.is_some() {
+        return Err(err(
+            "weighting",
+            "weighting = \"per-point\" leaves the covariance unused: remove covariance or choose covariance or estimated",
+        ));
+    }
+    Ok(weighting)
 }

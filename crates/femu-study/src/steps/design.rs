@@ -20,7 +20,7 @@ use crate::error::{Context, Error, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
-use crate::schema::{Study, WindowSpec};
+use crate::schema::{DesignSpec, Study, TestSpec, WindowSpec};
 use femu_identify::design::{self, Candidate, Design};
 use femu_identify::fit::FreeParameter;
 use femu_mech::sensitivity::{DirectSensitivity, Parameter};
@@ -133,164 +133,85 @@ fn information(
         .collect()
 }
 
+/// What the design step reads of a study: `[design]`, the tests, the noise, and the free
+/// parameters on the built model, checked before anything is solved.
+pub struct DesignInputs<'a> {
+    pub spec: &'a DesignSpec,
+    pub tests: &'a [TestSpec],
+    /// The noise of the measured displacement (mm).
+    pub sigma_mm: f64,
+    /// The free parameters (tied when `[design] grouped`).
+    pub free: Vec<FreeParameter>,
+}
+
+impl<'a> DesignInputs<'a> {
+    /// The study's `[design]`, tests and noise, and its free parameters on `built`; refuses a
+    /// window larger than the model seen from one of the sides.
+    pub fn of(study: &'a Study, built: &StudyModel) -> Result<DesignInputs<'a>> {
+        let (free, _) = free_parameters(study, &built.model, study.design.grouped)?;
+        check_window_sizes(study, &built.model.mesh)?;
+        Ok(DesignInputs {
+            spec: &study.design,
+            tests: &study.tests,
+            sigma_mm: study.measurement.sigma_mm,
+            free,
+        })
+    }
+}
+
 /// The design step on the built model `built` (see the module documentation).
 pub fn run_on(
-    study: &Study,
+    inputs: &DesignInputs,
     built: &StudyModel,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<DesignSummary> {
     let t0 = Instant::now();
     create_dir(out)?;
-    let spec = &study.design;
-    let sigma = study.measurement.sigma_mm;
-    let (free, _) = free_parameters(study, &built.model, spec.grouped)?;
+    let spec = inputs.spec;
+    let free = &inputs.free;
     let names: Vec<String> = free.iter().map(|f| f.name.clone()).collect();
     let families: Vec<String> = free
         .iter()
         .map(|f| f.members[0].spec().name.to_string())
         .collect();
-    check_window_sizes(study, &built.model.mesh)?;
-    // The windows, on the unloaded model (the measured points are reference positions).
-    let mut windows = Vec::new();
-    for side in &spec.sides {
-        for &[width_mm, depth_mm] in &spec.windows_mm {
-            if progress.cancelled() {
-                return Err(stopped(out, &names, &[], t0, "while placing the windows"));
-            }
-            let w = WindowSpec {
-                side: side.clone(),
-                width_mm,
-                depth_mm,
-                spacing_mm: spec.spacing_mm,
-            };
-            let (points, _) = window_points(built, &w)?;
-            windows.push((w, points));
-        }
-    }
+    let stopping = Stopping {
+        out,
+        names: &names,
+        t0,
+    };
+    let windows = place_windows(spec, built, &stopping, progress)?;
     progress.note(&format!(
-        "design: {} tests x {} windows, up to {} measurements per design, noise {sigma} mm, {} free parameters",
+        "design: {} tests x {} windows, up to {} measurements per design, noise {} mm, {} free parameters",
         spec.tests.len(),
         windows.len(),
         spec.max_measurements,
+        inputs.sigma_mm,
         free.len()
     ));
-    let bar = progress.task(
-        "solving and differentiating the tests",
-        Some(spec.tests.len()),
-    );
-    let mut candidates = Vec::new();
-    let mut summaries = Vec::new();
-    let mut failed_tests = Vec::new();
-    for &t in &spec.tests {
-        let loading = &study.tests[t].loading;
-        let test = loading.name();
-        let stop_here = || {
-            stopped(
-                out,
-                &names,
-                &summaries,
-                t0,
-                &format!("while solving {test}"),
-            )
-        };
-        if progress.cancelled() {
-            return Err(stop_here());
-        }
-        let (model, du) = match differentiate(built, loading, &free) {
-            Ok(r) => r,
-            Err(e) if crate::progress::is_interrupted(&e) => return Err(stop_here()),
-            Err(e) => {
-                let why = e.chain();
-                progress.warn(&format!("test {test} left out: {why}"));
-                failed_tests.push((test, why));
-                bar.inc(1);
-                continue;
-            }
-        };
-        let mut infos = Vec::with_capacity(windows.len());
-        for (_, points) in &windows {
-            if progress.cancelled() {
-                return Err(stop_here());
-            }
-            infos.push(information(&model, &free, &du, points, sigma));
-        }
-        for ((w, points), info) in windows.iter().zip(infos) {
-            let id = femu_identify::fisher::identifiability(&info, &names);
-            let name = format!("{test}, {}", w.label());
-            summaries.push(CandidateSummary {
-                name: name.clone(),
-                test: test.clone(),
-                side: w.side.clone(),
-                window_mm: [w.width_mm, w.depth_mm],
-                points: points.len(),
-                relative_sd: id.relative_sd,
-            });
-            candidates.push(Candidate {
-                name,
-                group: test.clone(),
-                exclusive: format!("{test}@{}", w.side),
-                information: info,
-                points: points.len(),
-            });
-        }
-        bar.inc(1);
-    }
-    drop(bar);
-    if candidates.is_empty() {
-        bail!(
-            "no test could be solved: {}",
-            failed_tests
-                .iter()
-                .map(|(t, why)| format!("{t}: {why}"))
-                .collect::<Vec<_>>()
-                .join("; ")
-        );
-    }
+    let evaluated = evaluate_windows(inputs, built, &windows, &stopping, progress)?;
     let solved_s = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let sets = design::designs(&candidates, spec.max_measurements);
-    let mut ranked: Vec<Design> = Vec::with_capacity(sets.len());
-    for chunk in sets.chunks(2000) {
-        if progress.cancelled() {
-            return Err(stopped(
-                out,
-                &names,
-                &summaries,
-                t0,
-                &format!(
-                    "while ranking the designs ({} of {})",
-                    ranked.len(),
-                    sets.len()
-                ),
-            ));
-        }
-        ranked.extend(
-            chunk
-                .iter()
-                .map(|m| design::score(&candidates, m, &names, &families, spec.identifiable_sd)),
-        );
-    }
-    design::rank(&mut ranked);
+    let ranked = rank_designs(&evaluated, spec, &families, &stopping, progress)?;
     let ranking_s = t1.elapsed().as_secs_f64();
     let best_single_test = best_for_each_family(&ranked, &families);
     let finding = findings(&best_single_test, &ranked);
     write_designs_csv(&out.join("designs.csv"), &ranked, &names)?;
-    write_candidates_csv(&out.join("candidates.csv"), &summaries, &names)?;
-    write_figures(out, &ranked, &summaries, &families)?;
+    write_candidates_csv(&out.join("candidates.csv"), &evaluated.summaries, &names)?;
+    write_figures(out, &ranked, &evaluated.summaries, &families)?;
     let summary = DesignSummary {
         command: "design".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         elements: built.model.mesh.elements.len(),
-        noise_sigma_mm: sigma,
+        noise_sigma_mm: inputs.sigma_mm,
         parameters: names.into_iter().zip(families).collect(),
         grouped: spec.grouped,
-        candidates: summaries,
+        candidates: evaluated.summaries,
         designs_ranked: ranked.len(),
         designs: ranked.iter().take(LISTED).cloned().collect(),
         best_single_test,
         finding,
-        failed_tests,
+        failed_tests: evaluated.failed_tests,
         timings_s: (solved_s, ranking_s, t0.elapsed().as_secs_f64()),
     };
     write_json(&out.join("summary.json"), &summary)?;
@@ -305,6 +226,193 @@ pub fn run_on(
         out.display()
     ));
     Ok(summary)
+}
+
+/// Where a stopped design keeps what it finished.
+struct Stopping<'a> {
+    out: &'a Path,
+    names: &'a [String],
+    t0: Instant,
+}
+
+impl Stopping<'_> {
+    /// The error of a design stopped `what` (`"while solving X"`), `finished` kept.
+    fn stop(&self, finished: &[CandidateSummary], what: &str) -> Error {
+        stopped(self.out, self.names, finished, self.t0, what)
+    }
+}
+
+/// Every window (each side × size) and its points in the tissue of the unloaded model (the
+/// measured points are reference positions).
+#[allow(clippy::type_complexity)]
+fn place_windows(
+    spec: &DesignSpec,
+    built: &StudyModel,
+    stopping: &Stopping,
+    progress: &dyn Progress,
+) -> Result<Vec<(WindowSpec, Vec<[f64; 2]>)>> {
+    let mut windows = Vec::new();
+    for side in &spec.sides {
+        for &[width_mm, depth_mm] in &spec.windows_mm {
+            if progress.cancelled() {
+                return Err(stopping.stop(&[], "while placing the windows"));
+            }
+            let w = WindowSpec {
+                side: side.clone(),
+                width_mm,
+                depth_mm,
+                spacing_mm: spec.spacing_mm,
+            };
+            let (points, _) = window_points(built, &w)?;
+            windows.push((w, points));
+        }
+    }
+    Ok(windows)
+}
+
+/// The candidates of every test that could be solved: each window's information, and the
+/// tests left out with the reason.
+struct Evaluated {
+    candidates: Vec<Candidate>,
+    summaries: Vec<CandidateSummary>,
+    failed_tests: Vec<(String, String)>,
+}
+
+/// Each test of `[design]` solved and differentiated once, and the information of each of its
+/// windows; a test that cannot be solved is left out (fails when none can).
+fn evaluate_windows(
+    inputs: &DesignInputs,
+    built: &StudyModel,
+    windows: &[(WindowSpec, Vec<[f64; 2]>)],
+    stopping: &Stopping,
+    progress: &dyn Progress,
+) -> Result<Evaluated> {
+    let spec = inputs.spec;
+    let bar = progress.task(
+        "solving and differentiating the tests",
+        Some(spec.tests.len()),
+    );
+    let mut e = Evaluated {
+        candidates: Vec::new(),
+        summaries: Vec::new(),
+        failed_tests: Vec::new(),
+    };
+    for &t in &spec.tests {
+        let loading = &inputs.tests[t].loading;
+        let test = loading.name();
+        let stop_here =
+            |e: &Evaluated| stopping.stop(&e.summaries, &format!("while solving {test}"));
+        if progress.cancelled() {
+            return Err(stop_here(&e));
+        }
+        let (model, du) = match differentiate(built, loading, &inputs.free) {
+            Ok(r) => r,
+            Err(err) if crate::progress::is_interrupted(&err) => return Err(stop_here(&e)),
+            Err(err) => {
+                let why = err.chain();
+                progress.warn(&format!("test {test} left out: {why}"));
+                e.failed_tests.push((test, why));
+                bar.inc(1);
+                continue;
+            }
+        };
+        let mut infos = Vec::with_capacity(windows.len());
+        for (_, points) in windows {
+            if progress.cancelled() {
+                return Err(stop_here(&e));
+            }
+            infos.push(information(
+                &model,
+                &inputs.free,
+                &du,
+                points,
+                inputs.sigma_mm,
+            ));
+        }
+        for ((w, points), info) in windows.iter().zip(infos) {
+            e.push(&test, w, points.len(), info, stopping.names);
+        }
+        bar.inc(1);
+    }
+    drop(bar);
+    if e.candidates.is_empty() {
+        bail!(
+            "no test could be solved: {}",
+            e.failed_tests
+                .iter()
+                .map(|(t, why)| format!("{t}: {why}"))
+                .collect::<Vec<_>>()
+                .join("; ")
+        );
+    }
+    Ok(e)
+}
+
+impl Evaluated {
+    /// The window `w` of `test`, of `points` points and information `info`.
+    fn push(
+        &mut self,
+        test: &str,
+        w: &WindowSpec,
+        points: usize,
+        info: Vec<Vec<f64>>,
+        names: &[String],
+    ) {
+        let id = femu_identify::fisher::identifiability(&info, names);
+        let name = format!("{test}, {}", w.label());
+        self.summaries.push(CandidateSummary {
+            name: name.clone(),
+            test: test.to_string(),
+            side: w.side.clone(),
+            window_mm: [w.width_mm, w.depth_mm],
+            points,
+            relative_sd: id.relative_sd,
+        });
+        self.candidates.push(Candidate {
+            name,
+            group: test.to_string(),
+            exclusive: format!("{test}@{}", w.side),
+            information: info,
+            points,
+        });
+    }
+}
+
+/// Every design of up to `[design] max_measurements` candidates scored and ranked (in chunks,
+/// so that a stop is seen).
+fn rank_designs(
+    evaluated: &Evaluated,
+    spec: &DesignSpec,
+    families: &[String],
+    stopping: &Stopping,
+    progress: &dyn Progress,
+) -> Result<Vec<Design>> {
+    let candidates = &evaluated.candidates;
+    let sets = design::designs(candidates, spec.max_measurements);
+    let mut ranked: Vec<Design> = Vec::with_capacity(sets.len());
+    for chunk in sets.chunks(2000) {
+        if progress.cancelled() {
+            return Err(stopping.stop(
+                &evaluated.summaries,
+                &format!(
+                    "while ranking the designs ({} of {})",
+                    ranked.len(),
+                    sets.len()
+                ),
+            ));
+        }
+        ranked.extend(chunk.iter().map(|m| {
+            design::score(
+                candidates,
+                m,
+                stopping.names,
+                families,
+                spec.identifiable_sd,
+            )
+        }));
+    }
+    design::rank(&mut ranked);
+    Ok(ranked)
 }
 
 /// Refuses a `[design] windows_mm` size larger than the model seen from one of the sides:

@@ -246,7 +246,8 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     if study.steps.design {
         progress.check()?;
         let t = begin(record, out, "design", Some("design"))?;
-        super::design::run_on(study, &built, &out.join("design"), progress)?;
+        let inputs = super::design::DesignInputs::of(study, &built)?;
+        super::design::run_on(&inputs, &built, &out.join("design"), progress)?;
         finish(record, out, t)?;
     }
 
@@ -374,7 +375,7 @@ fn forward_and_sensitivity(
             figures: true,
         };
         let summary = sensitivity::run_on(
-            study,
+            sensitivity::SensitivityInputs::of(study),
             &built.model,
             &built.skin,
             &options,

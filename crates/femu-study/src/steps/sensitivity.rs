@@ -7,7 +7,7 @@ use crate::bail;
 use crate::error::{Context, Result};
 use crate::output::{create_dir, write_json, ParameterEntry};
 use crate::progress::Progress;
-use crate::schema::Study;
+use crate::schema::{GridSpec, MeasurementSpec, QuadElement, Study, TestSpec};
 use femu_identify::fisher::{self, Identifiability, Tied};
 use femu_mech::loading::apply_loading;
 use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
@@ -126,7 +126,7 @@ pub fn run(
     femu_mesh::folder::refuse_inputs_in(&options.out, &study.input_files())?;
     let built = crate::model::build(&study.model)?;
     run_on(
-        study,
+        SensitivityInputs::of(study),
         &built.model,
         &built.skin,
         options,
@@ -135,13 +135,37 @@ pub fn run(
     )
 }
 
+/// What the sensitivity step reads of a study: its tests, its groups, its grid and noise.
+#[derive(Debug, Clone, Copy)]
+pub struct SensitivityInputs<'a> {
+    pub tests: &'a [TestSpec],
+    /// `[parameters] groups` (the grouped ranking ties them).
+    pub groups: &'a [Vec<String>],
+    /// The grid of the identifiability and the noise of the measured displacement.
+    pub measurement: &'a MeasurementSpec,
+    /// The model's element (the summary names it).
+    pub element: QuadElement,
+}
+
+impl<'a> SensitivityInputs<'a> {
+    /// The study's tests, groups, grid and noise.
+    pub fn of(study: &'a Study) -> SensitivityInputs<'a> {
+        SensitivityInputs {
+            tests: &study.tests,
+            groups: &study.groups,
+            measurement: &study.measurement,
+            element: study.model.element,
+        }
+    }
+}
+
 /// Called after each test is solved: `(test name, loaded model, solution, solve time s)`.
 pub type OnSolved<'a> = dyn FnMut(&str, &Model, &Solution, f64) -> Result<()> + 'a;
 
-/// The sensitivities of `study`'s tests on `base` (the study's model, unloaded); `on_solved`
-/// sees each test's solution (`femu run` writes the forward results from it).
+/// The sensitivities of the tests of `inputs` on `base` (the study's model, unloaded);
+/// `on_solved` sees each test's solution (`femu run` writes the forward results from it).
 pub fn run_on(
-    study: &Study,
+    inputs: SensitivityInputs,
     base: &Model,
     skin: &[(usize, usize)],
     args: &SensitivityOptions,
@@ -160,7 +184,7 @@ pub fn run_on(
         "sensitivity: {} elements, {} nodes; {} tests, {} parameters",
         base.mesh.elements.len(),
         base.node_count(),
-        study.tests.len(),
+        inputs.tests.len(),
         params.len()
     ));
     // Checked before any solve: the groups and the grid.
@@ -168,30 +192,119 @@ pub fn run_on(
         ("ungrouped".to_string(), Tied::none(&names)),
         (
             "grouped".to_string(),
-            Tied::new(&names, &study.groups).context("[parameters] groups")?,
+            Tied::new(&names, inputs.groups).context("[parameters] groups")?,
         ),
     ];
-    let (lo, hi) = base.mesh.bounding_box();
-    let points = study.measurement.grid.points(lo, hi);
-    let spacing = if points.len() > 1 {
-        points[1][0] - points[0][0]
-    } else {
-        0.0
+    let grid = GridPoints::of(&inputs.measurement.grid, base)?;
+    let setup = TestSetup {
+        base,
+        skin,
+        params: &params,
+        names: &names,
+        args,
     };
-    let locator = PointLocator::new(&base.mesh);
-    let located: Vec<_> = points.iter().filter_map(|p| locator.locate(*p)).collect();
-    if located.is_empty() {
-        bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
+    let (results, failed_tests) = solve_tests(inputs.tests, &setup, progress, on_solved)?;
+    let thetas: Vec<f64> = params.iter().map(|p| p.value(base)).collect();
+    let sigma_mm = inputs.measurement.sigma_mm;
+    let ranking = rank_measurements(&results, &groupings, &grid, &thetas, sigma_mm, &families)?;
+    write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
+
+    let finding = findings(&results, &families);
+    if args.figures {
+        write_figures(&args.out, &results, &names, progress)?;
     }
+    let summary = SensitivitySummary {
+        command: "sensitivity".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        elements: base.mesh.elements.len(),
+        nodes: base.node_count(),
+        element: format!("{:?}", inputs.element).to_uppercase(),
+        parameters: names.iter().cloned().zip(thetas.iter().cloned()).collect(),
+        law_parameters: ParameterEntry::all(base),
+        tests: results.iter().map(|r| r.summary(&names)).collect(),
+        grid_points: grid.points,
+        grid_points_in_tissue: grid.located.len(),
+        grid_spacing_mm: grid.spacing_mm,
+        noise_sigma_mm: sigma_mm,
+        ranking,
+        finding: finding.clone(),
+        wall_time_s: t0.elapsed().as_secs_f64(),
+        failed_tests,
+    };
+    write_json(&args.out.join("summary.json"), &summary)?;
+    for line in &finding {
+        progress.note(line);
+    }
+    note_best_measurements(&summary, progress);
+    progress.note(&format!("wrote {}", args.out.display()));
+    Ok(summary)
+}
+
+/// The measurement grid's points in the tissue of the unloaded model.
+struct GridPoints {
+    /// How many points the grid has (in the tissue or not).
+    points: usize,
+    located: Vec<femu_mesh::locate::PointLocation>,
+    /// The spacing along x of the first two points (0 for a single point).
+    spacing_mm: f64,
+}
+
+impl GridPoints {
+    /// The points of `grid` over `base`'s bounding box that lie in its tissue (at least one).
+    fn of(grid: &GridSpec, base: &Model) -> Result<GridPoints> {
+        let (lo, hi) = base.mesh.bounding_box();
+        let points = grid.points(lo, hi);
+        let spacing_mm = if points.len() > 1 {
+            points[1][0] - points[0][0]
+        } else {
+            0.0
+        };
+        let locator = PointLocator::new(&base.mesh);
+        let located: Vec<_> = points.iter().filter_map(|p| locator.locate(*p)).collect();
+        if located.is_empty() {
+            bail!("no grid point lies in the tissue: check [grid] origin_mm and spacing_mm");
+        }
+        Ok(GridPoints {
+            points: points.len(),
+            located,
+            spacing_mm,
+        })
+    }
+}
+
+/// What every test is solved and differentiated with.
+struct TestSetup<'a> {
+    base: &'a Model,
+    skin: &'a [(usize, usize)],
+    params: &'a [Parameter],
+    names: &'a [String],
+    args: &'a SensitivityOptions,
+}
+
+/// Every test solved and differentiated, its outputs written; a test that cannot be solved is
+/// reported and left out (with the reason), the others go on. Fails when none can be solved.
+#[allow(clippy::type_complexity)]
+fn solve_tests(
+    tests: &[TestSpec],
+    setup: &TestSetup,
+    progress: &dyn Progress,
+    on_solved: &mut OnSolved,
+) -> Result<(Vec<TestResult>, Vec<(String, String)>)> {
     let mut results = Vec::new();
     let mut failed_tests = Vec::new();
-    let bar = progress.task("solving the tests", Some(study.tests.len()));
-    for test in &study.tests {
+    let bar = progress.task("solving the tests", Some(tests.len()));
+    for test in tests {
         progress.check()?;
         let loading = &test.loading;
         bar.message(&format!("{}: solve and sensitivities", loading.name()));
-        // A test that cannot be solved is reported and left out; the others go on.
-        let r = match run_test(base, skin, loading, &params, args, progress) {
+        let r = match run_test(
+            setup.base,
+            setup.skin,
+            loading,
+            setup.params,
+            setup.args,
+            progress,
+        ) {
             Ok(r) => r,
             // A stop is not a failure of the test.
             Err(e) if crate::progress::is_interrupted(&e) => return Err(e),
@@ -207,7 +320,7 @@ pub fn run_on(
             }
         };
         on_solved(&r.name, &r.model, &r.solution, r.solve_s)?;
-        write_test_outputs(&args.out.join(&r.name), &r, &names)?;
+        write_test_outputs(&setup.args.out.join(&r.name), &r, setup.names)?;
         results.push(r);
         bar.inc(1);
     }
@@ -222,13 +335,25 @@ pub fn run_on(
                 .join("; ")
         );
     }
+    Ok((results, failed_tests))
+}
 
-    let thetas: Vec<f64> = params.iter().map(|p| p.value(base)).collect();
+/// The predicted identifiability of each test and of all tests together, in each grouping,
+/// from the scaled sensitivities `θ ∂u/∂θ` at the grid's points with noise `sigma_mm`: best
+/// first within each grouping.
+fn rank_measurements(
+    results: &[TestResult],
+    groupings: &[(String, Tied)],
+    grid: &GridPoints,
+    thetas: &[f64],
+    sigma_mm: f64,
+    families: &[&str],
+) -> Result<Vec<Ranking>> {
     let columns_of = |r: &TestResult| -> Vec<Vec<f64>> {
         r.du.iter()
-            .zip(&thetas)
+            .zip(thetas)
             .map(|(du, th)| {
-                located
+                grid.located
                     .iter()
                     .flat_map(|loc| {
                         [
@@ -241,11 +366,11 @@ pub fn run_on(
             .collect()
     };
     let mut ranking = Vec::new();
-    for (gname, tied) in &groupings {
+    for (gname, tied) in groupings {
         let mut total: Option<Vec<Vec<f64>>> = None;
-        for r in &results {
-            let f = fisher::information(&columns_of(r), study.measurement.sigma_mm, tied)?;
-            ranking.push(rank(&r.name, gname, &f, tied, &families));
+        for r in results {
+            let f = fisher::information(&columns_of(r), sigma_mm, tied)?;
+            ranking.push(rank(&r.name, gname, &f, tied, families));
             match &mut total {
                 None => total = Some(f),
                 Some(t) => fisher::add_information(t, &f),
@@ -262,7 +387,7 @@ pub fn run_on(
                 gname,
                 total.as_ref().expect("tests"),
                 tied,
-                &families,
+                families,
             ));
         }
     }
@@ -271,54 +396,35 @@ pub fn run_on(
             .partial_cmp(&(b.grouping.as_str(), b.worst()))
             .unwrap_or(std::cmp::Ordering::Equal)
     });
-    write_ranking_csv(&args.out.join("identifiability.csv"), &ranking)?;
+    Ok(ranking)
+}
 
-    let finding = findings(&results, &families);
-    if args.figures {
-        write_figures(&args.out, &results, &names, progress)?;
+impl TestResult {
+    /// As the summary gives it (`names`: the parameters').
+    fn summary(&self, names: &[String]) -> TestSummary {
+        TestSummary {
+            test: self.name.clone(),
+            solve_time_s: self.solve_s,
+            sensitivity_time_s: self.sensitivity_s,
+            sensitivity_over_solve: self.sensitivity_s / self.solve_s,
+            newton_iterations: self.solution.report.newton_iterations,
+            max_displacement_mm: max_norm(&self.solution.u),
+            sensitivity_index: names
+                .iter()
+                .cloned()
+                .zip(self.global.iter().cloned())
+                .collect(),
+            direct_differentiation: self.report.clone(),
+            finite_difference_max_relative_difference: self
+                .fd_max_rel_diff
+                .as_ref()
+                .map(|d| names.iter().cloned().zip(d.iter().cloned()).collect()),
+        }
     }
-    let summary = SensitivitySummary {
-        command: "sensitivity".into(),
-        version: env!("CARGO_PKG_VERSION").into(),
-        elements: base.mesh.elements.len(),
-        nodes: base.node_count(),
-        element: format!("{:?}", study.model.element).to_uppercase(),
-        parameters: names.iter().cloned().zip(thetas.iter().cloned()).collect(),
-        law_parameters: ParameterEntry::all(base),
-        tests: results
-            .iter()
-            .map(|r| TestSummary {
-                test: r.name.clone(),
-                solve_time_s: r.solve_s,
-                sensitivity_time_s: r.sensitivity_s,
-                sensitivity_over_solve: r.sensitivity_s / r.solve_s,
-                newton_iterations: r.solution.report.newton_iterations,
-                max_displacement_mm: max_norm(&r.solution.u),
-                sensitivity_index: names
-                    .iter()
-                    .cloned()
-                    .zip(r.global.iter().cloned())
-                    .collect(),
-                direct_differentiation: r.report.clone(),
-                finite_difference_max_relative_difference: r
-                    .fd_max_rel_diff
-                    .as_ref()
-                    .map(|d| names.iter().cloned().zip(d.iter().cloned()).collect()),
-            })
-            .collect(),
-        grid_points: points.len(),
-        grid_points_in_tissue: located.len(),
-        grid_spacing_mm: spacing,
-        noise_sigma_mm: study.measurement.sigma_mm,
-        ranking,
-        finding: finding.clone(),
-        wall_time_s: t0.elapsed().as_secs_f64(),
-        failed_tests,
-    };
-    write_json(&args.out.join("summary.json"), &summary)?;
-    for line in &finding {
-        progress.note(line);
-    }
+}
+
+/// The six best measurements of the ranking, for the user.
+fn note_best_measurements(summary: &SensitivitySummary, progress: &dyn Progress) {
     let family_names: Vec<&str> = summary
         .ranking
         .first()
@@ -341,8 +447,6 @@ pub fn run_on(
             worst.join(" / ")
         ));
     }
-    progress.note(&format!("wrote {}", args.out.display()));
-    Ok(summary)
 }
 
 fn max_norm(u: &[f64]) -> f64 {
