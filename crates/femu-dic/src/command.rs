@@ -455,5 +455,10 @@ fn write_tables(
             eq.into(),
         ],
     )?;
-    output::write_vtu(&out.join("result.vtu"), &m.res, frame)
+    output::write_fields(
+        &femu_mesh::VtuWriter,
+        &out.join("result.vtu"),
+        &m.res,
+        frame,
+    )
 }

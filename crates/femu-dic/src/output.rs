@@ -4,6 +4,7 @@
 use crate::error::DicError;
 use crate::quality::{NodalCovariance, Trust};
 use crate::solver::{DicResult, LevelReport, Timings};
+use femu_mesh::{FieldSet, FieldWriter, VtuField};
 use std::io::Write;
 use std::path::Path;
 
@@ -490,8 +491,14 @@ pub fn element_strains(res: &DicResult, frame: &ModelFrame) -> Vec<[f64; 3]> {
 }
 
 /// The mesh in the model frame (mm) with displacement (mm), pixel displacement, strain,
-/// residual and flags, for ParaView.
-pub fn write_vtu(path: &Path, res: &DicResult, frame: &ModelFrame) -> Result<(), DicError> {
+/// residual and flags, written by `writer` (ParaView's `.vtu` with
+/// [`femu_mesh::VtuWriter`]).
+pub fn write_fields(
+    writer: &dyn FieldWriter,
+    path: &Path,
+    res: &DicResult,
+    frame: &ModelFrame,
+) -> Result<(), DicError> {
     let mut mesh = res.mesh.to_mesh();
     for p in &mut mesh.nodes {
         *p = frame.point(*p);
@@ -511,38 +518,41 @@ pub fn write_vtu(path: &Path, res: &DicResult, frame: &ModelFrame) -> Result<(),
         .flat_map(|s| [s[0], s[1], 0.0, s[2]])
         .collect();
     let flagged: Vec<f64> = res.flagged.iter().map(|&b| b as u8 as f64).collect();
-    use femu_mesh::vtu::VtuField;
-    femu_mesh::vtu::write_vtu(
-        path,
-        &mesh,
-        Some(&u_mm),
-        &[VtuField {
-            name: "displacement_px",
-            components: 3,
-            data: &u_px,
-        }],
-        &[
-            VtuField {
-                name: "strain",
-                components: 4,
-                data: &strain,
+    writer
+        .write(
+            path,
+            &FieldSet {
+                mesh: &mesh,
+                displacement: Some(&u_mm),
+                point_fields: &[VtuField {
+                    name: "displacement_px",
+                    components: 3,
+                    data: &u_px,
+                }],
+                cell_fields: &[
+                    VtuField {
+                        name: "strain",
+                        components: 4,
+                        data: &strain,
+                    },
+                    VtuField {
+                        name: "residual",
+                        components: 1,
+                        data: &res.element_residual,
+                    },
+                    VtuField {
+                        name: "flagged",
+                        components: 1,
+                        data: &flagged,
+                    },
+                ],
+                int_cell_fields: &[],
             },
-            VtuField {
-                name: "residual",
-                components: 1,
-                data: &res.element_residual,
-            },
-            VtuField {
-                name: "flagged",
-                components: 1,
-                data: &flagged,
-            },
-        ],
-    )
-    .map_err(|e| DicError::Write {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })
+        )
+        .map_err(|e| DicError::Write {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })
 }
 
 /// The numbers a user quotes, for `summary.json`.

@@ -7,7 +7,8 @@ use crate::quality::scaled_jacobian;
 use crate::GeometryError;
 use femu_mesh::generate::GeneratedMesh;
 use femu_mesh::{
-    BoundaryCondition, Deck, FacePressure, MaterialDef, StepDef, VtuField, VtuIntField,
+    BoundaryCondition, Deck, FacePressure, FieldSet, FieldWriter, MaterialDef, StepDef, VtuField,
+    VtuIntField, VtuWriter,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -136,9 +137,18 @@ pub fn write_inp_with_surfaces(
     femu_mesh::atomic::write(path, out).map_err(io)
 }
 
-/// Writes the mesh as a ParaView file with the cell fields `region` (index into
-/// `model.regions`) and `scaled_jacobian`.
+/// Writes the mesh as a ParaView file ([`write_regions_fields`] with [`VtuWriter`]).
 pub fn write_regions_vtu(model: &ThighModel, path: &Path) -> Result<(), GeometryError> {
+    write_regions_fields(&VtuWriter, model, path)
+}
+
+/// Writes the mesh with `writer`, with the cell fields `region` (index into `model.regions`)
+/// and `scaled_jacobian`.
+pub fn write_regions_fields(
+    writer: &dyn FieldWriter,
+    model: &ThighModel,
+    path: &Path,
+) -> Result<(), GeometryError> {
     let m = &model.mesh.mesh;
     let mut region = vec![-1i32; m.elements.len()];
     for (r, name) in model.regions.iter().enumerate() {
@@ -149,23 +159,26 @@ pub fn write_regions_vtu(model: &ThighModel, path: &Path) -> Result<(), Geometry
     let sj: Vec<f64> = (0..m.elements.len())
         .map(|e| scaled_jacobian(&m.element_coords(e).0))
         .collect();
-    femu_mesh::write_vtu_with_int_cells(
-        path,
-        m,
-        None,
-        &[],
-        &[VtuField {
-            name: "scaled_jacobian",
-            components: 1,
-            data: &sj,
-        }],
-        &[VtuIntField {
-            name: "region",
-            data: &region,
-        }],
-    )
-    .map_err(|source| GeometryError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    writer
+        .write(
+            path,
+            &FieldSet {
+                mesh: m,
+                displacement: None,
+                point_fields: &[],
+                cell_fields: &[VtuField {
+                    name: "scaled_jacobian",
+                    components: 1,
+                    data: &sj,
+                }],
+                int_cell_fields: &[VtuIntField {
+                    name: "region",
+                    data: &region,
+                }],
+            },
+        )
+        .map_err(|source| GeometryError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
 }

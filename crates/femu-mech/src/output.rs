@@ -6,7 +6,7 @@ use crate::model::Model;
 use crate::solver::Solution;
 use femu_mesh::atomic::AtomicFile;
 use femu_mesh::decimal::push_f64;
-use femu_mesh::{write_vtu_with_int_cells, VtuField, VtuIntField};
+use femu_mesh::{FieldSet, FieldWriter, VtuField, VtuIntField, VtuWriter};
 use rayon::prelude::*;
 use std::io::{self, Write};
 use std::path::Path;
@@ -84,9 +84,20 @@ pub fn write_displacements_csv(path: &Path, model: &Model, u: &[f64]) -> io::Res
     w.commit()
 }
 
-/// Writes the ParaView file: point fields `displacement` and `reaction_force`; cell fields `LE`,
-/// `S` (Cauchy stress, components xx, yy, zz, xy), `J`, and the integer `region` and `material`.
+/// Writes the ParaView file ([`write_result_fields`] with [`VtuWriter`]).
 pub fn write_result_vtu(path: &Path, model: &Model, solution: &Solution) -> io::Result<()> {
+    write_result_fields(&VtuWriter, path, model, solution)
+}
+
+/// Writes the result fields with `writer`: point fields `displacement` and `reaction_force`;
+/// cell fields `LE`, `S` (Cauchy stress, components xx, yy, zz, xy), `J`, and the integer
+/// `region` and `material`.
+pub fn write_result_fields(
+    writer: &dyn FieldWriter,
+    path: &Path,
+    model: &Model,
+    solution: &Solution,
+) -> io::Result<()> {
     let fields = element_fields(model, &solution.u);
     let disp: Vec<[f64; 2]> = solution.u.chunks_exact(2).map(|c| [c[0], c[1]]).collect();
     let reaction: Vec<f64> = solution
@@ -98,42 +109,44 @@ pub fn write_result_vtu(path: &Path, model: &Model, solution: &Solution) -> io::
     let s: Vec<f64> = fields.cauchy_stress.iter().flatten().copied().collect();
     let region: Vec<i32> = model.element_region.iter().map(|&r| r as i32).collect();
     let material: Vec<i32> = model.element_material.iter().map(|&m| m as i32).collect();
-    write_vtu_with_int_cells(
+    writer.write(
         path,
-        &model.mesh,
-        Some(&disp),
-        &[VtuField {
-            name: "reaction_force",
-            components: 3,
-            data: &reaction,
-        }],
-        &[
-            VtuField {
-                name: "LE",
-                components: 4,
-                data: &le,
-            },
-            VtuField {
-                name: "S",
-                components: 4,
-                data: &s,
-            },
-            VtuField {
-                name: "J",
-                components: 1,
-                data: &fields.volume_ratio,
-            },
-        ],
-        &[
-            VtuIntField {
-                name: "region",
-                data: &region,
-            },
-            VtuIntField {
-                name: "material",
-                data: &material,
-            },
-        ],
+        &FieldSet {
+            mesh: &model.mesh,
+            displacement: Some(&disp),
+            point_fields: &[VtuField {
+                name: "reaction_force",
+                components: 3,
+                data: &reaction,
+            }],
+            cell_fields: &[
+                VtuField {
+                    name: "LE",
+                    components: 4,
+                    data: &le,
+                },
+                VtuField {
+                    name: "S",
+                    components: 4,
+                    data: &s,
+                },
+                VtuField {
+                    name: "J",
+                    components: 1,
+                    data: &fields.volume_ratio,
+                },
+            ],
+            int_cell_fields: &[
+                VtuIntField {
+                    name: "region",
+                    data: &region,
+                },
+                VtuIntField {
+                    name: "material",
+                    data: &material,
+                },
+            ],
+        },
     )
 }
 

@@ -40,4 +40,6 @@ pub use inp::{read_inp, write_inp, write_inp_file, InpError};
 pub use locate::{PointInterpolation, PointLocation, PointLocator};
 pub use mesh::{Element, ElementKind, Mesh, MeshError};
 pub use msh::{read_msh, MshError, MshModel};
-pub use vtu::{write_vtu, write_vtu_with_int_cells, VtuField, VtuIntField};
+pub use vtu::{
+    write_vtu, write_vtu_with_int_cells, FieldSet, FieldWriter, VtuField, VtuIntField, VtuWriter,
+};

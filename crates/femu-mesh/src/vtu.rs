@@ -10,6 +10,9 @@
 //! result gone wrong, not something to plot.
 //!
 //! Points are written in 3D with z = 0; cells are `VTK_QUAD` (9) and `VTK_TRIANGLE` (5).
+//!
+//! Callers that may want another format write through the [`FieldWriter`] trait (a
+//! [`FieldSet`]: mesh, displacement, point and cell fields); [`VtuWriter`] is this format.
 
 use base64::engine::general_purpose::STANDARD as BASE64;
 use base64::Engine;
@@ -37,11 +40,79 @@ pub struct VtuIntField<'a> {
     pub data: &'a [i32],
 }
 
-/// Writes `mesh` to `path` as a `.vtu` file with optional displacement and fields.
+/// What a field file holds: a mesh with an optional displacement, point fields and cell
+/// fields (`f64` and `Int32`).
 ///
-/// `displacement` (one `[ux, uy]` per node) is written as the 3-component point field
-/// `displacement` (z = 0). Errors with `InvalidInput` if a field has the wrong length or zero
-/// components, and `InvalidData` for a non-finite value.
+/// `displacement` (one `[ux, uy]` per node) is the point field `displacement`; each
+/// [`VtuField`] holds `components` values per point (or per cell), and each [`VtuIntField`]
+/// one value per cell.
+#[derive(Debug, Clone, Copy)]
+pub struct FieldSet<'a> {
+    pub mesh: &'a Mesh,
+    pub displacement: Option<&'a [[f64; 2]]>,
+    pub point_fields: &'a [VtuField<'a>],
+    pub cell_fields: &'a [VtuField<'a>],
+    pub int_cell_fields: &'a [VtuIntField<'a>],
+}
+
+impl<'a> FieldSet<'a> {
+    /// The mesh alone (no displacement, no fields).
+    pub fn mesh(mesh: &'a Mesh) -> Self {
+        FieldSet {
+            mesh,
+            displacement: None,
+            point_fields: &[],
+            cell_fields: &[],
+            int_cell_fields: &[],
+        }
+    }
+}
+
+/// A writer of a mesh with its fields to a file ([`VtuWriter`]: ParaView's `.vtu`).
+pub trait FieldWriter: Sync {
+    /// The file name extension of the format, without the dot.
+    fn extension(&self) -> &'static str;
+
+    /// Writes `fields` to `path`. The fields are checked before the file is created: a field of
+    /// the wrong length or with zero components is `InvalidInput`, a non-finite value
+    /// `InvalidData` (naming the field and the item).
+    fn write(&self, path: &Path, fields: &FieldSet) -> io::Result<()>;
+}
+
+/// The VTK XML `UnstructuredGrid` writer of the module documentation. The displacement is
+/// written as the 3-component point field `displacement` (z = 0).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct VtuWriter;
+
+impl FieldWriter for VtuWriter {
+    fn extension(&self) -> &'static str {
+        "vtu"
+    }
+
+    fn write(&self, path: &Path, fields: &FieldSet) -> io::Result<()> {
+        // Check everything before creating the file.
+        check(
+            fields.mesh,
+            fields.displacement,
+            fields.point_fields,
+            fields.cell_fields,
+            fields.int_cell_fields,
+        )?;
+        crate::atomic::write_with(path, |w| {
+            write_to(
+                w,
+                fields.mesh,
+                fields.displacement,
+                fields.point_fields,
+                fields.cell_fields,
+                fields.int_cell_fields,
+            )
+        })
+    }
+}
+
+/// Writes `mesh` to `path` as a `.vtu` file with optional displacement and fields
+/// ([`VtuWriter`] with a [`FieldSet`] without integer cell fields).
 pub fn write_vtu(
     path: &Path,
     mesh: &Mesh,
@@ -61,24 +132,16 @@ pub fn write_vtu_with_int_cells(
     cell_fields: &[VtuField],
     int_cell_fields: &[VtuIntField],
 ) -> io::Result<()> {
-    // Check everything before creating the file.
-    check(
-        mesh,
-        displacement,
-        point_fields,
-        cell_fields,
-        int_cell_fields,
-    )?;
-    crate::atomic::write_with(path, |w| {
-        write_to(
-            w,
+    VtuWriter.write(
+        path,
+        &FieldSet {
             mesh,
             displacement,
             point_fields,
             cell_fields,
             int_cell_fields,
-        )
-    })
+        },
+    )
 }
 
 fn invalid(kind: io::ErrorKind, msg: String) -> io::Error {
@@ -582,5 +645,67 @@ print('ok')
         assert!(!path.exists());
         let u = [[0.0; 2]; 4];
         assert!(write_vtu(&path, &m, Some(&u), &[], &[]).is_err());
+    }
+    /// The trait path (`&dyn FieldWriter`) and the free functions write the same bytes.
+    #[test]
+    fn field_writer_matches_the_free_functions() {
+        let mesh = two_elements();
+        let disp = vec![[0.1, -0.2]; mesh.nodes.len()];
+        let p: Vec<f64> = (0..mesh.nodes.len()).map(|i| i as f64 * 0.5).collect();
+        let c = vec![1.5, -2.5];
+        let r = vec![3, 7];
+        let pf = [VtuField {
+            name: "p",
+            components: 1,
+            data: &p,
+        }];
+        let cf = [VtuField {
+            name: "c",
+            components: 1,
+            data: &c,
+        }];
+        let rf = [VtuIntField {
+            name: "region",
+            data: &r,
+        }];
+        let a = scratch("trait-a.vtu");
+        let b = scratch("trait-b.vtu");
+        let writer: &dyn FieldWriter = &VtuWriter;
+        assert_eq!(writer.extension(), "vtu");
+        writer
+            .write(
+                &a,
+                &FieldSet {
+                    mesh: &mesh,
+                    displacement: Some(&disp),
+                    point_fields: &pf,
+                    cell_fields: &cf,
+                    int_cell_fields: &rf,
+                },
+            )
+            .unwrap();
+        write_vtu_with_int_cells(&b, &mesh, Some(&disp), &pf, &cf, &rf).unwrap();
+        let (ba, bb) = (std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+        assert!(!ba.is_empty());
+        assert_eq!(ba, bb);
+        // A bad field is refused through the trait too, before the file is created.
+        let short = [VtuField {
+            name: "short",
+            components: 1,
+            data: &c[..1],
+        }];
+        let e = writer
+            .write(
+                &scratch("trait-bad.vtu"),
+                &FieldSet {
+                    cell_fields: &short,
+                    ..FieldSet::mesh(&mesh)
+                },
+            )
+            .unwrap_err();
+        assert_eq!(e.kind(), io::ErrorKind::InvalidInput);
+        assert!(!scratch("trait-bad.vtu").exists());
+        let _ = std::fs::remove_file(a);
+        let _ = std::fs::remove_file(b);
     }
 }
