@@ -29,11 +29,13 @@ pub mod rate;
 pub mod refine;
 pub mod report;
 pub mod run;
+pub mod split;
 pub mod study;
 
 pub use rate::{fit_rate, fit_rate_against_finest, RateFit};
 pub use refine::refined_thigh;
 pub use run::{run_study, ElementSummary, LockingSummary, MeshRun, StudyResult};
+pub use split::{split_deck, split_deck_times, split_deck_with, Curves, SplitError};
 pub use study::{ConvergenceStudy, DicGrid, MeshSequence};
 
 use std::path::PathBuf;
