@@ -28,11 +28,29 @@ use femu_mech::build::{CurveDisplacement, CurvePressure};
 use femu_mesh::{StepDef, MMHG_IN_MPA};
 
 /// The boundary conditions of a Gmsh mesh.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct MeshBoundary {
     pub fixed: Vec<CurveDisplacement>,
     pub pressures: Vec<CurvePressure>,
     pub step: StepDef,
+}
+
+/// No boundary table: no condition, the declared `[step]`.
+impl Default for MeshBoundary {
+    fn default() -> Self {
+        let real = |key: &str| super::keys::default::<f64>("step", key);
+        MeshBoundary {
+            fixed: Vec::new(),
+            pressures: Vec::new(),
+            step: StepDef {
+                initial_increment: real("initial_increment"),
+                min_increment: real("min_increment"),
+                max_increment: real("max_increment"),
+                max_increments: super::keys::default("step", "max_increments"),
+                ..StepDef::default()
+            },
+        }
+    }
 }
 
 impl MeshBoundary {
@@ -51,7 +69,8 @@ pub(crate) fn parse(
 ) -> Result<MeshBoundary, StudyError> {
     let mut out = MeshBoundary::default();
     for (k, fx) in fixed.iter().enumerate() {
-        let dofs = fx.dofs.clone().unwrap_or_else(|| vec![1, 2]);
+        let dofs: Vec<usize> = super::keys::or_default(fx.dofs.clone(), "fixed", "dofs");
+        let value_mm: f64 = super::keys::or_default(fx.value_mm, "fixed", "value_mm");
         if dofs.is_empty() || dofs.iter().any(|&d| d != 1 && d != 2) {
             return Err(lines.err(
                 "fixed",
@@ -60,13 +79,13 @@ pub(crate) fn parse(
                 format!("plane strain has dofs 1 and 2, got {dofs:?}"),
             ));
         }
-        if !fx.value_mm.is_finite() {
+        if !value_mm.is_finite() {
             return Err(lines.err("fixed", k, "value_mm", "must be finite".into()));
         }
         out.fixed.push(CurveDisplacement {
             curve: fx.curve.clone(),
             dofs: dofs.iter().map(|d| d - 1).collect(),
-            value: fx.value_mm,
+            value: value_mm,
         });
     }
     for (k, p) in pressure.iter().enumerate() {

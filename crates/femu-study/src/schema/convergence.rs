@@ -143,24 +143,28 @@ pub(crate) fn view(v: ViewInputs, lines: &KeyLines) -> Result<ConvergenceStudy, 
         ..ConvergenceStudy::default()
     };
     let s = v.spec;
-    if let Some(k) = &s.element_types {
-        study.elements = k.clone();
-    }
-    if let Some(m) = &s.meshes {
-        study.meshes = m.clone();
-    }
-    if let Some(t) = s.tolerance_mm {
-        study.tolerance_mm = t;
-    }
-    if let Some(l) = s.locking {
-        study.locking = l;
-    }
-    if let Some(d) = s.d_scale {
-        study.d_scale = d;
-    }
-    if let Some(n) = s.locking_meshes {
-        study.locking_meshes = n;
-    }
+    study.elements = match &s.element_types {
+        Some(k) => k.clone(),
+        None => super::keys::default::<Vec<String>>("convergence", "element_types")
+            .iter()
+            .map(|n| {
+                ElementKind::from_deck_name(n)
+                    .unwrap_or_else(|| panic!("[convergence] element_types: the declared '{n}'"))
+            })
+            .collect(),
+    };
+    study.meshes = match &s.meshes {
+        Some(m) => m.clone(),
+        None => {
+            MeshSequence::TargetElements(super::keys::default("convergence", "target_elements"))
+        }
+    };
+    let declared = |key: &str| super::keys::default::<f64>("convergence", key);
+    study.tolerance_mm = s.tolerance_mm.unwrap_or_else(|| declared("tolerance_mm"));
+    study.locking = super::keys::or_default(s.locking, "convergence", "locking");
+    study.d_scale = s.d_scale.unwrap_or_else(|| declared("d_scale"));
+    study.locking_meshes =
+        super::keys::or_default(s.locking_meshes, "convergence", "locking_meshes");
     study.raster_mm = s.raster_mm;
     study.materials = table1_with(v.materials, lines)?;
     study.loading = v.tests[s.test].loading.clone();

@@ -18,7 +18,6 @@ use super::loading_tests::TestSpec;
 use super::raw::DesignEntry;
 use super::ultrasound::ProbeSection;
 use super::StudyError;
-use femu_identify::design::DEFAULT_IDENTIFIABLE_SD;
 use femu_mech::loading::Side;
 
 /// The candidates and criteria of `femu design`.
@@ -75,11 +74,7 @@ pub(crate) fn parse(
     let err = |key: &str, message: String| lines.err("design", 0, key, message);
     let e = e.unwrap_or_default();
     let chosen = chosen_tests(&e, tests, lines)?;
-    let sides: Vec<String> = e.sides.clone().unwrap_or_else(|| {
-        ["anterior", "lateral", "medial", "posterior"]
-            .map(String::from)
-            .to_vec()
-    });
+    let sides: Vec<String> = super::keys::or_default(e.sides.clone(), "design", "sides");
     if sides.is_empty() {
         return Err(err("sides", "name at least one side".into()));
     }
@@ -91,7 +86,7 @@ pub(crate) fn parse(
     let max_measurements = super::keys::check_int(
         "design",
         "max_measurements",
-        e.max_measurements.unwrap_or(2),
+        super::keys::or_default(e.max_measurements, "design", "max_measurements"),
     )
     .map_err(|m| err("max_measurements", m))?;
     let candidates = [chosen.len(), sides.len(), windows_mm.len()];
@@ -99,7 +94,7 @@ pub(crate) fn parse(
     let identifiable_sd = super::keys::check_real(
         "design",
         "identifiable_sd",
-        e.identifiable_sd.unwrap_or(DEFAULT_IDENTIFIABLE_SD),
+        super::keys::or_default(e.identifiable_sd, "design", "identifiable_sd"),
     )
     .map_err(|m| {
         err(
@@ -117,7 +112,7 @@ pub(crate) fn parse(
         spacing_mm,
         max_measurements,
         identifiable_sd,
-        grouped: e.grouped.unwrap_or(false),
+        grouped: super::keys::or_default(e.grouped, "design", "grouped"),
     })
 }
 
@@ -155,10 +150,8 @@ fn windows(
     lines: &KeyLines,
 ) -> Result<(Vec<[f64; 2]>, f64), StudyError> {
     let err = |key: &str, message: String| lines.err("design", 0, key, message);
-    let windows_mm = e
-        .windows_mm
-        .clone()
-        .unwrap_or(vec![[40.0, 40.0], [60.0, 40.0]]);
+    let windows_mm: Vec<[f64; 2]> =
+        super::keys::or_default(e.windows_mm.clone(), "design", "windows_mm");
     if windows_mm.is_empty() {
         return Err(err("windows_mm", "give at least one window size".into()));
     }

@@ -412,7 +412,8 @@ fn per_frame_loads(
 
 /// `force_log` (at `path`) with its offset and units.
 fn force_log_loads(m: &MeasurementEntry, path: PathBuf, at: At) -> Result<FrameLoads, StudyError> {
-    let offset_s = m.force_log_offset_s.unwrap_or(0.0);
+    let offset_s: f64 =
+        super::keys::or_default(m.force_log_offset_s, "measurement", "force_log_offset_s");
     if !offset_s.is_finite() {
         return Err(at.err("force_log_offset_s", "must be finite".into()));
     }
@@ -420,13 +421,15 @@ fn force_log_loads(m: &MeasurementEntry, path: PathBuf, at: At) -> Result<FrameL
         None => None,
         Some(u) => match u.as_slice() {
             [t, f] => Some(LogUnits::parse(t, f).map_err(|e| at.err("force_log_units", e))?),
-            _ => return Err(at.err(
-                "force_log_units",
-                format!(
+            _ => {
+                return Err(at.err(
+                    "force_log_units",
+                    format!(
                     "give the time's and the force's unit, e.g. [\"s\", \"N/mm\"]; got {} values",
                     u.len()
                 ),
-            )),
+                ))
+            }
         },
     };
     Ok(FrameLoads::ForceLog {
@@ -465,8 +468,10 @@ fn placement(
         }
         Ok(v)
     };
-    let x_axis = unit(m.x_axis.unwrap_or([1.0, 0.0]), "x_axis")?;
-    let y_axis = unit(m.y_axis.unwrap_or([0.0, 1.0]), "y_axis")?;
+    let axis =
+        |v: Option<[f64; 2]>, key: &str| unit(super::keys::or_default(v, "measurement", key), key);
+    let x_axis = axis(m.x_axis, "x_axis")?;
+    let y_axis = axis(m.y_axis, "y_axis")?;
     if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
         return Err(err(
             "y_axis",

@@ -93,16 +93,12 @@ pub(crate) fn parse(
         super::keys::check_int("model", "elements", n)
             .map_err(|m| lines.err("model", 0, "elements", m))?;
     }
-    let element = model
-        .element
-        .as_deref()
-        .map(|v| super::keys::word("model", "element", v))
-        .transpose()
+    let element = super::keys::word_or_default("model", "element", model.element.as_deref())
         .map_err(|m| lines.err("model", 0, "element", m))?;
     let element = match element {
-        None | Some("cpe4h") => QuadElement::Cpe4h,
-        Some("cpe4") => QuadElement::Cpe4,
-        Some(other) => {
+        "cpe4h" => QuadElement::Cpe4h,
+        "cpe4" => QuadElement::Cpe4,
+        other => {
             return Err(lines.err(
                 "model",
                 0,
@@ -217,16 +213,21 @@ fn check_labels(l: LabelsEntry, lines: &KeyLines, base: &Path) -> Result<LabelsS
     }
     // The thigh's cross-section is some 13 000 mm²: a threshold beyond 10 000 mm² (the
     // declared maximum) would merge whole muscles.
-    let min_island =
-        super::keys::check_real("labels", "min_island_mm2", l.min_island_mm2.unwrap_or(5.0))
-            .map_err(|m| lines.err("labels", 0, "min_island_mm2", m))?;
-    femu_geometry::LabelSpec::new(&l.map, &l.bone, l.background.as_deref().unwrap_or(&[0]))
+    let min_island = super::keys::check_real(
+        "labels",
+        "min_island_mm2",
+        super::keys::or_default(l.min_island_mm2, "labels", "min_island_mm2"),
+    )
+    .map_err(|m| lines.err("labels", 0, "min_island_mm2", m))?;
+    let background: Vec<u32> =
+        super::keys::or_default(l.background.clone(), "labels", "background");
+    femu_geometry::LabelSpec::new(&l.map, &l.bone, &background)
         .map_err(|e| lines.err("labels", 0, "map", e.to_string()))?;
     Ok(LabelsSpec {
         image: resolve(base, &l.image),
         map: l.map,
         bone: l.bone,
-        background: l.background.unwrap_or_else(|| vec![0]),
+        background,
         slice: l.slice,
         pixel_size_mm: l.pixel_size_mm,
         min_island_mm2: min_island,

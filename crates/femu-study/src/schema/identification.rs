@@ -118,15 +118,22 @@ pub(crate) fn parse(
     // Beyond 100 (MAX_BOUNDS_FACTOR, its declared maximum) the bounds span over four decades
     // around the reference: wider than any soft tissue's range, and the starts drawn in them
     // mostly fail to solve.
-    let bounds_factor = real("bounds_factor", e.bounds_factor.unwrap_or(4.0))?;
-    let starts = int("starts", e.starts.unwrap_or(5))?;
-    let repeat = int("repeat", e.repeat.unwrap_or(1))?;
-    let grouping = match &e.grouped {
-        None => Grouping::Both,
-        Some(GroupedEntry::Flag(true)) => Grouping::Grouped,
-        Some(GroupedEntry::Flag(false)) => Grouping::Ungrouped,
-        Some(GroupedEntry::Word(w)) if w.eq_ignore_ascii_case("both") => Grouping::Both,
-        Some(GroupedEntry::Word(w)) => {
+    let or_default = |v: Option<usize>, key: &str| keys::or_default(v, "identification", key);
+    let bounds_factor = real(
+        "bounds_factor",
+        keys::or_default(e.bounds_factor, "identification", "bounds_factor"),
+    )?;
+    let starts = int("starts", or_default(e.starts, "starts"))?;
+    let repeat = int("repeat", or_default(e.repeat, "repeat"))?;
+    let grouped = match e.grouped.clone() {
+        Some(g) => g,
+        None => keys::default("identification", "grouped"),
+    };
+    let grouping = match grouped {
+        GroupedEntry::Flag(true) => Grouping::Grouped,
+        GroupedEntry::Flag(false) => Grouping::Ungrouped,
+        GroupedEntry::Word(w) if w.eq_ignore_ascii_case("both") => Grouping::Both,
+        GroupedEntry::Word(w) => {
             return Err(err(
                 "grouped",
                 format!("'{w}' is not true, false or \"both\""),
@@ -148,10 +155,10 @@ pub(crate) fn parse(
         test,
         discretization: choices.discretization,
         data_refinement,
-        fixed: e.fixed,
+        fixed: keys::or_default(e.fixed.clone(), "identification", "fixed"),
         bounds_factor,
         starts,
-        seed: e.seed.unwrap_or(1),
+        seed: keys::or_default(e.seed, "identification", "seed"),
         repeat,
         grouping,
         optimizer,
@@ -169,17 +176,13 @@ impl Choices {
     /// `optimizer`.
     fn optimizer(e: &IdentificationEntry, lines: &KeyLines) -> Result<Optimizer, StudyError> {
         let err = |m: String| lines.err("identification", 0, "optimizer", m);
-        let word = e
-            .optimizer
-            .as_deref()
-            .map(|v| keys::word("identification", "optimizer", v))
-            .transpose()
+        let word = keys::word_or_default("identification", "optimizer", e.optimizer.as_deref())
             .map_err(err)?;
         match word {
-            None | Some("lm") => Ok(Optimizer::LevenbergMarquardt),
-            Some("bfgs") => Ok(Optimizer::Bfgs),
-            Some("bfgs-fd") => Ok(Optimizer::BfgsFiniteDifference),
-            Some(other) => Err(err(keys::unhandled("identification", "optimizer", other))),
+            "lm" => Ok(Optimizer::LevenbergMarquardt),
+            "bfgs" => Ok(Optimizer::Bfgs),
+            "bfgs-fd" => Ok(Optimizer::BfgsFiniteDifference),
+            other => Err(err(keys::unhandled("identification", "optimizer", other))),
         }
     }
 
@@ -187,23 +190,21 @@ impl Choices {
     fn parse(e: &IdentificationEntry, lines: &KeyLines) -> Result<Choices, StudyError> {
         let err = |key: &str, message: String| lines.err("identification", 0, key, message);
         let word = |key: &str, v: Option<&str>| {
-            v.map(|v| keys::word("identification", key, v))
-                .transpose()
-                .map_err(|m| err(key, m))
+            keys::word_or_default("identification", key, v).map_err(|m| err(key, m))
         };
         let unhandled = |key: &str, v: &str| err(key, keys::unhandled("identification", key, v));
         let loss = match word("loss", e.loss.as_deref())? {
-            None | Some("squared") => femu_identify::weighted::Loss::Squared,
-            Some("huber") => femu_identify::weighted::Loss::Huber {
+            "squared" => femu_identify::weighted::Loss::Squared,
+            "huber" => femu_identify::weighted::Loss::Huber {
                 k: femu_identify::weighted::HUBER_K,
             },
-            Some(other) => return Err(unhandled("loss", other)),
+            other => return Err(unhandled("loss", other)),
         };
         let discretization = match word("discretization", e.discretization.as_deref())? {
-            None | Some("check") => Discretization::Check,
-            Some("refine") => Discretization::Refine,
-            Some("off") => Discretization::Off,
-            Some(other) => return Err(unhandled("discretization", other)),
+            "check" => Discretization::Check,
+            "refine" => Discretization::Refine,
+            "off" => Discretization::Off,
+            other => return Err(unhandled("discretization", other)),
         };
         Ok(Choices {
             loss,
@@ -250,7 +251,7 @@ fn data_refinement(
     let data_refinement = keys::check_real(
         "identification",
         "data_refinement",
-        e.data_refinement.unwrap_or(1.0),
+        keys::or_default(e.data_refinement, "identification", "data_refinement"),
     )
     .map_err(|m| {
         err(format!(
@@ -275,8 +276,11 @@ fn image_settings(
     let normalization = keys::check_real(
         "identification",
         "image_normalization_px",
-        e.image_normalization_px
-            .unwrap_or(DEFAULT_IMAGE_NORMALIZATION_PX),
+        keys::or_default(
+            e.image_normalization_px,
+            "identification",
+            "image_normalization_px",
+        ),
     )
     .map_err(|m| {
         err(
@@ -286,16 +290,14 @@ fn image_settings(
             ),
         )
     })?;
-    let image_pairing = match e
-        .image_pairing
-        .as_deref()
-        .map(|v| keys::word("identification", "image_pairing", v))
-        .transpose()
-        .map_err(|m| err("image_pairing", m))?
-    {
-        None => DEFAULT_IMAGE_PAIRING,
-        Some(name) => name.parse().map_err(|why| err("image_pairing", why))?,
-    };
+    let image_pairing = keys::word_or_default(
+        "identification",
+        "image_pairing",
+        e.image_pairing.as_deref(),
+    )
+    .map_err(|m| err("image_pairing", m))?
+    .parse()
+    .map_err(|why| err("image_pairing", why))?;
     Ok((
         (normalization > 0.0).then_some(normalization),
         image_pairing,
@@ -331,18 +333,12 @@ pub(crate) fn find_test(tests: &[TestSpec], name: &str) -> Result<usize, String>
 
 /// Checks `[run]`.
 pub(crate) fn parse_steps(r: Option<RunEntry>) -> Steps {
-    match r {
-        None => Steps {
-            forward: true,
-            sensitivity: true,
-            identification: true,
-            design: false,
-        },
-        Some(r) => Steps {
-            forward: r.forward.unwrap_or(true),
-            sensitivity: r.sensitivity.unwrap_or(true),
-            identification: r.identification.unwrap_or(true),
-            design: r.design.unwrap_or(false),
-        },
+    let r = r.unwrap_or_default();
+    let flag = |v: Option<bool>, key: &str| keys::or_default(v, "run", key);
+    Steps {
+        forward: flag(r.forward, "forward"),
+        sensitivity: flag(r.sensitivity, "sensitivity"),
+        identification: flag(r.identification, "identification"),
+        design: flag(r.design, "design"),
     }
 }

@@ -1,14 +1,16 @@
 //! Every key of the study file, declared once: its table, name, type, unit, allowed values,
 //! default and documentation ([`TABLES`]). From these declarations come `femu init`'s commented
 //! study file ([`init_file`], committed as `example_study.toml`), the reference page
-//! `docs/guide/src/reference/study-file.md` ([`reference_page`]) and the parser's range and
-//! choice checks ([`check_int`], [`check_real`], [`word`]), so that a declared range and the
-//! checked one cannot differ. The keys of a `[[test]]` kind and of a `[materials.REGION]` law
-//! are declared with the kind (`femu_mech::loading::TEST_KINDS`) and the law
-//! (`femu_mech::material::LAWS`); the reference page lists them from there.
+//! `docs/guide/src/reference/study-file.md` ([`reference_page`]), the parser's range and
+//! choice checks ([`check_int`], [`check_real`], [`word`]) and the values the parser takes for
+//! an absent key ([`default`], [`or_default`], [`word_or_default`]), so that a declared range
+//! or default and the parser's cannot differ. The keys of a `[[test]]` kind and of a
+//! `[materials.REGION]` law are declared with the kind (`femu_mech::loading::TEST_KINDS`) and
+//! the law (`femu_mech::material::LAWS`); the reference page lists them from there.
 //!
 //! To add a key: its field in the serde struct of its table (`raw.rs` or the table's own file),
-//! its [`KeySpec`] here, and its check in the table's parser; then regenerate the two files with
+//! its [`KeySpec`] here, and its check in the table's parser (its default read with
+//! [`or_default`]); then regenerate the two files with
 //! `FEMU_BLESS=1 cargo test -p femu-study --test study_keys`.
 
 use std::fmt::Write;
@@ -354,6 +356,95 @@ pub fn spec(table: &str, key: &str) -> &'static KeySpec {
         .flat_map(|t| t.keys())
         .find(|k| k.name == key)
         .unwrap_or_else(|| panic!("[{table}] {key} is not declared in schema::keys"))
+}
+
+/// The declared default of `key` in `table` as a `T` (a number, a flag, a word, a list): what
+/// the parser takes when the key is absent, so that the declaration and the parser cannot
+/// differ.
+///
+/// # Panics
+/// When the key declares no value, or a value that is not a `T` (the tests parse the study
+/// without keys, so every default the parser takes is read).
+pub fn default<T: serde::de::DeserializeOwned>(table: &str, key: &str) -> T {
+    let text = default_text(table, key);
+    let parsed: Result<toml::Table, _> = toml::from_str(&format!("v = {text}"));
+    parsed
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .and_then(|v| v.try_into().ok())
+        .unwrap_or_else(|| {
+            panic!(
+                "[{table}] {key}: the declared default {text} is not a {}",
+                std::any::type_name::<T>()
+            )
+        })
+}
+
+/// The declared default word of `key` in `table` (one of its declared words).
+pub fn default_word(table: &str, key: &str) -> &'static str {
+    let text: String = default(table, key);
+    word(table, key, &text).unwrap_or_else(|m| panic!("[{table}] {key}: the declared default: {m}"))
+}
+
+/// `v`, or the declared default of `key` in `table` when it is absent.
+pub fn or_default<T: serde::de::DeserializeOwned>(v: Option<T>, table: &str, key: &str) -> T {
+    v.unwrap_or_else(|| default(table, key))
+}
+
+/// The declared word `v` is, or the declared default word when it is absent.
+pub fn word_or_default(table: &str, key: &str, v: Option<&str>) -> Result<&'static str, String> {
+    match v {
+        Some(v) => word(table, key, v),
+        None => Ok(default_word(table, key)),
+    }
+}
+
+/// The TOML text of the declared default of `key` in `table`.
+fn default_text(table: &str, key: &str) -> String {
+    #[cfg(test)]
+    if let Some(v) = overrides::overridden(table, key) {
+        return v;
+    }
+    match spec(table, key).default {
+        Def::Value(v) => v.to_string(),
+        Def::Text(t) => panic!("[{table}] {key} declares no default value ({t})"),
+    }
+}
+
+/// Test-only: declared defaults replaced for the current thread, to show that the parser
+/// takes what is declared.
+#[cfg(test)]
+pub(crate) mod overrides {
+    use std::cell::RefCell;
+
+    thread_local! {
+        static OVERRIDES: RefCell<Vec<(String, String, String)>> = const { RefCell::new(Vec::new()) };
+    }
+
+    /// The replaced default of `key` in `table`, if any.
+    pub(super) fn overridden(table: &str, key: &str) -> Option<String> {
+        OVERRIDES.with(|o| {
+            o.borrow()
+                .iter()
+                .rev()
+                .find(|(t, k, _)| t == table && k == key)
+                .map(|(_, _, v)| v.clone())
+        })
+    }
+
+    /// `f` run with the declared defaults replaced by `values` (`(table, key, TOML value)`).
+    pub(crate) fn with_defaults<R>(values: &[(&str, &str, &str)], f: impl FnOnce() -> R) -> R {
+        OVERRIDES.with(|o| {
+            o.borrow_mut().extend(
+                values
+                    .iter()
+                    .map(|(t, k, v)| (t.to_string(), k.to_string(), v.to_string())),
+            )
+        });
+        let out = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+        OVERRIDES.with(|o| o.borrow_mut().clear());
+        out.unwrap_or_else(|p| std::panic::resume_unwind(p))
+    }
 }
 
 /// The check of an integer against its declared range: the message names the range.

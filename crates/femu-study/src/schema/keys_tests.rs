@@ -1,6 +1,7 @@
 //! The declarations of [`super::keys`] against the parser: every key the serde structs accept is
 //! declared and every declared key is accepted; each key set to its declared default gives the
-//! study it has without it; each declared range and word list is the one the parser checks.
+//! study it has without it, and with the declaration changed the parser takes the new default;
+//! each declared range and word list is the one the parser checks.
 
 use super::keys::{Allowed, Def, TableSpec, TABLES};
 use super::{parse, raw, ProbeSection, Study, UltrasoundSection};
@@ -166,6 +167,12 @@ fn with_key(t: &TableSpec, key: &str, value: &str) -> String {
 /// What a study is, every part that the file sets (its key lines left out). The built-in
 /// thigh's default resolution is written as its element count (`DEFAULT_ELEMENTS`).
 fn outcome(s: &Study) -> String {
+    // The convergence view of the study as parsed (it refuses a [model] resolution).
+    let convergence = if s.convergence.given {
+        format!("{:?}", s.convergence_study().map(|c| format!("{c:?}")))
+    } else {
+        String::new()
+    };
     let mut s = s.clone();
     if s.model.resolution == super::Resolution::Default
         && matches!(s.model.geometry, super::Geometry::Thigh(_))
@@ -173,11 +180,6 @@ fn outcome(s: &Study) -> String {
         s.model.resolution = super::Resolution::Elements(super::DEFAULT_ELEMENTS);
     }
     let s = &s;
-    let convergence = if s.convergence.given {
-        format!("{:?}", s.convergence_study().map(|c| format!("{c:?}")))
-    } else {
-        String::new()
-    };
     format!(
         "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{convergence}",
         s.model,
@@ -353,4 +355,161 @@ fn every_declared_word_is_the_parsers() {
         }
     }
     assert!(tried >= 8, "{tried}");
+}
+
+/// Values other than the declared default for the keys whose type [`other_values`] cannot
+/// vary by itself (pairs, lists, free words), each valid in the key's [`context`].
+const OTHER_VALUES: &[(&str, &str, &str)] = &[
+    ("grid", "counts", "[32, 16]"),
+    ("labels", "background", "[0, 9]"),
+    ("measurement", "x_axis", "[-1.0, 0.0]"),
+    ("measurement", "y_axis", "[0.0, -1.0]"),
+    ("parameters", "groups", "[[\"D_ISCHIO\", \"D_SARTORIUS\"]]"),
+    ("identification", "fixed", "[\"C10_FAT\"]"),
+    ("identification", "grouped", "false"),
+    ("probe", "side", "\"lateral\""),
+    ("design", "sides", "[\"lateral\", \"medial\"]"),
+    ("design", "windows_mm", "[[30.0, 30.0]]"),
+    ("convergence", "element_types", "[\"CPE4\", \"CPE3\"]"),
+    ("convergence", "target_elements", "[3000, 6000, 12000]"),
+    ("fixed", "dofs", "[1]"),
+];
+
+/// Keys whose every other value needs another key set too (the parser takes their default
+/// from the declaration all the same), and why.
+const NO_OTHER_VALUE_ALONE: &[(&str, &str, &str)] = &[
+    (
+        "measurement",
+        "units",
+        "its other word, px, needs pixel_size_mm, which mm refuses",
+    ),
+    (
+        "step",
+        "max_increment",
+        "at most 1 and at least initial_increment, whose default is 1",
+    ),
+];
+
+/// Keys with a declared default the parser does not take from the declaration, and why (the
+/// test above still checks that the two agree).
+const NOT_FROM_THE_DECLARATION: &[(&str, &str, &str)] = &[
+    (
+        "model",
+        "elements",
+        "the thigh's default resolution is geometry::DEFAULT_ELEMENTS, a constant the mesher and the commands read",
+    ),
+    (
+        "thigh",
+        "*",
+        "[thigh] is femu_geometry::ThighParams, its defaults the geometry crate's",
+    ),
+    (
+        "identification",
+        "image_normalization_px",
+        "declared from DEFAULT_IMAGE_NORMALIZATION_PX, which the parser's message also names",
+    ),
+];
+
+/// Candidate values of key `k` other than its declared default `v` (the first the study
+/// accepts is used): the other flag, a neighbouring integer or number in the declared range,
+/// the other declared words, or the value of [`OTHER_VALUES`].
+fn other_values(table: &str, k: &super::keys::KeySpec, v: &str) -> Vec<String> {
+    use super::keys::Ty;
+    if let Some((_, _, o)) = OTHER_VALUES
+        .iter()
+        .find(|(t, key, _)| *t == table && *key == k.name)
+    {
+        return vec![o.to_string()];
+    }
+    match (k.ty, k.allowed) {
+        (Ty::Bool, _) => vec![if v == "true" { "false" } else { "true" }.to_string()],
+        (Ty::Int, allowed) => {
+            let n: f64 = v.parse().expect("an integer default");
+            [n + 1.0, n - 1.0]
+                .into_iter()
+                .filter(|x| allowed.admits(*x) && *x >= 0.0)
+                .map(|x| format!("{x}"))
+                .collect()
+        }
+        (Ty::Real, allowed) => {
+            let x: f64 = v.parse().expect("a number default");
+            [x * 1.25, x * 0.8, 0.5]
+                .into_iter()
+                .filter(|y| *y != x && allowed.admits(*y))
+                .map(|y| format!("{y:?}"))
+                .collect()
+        }
+        (_, Allowed::Words { words, .. }) => words
+            .iter()
+            .filter(|w| format!("{w:?}") != v)
+            .map(|w| format!("{w:?}"))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// The parser takes every declared default from its declaration: with the declaration
+/// replaced by another value, the study without the key is the study with the key set to that
+/// value (a default written by hand in the parser would keep the old one).
+#[test]
+fn a_changed_declaration_changes_the_parsed_default() {
+    let mut tried = Vec::new();
+    let mut untried = Vec::new();
+    for t in TABLES {
+        let table = t.name.replace("REGION", "FAT");
+        for k in t.keys() {
+            let Def::Value(v) = k.default else { continue };
+            if NOT_FROM_THE_DECLARATION
+                .iter()
+                .any(|(tt, kk, _)| *tt == table && (*kk == k.name || *kk == "*"))
+            {
+                continue;
+            }
+            let base_text = context(&table, k.name);
+            let candidates = other_values(&table, k, v);
+            let Some((other, set)) = candidates.iter().find_map(|o| {
+                parse(&with_key(t, k.name, o), Path::new("."))
+                    .ok()
+                    .map(|s| (o, s))
+            }) else {
+                let why = NO_OTHER_VALUE_ALONE
+                    .iter()
+                    .find(|(tt, kk, _)| *tt == table && *kk == k.name)
+                    .map_or(format!("tried {candidates:?}"), |w| w.2.to_string());
+                untried.push(format!("{} {}: {why}", t.title(), k.name));
+                continue;
+            };
+            // The views read later (the convergence study) are made under the declaration too.
+            let by_declaration =
+                super::keys::overrides::with_defaults(&[(&table, k.name, other)], || {
+                    parse(base_text, Path::new(".")).map(|s| outcome(&s))
+                })
+                .unwrap_or_else(|e| panic!("{} {} declared {other}: {e}", t.title(), k.name));
+            assert_ne!(
+                outcome(&set),
+                outcome(&parse(base_text, Path::new(".")).unwrap()),
+                "{} {} = {other} changes nothing: choose another value",
+                t.title(),
+                k.name
+            );
+            assert_eq!(
+                by_declaration,
+                outcome(&set),
+                "{} {}: declared {other}, the parser still takes {v}",
+                t.title(),
+                k.name
+            );
+            tried.push(format!("{} {}", t.title(), k.name));
+        }
+    }
+    assert_eq!(
+        untried,
+        NO_OTHER_VALUE_ALONE
+            .iter()
+            .map(|(t, k, why)| format!("[{t}] {k}: {why}"))
+            .collect::<Vec<_>>(),
+        "no other value to try"
+    );
+    // 57 keys when this was written: a key cannot silently leave the test.
+    assert!(tried.len() >= 57, "{}: {tried:?}", tried.len());
 }

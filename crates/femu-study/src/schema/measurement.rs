@@ -108,7 +108,7 @@ impl Default for GridSpec {
     /// The seed's 64 x 64 points over the whole section.
     fn default() -> Self {
         GridSpec {
-            counts: [64, 64],
+            counts: super::keys::default("grid", "counts"),
             origin: None,
             spacing: None,
         }
@@ -152,7 +152,7 @@ pub(crate) fn parse_grid_noise(
         Some(g) => check_grid(g, lines)?,
     };
     let sigma_mm = match noise {
-        None => SEED_SIGMA_MM,
+        None => super::keys::default("noise", "sigma_mm"),
         Some(n) => lines.positive("noise", 0, "sigma_mm", n.sigma_mm)?,
     };
     Ok((grid, sigma_mm))
@@ -212,7 +212,7 @@ pub(crate) fn check_entry(
 pub const MAX_GRID_POINTS: usize = 4_000_000;
 
 fn check_grid(g: GridEntry, lines: &KeyLines) -> Result<GridSpec, StudyError> {
-    let counts = g.counts.unwrap_or([64, 64]);
+    let counts: [usize; 2] = super::keys::or_default(g.counts, "grid", "counts");
     // 4e6 points: the projection and the Jacobian hold 2 rows per point and parameter, some
     // 1 GB for ten parameters (issue 28.4; the product saturates, a huge count cannot wrap).
     let points = counts[0].saturating_mul(counts[1]);
@@ -287,9 +287,11 @@ fn check_source(
     let source = super::keys::word(
         "measurement",
         "source",
-        m.source
-            .as_deref()
-            .unwrap_or(if m.file.is_some() { "file" } else { "virtual" }),
+        m.source.as_deref().unwrap_or(if m.file.is_some() {
+            "file"
+        } else {
+            super::keys::default_word("measurement", "source")
+        }),
     )
     .map_err(|e| err("source", &e))?;
     if source != "frames" {
@@ -394,7 +396,7 @@ fn file_source(
 /// the model.
 fn file_frame(m: &MeasurementEntry, index: usize, lines: &KeyLines) -> Result<Frame, StudyError> {
     let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
-    let units = super::keys::word("measurement", "units", m.units.as_deref().unwrap_or("mm"))
+    let units = super::keys::word_or_default("measurement", "units", m.units.as_deref())
         .map_err(|e| err("units", &e))?;
     let scale = match units {
         "mm" => match m.pixel_size_mm {
@@ -422,8 +424,10 @@ fn file_frame(m: &MeasurementEntry, index: usize, lines: &KeyLines) -> Result<Fr
         }
         Ok(v)
     };
-    let x_axis = unit(m.x_axis.unwrap_or([1.0, 0.0]), "x_axis")?;
-    let y_axis = unit(m.y_axis.unwrap_or([0.0, 1.0]), "y_axis")?;
+    let axis =
+        |v: Option<[f64; 2]>, key: &str| unit(super::keys::or_default(v, "measurement", key), key);
+    let x_axis = axis(m.x_axis, "x_axis")?;
+    let y_axis = axis(m.y_axis, "y_axis")?;
     if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
         return Err(err(
             "y_axis",

@@ -254,7 +254,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
     let groups_given = matches!(&file.parameters, Some(p) if !p.groups.is_empty());
     let groups = match file.parameters {
         Some(p) if !p.groups.is_empty() => p.groups,
-        _ => seed_groups(),
+        _ => keys::default("parameters", "groups"),
     };
     let study = Study {
         model: ModelSpec {

@@ -143,8 +143,7 @@ pub(crate) struct ParametersEntry {
 #[serde(deny_unknown_fields)]
 pub(crate) struct IdentificationEntry {
     pub test: Option<String>,
-    #[serde(default)]
-    pub fixed: Vec<String>,
+    pub fixed: Option<Vec<String>>,
     pub bounds_factor: Option<f64>,
     pub starts: Option<usize>,
     pub seed: Option<u64>,
@@ -160,14 +159,14 @@ pub(crate) struct IdentificationEntry {
 }
 
 /// `grouped = true | false | "both"`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
 pub(crate) enum GroupedEntry {
     Flag(bool),
     Word(String),
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct RunEntry {
     pub forward: Option<bool>,
@@ -181,8 +180,7 @@ pub(crate) struct RunEntry {
 pub(crate) struct FixedEntry {
     pub curve: String,
     pub dofs: Option<Vec<usize>>,
-    #[serde(default)]
-    pub value_mm: f64,
+    pub value_mm: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -31,11 +31,12 @@ pub struct ProbeSection {
 
 impl Default for ProbeSection {
     fn default() -> Self {
+        let real = |key: &str| super::keys::default("probe", key);
         ProbeSection {
-            side: "anterior".into(),
-            width_mm: 40.0,
-            depth_mm: 40.0,
-            px_per_mm: 10.0,
+            side: super::keys::default("probe", "side"),
+            width_mm: real("width_mm"),
+            depth_mm: real("depth_mm"),
+            px_per_mm: real("px_per_mm"),
         }
     }
 }
@@ -63,20 +64,20 @@ pub struct UltrasoundSection {
 
 impl Default for UltrasoundSection {
     fn default() -> Self {
-        let (t, s) = (Transducer::default(), Scanner::default());
+        let real = |key: &str| super::keys::default::<f64>("ultrasound", key);
         UltrasoundSection {
-            frequency_mhz: t.frequency_mhz,
-            cycles: t.cycles,
-            f_number: t.f_number,
-            gain_db: s.gain_db,
-            dynamic_db: s.dynamic_db,
-            black_level_db: s.black_level_db,
-            tgc_db_per_cm_mhz: s.tgc_db_per_cm_mhz,
-            tgc_max_db: s.tgc_max_db,
-            noise_db: s.noise_db,
-            seed: 1,
-            render_refine: 2,
-            decorrelation: 0.05,
+            frequency_mhz: real("frequency_mhz"),
+            cycles: real("cycles"),
+            f_number: real("f_number"),
+            gain_db: real("gain_db"),
+            dynamic_db: real("dynamic_db"),
+            black_level_db: real("black_level_db"),
+            tgc_db_per_cm_mhz: real("tgc_db_per_cm_mhz"),
+            tgc_max_db: real("tgc_max_db"),
+            noise_db: Some(real("noise_db")),
+            seed: super::keys::default("ultrasound", "seed"),
+            render_refine: super::keys::default("ultrasound", "render_refine"),
+            decorrelation: real("decorrelation"),
         }
     }
 }
