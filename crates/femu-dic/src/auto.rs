@@ -79,11 +79,15 @@ pub struct Attempt {
     pub iterations: usize,
     pub last_increment_px: f64,
     pub residual_rms: f64,
+    /// Share of the elements trusted; NaN (null in JSON) for a rung of the automatic choice
+    /// that did not converge (rejected without computing its quality).
     pub trusted_fraction: f64,
-    /// 90th percentile of the larger nodal standard deviation (pixels).
+    /// 90th percentile of the larger nodal standard deviation (pixels); NaN as above.
     pub sd_p90_px: f64,
     /// Why it failed or was not kept.
     pub note: Option<String>,
+    /// Wall time of the correlation (seconds; its quality not included).
+    pub correlation_s: f64,
 }
 
 /// The choice and how it was reached.
@@ -201,38 +205,50 @@ fn median(mut v: Vec<f64>) -> f64 {
     v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
 }
 
-fn measure(
-    f: &GreyImage,
-    g: &GreyImage,
-    roi: &Roi,
-    opts: &DicOptions,
+/// The nodal covariance and the trust of the elements of a correlation.
+fn quality_of(
+    res: &DicResult,
     criteria: &TrustCriteria,
-) -> Result<Measured, DicError> {
-    let res = correlate(f, g, roi, opts)?;
-    let cov = quality::covariance(&res)?;
-    let trust = quality::element_trust(&res, &cov, criteria);
-    Ok(Measured { res, cov, trust })
+) -> Result<(NodalCovariance, Vec<Trust>), DicError> {
+    let cov = quality::covariance(res)?;
+    let trust = quality::element_trust(res, &cov, criteria);
+    Ok((cov, trust))
 }
 
-fn attempt_of(m: &Measured, opts: &DicOptions) -> Attempt {
-    let trusted = m.trust.iter().filter(|&&t| t == Trust::Trusted).count();
-    let mut sd: Vec<f64> = m
-        .cov
-        .node
-        .iter()
-        .map(|n| n.sd_ux_px.max(n.sd_uy_px))
-        .collect();
-    sd.sort_by(|a, b| a.total_cmp(b));
+/// The attempt of a correlation, with its quality when it was computed (else no trusted
+/// fraction and no standard deviation: NaN).
+fn attempt_of(
+    res: &DicResult,
+    quality: Option<&(NodalCovariance, Vec<Trust>)>,
+    opts: &DicOptions,
+) -> Attempt {
+    let (trusted_fraction, sd_p90_px) = match quality {
+        None => (f64::NAN, f64::NAN),
+        Some((cov, trust)) => {
+            let trusted = trust.iter().filter(|&&t| t == Trust::Trusted).count();
+            let mut sd: Vec<f64> = cov
+                .node
+                .iter()
+                .map(|n| n.sd_ux_px.max(n.sd_uy_px))
+                .collect();
+            sd.sort_by(|a, b| a.total_cmp(b));
+            (
+                trusted as f64 / trust.len().max(1) as f64,
+                sd.get(sd.len() * 9 / 10).copied().unwrap_or(f64::NAN),
+            )
+        }
+    };
     Attempt {
         element_size_px: opts.element_size,
         regularization_px: opts.regularization_length,
-        converged: m.res.converged,
-        iterations: m.res.iterations,
-        last_increment_px: m.res.last_increment_px,
-        residual_rms: m.res.residual_rms,
-        trusted_fraction: trusted as f64 / m.trust.len().max(1) as f64,
-        sd_p90_px: sd.get(sd.len() * 9 / 10).copied().unwrap_or(f64::NAN),
+        converged: res.converged,
+        iterations: res.iterations,
+        last_increment_px: res.last_increment_px,
+        residual_rms: res.residual_rms,
+        trusted_fraction,
+        sd_p90_px,
         note: None,
+        correlation_s: res.timings.total_s,
     }
 }
 
@@ -450,36 +466,58 @@ fn ladder(
                 regularization_length: ladder[k],
                 ..base.clone()
             };
-            let m = match measure(f, g, roi, &opts, criteria) {
-                Ok(m) => m,
-                Err(
-                    e @ (DicError::Roi(_)
-                    | DicError::SizeMismatch { .. }
-                    | DicError::Interrupted(_)),
-                ) => return Err(fatal(e)),
+            // Options given in full: the result is returned whatever it is (the caller writes
+            // it and reports a non-convergence with [`advice`]).
+            let forced = element != Setting::Auto && regularization != Setting::Auto;
+            let started = std::time::Instant::now();
+            let failed = |e: DicError| Attempt {
+                element_size_px: h,
+                regularization_px: ladder[k],
+                converged: false,
+                iterations: 0,
+                last_increment_px: f64::NAN,
+                residual_rms: f64::NAN,
+                trusted_fraction: 0.0,
+                sd_p90_px: f64::NAN,
+                note: Some(e.to_string()),
+                correlation_s: started.elapsed().as_secs_f64(),
+            };
+            let is_fatal = |e: &DicError| {
+                matches!(
+                    e,
+                    DicError::Roi(_) | DicError::SizeMismatch { .. } | DicError::Interrupted(_)
+                )
+            };
+            let res = match correlate(f, g, roi, &opts) {
+                Ok(res) => res,
+                Err(e) if is_fatal(&e) => return Err(fatal(e)),
                 Err(e) => {
-                    attempts.push(Attempt {
-                        element_size_px: h,
-                        regularization_px: ladder[k],
-                        converged: false,
-                        iterations: 0,
-                        last_increment_px: f64::NAN,
-                        residual_rms: f64::NAN,
-                        trusted_fraction: 0.0,
-                        sd_p90_px: f64::NAN,
-                        note: Some(e.to_string()),
-                    });
+                    attempts.push(failed(e));
                     k += 1;
                     continue;
                 }
             };
+            // A rung that did not converge is rejected whatever its quality: the covariance
+            // and the trust (the costliest part of a rung after the iterations) are computed
+            // only for a field that may be kept; such a rung's attempt has no trusted fraction
+            // and no standard deviation.
+            let quality = if forced || res.converged {
+                match quality_of(&res, criteria) {
+                    Ok(q) => Some(q),
+                    Err(e) if is_fatal(&e) => return Err(fatal(e)),
+                    Err(e) => {
+                        attempts.push(failed(e));
+                        k += 1;
+                        continue;
+                    }
+                }
+            } else {
+                None
+            };
             if stats.pair_noise_grey.is_nan() {
-                stats.pair_noise_grey = m.res.residual_rms / std::f64::consts::SQRT_2;
+                stats.pair_noise_grey = res.residual_rms / std::f64::consts::SQRT_2;
             }
-            let mut a = attempt_of(&m, &opts);
-            // Options given in full: the result is returned whatever it is (the caller writes
-            // it and reports a non-convergence with [`advice`]).
-            let forced = element != Setting::Auto && regularization != Setting::Auto;
+            let mut a = attempt_of(&res, quality.as_ref(), &opts);
             let ok = forced || (a.converged && a.trusted_fraction >= MIN_TRUSTED);
             if !a.converged {
                 a.note = Some("not converged".into());
@@ -493,7 +531,7 @@ fn ladder(
             // motion far beyond the capture range): no longer regularization or larger element
             // makes them correlate; the ladder stops here instead of trying every rung.
             let mismatch = (!ok && stop_on_mismatch)
-                .then(|| coarse_match(f, &bb, &m.res))
+                .then(|| coarse_match(f, &bb, &res))
                 .flatten()
                 .filter(|&(_, z)| z < MIN_COARSE_MATCH);
             if let Some((level, z)) = mismatch {
@@ -536,7 +574,8 @@ fn ladder(
                     regularization_px: ladder[k],
                     reason,
                 };
-                return Ok((m, choice));
+                let (cov, trust) = quality.expect("a kept rung is forced or converged");
+                return Ok((Measured { res, cov, trust }, choice));
             }
             k += 1;
         }

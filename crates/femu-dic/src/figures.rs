@@ -48,9 +48,22 @@ pub fn draw(
             .copied()
             .filter(|x| x.is_finite())
             .collect();
-        v.sort_by(|a, b| a.total_cmp(b));
-        (v.len() > 1)
-            .then(|| (v[v.len() / 100], v[v.len() - 1 - v.len() / 100]))
+        // The two order statistics by selection (what a full sort would put there, in linear
+        // time: the maps have a value per pixel).
+        let n = v.len();
+        (n > 1)
+            .then(|| {
+                let (lo, hi) = (n / 100, n - 1 - n / 100);
+                let (_, &mut a, right) = v.select_nth_unstable_by(lo, |a, b| a.total_cmp(b));
+                let b = if hi == lo {
+                    a
+                } else {
+                    *right
+                        .select_nth_unstable_by(hi - lo - 1, |a, b| a.total_cmp(b))
+                        .1
+                };
+                (a, b)
+            })
             .filter(|r| r.1 > r.0)
     });
     let opts = femu_plot::ImageField {

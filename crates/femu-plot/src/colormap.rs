@@ -85,14 +85,27 @@ impl ColorMap {
 /// Linear interpolation in a table of equally spaced colours, `t` in `[0, 1]`.
 fn sample(table: &[[u8; 3]], t: f64) -> RGBColor {
     let x = t * (table.len() - 1) as f64;
-    let i = (x.floor() as usize).min(table.len() - 2);
+    // x ≥ 0: truncation is the floor.
+    let i = (x as usize).min(table.len() - 2);
     let f = x - i as f64;
     let c = |k: usize| {
         let a = table[i][k] as f64;
         let b = table[i + 1][k] as f64;
-        (a + f * (b - a)).round() as u8
+        round_u8(a + f * (b - a))
     };
     RGBColor(c(0), c(1), c(2))
+}
+
+/// `v.round() as u8` for `0 ≤ v` (halves away from zero, saturating at 255), without the
+/// call to the C library's `round` that `f64::round` is on a baseline x86-64 target (the maps
+/// round three channels of every pixel): the integer part by truncation, plus one when the
+/// exact fraction `v − ⌊v⌋` is at least ½. A negative `v` gives 0, as `round` does for
+/// `v > −½`, and NaN gives 0 (as `as u8` does).
+#[inline]
+pub fn round_u8(v: f64) -> u8 {
+    let t = v.clamp(0.0, 255.0) as u32;
+    let r = t + u32::from(v - t as f64 >= 0.5);
+    r.min(255) as u8
 }
 
 /// Colour-blind-safe qualitative colours (Okabe & Ito) for series and bar groups.
@@ -123,5 +136,22 @@ mod tests {
         assert_eq!(d.color(0.0), RGBColor(0xF7, 0xF7, 0xF7));
         assert_eq!(d.color(-3.0), RGBColor(0x05, 0x30, 0x61));
         assert_eq!(d.color(3.0), RGBColor(0x67, 0x00, 0x1F));
+    }
+
+    /// [`round_u8`] equals `round() as u8` on every value of the maps' range and around it:
+    /// a fine grid of [−0.5, 256] with each integer and half-integer and their neighbours
+    /// one ulp away (where a rounding by `v + 0.5` would differ).
+    #[test]
+    fn round_u8_is_round() {
+        let mut values: Vec<f64> = (0..=256 * 1024).map(|k| k as f64 / 1024.0).collect();
+        values.extend([-0.4, -1e-300, -0.0, f64::NAN, 0.49999999999999994]);
+        for k in 0..=256 {
+            for base in [k as f64, k as f64 + 0.5] {
+                values.extend([base, base.next_up(), base.next_down()]);
+            }
+        }
+        for v in values {
+            assert_eq!(round_u8(v), v.round() as u8, "{v:e}");
+        }
     }
 }

@@ -3,7 +3,7 @@
 //! image pixels, y pointing down as in the image.
 
 use crate::colorbar::{draw_color_bar, ColorBarPlace};
-use crate::colormap::ColorMap;
+use crate::colormap::{round_u8, ColorMap};
 use crate::text::{draw_title, font, Sizes};
 use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
 use plotters::prelude::*;
@@ -105,11 +105,15 @@ pub fn image_field_png(
     let canvas = Canvas::new(opts.width, opts.height);
     canvas.draw_and_save(path, |root| {
         draw_title(root, &opts.title, s)?;
-        // Image pixels: nearest neighbour, grey blended with the colour where defined.
+        // Image pixels: nearest neighbour, grey blended with the colour where defined. The
+        // source column of each picture column once (a non-negative quotient: truncation is
+        // the floor).
+        let columns: Vec<usize> = (0..pw)
+            .map(|px| cx + (((px as f64 + 0.5) / scale) as usize).min(cw - 1))
+            .collect();
         for py in 0..ph {
-            let iy = cy + ((py as f64 + 0.5) / scale).floor().min(ch as f64 - 1.0) as usize;
-            for px in 0..pw {
-                let ix = cx + ((px as f64 + 0.5) / scale).floor().min(cw as f64 - 1.0) as usize;
+            let iy = cy + (((py as f64 + 0.5) / scale) as usize).min(ch - 1);
+            for (px, &ix) in (0..pw).zip(&columns) {
                 let k = iy * img_w + ix;
                 let gv = grey[k].clamp(0.0, 255.0);
                 let v = values[k];
@@ -117,8 +121,7 @@ pub fn image_field_png(
                     RGBColor(gv as u8, gv as u8, gv as u8)
                 } else {
                     let RGBColor(r, g, b) = cmap.color(v);
-                    let mix =
-                        |c: u8| (opts.alpha * c as f64 + (1.0 - opts.alpha) * gv).round() as u8;
+                    let mix = |c: u8| round_u8(opts.alpha * c as f64 + (1.0 - opts.alpha) * gv);
                     RGBColor(mix(r), mix(g), mix(b))
                 };
                 root.draw_pixel(((left + px) as i32, (top + py) as i32), &c)
