@@ -119,7 +119,7 @@ enum Command {
         /// The deck (.inp) or Gmsh mesh (.msh 4.1).
         input: PathBuf,
         /// Study file (TOML) for a .msh input: materials per physical surface, fixed curves,
-        /// pressures (see README).
+        /// pressures (the guide: docs/guide, "A deck from another mesher").
         #[arg(long)]
         study: Option<PathBuf>,
         /// Output folder (created if absent).
@@ -153,8 +153,9 @@ enum Command {
     /// loading test (seed Eq. 3, Fig. 8), and the identifiability of the parameters from the
     /// measurement grid (Fisher information, predicted standard deviations, test ranking).
     Sensitivity {
-        /// Study file (TOML; see README). Without it: the built-in thigh, Table 1, the seed's
-        /// three tests, a 64 x 64 grid over the thigh, sigma = 1.76e-2 mm.
+        /// Study file (TOML; `femu init` writes one with every key). Without it: the built-in
+        /// thigh, Table 1, the seed's three tests, a 64 x 64 grid over the thigh, sigma =
+        /// 1.76e-2 mm.
         study: Option<PathBuf>,
         /// Output folder.
         #[arg(long, default_value = "out/sensitivity")]
@@ -177,7 +178,8 @@ enum Command {
     /// reference parameters, project the field on the grid, add seeded Gaussian noise; writes
     /// measured.csv.
     Synth {
-        /// Study file (TOML; see README). Without it: built-in thigh, Table 1, compression.
+        /// Study file (TOML; `femu init` writes one with every key). Without it: built-in thigh,
+        /// Table 1, compression.
         study: Option<PathBuf>,
         #[arg(long, default_value = "out/synth")]
         out: PathBuf,
@@ -189,7 +191,7 @@ enum Command {
     /// the exact Jacobian from Latin-hypercube starts; a virtual experiment when no --measured
     /// field is given (with --repeat noise realizations: the seed's Fig. 9 with error bars).
     Identify {
-        /// Study file (TOML; see README).
+        /// Study file (TOML; `femu init` writes one with every key).
         study: Option<PathBuf>,
         #[arg(long, default_value = "out/identify")]
         out: PathBuf,
@@ -211,8 +213,9 @@ enum Command {
     /// combined, ranked by the predicted parameter sd (A- and D-optimal); which parameters
     /// each design can and cannot identify; designs.csv, figures, report.html.
     Design {
-        /// Study file (TOML; see README). Without it: the built-in thigh, the seed's three
-        /// tests, four sides, 40 x 40 and 60 x 40 mm windows, sigma = 1.76e-2 mm.
+        /// Study file (TOML; `femu init` writes one with every key). Without it: the built-in
+        /// thigh, the seed's three tests, four sides, 40 x 40 and 60 x 40 mm windows, sigma =
+        /// 1.76e-2 mm.
         study: Option<PathBuf>,
         #[arg(long, default_value = "out/design")]
         out: PathBuf,
