@@ -86,7 +86,12 @@ pub fn sim(args: &UsSimArgs, quiet: bool) -> Result<()> {
         levels: args.levels,
         steps: args.steps,
     };
-    ultrasound::sim(&study, &options, &args.out, &Terminal { quiet })?;
+    ultrasound::sim(
+        ultrasound::SimInputs::of(&study),
+        &options,
+        &args.out,
+        &Terminal { quiet },
+    )?;
     Ok(())
 }
 

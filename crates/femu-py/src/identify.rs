@@ -182,13 +182,7 @@ pub fn identify_field(
     let weighting = WeightArgs { sx, sy, w, weights };
     let field = measured_field(x, y, ux, uy, weighting)?;
     let source = source.unwrap_or_else(|| "NumPy arrays (x, y, ux, uy)".into());
-    let measured = Measured {
-        field,
-        source: source.clone(),
-        reference_known: false,
-        covariance: None,
-        weighting: femu_study::schema::Weighting::PerPoint,
-    };
+    let measured = Measured::plain(field, source.clone());
     let study = &study.study;
     let summary = running::run(py, reporter.as_ref(), |progress| {
         let built = femu_study::model::build(&study.model)?;
@@ -297,13 +291,7 @@ pub fn least_squares(
         let built = femu_study::model::build(&study.model)?;
         let prepared = match field {
             Some(f) => {
-                let measured = Measured {
-                    field: f,
-                    source: "NumPy arrays (x, y, ux, uy)".into(),
-                    reference_known: false,
-                    covariance: None,
-                    weighting: femu_study::schema::Weighting::PerPoint,
-                };
+                let measured = Measured::plain(f, "NumPy arrays (x, y, ux, uy)".into());
                 identify::measured_prepared(study, measured, "NumPy arrays")?
             }
             None => {

@@ -230,7 +230,7 @@ fn forward_step(
         let model = built.loaded(&test.loading)?;
         let dir = out.join(&name);
         let input = format!("{}, {name}", built.source);
-        solve::solve_model(
+        let summary = solve::solve_model(
             &model,
             &SolveOutput {
                 input: &input,
@@ -242,8 +242,11 @@ fn forward_step(
             },
             progress,
         )?;
-        let text = read_typed::<SolveSummary>(&dir.join("summary.json"))?;
-        summaries.push(format!("{}:{text}", serde_json::to_string(&name)?));
+        summaries.push(format!(
+            "{}:{}",
+            serde_json::to_string(&name)?,
+            serde_json::to_string(&summary)?
+        ));
     }
     Ok(format!("{{{}}}", summaries.join(",")))
 }

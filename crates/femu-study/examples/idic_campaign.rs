@@ -19,7 +19,7 @@ use femu_study::progress::Progress;
 use femu_study::steps::images::{
     identify_image_measurement, identify_images, read_sequence, ImageRouteOptions,
 };
-use femu_study::steps::ultrasound::{sim, SimOptions};
+use femu_study::steps::ultrasound::{sim, SimInputs, SimOptions};
 use serde::Serialize;
 use std::io::Write;
 use std::path::PathBuf;
@@ -234,7 +234,7 @@ fn main() -> Result<()> {
         );
         let t = Instant::now();
         let s = sim(
-            &study,
+            SimInputs::of(&study),
             &SimOptions {
                 steps: a.steps,
                 ..SimOptions::default()
@@ -244,13 +244,8 @@ fn main() -> Result<()> {
         )?;
         let render_and_dic = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let (dic, weighted, idic) = identify_image_measurement(
-            &study,
-            true,
-            &dir.join("measurement"),
-            &dir.join("identify"),
-            &Print,
-        )?;
+        let (dic, weighted, idic) =
+            identify_image_measurement(&study, true, &s, &dir.join("identify"), &Print)?;
         let all = t.elapsed().as_secs_f64();
         for ((p, q), w) in idic
             .parameters
@@ -286,13 +281,13 @@ fn main() -> Result<()> {
         times.push(Times {
             realization: r,
             render_and_dic,
-            dic: s.timings_s.dic,
+            dic: s.summary.timings_s.dic,
             femu: dic.wall_time_s,
             femu_weighted: weighted.wall_time_s,
             idic_identification: idic.identification_s,
             idic_discretization: idic.discretization_s,
             idic_total: idic.wall_time_s,
-            dic_route: s.timings_s.dic + dic.wall_time_s,
+            dic_route: s.summary.timings_s.dic + dic.wall_time_s,
             all_routes: all,
         });
         write_outputs(&a, &rows, &times)?;

@@ -127,13 +127,13 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
     };
     let built = femu_study::model::build(&study.model).unwrap();
     let measured = base.join("frames-measurement");
-    let record = frames::measure(&study, &built, m, spec, &measured, &Quiet).unwrap();
+    let recorded = frames::measure(&study, &built, m, spec, &measured, &Quiet).unwrap();
     assert!(
-        record.dic.is_some(),
+        recorded.record.dic.is_some() && recorded.measured.is_some(),
         "no DIC of the sequence: {:?}",
-        record.notes
+        recorded.record.notes
     );
-    let (fr_seq, _) = frames::read_sequence(&measured).unwrap();
+    let fr_seq = recorded.sequence();
     // Without the pose keys the frames are placed by [probe] on the model's skin: the same
     // placement as the simulator's (its mesh is the model's here, render_refine = 1), to
     // rounding (the probe's px/mm is the reciprocal of the frames' pixel size).

@@ -47,28 +47,14 @@ pub struct Checked {
     pub finest: Option<JointProblem>,
 }
 
-/// The check of `fit` (its first repeat, relative sds `sd`).
-pub fn check(
+/// The meshes of the check: the model's own and the refined ones (`RATIOS`), each with the
+/// measured tests' models; those of an earlier check on this model (the demo's ungrouped
+/// identification before its grouped one) taken back with their last solutions.
+fn check_levels(
     study: &Study,
     built: &StudyModel,
     models: &TestModels,
-    prepared: &[Prepared],
-    fit: &JointFit,
-    sd: &[f64],
-    progress: &dyn Progress,
-) -> Result<Checked> {
-    if matches!(study.model.geometry, Geometry::Deck(_)) {
-        return Ok(Checked {
-            check: DiscretizationCheck::unknown(
-                models.elements(),
-                "femu cannot refine a deck; mesh the same geometry with about four times the elements, identify again from the same data and compare the parameters (or describe the geometry with [thigh] or [labels], which femu refines itself)",
-            ),
-            finest: None,
-        });
-    }
-    let task = progress.task("discretization check on refined meshes", None);
-    // The meshes of an earlier check on this model (the demo's ungrouped identification before
-    // its grouped one), with their last solutions.
+) -> Result<Vec<CachedLevel>> {
     let tests: Vec<String> = models
         .tests
         .iter()
@@ -108,6 +94,30 @@ pub fn check(
             states: Vec::new(),
         });
     }
+    Ok(levels)
+}
+
+/// The check of `fit` (its first repeat, relative sds `sd`).
+pub fn check(
+    study: &Study,
+    built: &StudyModel,
+    models: &TestModels,
+    prepared: &[Prepared],
+    fit: &JointFit,
+    sd: &[f64],
+    progress: &dyn Progress,
+) -> Result<Checked> {
+    if matches!(study.model.geometry, Geometry::Deck(_)) {
+        return Ok(Checked {
+            check: DiscretizationCheck::unknown(
+                models.elements(),
+                "femu cannot refine a deck; mesh the same geometry with about four times the elements, identify again from the same data and compare the parameters (or describe the geometry with [thigh] or [labels], which femu refines itself)",
+            ),
+            finest: None,
+        });
+    }
+    let task = progress.task("discretization check on refined meshes", None);
+    let mut levels = check_levels(study, built, models)?;
     let fields: Vec<MeasuredField> = (0..models.tests.len())
         .map(|b| {
             let meshes: Vec<&Model> = levels.iter().map(|l| &l.models[b]).collect();

@@ -21,7 +21,7 @@
 use crate::bail;
 use crate::error::{Context, Result};
 use crate::model::StudyModel;
-use crate::output::{create_dir, read_json, write_json};
+use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
 use crate::schema::{Measurement, Study};
@@ -30,7 +30,7 @@ use femu_dic::GreyImage;
 use femu_identify::idic::ImageFrame;
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// What the measurement step read (`frames.json`).
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -124,6 +124,46 @@ pub fn placement(
     }
 }
 
+/// What the measurement step of recorded frames made, for the identification: its record
+/// (`frames.json`), the frames as read, and the DIC of the sequence as `measured.csv` holds it.
+#[derive(Debug, Clone)]
+pub struct RecordedFrames {
+    pub record: FramesRecord,
+    /// The frames, the unloaded one first, decoded and cropped.
+    pub frames: Vec<GreyImage>,
+    /// The composed DIC field (model frame, mm) as written, and its file; `None` when the DIC
+    /// of the sequence failed.
+    pub measured: Option<(MeasuredField, PathBuf)>,
+}
+
+impl RecordedFrames {
+    /// The image sequence: the frames, placed and loaded as the record says.
+    pub fn sequence(&self) -> ImageSequence {
+        let record = &self.record;
+        let files: Vec<String> = record
+            .frames
+            .sources
+            .iter()
+            .map(|(p, k)| match k {
+                0 => p.display().to_string(),
+                k => format!("{} frame {k}", p.display()),
+            })
+            .collect();
+        ImageSequence {
+            frames: self.frames.clone(),
+            load_fractions: record.load_fractions.clone(),
+            frame: record.placement,
+            source: format!(
+                "{} recorded frames ({}), {} mm/px, loads {:?} N/mm",
+                files.len(),
+                files.join(", "),
+                record.frames.pixel_size_mm,
+                record.frames.loads_n_per_mm
+            ),
+        }
+    }
+}
+
 /// The measurement step of recorded frames: reads and places them, gives each its load, writes
 /// the record and figures, and correlates the sequence for the identification's start (a DIC
 /// that fails is a note: the identification then starts from the Latin-hypercube starts).
@@ -134,7 +174,7 @@ pub fn measure(
     spec: &FramesSpec,
     out: &Path,
     progress: &dyn Progress,
-) -> Result<FramesRecord> {
+) -> Result<RecordedFrames> {
     create_dir(out)?;
     let resolved = spec
         .resolve()
@@ -173,8 +213,8 @@ pub fn measure(
         force,
         placement_from
     ));
-    let dic = match sequence_dic(&frames, &placement, out, progress) {
-        Ok(d) => Some(d),
+    let (dic, measured) = match sequence_dic(&frames, &placement, out, progress) {
+        Ok((d, field)) => (Some(d), Some((field, out.join("measured.csv")))),
         Err(e) if e.is_interrupted() => return Err(e),
         Err(e) => {
             let note = format!(
@@ -183,7 +223,7 @@ pub fn measure(
             );
             progress.warn(&note);
             notes.push(note);
-            None
+            (None, None)
         }
     };
     let record = FramesRecord {
@@ -197,7 +237,11 @@ pub fn measure(
         notes,
     };
     write_json(&out.join("frames.json"), &record)?;
-    Ok(record)
+    Ok(RecordedFrames {
+        record,
+        frames,
+        measured,
+    })
 }
 
 /// The force log against time (the log's clock), the chosen frames marked.
@@ -256,7 +300,7 @@ fn sequence_dic(
     placement: &ImageFrame,
     out: &Path,
     progress: &dyn Progress,
-) -> Result<SequenceDic> {
+) -> Result<(SequenceDic, MeasuredField)> {
     use femu_dic::command::{CorrelationSpec, RoiSpec};
     let t0 = std::time::Instant::now();
     let spec = CorrelationSpec {
@@ -339,7 +383,8 @@ fn sequence_dic(
     finish_start(field, placement, out, increments, t0, progress)
 }
 
-/// The composed field in pixels `field` mapped to the model, written as `measured.csv`.
+/// The composed field in pixels `field` mapped to the model, written as `measured.csv`;
+/// returns the DIC's account and the field as the file holds it.
 fn finish_start(
     field: MeasuredField,
     placement: &ImageFrame,
@@ -347,7 +392,7 @@ fn finish_start(
     increments: Vec<(usize, Option<f64>, usize, f64)>,
     t0: std::time::Instant,
     progress: &dyn Progress,
-) -> Result<SequenceDic> {
+) -> Result<(SequenceDic, MeasuredField)> {
     let model = field.to_model_frame(
         placement.mm_per_px,
         placement.origin_mm,
@@ -358,7 +403,7 @@ fn finish_start(
     if kept.points.is_empty() {
         bail!("no point of the composed field is trusted");
     }
-    write_measured(&out.join("measured.csv"), &model)?;
+    let written = write_measured(&out.join("measured.csv"), &model)?;
     let d = SequenceDic {
         points: model.points.len(),
         trusted: kept.points.len(),
@@ -374,7 +419,7 @@ fn finish_start(
         d.time_s,
         out.join("measured.csv").display()
     ));
-    Ok(d)
+    Ok((d, written))
 }
 
 /// The fallback of the sequence's DIC: each pair correlated with fixed options (16 px elements,
@@ -440,8 +485,9 @@ fn plain_chain(frames: &[GreyImage]) -> Result<MeasuredField> {
     })
 }
 
-/// Writes a model-frame field with its weights as `sx,sy,w` (conventions.md).
-fn write_measured(path: &Path, f: &MeasuredField) -> Result<()> {
+/// Writes a model-frame field with its weights as `sx,sy,w` (conventions.md); returns the
+/// field as the file holds it (its text parsed: the digits and weights written).
+fn write_measured(path: &Path, f: &MeasuredField) -> Result<MeasuredField> {
     let mut s = String::new();
     for c in &f.comments {
         s += &format!("# {c}\n");
@@ -459,38 +505,9 @@ fn write_measured(path: &Path, f: &MeasuredField) -> Result<()> {
             p.x[0], p.x[1], p.u[0], p.u[1], sd[0], sd[1]
         );
     }
-    femu_mesh::atomic::write(path, s).with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// The image sequence the measurement step recorded in `dir`: the frames read again, placed
-/// and loaded as `frames.json` says.
-pub fn read_sequence(dir: &Path) -> Result<(ImageSequence, FramesRecord)> {
-    let record: FramesRecord = read_json(&dir.join("frames.json"))?;
-    let frames = read_frames(&record.frames)?;
-    let files: Vec<String> = record
-        .frames
-        .sources
-        .iter()
-        .map(|(p, k)| match k {
-            0 => p.display().to_string(),
-            k => format!("{} frame {k}", p.display()),
-        })
-        .collect();
-    Ok((
-        ImageSequence {
-            frames,
-            load_fractions: record.load_fractions.clone(),
-            frame: record.placement,
-            source: format!(
-                "{} recorded frames ({}), {} mm/px, loads {:?} N/mm",
-                files.len(),
-                files.join(", "),
-                record.frames.pixel_size_mm,
-                record.frames.loads_n_per_mm
-            ),
-        },
-        record,
-    ))
+    femu_mesh::atomic::write(path, &s)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    Ok(MeasuredField::parse(&s, &path.display().to_string())?)
 }
 
 /// The identification from recorded frames: DIC → FEMU on the sequence's DIC (`dic/`, its
@@ -499,30 +516,26 @@ pub fn identify_frames(
     study: &Study,
     grouped: bool,
     built: &StudyModel,
-    measurement: &Path,
+    recorded: &RecordedFrames,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<super::images::ImageIdentificationSummary> {
     use crate::steps::measure::{Measured, Prepared, PreparedData};
-    let (seq, record) = read_sequence(measurement)?;
+    let seq = recorded.sequence();
     let m = &study.measurements[0];
     let mut study_idic = study.clone();
     study_idic.identification.test = m.test;
     let mut starts = Vec::new();
-    if record.dic.is_some() {
-        let path = measurement.join("measured.csv");
-        let (field, _) = MeasuredField::read(&path)?.weighted_points();
+    if let Some((measured, path)) = &recorded.measured {
+        let (field, _) = measured.weighted_points();
         let prepared = Prepared {
             name: m.name.clone(),
             label: m.label(&study.tests),
             test: m.test,
-            data: PreparedData::Measured(Measured {
+            data: PreparedData::Measured(Measured::plain(
                 field,
-                source: format!("DIC of the recorded frames ({})", path.display()),
-                reference_known: false,
-                covariance: None,
-                weighting: crate::schema::Weighting::PerPoint,
-            }),
+                format!("DIC of the recorded frames ({})", path.display()),
+            )),
             travel: None,
         };
         let mut squared = study_idic.clone();

@@ -601,44 +601,11 @@ fn estimate_with_check(
             Err(e) => return Err(e),
         };
     let flagged = checked.check.flagged();
-    if flagged && study.identification.discretization == Discretization::Refine {
-        if let Some(finest) = checked.finest.as_mut() {
-            let refined = discretization::refine(
-                finest,
-                &fit.free,
-                &fit.campaign.best[0].theta,
-                &checked.check.bias,
-            )?;
-            let finest_elements = checked.check.levels.last().map_or(0, |l| l.elements);
-            progress.note(&format!(
-                "identified again on the refined mesh ({finest_elements} elements): cost {:.4e}, {} forward solves",
-                refined.cost, refined.forward_solves
-            ));
-            fit.campaign.best[0] = refined;
-            // The refined fit's Jacobian has the rows of the finest problem (the points inside
-            // every level's mesh): the information shares read them through its layout.
-            fit.campaign.layout = finest.segments();
-            (parameters, id) = estimates(fit)?;
-            // What remains beyond the finest mesh: the bias scaled by ρ^-p.
-            let remaining = checked
-                .check
-                .levels
-                .last()
-                .map_or(1.0, |l| l.ratio)
-                .powf(-checked.check.rate);
-            checked.check.bias.iter_mut().for_each(|b| *b *= remaining);
-            checked
-                .check
-                .bias_over_sd
-                .iter_mut()
-                .for_each(|b| *b *= remaining);
-            checked.check.status = "refined".into();
-            checked.check.message = format!(
-                "identified again on {finest_elements} elements (the mesh biased the parameters by up to {:.1} sd); the bias left is estimated at up to {:.2} sd",
-                checked.check.bias_over_sd.iter().copied().fold(0.0, f64::max) / remaining,
-                checked.check.bias_over_sd.iter().copied().fold(0.0, f64::max)
-            );
-        }
+    if flagged
+        && study.identification.discretization == Discretization::Refine
+        && refine_on_finest(&mut checked, fit, progress)?
+    {
+        (parameters, id) = estimates(fit)?;
     }
     let widen = checked.check.flagged() && !discretization::data_from_model(study, prepared);
     if widen {
@@ -652,6 +619,50 @@ fn estimate_with_check(
         )?;
     }
     Ok((parameters, id, Some(checked.check)))
+}
+
+/// `[identification] discretization = "refine"`: the first repeat of `fit` identified again on
+/// the finest mesh of the check (if it kept its problem), and the bias the check found scaled
+/// to what remains beyond that mesh. Returns whether it was.
+fn refine_on_finest(
+    checked: &mut discretization::Checked,
+    fit: &mut JointFit,
+    progress: &dyn Progress,
+) -> Result<bool> {
+    let Some(finest) = checked.finest.as_mut() else {
+        return Ok(false);
+    };
+    let refined = discretization::refine(
+        finest,
+        &fit.free,
+        &fit.campaign.best[0].theta,
+        &checked.check.bias,
+    )?;
+    let finest_elements = checked.check.levels.last().map_or(0, |l| l.elements);
+    progress.note(&format!(
+        "identified again on the refined mesh ({finest_elements} elements): cost {:.4e}, {} forward solves",
+        refined.cost, refined.forward_solves
+    ));
+    fit.campaign.best[0] = refined;
+    // The refined fit's Jacobian has the rows of the finest problem (the points inside every
+    // level's mesh): the information shares read them through its layout.
+    fit.campaign.layout = finest.segments();
+    // What remains beyond the finest mesh: the bias scaled by ρ^-p.
+    let check = &mut checked.check;
+    let remaining = check
+        .levels
+        .last()
+        .map_or(1.0, |l| l.ratio)
+        .powf(-check.rate);
+    check.bias.iter_mut().for_each(|b| *b *= remaining);
+    check.bias_over_sd.iter_mut().for_each(|b| *b *= remaining);
+    check.status = "refined".into();
+    check.message = format!(
+        "identified again on {finest_elements} elements (the mesh biased the parameters by up to {:.1} sd); the bias left is estimated at up to {:.2} sd",
+        check.bias_over_sd.iter().copied().fold(0.0, f64::max) / remaining,
+        check.bias_over_sd.iter().copied().fold(0.0, f64::max)
+    );
+    Ok(true)
 }
 
 /// The identification of `study` (groups tied when `grouped`) on the model `built` from its
@@ -669,48 +680,13 @@ pub fn identify_on(
     create_dir(out)?;
     let spec = &study.identification;
     let models = TestModels::new(study, built, prepared)?;
-    let virtual_experiment = prepared
-        .iter()
-        .all(|p| matches!(p.data, PreparedData::Virtual { .. }));
-    let reference_known = prepared.iter().all(|p| match &p.data {
-        PreparedData::Virtual { .. } => true,
-        PreparedData::Measured(m) => m.reference_known,
-    });
-    // Whitened residuals have unit variance: the intervals need no residual scaling.
-    let weighted = prepared.iter().any(
-        |p| matches!(&p.data, PreparedData::Measured(m) if m.weighting != Weighting::PerPoint),
-    );
-    let known_noise = virtual_experiment || weighted;
+    let data = DataKind::of(prepared);
     let tests: Vec<String> = models
         .tests
         .iter()
         .map(|&t| study.tests[t].loading.name())
         .collect();
-    progress.note(&format!(
-        "identify ({}): {} ({} measurement{}), {} elements, {} starts x {} noise realizations",
-        spec.optimizer.name(),
-        tests.join(" + "),
-        prepared.len(),
-        if prepared.len() == 1 { "" } else { "s" },
-        models.elements(),
-        spec.starts,
-        if virtual_experiment
-            || prepared
-                .iter()
-                .any(|p| matches!(p.data, PreparedData::Virtual { .. }))
-        {
-            spec.repeat
-        } else {
-            1
-        }
-    ));
-    if let Some(c) = models.coarse.first() {
-        progress.note(&format!(
-            "multilevel: starts on {} elements, the best refined on {}",
-            c.mesh.elements.len(),
-            models.elements()
-        ));
-    }
+    note_identification(study, &models, prepared, &tests, progress);
     let (mut fit, interrupted, error_model) =
         fit_or_keep(study, grouped, &models, prepared, out, progress)?;
     write_starts_csv(&out.join("starts.csv"), &fit.free, &fit.campaign.starts)?;
@@ -720,8 +696,8 @@ pub fn identify_on(
         &models,
         prepared,
         &mut fit,
-        reference_known,
-        known_noise,
+        data.reference_known,
+        data.known_noise(),
         interrupted.is_some(),
         progress,
     )?;
@@ -736,7 +712,7 @@ pub fn identify_on(
     let best = &c.best[0];
     // What finished is written even after a stop (the field figures need one more solve).
     femu_mesh::stop::shielded(|| {
-        write_result_figures(study, &models, &fit, &parameters, reference_known, out)
+        write_result_figures(study, &models, &fit, &parameters, data.reference_known, out)
     })?;
     let summary = IdentificationSummary {
         command: "identify".into(),
@@ -745,24 +721,10 @@ pub fn identify_on(
         optimizer: spec.optimizer.name().into(),
         grouped,
         elements: models.elements(),
-        measured: {
-            let mut sources: Vec<String> = Vec::new();
-            for p in prepared {
-                if !sources.contains(&p.source()) {
-                    sources.push(p.source());
-                }
-            }
-            sources.join("; ")
-        },
+        measured: measured_sources(prepared),
         points_in_tissue: c.points_in_tissue,
         points_masked: measurements.iter().map(|m| m.points_masked).sum(),
-        noise_sigma_mm: prepared
-            .iter()
-            .find_map(|p| match p.data {
-                PreparedData::Virtual { sigma, .. } => Some(sigma),
-                PreparedData::Measured(_) => None,
-            })
-            .unwrap_or(study.measurement.sigma_mm),
+        noise_sigma_mm: data.sigma.unwrap_or(study.measurement.sigma_mm),
         free_parameters: fit.free.iter().map(FreeParameterSummary::from).collect(),
         parameters,
         correlation: id.correlation,
@@ -783,26 +745,9 @@ pub fn identify_on(
         starts: c.starts.clone(),
         wall_time_s: t0.elapsed().as_secs_f64(),
         warnings,
-        weighting: if weighted && error_model.is_some() {
-            "covariance and estimated error".into()
-        } else if weighted {
-            "full covariance".into()
-        } else if virtual_experiment {
-            "one sigma".into()
-        } else {
-            "per point".into()
-        },
+        weighting: data.weighting(error_model.is_some()).into(),
         loss: spec.loss,
-        interrupted: match interrupted {
-            Some(n) => Some(format!(
-                "interrupted: {} of {n} repeats finished and kept",
-                c.best.len()
-            )),
-            None if check.as_ref().is_some_and(|k| k.status == "interrupted") => Some(
-                "interrupted during the discretization check: the fit is kept, its intervals not checked for the mesh".into(),
-            ),
-            None => None,
-        },
+        interrupted: interrupted_note(interrupted, c.best.len(), check.as_ref()),
         measurements,
         discretization: check,
         error_model,
@@ -821,6 +766,119 @@ pub fn identify_on(
         ));
     }
     Ok(summary)
+}
+
+/// What kind of data an identification fits.
+struct DataKind {
+    /// Every measurement is virtual (the model's field with noise of known sigma).
+    virtual_experiment: bool,
+    /// The reference parameters are the truth (a simulated experiment).
+    reference_known: bool,
+    /// A measurement is weighted by a covariance (whitened residuals).
+    weighted: bool,
+    /// The noise sigma of the first virtual measurement.
+    sigma: Option<f64>,
+}
+
+impl DataKind {
+    fn of(prepared: &[Prepared]) -> DataKind {
+        DataKind {
+            virtual_experiment: prepared
+                .iter()
+                .all(|p| matches!(p.data, PreparedData::Virtual { .. })),
+            reference_known: prepared.iter().all(|p| match &p.data {
+                PreparedData::Virtual { .. } => true,
+                PreparedData::Measured(m) => m.reference_known,
+            }),
+            weighted: prepared.iter().any(|p| {
+                matches!(&p.data, PreparedData::Measured(m) if m.weighting != Weighting::PerPoint)
+            }),
+            sigma: prepared.iter().find_map(|p| match p.data {
+                PreparedData::Virtual { sigma, .. } => Some(sigma),
+                PreparedData::Measured(_) => None,
+            }),
+        }
+    }
+
+    /// Whether the noise's size is known: a virtual experiment's sigma, or whitened residuals
+    /// (unit variance); the intervals then need no residual scaling.
+    fn known_noise(&self) -> bool {
+        self.virtual_experiment || self.weighted
+    }
+
+    /// How the misfit is weighted, as the summary says it (`estimated_error`: an error model
+    /// was estimated beside the covariance).
+    fn weighting(&self, estimated_error: bool) -> &'static str {
+        if self.weighted && estimated_error {
+            "covariance and estimated error"
+        } else if self.weighted {
+            "full covariance"
+        } else if self.virtual_experiment {
+            "one sigma"
+        } else {
+            "per point"
+        }
+    }
+}
+
+/// What an identification is about to fit, for the user.
+fn note_identification(
+    study: &Study,
+    models: &TestModels,
+    prepared: &[Prepared],
+    tests: &[String],
+    progress: &dyn Progress,
+) {
+    let spec = &study.identification;
+    let any_virtual = prepared
+        .iter()
+        .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
+    progress.note(&format!(
+        "identify ({}): {} ({} measurement{}), {} elements, {} starts x {} noise realizations",
+        spec.optimizer.name(),
+        tests.join(" + "),
+        prepared.len(),
+        if prepared.len() == 1 { "" } else { "s" },
+        models.elements(),
+        spec.starts,
+        if any_virtual { spec.repeat } else { 1 }
+    ));
+    if let Some(c) = models.coarse.first() {
+        progress.note(&format!(
+            "multilevel: starts on {} elements, the best refined on {}",
+            c.mesh.elements.len(),
+            models.elements()
+        ));
+    }
+}
+
+/// Where the measurements come from, each source once.
+fn measured_sources(prepared: &[Prepared]) -> String {
+    let mut sources: Vec<String> = Vec::new();
+    for p in prepared {
+        if !sources.contains(&p.source()) {
+            sources.push(p.source());
+        }
+    }
+    sources.join("; ")
+}
+
+/// What the summary says of a stop: the repeats kept of `interrupted` asked (`finished` of
+/// them), or a discretization check cut short.
+fn interrupted_note(
+    interrupted: Option<usize>,
+    finished: usize,
+    check: Option<&DiscretizationCheck>,
+) -> Option<String> {
+    match interrupted {
+        Some(n) => Some(format!(
+            "interrupted: {finished} of {n} repeats finished and kept"
+        )),
+        None if check.is_some_and(|k| k.status == "interrupted") => Some(
+            "interrupted during the discretization check: the fit is kept, its intervals not checked for the mesh".into(),
+        ),
+        None => None,
+    }
 }
 
 /// `errors.png`, `cost_history.png` and the field figure of each measurement (`fields.png`,
@@ -1176,7 +1234,18 @@ fn write_field_figures(
             images[3 * c + 2][pix] = m[c] - pt.u[c];
         }
     }
-    let spacing = xs[1] - xs[0];
+    write_field_panels(out, name, (nx, ny), xs[1] - xs[0], &images)
+}
+
+/// The six panels of a field figure (measured, model, difference; ux then uy) on an `nx x ny`
+/// grid `spacing` mm apart, written into `out/panels/` and tiled into `out/name`.
+fn write_field_panels(
+    out: &Path,
+    name: &str,
+    (nx, ny): (usize, usize),
+    spacing: f64,
+    images: &[Vec<f64>],
+) -> Result<()> {
     let grey = vec![255.0; nx * ny];
     let panels_dir = out.join("panels");
     femu_mesh::atomic::create_dir_all(&panels_dir)?;

@@ -23,7 +23,7 @@ use crate::progress::Progress;
 use crate::schema::Study;
 use crate::steps::identify::FreeParameterSummary;
 use crate::steps::parameters::free_parameters;
-use crate::steps::ultrasound::SimSummary;
+use crate::steps::ultrasound::{SimSummary, SimulatedImages};
 use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
 use femu_identify::fit::FreeParameter;
@@ -61,7 +61,9 @@ pub fn image_frame(probe: &Probe) -> ImageFrame {
     }
 }
 
-/// The sequence the measurement step wrote into `dir` (its `summary.json` and frames).
+/// The sequence of a `femu us-sim` folder `dir` (its `summary.json` and frames), for a script
+/// that identifies from a folder written earlier (a run passes the sequence on in memory:
+/// [`SimulatedImages::sequence`]).
 pub fn read_sequence(dir: &Path) -> Result<ImageSequence> {
     let s: SimSummary = read_json(&dir.join("summary.json"))?;
     if s.frames.len() < 2 || s.frames.len() != s.load_fractions.len() + 1 {
@@ -77,19 +79,7 @@ pub fn read_sequence(dir: &Path) -> Result<ImageSequence> {
         .iter()
         .map(|f| GreyImage::open(&dir.join(f), 0).with_context(|| format!("frame {f}")))
         .collect::<Result<Vec<_>>>()?;
-    Ok(ImageSequence {
-        frames,
-        load_fractions: s.load_fractions,
-        frame: image_frame(&s.probe),
-        source: format!(
-            "{} B-mode frames simulated at {} MHz from {} elements (render_refine {}, decorrelation {})",
-            s.frames.len(),
-            s.transducer.frequency_mhz,
-            s.render_elements,
-            s.render_refine,
-            s.decorrelation
-        ),
-    })
+    Ok(s.sequence(frames))
 }
 
 /// How the images are compared (the integrated correlation's options and its scales).
@@ -592,7 +582,6 @@ pub fn identify_images(
 ) -> Result<ImageIdentificationSummary> {
     let t0 = Instant::now();
     create_dir(out)?;
-    let spec = &study.identification;
     let built = crate::model::build(&study.model)?;
     let models = step_models(study, &built, &seq.load_fractions)?;
     let last = models.last().context("no load step")?;
@@ -610,17 +599,85 @@ pub fn identify_images(
         .map(|p| p.with_stop(stop.clone()))
     };
     let settings = IdicSettings {
-        starts: spec.starts,
-        seed: spec.seed,
+        starts: study.identification.starts,
+        seed: study.identification.seed,
         extra_starts,
         scales_px: route.scales_px.clone(),
         ..IdicSettings::default()
     };
     progress.note(&format!(
-        "identify from images (integrated DIC): {}, {} elements, {} free parameters, {} frames (pairs: {:?}), {} starts + {} given, scales {:?} px, {}",
+        "identify from images (integrated DIC): {}, {} elements, {} free parameters, {}",
         study.identification_test().loading.name(),
         last.mesh.elements.len(),
         free.len(),
+        what_is_correlated(seq, &options, &settings)
+    ));
+    let (mut problem, mut outcome) = idic::identify(&make, &settings, &show_idic_events(progress))
+        .map_err(|e| run_error(e).context("identification from images"))?;
+    let identification_s = t0.elapsed().as_secs_f64();
+    // The discretization correction on further meshes.
+    let t1 = Instant::now();
+    let mut notes = Vec::new();
+    let mut identified = Identified {
+        free: &free,
+        problem: &mut problem,
+        outcome: &mut outcome,
+    };
+    let mesh =
+        identified.discretization(study, seq, route, &settings.fine, &mut notes, progress)?;
+    let discretization_s = t1.elapsed().as_secs_f64();
+    let parameters = identified.estimates(&reference, reference_known, mesh.as_ref());
+    notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
+    let maps = problem.residual_maps();
+    let before = rest_residual(&problem);
+    let summary = ImageIdentificationSummary {
+        command: "identify (images)".into(),
+        version: env!("CARGO_PKG_VERSION").into(),
+        method: "integrated DIC".into(),
+        test: study.identification_test().loading.name(),
+        grouped,
+        elements: last.mesh.elements.len(),
+        refined_elements: mesh.as_ref().and_then(|m| m.elements.first().copied()),
+        mesh_correction: mesh,
+        source: seq.source.clone(),
+        load_fractions: seq.load_fractions.clone(),
+        image_px: (seq.frames[0].width, seq.frames[0].height),
+        pixels: problem.pixels().len(),
+        mask: problem.pixels().counts,
+        sandwich_blocks: outcome.covariance.blocks,
+        jackknife_groups: outcome.jackknife_groups,
+        pairing: options.pairing,
+        local_normalization_px: options.local_normalization_px,
+        free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
+        correlation: femu_identify::fisher::correlation(&outcome.covariance.covariance),
+        parameters,
+        scales: scale_summaries(&outcome, &free),
+        starts: outcome.starts.clone(),
+        residual_rms_before: finite_rms(&before),
+        residual_rms_after: finite_rms(maps.last().map_or(&[][..], |m| m.as_slice())),
+        forward_solves: outcome.forward_solves,
+        identification_s,
+        discretization_s,
+        solve_s: problem.timings().0,
+        image_s: problem.timings().1,
+        wall_time_s: t0.elapsed().as_secs_f64(),
+        notes,
+    };
+    write_parameters_csv(&out.join("parameters.csv"), &summary.parameters)?;
+    write_figures(out, &problem, &before, maps.last())?;
+    write_json(&out.join("summary.json"), &summary)?;
+    print_estimates(&summary, out, progress);
+    Ok(summary)
+}
+
+/// The frames, starts and scales of an integrated-DIC identification, in words.
+fn what_is_correlated(
+    seq: &ImageSequence,
+    options: &IdicOptions,
+    settings: &IdicSettings,
+) -> String {
+    format!(
+        "{} frames (pairs: {:?}), {} starts + {} given, scales {:?} px, {}",
         seq.frames.len(),
         options.pairing,
         settings.starts,
@@ -630,8 +687,12 @@ pub fn identify_images(
             Some(w) => format!("frames locally normalized over {w} px"),
             None => "grey levels as recorded".into(),
         }
-    ));
-    let on_event = |e: IdicEvent| match e {
+    )
+}
+
+/// The progress of an integrated-DIC identification as notes: each start, each scale.
+fn show_idic_events(progress: &dyn Progress) -> impl Fn(IdicEvent) + '_ {
+    move |e: IdicEvent| match e {
         IdicEvent::Start { index, outcome } => match outcome {
             Ok(r) => progress.note(&format!(
                 "  start {index}: cost {:.4e}, {} iterations, {} forward solves, {:.1} s ({})",
@@ -649,47 +710,67 @@ pub fn identify_images(
             r.result.reason,
             r.result.theta
         )),
-    };
-    let (mut problem, mut outcome) = idic::identify(&make, &settings, &on_event)
-        .map_err(|e| run_error(e).context("identification from images"))?;
-    let identification_s = t0.elapsed().as_secs_f64();
-    // The discretization correction on further meshes.
-    let t1 = Instant::now();
-    let mut notes = Vec::new();
-    let mesh = if !route.discretization_check {
-        notes.push(
-            "the discretization check was not asked for: the intervals leave the mesh's error out"
-                .into(),
-        );
-        None
-    } else if refined_spec(&study.model, 2).is_none() {
-        notes.push(
-            "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
-        );
-        None
-    } else if !route.mesh_correction {
-        match discretization_shift(study, seq, &problem, &moving_parameters(&free, &outcome)) {
-            Ok(m) => Some(m),
-            Err(e) if e.is_interrupted() => return Err(e),
-            Err(e) => {
-                notes.push(format!(
-                    "the discretization check failed ({}): the intervals leave the mesh's error out",
-                    e.chain()
-                ));
-                None
-            }
+    }
+}
+
+/// An integrated-DIC estimate and the problem it was last evaluated on.
+struct Identified<'a> {
+    free: &'a [FreeParameter],
+    problem: &'a mut IdicProblem,
+    outcome: &'a mut idic::IdicOutcome,
+}
+
+impl Identified<'_> {
+    /// The estimates with their uncertainty budget ([`estimates`]).
+    fn estimates(
+        &self,
+        reference: &[f64],
+        reference_known: bool,
+        mesh: Option<&MeshCorrection>,
+    ) -> Vec<ImageEstimate> {
+        let outcome = &*self.outcome;
+        estimates(
+            self.free,
+            reference,
+            reference_known,
+            &outcome.theta,
+            &outcome.covariance,
+            &outcome.jackknife_sd,
+            mesh,
+            scale_change(outcome).as_deref(),
+        )
+    }
+
+    /// The discretization term of the intervals as `route` asks: none (with a note saying
+    /// why), the extrapolated shift ([`discretization_shift`]) or the estimate corrected for the
+    /// mesh ([`mesh_correction`], which identifies again). A check that fails is a note; a
+    /// stop request ends the step.
+    fn discretization(
+        &mut self,
+        study: &Study,
+        seq: &ImageSequence,
+        route: &ImageRouteOptions,
+        lm: &femu_identify::fit::LmOptions,
+        notes: &mut Vec<String>,
+        progress: &dyn Progress,
+    ) -> Result<Option<MeshCorrection>> {
+        if !route.discretization_check {
+            notes.push(
+                "the discretization check was not asked for: the intervals leave the mesh's error out"
+                    .into(),
+            );
+            return Ok(None);
         }
-    } else {
-        let moving = moving_parameters(&free, &outcome);
-        match mesh_correction(
-            study,
-            seq,
-            &mut problem,
-            &mut outcome,
-            &settings.fine,
-            &moving,
-        ) {
-            Ok(m) => {
+        if refined_spec(&study.model, 2).is_none() {
+            notes.push(
+                "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
+            );
+            return Ok(None);
+        }
+        let moving = moving_parameters(self.free, self.outcome);
+        let (result, what, without) = if route.mesh_correction {
+            let r = mesh_correction(study, seq, self.problem, self.outcome, lm, &moving);
+            if let Ok(m) = &r {
                 progress.note(&format!(
                     "  mesh correction: meshes of {:?} elements, rate {:.2} ({}), correction RMS {:.3} px; identified again: cost {:.4e}, {} iterations ({})",
                     m.elements,
@@ -700,87 +781,60 @@ pub fn identify_images(
                     m.iterations,
                     m.reason
                 ));
-                Some(m)
             }
-            Err(e) if e.is_interrupted() => return Err(e),
+            (
+                r,
+                "correction",
+                "the estimate is the mesh's own and the intervals leave the mesh's error out",
+            )
+        } else {
+            (
+                discretization_shift(study, seq, self.problem, &moving),
+                "check",
+                "the intervals leave the mesh's error out",
+            )
+        };
+        match result {
+            Ok(m) => Ok(Some(m)),
+            Err(e) if e.is_interrupted() => Err(e),
             Err(e) => {
                 notes.push(format!(
-                    "the discretization correction failed ({}): the estimate is the mesh's own and the intervals leave the mesh's error out",
+                    "the discretization {what} failed ({}): {without}",
                     e.chain()
                 ));
-                None
+                Ok(None)
             }
         }
-    };
-    let refined_elements = mesh.as_ref().and_then(|m| m.elements.first().copied());
-    let discretization_s = t1.elapsed().as_secs_f64();
-    let parameters = estimates(
-        &free,
-        &reference,
-        reference_known,
-        &outcome.theta,
-        &outcome.covariance,
-        &outcome.jackknife_sd,
-        mesh.as_ref(),
-        scale_change(&outcome).as_deref(),
-    );
-    notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
-    let maps = problem.residual_maps();
-    let rms = |m: &[f64]| {
-        let v: Vec<f64> = m.iter().copied().filter(|x| x.is_finite()).collect();
-        (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
-    };
-    let before = rest_residual(&problem);
-    let summary = ImageIdentificationSummary {
-        command: "identify (images)".into(),
-        version: env!("CARGO_PKG_VERSION").into(),
-        method: "integrated DIC".into(),
-        test: study.identification_test().loading.name(),
-        grouped,
-        elements: last.mesh.elements.len(),
-        refined_elements,
-        mesh_correction: mesh.clone(),
-        source: seq.source.clone(),
-        load_fractions: seq.load_fractions.clone(),
-        image_px: (seq.frames[0].width, seq.frames[0].height),
-        pixels: problem.pixels().len(),
-        mask: problem.pixels().counts,
-        sandwich_blocks: outcome.covariance.blocks,
-        jackknife_groups: outcome.jackknife_groups,
-        pairing: options.pairing,
-        local_normalization_px: options.local_normalization_px,
-        free_parameters: free.iter().map(FreeParameterSummary::from).collect(),
-        correlation: femu_identify::fisher::correlation(&outcome.covariance.covariance),
-        parameters,
-        scales: outcome
-            .scales
-            .iter()
-            .map(|s| ScaleSummary {
-                scale_px: s.scale_px,
-                cost: s.result.cost,
-                iterations: s.result.iterations,
-                forward_solves: s.result.forward_solves,
-                theta: s.result.theta.clone(),
-                band_sd: s.band_sd.clone(),
-                held: s.held.iter().map(|&k| free[k].name.clone()).collect(),
-                reason: s.result.reason.clone(),
-                history: s.result.history.clone(),
-            })
-            .collect(),
-        starts: outcome.starts.clone(),
-        residual_rms_before: rms(&before),
-        residual_rms_after: rms(maps.last().map_or(&[][..], |m| m.as_slice())),
-        forward_solves: outcome.forward_solves,
-        identification_s,
-        discretization_s,
-        solve_s: problem.timings().0,
-        image_s: problem.timings().1,
-        wall_time_s: t0.elapsed().as_secs_f64(),
-        notes,
-    };
-    write_parameters_csv(&out.join("parameters.csv"), &summary.parameters)?;
-    write_figures(out, &problem, &before, maps.last())?;
-    write_json(&out.join("summary.json"), &summary)?;
+    }
+}
+
+/// The root mean square of the finite values of `m` (a residual map, NaN outside the mask).
+fn finite_rms(m: &[f64]) -> f64 {
+    let v: Vec<f64> = m.iter().copied().filter(|x| x.is_finite()).collect();
+    (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
+}
+
+/// Each scale of the coarse-to-fine identification, for the summary.
+fn scale_summaries(outcome: &idic::IdicOutcome, free: &[FreeParameter]) -> Vec<ScaleSummary> {
+    outcome
+        .scales
+        .iter()
+        .map(|s| ScaleSummary {
+            scale_px: s.scale_px,
+            cost: s.result.cost,
+            iterations: s.result.iterations,
+            forward_solves: s.result.forward_solves,
+            theta: s.result.theta.clone(),
+            band_sd: s.band_sd.clone(),
+            held: s.held.iter().map(|&k| free[k].name.clone()).collect(),
+            reason: s.result.reason.clone(),
+            history: s.result.history.clone(),
+        })
+        .collect()
+}
+
+/// The estimates of `summary` as a table for the user, and where they were written.
+fn print_estimates(summary: &ImageIdentificationSummary, out: &Path, progress: &dyn Progress) {
     progress.note(&format!(
         "{:<36} {:>12} {:>12} {:>10} {:>9} {:>9}",
         "parameter", "reference", "identified", "error", "sd", "mesh bias"
@@ -803,10 +857,9 @@ pub fn identify_images(
         "wrote {} ({:.1} s: identification {:.1} s, discretization check {:.1} s)",
         out.display(),
         summary.wall_time_s,
-        identification_s,
-        discretization_s
+        summary.identification_s,
+        summary.discretization_s
     ));
-    Ok(summary)
 }
 
 /// `ln θ` of the last scale minus that of the one before (None with a single scale).
@@ -957,8 +1010,8 @@ fn write_figures(
 /// The three routes from the same images, side by side (`femu run` with `[measurement] source =
 /// "ultrasound"`), each in its folder under `out`:
 ///
-/// - `dic/` — DIC → FEMU, plain: the composed incremental DIC field (`measured.csv`) with one
-///   weight per point, as `identify --measured` fits it;
+/// - `dic/` — DIC → FEMU, plain: the composed incremental DIC field (`measured.csv` of
+///   `simulated`) with one weight per point, as `identify --measured` fits it;
 /// - `dic-weighted/` — DIC → FEMU weighted by the field's full covariance
 ///   (`measured_covariance.mtx`) with Huber's loss;
 /// - `.` (the folder itself) — integrated DIC from the frames, started from the two optima
@@ -970,7 +1023,7 @@ fn write_figures(
 pub fn identify_image_measurement(
     study: &Study,
     grouped: bool,
-    measurement: &Path,
+    simulated: &SimulatedImages,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<(
@@ -981,12 +1034,11 @@ pub fn identify_image_measurement(
     use crate::steps::identify::identify_on;
     use crate::steps::measure::Measured;
     use crate::steps::measure::{Prepared, PreparedData};
-    use femu_identify::measured::MeasuredField;
     use femu_identify::weighted::{Loss, HUBER_K};
-    let field = MeasuredField::read(&measurement.join("measured.csv"))?;
-    let covariance = femu_identify::weighted::FieldCovariance::read_mtx(
-        &measurement.join("measured_covariance.mtx"),
-    )?;
+    let field = &simulated.measured;
+    let covariance = simulated.covariance.clone();
+    // Its own model, as `femu identify` builds it (the discretization check's meshes start
+    // afresh for each grouping).
     let built = crate::model::build(&study.model)?;
     let m = &study.measurements[0];
     let source = "DIC of the simulated B-mode images (incremental, composed)".to_string();
@@ -1008,6 +1060,7 @@ pub fn identify_image_measurement(
                 crate::schema::Weighting::PerPoint
             },
             covariance,
+            simulated: None,
         }),
         travel: None,
     };
@@ -1033,7 +1086,7 @@ pub fn identify_image_measurement(
         &out.join("dic-weighted"),
         progress,
     )?;
-    let seq = read_sequence(measurement)?;
+    let seq = simulated.sequence();
     let starts = vec![
         a.parameters.iter().map(|p| p.identified).collect(),
         b.parameters.iter().map(|p| p.identified).collect(),

@@ -7,12 +7,14 @@ use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::progress::Progress;
 use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
+use crate::steps::ultrasound::{SimInputs, SimulatedImages};
 use femu_identify::campaign::{self, TravelTerm};
 use femu_identify::measured::{DeclaredUnits, MeasuredField};
 use femu_identify::weighted::FieldCovariance;
 use femu_mech::loading::Side;
 use femu_mesh::locate::PointLocator;
 use std::path::Path;
+use std::sync::Arc;
 
 /// The measured field of an identification and where it came from.
 #[derive(Debug, Clone)]
@@ -27,6 +29,23 @@ pub struct Measured {
     pub covariance: Option<FieldCovariance>,
     /// How the misfit is weighted (`[measurement] weighting`).
     pub weighting: crate::schema::Weighting,
+    /// The simulated experiment the field is the DIC of, when it was simulated here (its
+    /// images are identified from by integrated DIC).
+    pub simulated: Option<Arc<SimulatedImages>>,
+}
+
+impl Measured {
+    /// A measured field from `source`, weighted per point, its parameters unknown.
+    pub fn plain(field: MeasuredField, source: String) -> Measured {
+        Measured {
+            field,
+            source,
+            reference_known: false,
+            covariance: None,
+            weighting: crate::schema::Weighting::PerPoint,
+            simulated: None,
+        }
+    }
 }
 
 /// A measurement ready to fit.
@@ -253,6 +272,7 @@ pub fn read_measured(
         reference_known: false,
         covariance,
         weighting,
+        simulated: None,
     })
 }
 
@@ -281,30 +301,40 @@ pub(crate) fn read_covariance(
 }
 
 /// The DIC field of simulated B-mode images of `m`'s test under its window (or `[probe]`),
-/// written into `out` by `femu us-sim`'s step.
+/// written into `out` by `femu us-sim`'s step, with the experiment it came from.
 fn ultrasound_measurement(
     study: &Study,
     m: &Measurement,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Measured> {
-    let mut s = study.clone();
-    s.identification.test = m.test;
+    let mut probe = study.probe.clone();
     if let Region::Window(w) = &m.region {
-        s.probe.side = w.side.clone();
-        s.probe.width_mm = w.width_mm;
-        s.probe.depth_mm = w.depth_mm;
+        probe.side = w.side.clone();
+        probe.width_mm = w.width_mm;
+        probe.depth_mm = w.depth_mm;
     }
-    super::ultrasound::sim(&s, &super::ultrasound::SimOptions::default(), out, progress)?;
-    let path = out.join("measured.csv");
+    let inputs = SimInputs {
+        model: &study.model,
+        test: &study.tests[m.test].loading,
+        probe: &probe,
+        ultrasound: &study.ultrasound,
+    };
+    let simulated = super::ultrasound::sim(
+        inputs,
+        &super::ultrasound::SimOptions::default(),
+        out,
+        progress,
+    )?;
     Ok(Measured {
-        field: MeasuredField::read(&path)?,
+        field: simulated.measured.clone(),
         source: format!(
             "DIC of simulated B-mode images (femu us-sim, {})",
-            path.display()
+            out.join("measured.csv").display()
         ),
         reference_known: true,
         covariance: None,
         weighting: crate::schema::Weighting::PerPoint,
+        simulated: Some(Arc::new(simulated)),
     })
 }

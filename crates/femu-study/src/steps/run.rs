@@ -18,11 +18,13 @@
 //! DIR/steps.json, DIR/summary.json, DIR/report.html
 //! ```
 
+use super::frames::RecordedFrames;
 use super::identify;
-use super::measure;
+use super::measure::{self, Prepared, PreparedData};
 use super::record::{begin, finish, skip, RunRecord};
 use super::sensitivity::{self, SensitivityOptions};
 use super::solve::{write_solved, SolveContext};
+use super::ultrasound::SimulatedImages;
 use crate::bail;
 use crate::error::Result;
 use crate::model::{build, StudyModel};
@@ -31,6 +33,7 @@ use crate::progress::Progress;
 use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Elements of the demo's built-in thigh: the whole demo runs in about 7 s on two cores.
@@ -221,6 +224,7 @@ fn last_step_seconds(t0: Instant, steps: &[super::record::StepRecord]) -> f64 {
     (t0.elapsed().as_secs_f64() - before).max(0.0)
 }
 
+/// The steps of a run, each recorded in `record` (and `out/steps.json`) as it begins and ends.
 fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
     // 1. The model.
     let t = begin(record, out, "model", Some("model"))?;
@@ -262,42 +266,10 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         )?;
         return Ok(());
     }
-    for m in &study.measurements {
-        let test = &study.tests[m.test].loading;
-        if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
-            let reason = format!("its test {} could not be solved: {why}", test.name());
-            skip(record, out, "measurement", &reason)?;
-            skip(record, out, "identification", &reason)?;
-            bail!(
-                "the identification needs the test {}, which could not be solved: {why}",
-                test.name()
-            );
-        }
-    }
+    refuse_unsolved_tests(study, &failed, out, record)?;
     progress.check()?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
-    let dir = out.join("measurement");
-    create_dir(&dir)?;
-    // Recorded frames are measured and identified by integrated DIC (`super::frames`); any
-    // other measurement is prepared once for the identifications.
-    let (frames, images) = match study.measurements.as_slice() {
-        [m] => match &m.source {
-            MeasurementSource::Frames(spec) => (Some((m, spec)), false),
-            source => (None, *source == MeasurementSource::Ultrasound),
-        },
-        _ => (None, false),
-    };
-    let prepared = match frames {
-        Some((m, spec)) => {
-            super::frames::measure(study, &built, m, spec, &dir, progress)?;
-            None
-        }
-        None => {
-            let prepared = measure::prepare(study, &built, &dir, progress)?;
-            super::joint::write_measured(study, &built, &prepared, &dir, progress)?;
-            Some(prepared)
-        }
-    };
+    let measured = measure_step(study, &built, &out.join("measurement"), progress)?;
     finish(record, out, t)?;
 
     for (grouped, name) in groupings(study) {
@@ -310,21 +282,85 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
             Some(&folder),
         )?;
         let into = out.join(&folder);
-        match &prepared {
-            None => {
-                super::frames::identify_frames(study, grouped, &built, &dir, &into, progress)?;
+        match &measured {
+            Measurements::Frames(recorded) => {
+                super::frames::identify_frames(study, grouped, &built, recorded, &into, progress)?;
             }
-            // Images: integrated DIC, beside DIC -> FEMU plain and weighted.
-            Some(_) if images => {
-                super::images::identify_image_measurement(study, grouped, &dir, &into, progress)?;
+            Measurements::Images(simulated) => {
+                super::images::identify_image_measurement(
+                    study, grouped, simulated, &into, progress,
+                )?;
             }
-            Some(prepared) => {
+            Measurements::Fields(prepared) => {
                 identify::identify_on(study, grouped, &built, prepared, &into, progress)?;
             }
         }
         finish(record, out, t)?;
     }
     Ok(())
+}
+
+/// The measurement and identification steps skipped, and an error, when a measured test could
+/// not be solved.
+fn refuse_unsolved_tests(
+    study: &Study,
+    failed: &[(String, String)],
+    out: &Path,
+    record: &mut RunRecord,
+) -> Result<()> {
+    for m in &study.measurements {
+        let test = &study.tests[m.test].loading;
+        if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
+            let reason = format!("its test {} could not be solved: {why}", test.name());
+            skip(record, out, "measurement", &reason)?;
+            skip(record, out, "identification", &reason)?;
+            bail!(
+                "the identification needs the test {}, which could not be solved: {why}",
+                test.name()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// What the measurement step made, for the identifications.
+enum Measurements {
+    /// Recorded frames: identified by integrated DIC (`super::frames`).
+    Frames(Box<RecordedFrames>),
+    /// Simulated images: integrated DIC, beside DIC -> FEMU plain and weighted.
+    Images(Arc<SimulatedImages>),
+    /// Fields to fit (virtual, files, simulated images in a list of measurements).
+    Fields(Vec<Prepared>),
+}
+
+/// The measurement step into `dir`: recorded frames read, placed and correlated; any other
+/// measurement prepared once for the identifications, its fields written.
+fn measure_step(
+    study: &Study,
+    built: &StudyModel,
+    dir: &Path,
+    progress: &dyn Progress,
+) -> Result<Measurements> {
+    create_dir(dir)?;
+    if let [m] = study.measurements.as_slice() {
+        if let MeasurementSource::Frames(spec) = &m.source {
+            let recorded = super::frames::measure(study, built, m, spec, dir, progress)?;
+            return Ok(Measurements::Frames(Box::new(recorded)));
+        }
+    }
+    let prepared = measure::prepare(study, built, dir, progress)?;
+    super::joint::write_measured(study, built, &prepared, dir, progress)?;
+    let simulated = match prepared.as_slice() {
+        [p] => match &p.data {
+            PreparedData::Measured(m) => m.simulated.clone(),
+            PreparedData::Virtual { .. } => None,
+        },
+        _ => None,
+    };
+    Ok(match simulated {
+        Some(simulated) => Measurements::Images(simulated),
+        None => Measurements::Fields(prepared),
+    })
 }
 
 /// The groupings the identification runs (`[identification] grouped`), with their folders.
@@ -365,6 +401,7 @@ fn forward_and_sensitivity(
             },
             &crate::progress::Quiet,
         )
+        .map(|_| ())
     };
     if study.steps.sensitivity {
         let t = begin(record, out, "forward and sensitivity", Some("sensitivity"))?;

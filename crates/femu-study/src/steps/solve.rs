@@ -136,7 +136,11 @@ pub struct SolveOutput<'a> {
 
 /// Solves `model` and writes its output folder (see [`write_solved`]). A solve that stops
 /// midway still writes the last converged state, then returns the error.
-pub fn solve_model(model: &Model, o: &SolveOutput, progress: &dyn Progress) -> Result<()> {
+pub fn solve_model(
+    model: &Model,
+    o: &SolveOutput,
+    progress: &dyn Progress,
+) -> Result<SolveSummary> {
     let t0 = Instant::now();
     create_dir(o.out)?;
     // Nothing reads the tangent at the solution here (no sensitivities): not assembled.
@@ -215,15 +219,15 @@ pub struct SolveContext<'a> {
 }
 
 /// Writes the output folder of a solved model (`displacements.csv`, `result.vtu`, contact
-/// results, figures, `summary.json`); returns `error` (a solve that stopped midway, whose last
-/// converged state `solution` is) with the folder named.
+/// results, figures, `summary.json`); returns its summary, or `error` (a solve that stopped
+/// midway, whose last converged state `solution` is) with the folder named.
 pub fn write_solved(
     model: &Model,
     solution: &Solution,
     error: Option<SolveError>,
     cx: &SolveContext,
     progress: &dyn Progress,
-) -> Result<()> {
+) -> Result<SolveSummary> {
     let t0 = Instant::now();
     let out = cx.out;
     create_dir(out)?;
@@ -271,7 +275,7 @@ pub fn write_solved(
         ));
     }
     match error {
-        None => Ok(()),
+        None => Ok(summary),
         Some(e) => Err(crate::Error::from(e).context(format!(
             "the solve stopped at load factor {:.4}; the last converged state is in {}",
             r.lambda,
@@ -431,7 +435,8 @@ pub fn solve_file(
             figures,
         },
         progress,
-    )
+    )?;
+    Ok(())
 }
 
 /// `femu forward`: loading tests on the built-in parametric thigh with the Table 1
