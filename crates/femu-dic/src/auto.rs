@@ -488,7 +488,12 @@ fn ladder(
                     DicError::Roi(_) | DicError::SizeMismatch { .. } | DicError::Interrupted(_)
                 )
             };
-            let res = match correlate(f, g, roi, &opts) {
+            let correlated = if forced {
+                correlate(f, g, roi, &opts)
+            } else {
+                crate::solver::correlate_rung(f, g, roi, &opts)
+            };
+            let res = match correlated {
                 Ok(res) => res,
                 Err(e) if is_fatal(&e) => return Err(fatal(e)),
                 Err(e) => {

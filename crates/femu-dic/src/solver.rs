@@ -865,6 +865,31 @@ pub fn correlate_from(
     opts: &DicOptions,
     initial: Option<InitialGuess>,
 ) -> Result<DicResult, DicError> {
+    correlate_with(reference, deformed, roi, opts, initial, true)
+}
+
+/// [`correlate`] for a rung of the automatic choice ([`crate::auto`]), which rejects a field
+/// that did not converge whatever its quality: such a result skips what only the quality of a
+/// kept field reads, its `element_texture`, `residual_image` and `system.elem_m_noise` being
+/// empty and its `system.residual_correlation` the trivial one (no lag).
+pub(crate) fn correlate_rung(
+    reference: &GreyImage,
+    deformed: &GreyImage,
+    roi: &Roi,
+    opts: &DicOptions,
+) -> Result<DicResult, DicError> {
+    correlate_with(reference, deformed, roi, opts, None, false)
+}
+
+/// [`correlate_from`]; `unconverged_diagnostics` false: see [`correlate_rung`].
+fn correlate_with(
+    reference: &GreyImage,
+    deformed: &GreyImage,
+    roi: &Roi,
+    opts: &DicOptions,
+    initial: Option<InitialGuess>,
+    unconverged_diagnostics: bool,
+) -> Result<DicResult, DicError> {
     let t0 = Instant::now();
     opts.validate()?;
     if (reference.width, reference.height) != (deformed.width, deformed.height) {
@@ -1037,7 +1062,10 @@ pub fn correlate_from(
         .iter()
         .map(|&r| r > opts.flag_factor * median)
         .collect();
+    // What only the quality of a kept field reads.
+    let diagnostics = converged || unconverged_diagnostics;
     let element_texture: Vec<ElementTexture> = (0..ne)
+        .filter(|_| diagnostics)
         .map(|e| {
             let r = e * npx..(e + 1) * npx;
             let (s, o) = level.corr[e];
@@ -1049,8 +1077,8 @@ pub fn correlate_from(
             )
         })
         .collect();
-    let mut residual_image = vec![f32::NAN; width * height];
-    for e in 0..ne {
+    let mut residual_image = vec![f32::NAN; if diagnostics { width * height } else { 0 }];
+    for e in (0..ne).filter(|_| diagnostics) {
         let (px, py) = level.mesh.element_origin(e);
         let (s, o) = level.corr[e];
         for k in 0..npx {
@@ -1059,8 +1087,18 @@ pub fn correlate_from(
         }
     }
     let element_variance: Vec<f64> = element_residual.iter().map(|r| r * r).collect();
-    let rho = ResidualCorrelation::of(&residual_image, width, height);
-    let elem_m_noise = noise_matrices(&level, &element_variance, &rho);
+    let (rho, elem_m_noise) = if diagnostics {
+        let rho = ResidualCorrelation::of(&residual_image, width, height);
+        let noise = noise_matrices(&level, &element_variance, &rho);
+        (rho, noise)
+    } else {
+        let rho = ResidualCorrelation {
+            lx: 0,
+            ly: 0,
+            rho: vec![1.0],
+        };
+        (rho, Vec::new())
+    };
     let (fmin, fmax) = level
         .f
         .iter()
@@ -1299,6 +1337,45 @@ mod tests {
             }
         }
         assert!(worst < 0.02, "largest relative difference {worst}");
+    }
+
+    /// A ladder rung's correlation is the correlation: the same field, iterations and residual;
+    /// only a rung that did not converge skips the diagnostics of the quality (empty).
+    #[test]
+    fn rung_correlation_is_the_correlation_without_unused_diagnostics() {
+        let s = Speckle::new(96, 96, 1.5, 3);
+        let f = s.reference();
+        let g = s.deformed(&lab::translation(0.4, -0.3));
+        let roi = Roi::Rect(Rect {
+            x: 16,
+            y: 16,
+            w: 64,
+            h: 64,
+        });
+        for max_iterations in [2, 100] {
+            let o = DicOptions {
+                element_size: 16,
+                max_iterations,
+                tolerance: 1e-4,
+                ..Default::default()
+            };
+            let full = correlate(&f, &g, &roi, &o).unwrap();
+            let rung = correlate_rung(&f, &g, &roi, &o).unwrap();
+            assert_eq!(full.displacement, rung.displacement);
+            assert_eq!(full.iterations, rung.iterations);
+            assert_eq!(full.converged, rung.converged);
+            assert_eq!(full.residual_rms, rung.residual_rms);
+            assert_eq!(full.element_residual, rung.element_residual);
+            assert_eq!(full.converged, max_iterations == 100, "{}", full.iterations);
+            if full.converged {
+                assert_eq!(full.residual_image.len(), rung.residual_image.len());
+                assert_eq!(full.system.elem_m_noise, rung.system.elem_m_noise);
+            } else {
+                assert!(rung.residual_image.is_empty() && rung.element_texture.is_empty());
+                assert!(rung.system.elem_m_noise.is_empty());
+                assert!(!full.system.elem_m_noise.is_empty());
+            }
+        }
     }
 
     #[test]
