@@ -42,7 +42,7 @@ TIMING_KEY = re.compile(
     r"|sensitivity_over_solve|peak_memory_mb|peak_rss_mb|.*_memory_mb)$"
 )
 # Every numeric field of a "timings" object is a wall-clock measurement.
-TIMING_OBJECTS = {"timings", "timing"}
+TIMING_OBJECTS = {"timings", "timing", "timings_s"}
 
 TEXT_EXTENSIONS = {
     ".json", ".csv", ".mtx", ".inp", ".vtu", ".vtk", ".txt", ".md", ".toml", ".svg", ".dat",
