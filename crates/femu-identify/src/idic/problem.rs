@@ -63,8 +63,8 @@ pub enum Pairing {
     /// Both: `(i − 1, i)` for every frame and `(0, i)` for the frames after the first loaded one.
     Both,
     /// Every frame against every earlier one: pairs `(a, b)`, `a < b` — more comparisons of
-    /// each frame's renewed scatterers against different frames (README, images →
-    /// parameters).
+    /// each frame's renewed scatterers against different frames (the guide's integrated-DIC
+    /// page, docs/guide/src/explanation/idic.md).
     All,
 }
 
@@ -103,7 +103,7 @@ pub struct IdicOptions {
     /// local patterns, not their local brightness. `None`: as recorded. The echo of an
     /// interface (skin, fascia) whose scatterers are renewed between load steps changes its
     /// brightness along the line, which a warp would otherwise follow by moving the line
-    /// (README, images → parameters).
+    /// (the guide's integrated-DIC page, docs/guide/src/explanation/idic.md).
     #[serde(default)]
     pub local_normalization_px: Option<f64>,
 }
