@@ -9,7 +9,8 @@
 //! The walk mirrors how dicom-rs 0.10.1 reads a file (where it ends the meta group, how it sizes
 //! a header, how far it advances after a binary value): a different reading would let a
 //! length past the check. When dicom-rs is upgraded, run the `dicom` fuzz target again
-//! (`cargo +nightly fuzz run dicom`, the guide's "Reliability" page, docs/guide/src/explanation/reliability.md) before trusting the walk.
+//! (`cargo +nightly fuzz run dicom`, the guide's "Reliability" page,
+//! docs/guide/src/explanation/reliability.md) before trusting the walk.
 
 use dicom_core::dictionary::{DataDictionary, DataDictionaryEntry, VirtualVr};
 use dicom_core::{Tag, VR};
