@@ -21,6 +21,7 @@ use femu_geometry::{
     table1_materials, write_inp_with_surfaces, write_regions_png, write_regions_vtu, LabelSpec,
     MeshOptions, QualityReport, ThighModel, ThighParams, CONTENTION_MPA,
 };
+use femu_mesh::FieldWriter;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -365,16 +366,17 @@ fn write_deck_model(built: &StudyModel, dir: &Path) -> Result<()> {
         .iter()
         .map(|&m| m as f64)
         .collect();
-    femu_mesh::vtu::write_vtu(
+    let cell_fields = [femu_mesh::VtuField {
+        name: "material",
+        components: 1,
+        data: &region,
+    }];
+    femu_mesh::VtuWriter.write(
         &dir.join("mesh.vtu"),
-        mesh,
-        None,
-        &[],
-        &[femu_mesh::vtu::VtuField {
-            name: "material",
-            components: 1,
-            data: &region,
-        }],
+        &femu_mesh::FieldSet {
+            cell_fields: &cell_fields,
+            ..femu_mesh::FieldSet::mesh(mesh)
+        },
     )?;
     write_json(
         &dir.join("summary.json"),

@@ -13,6 +13,7 @@ use femu_mech::loading::apply_loading;
 use femu_mech::sensitivity::{all_parameters, sensitivity_map, DirectSensitivity, Parameter};
 use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
+use femu_mesh::FieldWriter;
 use femu_plot::{bar_chart_png, node_field_png, tile_png, BarChart, FieldPlot};
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -648,7 +649,13 @@ fn write_test_outputs(dir: &Path, r: &TestResult, names: &[String]) -> Result<()
         });
     }
     let path = dir.join("sensitivity.vtu");
-    femu_mesh::vtu::write_vtu(&path, &r.model.mesh, Some(&disp), &fields, &[])
+    let set = femu_mesh::FieldSet {
+        displacement: Some(&disp),
+        point_fields: &fields,
+        ..femu_mesh::FieldSet::mesh(&r.model.mesh)
+    };
+    femu_mesh::VtuWriter
+        .write(&path, &set)
         .with_context(|| format!("cannot write {}", path.display()))?;
     Ok(())
 }
