@@ -39,7 +39,8 @@ from html.parser import HTMLParser
 # time, peak memory): they differ between any two runs of the same binary and are not compared.
 TIMING_KEY = re.compile(
     r"^(seconds|total_seconds|started_unix_s|finished_unix_s|wall_time_s|.*_time_s|solve_s"
-    r"|sensitivity_over_solve|peak_memory_mb|peak_rss_mb|.*_memory_mb)$"
+    r"|sensitivity_over_solve|peak_memory_mb|peak_rss_mb|.*_memory_mb"
+    r"|idic_s|dic_femu_s|identification_s|image_s|discretization_s|time_s|correlation_s)$"
 )
 # Every numeric field of a "timings" object is a wall-clock measurement.
 TIMING_OBJECTS = {"timings", "timing", "timings_s"}
@@ -52,7 +53,7 @@ TEXT_EXTENSIONS = {
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?|[-+]?(?:inf|nan|NaN|Inf)")
 
 # Headers of report table columns that hold wall-clock times.
-TIMING_HEADER = re.compile(r"time \(s\)|solve \(s\)|sensitivities / solve|\(ms\)|seconds", re.I)
+TIMING_HEADER = re.compile(r"time \(s\)|^time_s$|solve \(s\)|sensitivities / solve|\(ms\)|seconds", re.I)
 
 
 class Differences:
