@@ -25,7 +25,8 @@ use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
 use crate::schema::{Measurement, Study};
-use crate::steps::images::{identify_images, ImageRouteOptions, ImageSequence};
+use crate::steps::images::{identify_images, ImageRouteOptions};
+use crate::steps::sequence::ImageSequence;
 use femu_dic::GreyImage;
 use femu_identify::idic::ImageFrame;
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
@@ -114,7 +115,7 @@ pub fn placement(
             let probe = super::ultrasound::place_probe(&built.model.mesh, &built.skin, &section)
                 .context("placing the frames by [probe]")?;
             Ok((
-                super::images::image_frame(&probe),
+                super::sequence::image_frame(&probe),
                 format!(
                     "[probe] side {} on the model's skin, {:.3} x {:.3} mm at {} mm/px",
                     section.side, section.width_mm, section.depth_mm, s

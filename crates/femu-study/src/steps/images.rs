@@ -29,37 +29,15 @@ use femu_identify::campaign::StartRecord;
 use femu_identify::fit::FreeParameter;
 use femu_identify::idic::pixels::MaskCounts;
 use femu_identify::idic::{
-    self, IdicEvent, IdicOptions, IdicProblem, IdicSettings, ImageFrame, Pairing, PixelOptions,
+    self, IdicEvent, IdicOptions, IdicProblem, IdicSettings, Pairing, PixelOptions,
 };
 use femu_mech::Model;
-use femu_ultrasound::Probe;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 
-/// An image sequence and where it lies in the model.
-#[derive(Debug, Clone)]
-pub struct ImageSequence {
-    /// The unloaded frame first, then one frame per load step.
-    pub frames: Vec<GreyImage>,
-    /// Fraction of the test's load of each loaded frame.
-    pub load_fractions: Vec<f64>,
-    pub frame: ImageFrame,
-    /// Where the frames come from (files, or the simulator).
-    pub source: String,
-}
-
-/// The image frame of a linear probe: pixel `(i, j)` at `c + ((i + ½)/p − W/2) t + ((j + ½)/p) n`
-/// (`femu_ultrasound::probe`), an affine map with axes `t` (along the array) and `n` (the beam).
-pub fn image_frame(probe: &Probe) -> ImageFrame {
-    ImageFrame {
-        origin_mm: probe.pixel_to_model([0.0, 0.0]),
-        mm_per_px: 1.0 / probe.px_per_mm,
-        x_axis: probe.lateral(),
-        y_axis: probe.direction,
-    }
-}
+pub use super::sequence::{image_frame, ImageSequence};
 
 /// The sequence of a `femu us-sim` folder `dir` (its `summary.json` and frames), for a script
 /// that identifies from a folder written earlier (a run passes the sequence on in memory:

@@ -22,5 +22,6 @@ pub mod parameters;
 pub mod record;
 pub mod run;
 pub mod sensitivity;
+pub mod sequence;
 pub mod solve;
 pub mod ultrasound;

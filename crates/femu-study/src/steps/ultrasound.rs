@@ -10,7 +10,7 @@ use crate::schema::{
     Geometry, ModelSpec, ProbeSection, Resolution, Study, UltrasoundSection, DEFAULT_ELEMENTS,
     DEFAULT_LABEL_SIZE_MM,
 };
-use crate::steps::images::ImageSequence;
+use crate::steps::sequence::ImageSequence;
 use femu_dic::{Brightness, DicOptions, GreyImage};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_identify::weighted::FieldCovariance;
@@ -227,7 +227,7 @@ impl SimSummary {
         ImageSequence {
             frames,
             load_fractions: self.load_fractions.clone(),
-            frame: super::images::image_frame(&self.probe),
+            frame: super::sequence::image_frame(&self.probe),
             source: format!(
                 "{} B-mode frames simulated at {} MHz from {} elements (render_refine {}, decorrelation {})",
                 self.frames.len(),
