@@ -82,6 +82,10 @@ def main():
     if not args.list and not femu.exists():
         print(f"no femu binary at {femu}", file=sys.stderr)
         return 1
+    # The examples run in a scratch folder: a Python given by a relative path is made absolute
+    # (without resolving symbolic links, which would leave a virtual environment).
+    if args.python and os.sep in args.python:
+        args.python = os.path.abspath(args.python)
     python_ok = bool(args.python) and (
         subprocess.run([args.python, "-c", "import femu"], capture_output=True).returncode == 0
     )
