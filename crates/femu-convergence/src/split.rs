@@ -166,16 +166,12 @@ pub fn split_deck_with(deck: &Deck, curves: Curves) -> Result<Deck, SplitError> 
         // face `f` (corner f → f+1) is face `f` of children `f` and `f + 1`.
         match el.kind {
             ElementKind::Cpe3 => {
-                for (child, conn) in [
+                for conn in [
                     [c[0], m[0], m[2]],
                     [m[0], c[1], m[1]],
                     [m[2], m[1], c[2]],
                     [m[0], m[1], m[2]],
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    debug_assert!(child < 4);
+                ] {
                     elements.push(Element {
                         kind: el.kind,
                         conn: [conn[0], conn[1], conn[2], 0],
@@ -280,12 +276,14 @@ pub fn split_deck_with(deck: &Deck, curves: Curves) -> Result<Deck, SplitError> 
         element_sets,
         node_sets,
     };
-    if let Err(MeshError::Inverted { label, .. }) = refined.check_orientation() {
-        return Err(SplitError::Inverted {
-            label: mesh.element_labels[parent[(label - 1) as usize]],
-        });
+    match refined.check_orientation() {
+        Err(MeshError::Inverted { label, .. }) => {
+            return Err(SplitError::Inverted {
+                label: mesh.element_labels[parent[(label - 1) as usize]],
+            })
+        }
+        other => other?,
     }
-    refined.check_orientation()?;
     Ok(Deck {
         mesh: refined,
         materials: deck.materials.clone(),

@@ -462,22 +462,7 @@ fn placement(
     if !(origin_mm[0].is_finite() && origin_mm[1].is_finite()) {
         return Err(err("origin_mm", "must be finite".into()));
     }
-    let unit = |v: [f64; 2], key: &str| -> Result<[f64; 2], StudyError> {
-        if !((v[0].hypot(v[1]) - 1.0).abs() < 1e-6) {
-            return Err(err(key, format!("must be a unit vector, got {v:?}")));
-        }
-        Ok(v)
-    };
-    let axis =
-        |v: Option<[f64; 2]>, key: &str| unit(super::keys::or_default(v, "measurement", key), key);
-    let x_axis = axis(m.x_axis, "x_axis")?;
-    let y_axis = axis(m.y_axis, "y_axis")?;
-    if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
-        return Err(err(
-            "y_axis",
-            format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
-        ));
-    }
+    let (x_axis, y_axis) = super::measurement::image_axes(m, &err)?;
     Ok(Some(Placement {
         origin_mm,
         x_axis,
