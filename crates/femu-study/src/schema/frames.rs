@@ -462,7 +462,7 @@ fn placement(
     if !(origin_mm[0].is_finite() && origin_mm[1].is_finite()) {
         return Err(err("origin_mm", "must be finite".into()));
     }
-    let (x_axis, y_axis) = super::measurement::image_axes(m, &err)?;
+    let (x_axis, y_axis) = image_axes(m, &err)?;
     Ok(Some(Placement {
         origin_mm,
         x_axis,
@@ -986,6 +986,30 @@ fn read_force_log(
         offset_s,
         at_frames,
     })
+}
+
+/// The image axes of a `[measurement]` in the model (`x_axis`, `y_axis`, their declared
+/// defaults when absent): unit vectors, perpendicular; `err` names the key at fault.
+pub(crate) fn image_axes(
+    m: &MeasurementEntry,
+    err: &dyn Fn(&str, String) -> StudyError,
+) -> Result<([f64; 2], [f64; 2]), StudyError> {
+    let axis = |v: Option<[f64; 2]>, key: &str| -> Result<[f64; 2], StudyError> {
+        let v = super::keys::or_default(v, "measurement", key);
+        if !((v[0].hypot(v[1]) - 1.0).abs() < 1e-6) {
+            return Err(err(key, format!("must be a unit vector, got {v:?}")));
+        }
+        Ok(v)
+    };
+    let x_axis = axis(m.x_axis, "x_axis")?;
+    let y_axis = axis(m.y_axis, "y_axis")?;
+    if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
+        return Err(err(
+            "y_axis",
+            format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
+        ));
+    }
+    Ok((x_axis, y_axis))
 }
 
 #[cfg(test)]

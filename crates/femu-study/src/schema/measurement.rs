@@ -417,7 +417,7 @@ fn file_frame(m: &MeasurementEntry, index: usize, lines: &KeyLines) -> Result<Fr
             ));
         }
     };
-    let (x_axis, y_axis) = image_axes(m, &|key, message| err(key, &message))?;
+    let (x_axis, y_axis) = super::frames::image_axes(m, &|key, message| err(key, &message))?;
     let origin = m.origin_mm.unwrap_or([0.0, 0.0]);
     if !(origin[0].is_finite() && origin[1].is_finite()) {
         return Err(err("origin_mm", "must be finite"));
@@ -470,28 +470,4 @@ fn weighting(
         ));
     }
     Ok(weighting)
-}
-
-/// The image axes of a `[measurement]` in the model (`x_axis`, `y_axis`, their declared
-/// defaults when absent): unit vectors, perpendicular; `err` names the key at fault.
-pub(crate) fn image_axes(
-    m: &MeasurementEntry,
-    err: &dyn Fn(&str, String) -> StudyError,
-) -> Result<([f64; 2], [f64; 2]), StudyError> {
-    let axis = |v: Option<[f64; 2]>, key: &str| -> Result<[f64; 2], StudyError> {
-        let v = super::keys::or_default(v, "measurement", key);
-        if !((v[0].hypot(v[1]) - 1.0).abs() < 1e-6) {
-            return Err(err(key, format!("must be a unit vector, got {v:?}")));
-        }
-        Ok(v)
-    };
-    let x_axis = axis(m.x_axis, "x_axis")?;
-    let y_axis = axis(m.y_axis, "y_axis")?;
-    if (x_axis[0] * y_axis[0] + x_axis[1] * y_axis[1]).abs() > 1e-6 {
-        return Err(err(
-            "y_axis",
-            format!("x_axis {x_axis:?} and y_axis {y_axis:?} must be perpendicular"),
-        ));
-    }
-    Ok((x_axis, y_axis))
 }
