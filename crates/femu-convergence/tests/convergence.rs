@@ -9,6 +9,9 @@ use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::generate;
 use femu_mesh::ElementKind;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// Largest error of the outer-surface displacement of the two-layer annulus (femur radius
 /// 14 mm, quadriceps-like layer to 40 mm, fat-like layer to 60 mm, Table 1 materials, 20 mmHg
 /// follower pressure outside, inner edge fixed) against the radial ODE reference
@@ -81,6 +84,15 @@ fn annulus_displacement_error_converges_at_rate_two() {
             fit.rate,
             fit.r_squared
         );
+        measure::record(
+            &format!(
+                "{} annulus, 20 mmHg: fitted rate of the largest outer-node error",
+                format!("{kind:?}").to_uppercase()
+            ),
+            fit.rate,
+            "2 ± 0.2, r² > 0.99",
+            "",
+        );
         assert!(
             (fit.rate - 2.0).abs() < 0.2,
             "{kind:?}: fitted rate {:.3}",
@@ -129,6 +141,19 @@ fn thigh_study_recommends_a_mesh_and_shows_locking() {
     let (_, cpe4_t1, cpe4_small) = ratio("CPE4");
     let (_, cpe4h_t1, cpe4h_small) = ratio("CPE4H");
     let (cpe4_small, cpe4h_small) = (cpe4_small.unwrap(), cpe4h_small.unwrap());
+    for (name, value, bound) in [
+        ("CPE4, D / 1000", cpe4_small, "< 0.8"),
+        ("CPE4H, D / 1000", cpe4h_small, "1 ± 0.03"),
+        ("CPE4, Table 1 D", cpe4_t1.unwrap(), "> 0.85"),
+        ("CPE4H, Table 1 D", cpe4h_t1.unwrap(), "1 ± 0.03"),
+    ] {
+        measure::record(
+            &format!("locking, {name}: RMS displacement / the reference's"),
+            value,
+            bound,
+            "",
+        );
+    }
     assert!(cpe4_small < 0.8, "CPE4 with D/1000: {cpe4_small:.3}");
     assert!(
         (cpe4h_small - 1.0).abs() < 0.03,

@@ -7,6 +7,9 @@
 use femu_dic::lab::{self, DisplacementField, Speckle};
 use femu_dic::{correlate, DicOptions, DicResult, GreyImage, Rect, Roi};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 const ROI: Rect = Rect {
     x: 32,
     y: 32,
@@ -47,6 +50,18 @@ fn check(name: &str, u: &dyn DisplacementField, bias_max: f64, std_max: f64) {
     eprintln!(
         "{name}: bias ({:+.5}, {:+.5}) px, std ({:.5}, {:.5}) px, {} iterations, residual {:.4}",
         b[0], b[1], sd[0], sd[1], res.iterations, res.residual_rms
+    );
+    measure::record(
+        &format!("{name}: largest |bias| of x and y"),
+        b[0].abs().max(b[1].abs()),
+        &format!("< {bias_max}"),
+        "px",
+    );
+    measure::record(
+        &format!("{name}: largest std of x and y"),
+        sd[0].max(sd[1]),
+        &format!("< {std_max}"),
+        "px",
     );
     assert!(
         b[0].abs() < bias_max && b[1].abs() < bias_max,
@@ -117,6 +132,16 @@ fn error_growth_with_noise_and_element_size() {
             eprintln!(
                 "{sigma:4.1} | {h:2} | {:+.5} {:+.5} | {:.5} {:.5}",
                 b[0], b[1], sd[0], sd[1]
+            );
+            measure::record(
+                &format!("noise σ = {sigma} grey levels, {h} px elements: mean std of x and y"),
+                0.5 * (sd[0] + sd[1]),
+                if (sigma, h) == (2.0, 16) {
+                    "< 0.02; grows with noise and as elements shrink"
+                } else {
+                    "grows with noise and as elements shrink"
+                },
+                "px",
             );
             table.push((sigma, h, 0.5 * (sd[0] + sd[1])));
         }

@@ -20,6 +20,9 @@ use femu_mesh::ElementKind;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("femu-geometry-{}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -127,9 +130,23 @@ fn mri_label_map_meshes_with_pixel_areas_and_solves() {
     for (r, a) in expected {
         let err = areas[r] / a - 1.0;
         report += &format!("{r} {:.2}% ", 100.0 * err);
+        measure::record(
+            &format!(
+                "MRI slice, h = 1 mm: {r} meshed area against its pixel area, |relative error|"
+            ),
+            err.abs(),
+            "< 0.02",
+            "",
+        );
         assert!(err.abs() < 0.02, "{r}: meshed {} vs pixels {a}", areas[r]);
     }
     let hole_err = model.hole_area() / pixel_area(&[7]) - 1.0;
+    measure::record(
+        "MRI slice, h = 1 mm: femur hole against its pixel area, |relative error|",
+        hole_err.abs(),
+        "< 0.03",
+        "",
+    );
     assert!(hole_err.abs() < 0.03, "femur hole {}", model.hole_area());
     eprintln!(
         "MRI slice, h = 1 mm: {} quads in {mesh_s:.3} s; area errors {report}; femur hole {:.2}%; scaled Jacobian {:.3}..{:.3}, angles {:.1}..{:.1}; warnings {:?}",
@@ -254,6 +271,14 @@ fn synthetic_disk_and_annulus_converge_with_element_size() {
             assert!(e < tol, "h = {h}: {what} error {e:.2e} above {tol:.1e}");
             worst = worst.max(e);
         }
+        measure::record(
+            &format!(
+                "disk and annulus images, h = {h} mm: worst area or perimeter |relative error|"
+            ),
+            worst,
+            &format!("< {tol}"),
+            "",
+        );
         worst_by_h.push(worst);
     }
     // The worst error shrinks with the element size.
@@ -667,6 +692,18 @@ fn default_parametric_thigh_has_the_seed_scale() {
         q.total.max_angle_deg,
         q.total.max_aspect_ratio
     );
+    measure::record(
+        "default parametric thigh: quads",
+        n as f64,
+        "25 000 ± 5 %",
+        "",
+    );
+    measure::record(
+        "default parametric thigh: smallest scaled Jacobian",
+        q.total.min_scaled_jacobian,
+        "> 0.4",
+        "",
+    );
     assert!((n as f64 / 25_000.0 - 1.0).abs() < 0.05, "{n}");
     let areas = model.region_areas();
     for (r, s) in &model.source_areas_mm2 {
@@ -760,6 +797,12 @@ fn exports_read_back_and_calculix_agrees() {
         diff = diff.max((u[0] - sol.u[2 * i]).hypot(u[1] - sol.u[2 * i + 1]));
     }
     eprintln!("CalculiX vs femu on the coarse thigh (CPE4): max |du| = {diff:.2e} mm, max |u| = {umax:.3} mm");
+    measure::record(
+        "coarse parametric thigh, CPE4 contention: largest nodal difference from CalculiX / largest displacement",
+        diff / umax,
+        "< 1e-3 (+ 1e-5 mm)",
+        "",
+    );
     assert!(diff < 1e-3 * umax.max(1e-3) + 1e-5, "{diff}");
     std::fs::remove_dir_all(dir).ok();
 }

@@ -15,6 +15,9 @@ use femu_mesh::ElementKind;
 mod common;
 use rayon::prelude::*;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 fn compression_thigh(elements: usize) -> Model {
     compression_thigh_with(elements, table1_materials())
 }
@@ -123,6 +126,18 @@ fn noise_free_compression_recovers_table1_from_five_starts() {
         eprintln!(
             "start {k}: worst relative error {worst:.2e}, cost {:.3e}, {} iterations, {} forward solves, {:.1} s ({})",
             r.cost, r.iterations, r.forward_solves, r.wall_time_s, r.reason
+        );
+        measure::record(
+            &format!("start {k}: worst relative error of the ten parameters"),
+            worst,
+            "< 1e-3",
+            "",
+        );
+        measure::record(
+            &format!("start {k}: forward solves"),
+            r.forward_solves as f64,
+            "not asserted",
+            "",
         );
         for ((f, t), t0) in free.iter().zip(&r.theta).zip(&reference) {
             assert!(
@@ -329,6 +344,18 @@ fn lm_and_bfgs_reach_the_same_optimum() {
         eprintln!(
             "{method}: worst relative error {worst:.2e}, cost {:.2e}, {} iterations, {} forward solves ({})",
             r.cost, r.iterations, r.forward_solves, r.reason
+        );
+        measure::record(
+            &format!("{method}: worst relative error of the four parameters"),
+            worst,
+            "< 1e-3",
+            "",
+        );
+        measure::record(
+            &format!("{method}: forward solves"),
+            r.forward_solves as f64,
+            "LM fewer than BFGS FD",
+            "",
         );
         runs.push((method, worst, r.forward_solves));
     }

@@ -21,6 +21,9 @@ use femu_mesh::ElementKind;
 mod common;
 use common::free_parameters;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// The built-in thigh (about `elements` CPE4H quads) unloaded, and its skin.
 fn thigh(elements: usize) -> (Model, Vec<(usize, usize)>) {
     let t = parametric_thigh(
@@ -140,6 +143,12 @@ fn stacked_jacobian_matches_finite_differences() {
             .sum::<f64>()
             .sqrt();
         eprintln!("{}: |J - FD| / |J| = {:.2e}", free[k].name, diff / norm);
+        measure::record(
+            &format!("stacked Jacobian, column {}: |J - FD| / |J|", free[k].name),
+            diff / norm,
+            "≤ 2e-3",
+            "",
+        );
         assert!(
             diff <= 2e-3 * norm,
             "{}: {diff:.3e} of {norm:.3e}",
@@ -286,6 +295,19 @@ fn noise_free_joint_fit_recovers_every_parameter() {
             "start {}: {} forward solves, cost {:.2e}",
             s.start, r.forward_solves, r.cost
         );
+        measure::record(
+            &format!(
+                "noise-free joint fit, start {}: worst relative error",
+                s.start
+            ),
+            free.iter()
+                .zip(&r.theta)
+                .zip(&reference)
+                .map(|((_, t), t0)| ((t - t0) / t0).abs())
+                .fold(0.0f64, f64::max),
+            "< 1e-3",
+            "",
+        );
     }
     let names: Vec<String> = free.iter().map(|f| f.name.clone()).collect();
     let segment_names: Vec<&str> = c.layout.iter().map(|s| s.0.as_str()).collect();
@@ -391,6 +413,12 @@ fn light_monte_carlo_intervals_cover_the_truth() {
         );
     }
     eprintln!("{inside} of 80 intervals hold the truth");
+    measure::record(
+        "light Monte Carlo (8 realizations, the seed's noise): intervals holding the truth, of 80",
+        inside,
+        "≥ 70",
+        "",
+    );
     assert!(inside >= 70.0, "{inside} of 80 intervals hold the truth");
 }
 

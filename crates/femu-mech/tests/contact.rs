@@ -11,6 +11,9 @@ use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 mod common;
 
 /// Tight Newton tolerances: the assertions are about the discretisation and the contact
@@ -135,6 +138,12 @@ fn contact_tangent_and_force_equation_match_finite_differences() {
         }
         // Central differences across the kink of ⟨·⟩₊ are avoided by the random state (no gap is
         // within h of zero); truncation and round-off stay below 1e-6 of the largest entry.
+        measure::record(
+            &format!("{label}: contact tangent against finite differences, largest error / largest entry"),
+            max_err / kmax,
+            "< 1e-6",
+            "",
+        );
         assert!(
             max_err < 1e-6 * kmax,
             "{label}: tangent error {max_err:.3e}, largest entry {kmax:.3e}"
@@ -207,6 +216,18 @@ fn plate_force_balance_symmetry_and_penetration() {
     let sol = solve(&model, tight());
     let body = &sol.bodies[0];
     let sum: f64 = body.node_forces.iter().sum();
+    measure::record(
+        "plate: contact forces against the applied force, relative difference",
+        (sum - 0.1).abs() / 0.1,
+        "< 1e-8",
+        "",
+    );
+    measure::record(
+        "plate: support reaction against the applied force, relative difference",
+        (sol.report.reaction_total[1] - 0.1).abs() / 0.1,
+        "< 1e-8",
+        "",
+    );
     assert!(
         (sum - 0.1).abs() < 1e-8 * 0.1,
         "contact forces sum to {sum}"
@@ -256,6 +277,12 @@ fn plate_force_balance_symmetry_and_penetration() {
             .max((sol.u[2 * k] + sol.u[2 * m]).abs())
             .max((sol.u[2 * k + 1] - sol.u[2 * m + 1]).abs());
     }
+    measure::record(
+        "plate: mirror asymmetry / largest displacement",
+        asym / umax,
+        "< 1e-10",
+        "",
+    );
     assert!(asym < 1e-10 * umax, "asymmetry {asym:.3e} of {umax:.3e}");
     // Displacement control to the travel just found gives back the force.
     let mut model2 = plate_on_block(TravelControl::Displacement(body.travel));
@@ -264,6 +291,12 @@ fn plate_force_balance_symmetry_and_penetration() {
     // Same travel, same force — up to the augmented-Lagrangian multipliers, which the two runs
     // update along different load paths; both meet the 1e-3 h penetration limit, which bounds
     // the difference to about 1e-4 of the force here.
+    measure::record(
+        "plate: force under displacement control to the same travel, relative difference",
+        (sol2.bodies[0].force - 0.1).abs() / 0.1,
+        "< 1e-4",
+        "",
+    );
     assert!(
         (sol2.bodies[0].force - 0.1).abs() < 1e-4 * 0.1,
         "displacement control force {}",
@@ -325,6 +358,12 @@ fn hertz_line_contact() {
     }
     let a_fe = 2.0 * (m2 / m0).sqrt();
     println!("Hertz: F = {force:.4e} N/mm, a = {a_hertz:.4} mm, FE a = {a_fe:.4} mm ({:+.2} %), penetration {:.2e} mm (limit {:.2e}), {} active nodes", 100.0 * (a_fe / a_hertz - 1.0), body.max_penetration, body.penetration_limit, body.active_nodes);
+    measure::record(
+        "Hertz line contact (R = 10 mm, a/R = 0.1): half-width against Hertz, relative difference",
+        (a_fe / a_hertz - 1.0).abs(),
+        "< 0.05",
+        "",
+    );
     assert!(
         (a_fe / a_hertz - 1.0).abs() < 0.05,
         "half-width {a_fe} vs Hertz {a_hertz}"
@@ -350,6 +389,12 @@ fn hertz_line_contact() {
     println!(
         "Hertz: largest pressure deviation inside 0.8 a: {:.2} % of p0 = {p0:.4e} MPa",
         100.0 * worst
+    );
+    measure::record(
+        "Hertz line contact: largest pressure deviation inside 0.8 a / p0",
+        worst,
+        "< 0.10",
+        "",
     );
     assert!(worst < 0.10, "pressure deviation {worst}");
     assert!(body.max_penetration <= body.penetration_limit);
@@ -551,6 +596,12 @@ fn thigh_contact_tests_iterations_and_final_state() {
             report.newton_iterations,
             sol.bodies[0].travel
         );
+        measure::record(
+            &format!("{}, 4 000 CPE4H thigh: Newton iterations", loading.name()),
+            report.newton_iterations as f64,
+            &format!("≤ {bound}, no cut-back"),
+            "",
+        );
         assert_eq!(report.cutbacks, 0, "{}", loading.name());
         assert!(
             report.newton_iterations <= bound,
@@ -569,6 +620,15 @@ fn thigh_contact_tests_iterations_and_final_state() {
             .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
         // The bound: the same final state to 1e-8 of the largest displacement (the
         // nodal displacements and the travel).
+        measure::record(
+            &format!(
+                "{}, 4 000 CPE4H thigh: final state against the tight solve / largest displacement",
+                loading.name()
+            ),
+            diff / scale,
+            "≤ 1e-8",
+            "",
+        );
         assert!(
             diff <= 1e-8 * scale,
             "{}: final state off by {diff:.3e} of {scale:.3e} mm",

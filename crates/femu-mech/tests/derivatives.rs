@@ -10,6 +10,9 @@ use femu_mesh::generate;
 use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// Table 1 quadriceps (C10 = 1.75 kPa, D = 18 MPa^-1) and a stiffer-bulk variant.
 fn materials() -> [NeoHookean; 2] {
     [
@@ -47,6 +50,7 @@ fn material_stress_and_tangent_match_finite_differences() {
     // Central differences with h = 1e-6 on quantities of order C10: truncation ~h², round-off
     // ~1e-16/h, so 1e-7 relative is a safe bound.
     let h = 1e-6;
+    let (mut worst_p, mut worst_a) = (0.0f64, 0.0f64);
     for mat in materials() {
         for _ in 0..50 {
             let f = random_f(&mut rng);
@@ -73,6 +77,7 @@ fn material_stress_and_tangent_match_finite_differences() {
                         a_fd[a][b] = (rp.pk1[a] - rm.pk1[a]) / (2.0 * h);
                     }
                 }
+                worst_p = worst_p.max(rel_err(&r.pk1, &p_fd));
                 assert!(
                     rel_err(&r.pk1, &p_fd) < 1e-7,
                     "P vs dW/dF: {:?} {:?}",
@@ -81,10 +86,23 @@ fn material_stress_and_tangent_match_finite_differences() {
                 );
                 let a: Vec<f64> = r.tangent.iter().flatten().copied().collect();
                 let afd: Vec<f64> = a_fd.iter().flatten().copied().collect();
+                worst_a = worst_a.max(rel_err(&a, &afd));
                 assert!(rel_err(&a, &afd) < 1e-7, "A vs dP/dF (iso={iso})");
             }
         }
     }
+    measure::record(
+        "stress P against dW/dF, worst relative error",
+        worst_p,
+        "< 1e-7",
+        "",
+    );
+    measure::record(
+        "tangent A against dP/dF, worst relative error",
+        worst_a,
+        "< 1e-7",
+        "",
+    );
 }
 
 #[test]
@@ -92,6 +110,7 @@ fn element_force_and_stiffness_match_finite_differences() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(11);
     let h = 1e-7;
     for kind in [ElementKind::Cpe4, ElementKind::Cpe4h, ElementKind::Cpe3] {
+        let (mut worst_f, mut worst_k) = (0.0f64, 0.0f64);
         for mat in materials() {
             for _ in 0..20 {
                 // A distorted reference element and a moderate random displacement.
@@ -134,6 +153,8 @@ fn element_force_and_stiffness_match_finite_differences() {
                         k_fd[r * nd + c] = (fp[r] - fm[r]) / (2.0 * h);
                     }
                 }
+                worst_f = worst_f.max(rel_err(&f0[..nd], &f_fd));
+                worst_k = worst_k.max(rel_err(&k0[..nd * nd], &k_fd));
                 assert!(rel_err(&f0[..nd], &f_fd) < 1e-6, "{kind:?}: force vs dΠ/du");
                 assert!(
                     rel_err(&k0[..nd * nd], &k_fd) < 1e-6,
@@ -150,6 +171,19 @@ fn element_force_and_stiffness_match_finite_differences() {
                 }
             }
         }
+        let name = format!("{kind:?}").to_uppercase();
+        measure::record(
+            &format!("{name} force against dΠ/du, worst relative error"),
+            worst_f,
+            "< 1e-6",
+            "",
+        );
+        measure::record(
+            &format!("{name} stiffness against df/du, worst relative error"),
+            worst_k,
+            "< 1e-6",
+            "",
+        );
     }
 }
 
@@ -202,6 +236,15 @@ fn global_tangent_with_follower_pressure_matches_finite_differences() {
                 max_err = max_err.max((kv - col[r]).abs());
             }
         }
+        measure::record(
+            &format!(
+                "{} global tangent with follower pressure, largest error / largest entry",
+                format!("{kind:?}").to_uppercase()
+            ),
+            max_err / kmax,
+            "< 1e-6",
+            "",
+        );
         assert!(
             max_err < 1e-6 * kmax,
             "{kind:?}: global tangent error {max_err:.3e} (max entry {kmax:.3e})"

@@ -10,6 +10,9 @@ use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
 use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::{Deck, ElementKind, StepDef};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 const KINDS: [ElementKind; 3] = [ElementKind::Cpe4, ElementKind::Cpe4h, ElementKind::Cpe3];
 
 /// Solves with Newton tolerances far below the assertions' (residual 1e-12, energy 1e-20), so
@@ -94,6 +97,15 @@ fn patch_test_on_distorted_mesh() {
                 .max((sol.u[2 * n] - e[0]).abs())
                 .max((sol.u[2 * n + 1] - e[1]).abs());
         }
+        measure::record(
+            &format!(
+                "{} patch test, largest nodal error",
+                format!("{kind:?}").to_uppercase()
+            ),
+            max_err,
+            "< 1e-10",
+            "mm",
+        );
         assert!(
             max_err < 1e-10,
             "{kind:?}: patch test error {max_err:.3e} mm"
@@ -159,6 +171,15 @@ fn uniaxial_plane_strain_stretch_matches_closed_form() {
         let right = &model.mesh.node_sets["RIGHT"];
         let force: f64 = right.iter().map(|&n| sol.reactions[2 * n]).sum();
         let p11 = sc[0] * l2; // P = σ J F^-T: P11 = σxx λ1 λ2 / λ1
+        measure::record(
+            &format!(
+                "{} uniaxial stretch 1.3, reaction against the closed form, relative error",
+                format!("{kind:?}").to_uppercase()
+            ),
+            (force - p11).abs() / p11.abs(),
+            "< 1e-8",
+            "",
+        );
         assert!(
             (force - p11 * 1.0).abs() < 1e-8 * p11.abs(),
             "{kind:?}: reaction {force} vs {p11}"
@@ -316,6 +337,19 @@ fn thick_cylinder_converges_to_radial_reference() {
         let rates: Vec<f64> = errors.windows(2).map(|w| (w[0] / w[1]).log2()).collect();
         println!("{kind:?}: reference u_r(R_out) = {reference:.8e} mm; relative errors {errors:?}; observed rates {rates:.3?}");
         let last = *rates.last().unwrap();
+        let name = format!("{kind:?}").to_uppercase();
+        measure::record(
+            &format!("{name} thick cylinder, observed rate on the last refinement"),
+            last,
+            "in [1.7, 2.3]",
+            "",
+        );
+        measure::record(
+            &format!("{name} thick cylinder, finest relative error of u_r(R_out)"),
+            *errors.last().unwrap(),
+            "< 1e-3",
+            "",
+        );
         assert!(
             (1.7..2.3).contains(&last),
             "{kind:?}: observed rate {last:.3}"
