@@ -26,6 +26,11 @@ Figures (NAMES for --only in brackets):
   binaries, side by side, is given beside it.
 
 Each value is the median over the runs; the spread (min-max) is printed beside it.
+
+Beside results.md it writes the same table as data, from which the guide's Performance page is
+generated (`python3 scripts/guide/tables.py performance bench/perf/results`): --results DIR
+(default bench/perf/results) receives results.json (the rows, the binaries and their commits)
+and provenance.json (date, machine, commit, load average at the start, command).
 """
 
 import argparse
@@ -293,6 +298,8 @@ def main() -> None:
     ap.add_argument("--prev", type=Path, default=Path("/tmp/femu_prev"))
     ap.add_argument("--prev-commit", default="d9ac6d3")
     ap.add_argument("--cur", type=Path, default=ROOT / "target/release/femu")
+    ap.add_argument("--cur-commit", default="",
+                    help="the commit --cur was built from, when it is not this checkout's target/release/femu")
     ap.add_argument("--no-build", action="store_true", help="use --cur as it is")
     ap.add_argument("--runs", type=int, default=3, help="runs of each binary for the short figures")
     ap.add_argument("--slow-runs", type=int, default=1, help="runs of each binary for idic and demo --full")
@@ -300,7 +307,11 @@ def main() -> None:
     ap.add_argument("--only", default="dic1024,dic512,idic,demo,full,bench")
     ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "femu_perf")
     ap.add_argument("--out", type=Path, default=HERE / "results.md")
+    ap.add_argument("--results", type=Path, default=HERE / "results",
+                    help="folder for results.json and provenance.json (the guide's page is made from them)")
     a = ap.parse_args()
+    load = os.getloadavg()[0]
+    started = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
 
     if not a.prev.exists():
         log(f"building the previous binary ({a.prev_commit}) into {a.prev}")
@@ -359,6 +370,20 @@ def main() -> None:
     print(text)
     a.out.write_text(text)
     log(f"written {a.out}")
+    a.results.mkdir(parents=True, exist_ok=True)
+    cur_commit = commit + dirty if a.cur == ROOT / "target/release/femu" or not a.cur_commit else a.cur_commit
+    (a.results / "results.json").write_text(json.dumps({
+        "previous": {"binary": str(a.prev), "commit": a.prev_commit},
+        "current": {"binary": str(a.cur), "commit": cur_commit},
+        "runs": a.runs, "slow_runs": a.slow_runs, "bench_repeat": a.bench_repeat,
+        "rows": [{"figure": fig, "goal": goal, "previous": cell.get("previous"),
+                  "current": cell.get("current")} for fig, goal, cell in rows],
+    }, indent=1) + "\n")
+    (a.results / "provenance.json").write_text(json.dumps({
+        "date": started, "machine": machine(), "commit": cur_commit, "build": "release builds",
+        "load": f"{load:.1f}", "command": f"python3 bench/perf/run.py {' '.join(sys.argv[1:])}",
+    }, indent=1) + "\n")
+    log(f"written {a.results}/results.json and provenance.json")
 
 
 if __name__ == "__main__":

@@ -13,26 +13,14 @@ set -euo pipefail
 femu=$(readlink -f "${1:?usage: measure.sh FEMU_BINARY [OUT_DIR]}")
 out=${2:-out/measured}
 cd "$(dirname "$0")/../.."
-commit=${COMMIT:-$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- crates Cargo.toml Cargo.lock || echo " with uncommitted changes")}
-build=${BUILD:-release build}
-cpu=$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//')
-mem=$(awk '/MemTotal/ {printf "%.0f GiB", $2 / 1048576}' /proc/meminfo)
-machine="$cpu, $(nproc) cores, $mem, $(uname -sr)"
+. scripts/guide/provenance.sh
 
 run() { # NAME COMMAND...
     local dir=$out/$1
     shift
     rm -rf "$dir"
     mkdir -p "$dir"
-    python3 - "$dir/provenance.json" "$machine" "$commit" "$build" "$*" <<'PY'
-import datetime, json, os, sys
-path, machine, commit, build, command = sys.argv[1:]
-json.dump({
-    "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-    "machine": machine, "commit": commit, "build": build,
-    "load": "%.1f" % os.getloadavg()[0], "command": command.replace(os.environ.get("FEMU_BIN", ""), "femu"),
-}, open(path, "w"), indent=1)
-PY
+    write_provenance "$dir/provenance.json" "$@"
     "$@" >"$dir.log" 2>&1
 }
 

@@ -5,6 +5,9 @@
     python3 scripts/guide/tables.py convergence RUN_DIR     # `femu convergence` folder
     python3 scripts/guide/tables.py bench RUN_DIR           # `femu bench` folder
     python3 scripts/guide/tables.py page DEMO CONV [BENCH] > docs/guide/src/measured/runs.md
+    python3 scripts/guide/tables.py verification RESULTS    # values the tests recorded
+    python3 scripts/guide/tables.py render TEMPLATE         # a page of scripts/guide/templates/
+    python3 scripts/guide/tables.py check                   # the generated pages up to date?
 
 Every number comes from the run's own output files (`summary.json`, `steps.json`,
 `convergence.csv`); nothing is typed in. The provenance comes from `provenance.json` in the run
@@ -13,9 +16,14 @@ of the binary's sources, load average); without it the table says what is unknow
 """
 
 import csv
+import difflib
 import json
 import pathlib
+import re
 import sys
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent.parent
+TEMPLATES = ROOT / "scripts" / "guide" / "templates"
 
 
 def provenance(run):
@@ -28,7 +36,9 @@ def provenance(run):
         f"*Measured {d.get('date', 'on an unrecorded date')} on {d.get('machine', 'an unrecorded machine')}, "
         f"commit {d.get('commit', 'unrecorded')}, {d.get('build', 'build unrecorded')}; "
         f"load average {d.get('load', 'unrecorded')} at the start; "
-        f"command `{d.get('command', '?')}`.*\n"
+        f"command `{d.get('command', '?')}`.*"
+        + (f" {d['note']}" if d.get("note") else "")
+        + "\n"
     )
 
 
@@ -165,12 +175,209 @@ def page(demo_dir, conv_dir, bench_dir=None):
     return "".join(parts)
 
 
+def number(v):
+    """A measured value for a table: integers as such, the rest with three significant digits."""
+    if v is None:
+        return "–"
+    if float(v).is_integer() and abs(v) < 1e7:
+        return f"{int(v)}"
+    t = f"{v:.3g}"
+    return re.sub(r"e([+-])0*(\d)", lambda m: "e" + ("-" if m.group(1) == "-" else "") + m.group(2), t)
+
+
+def verification_table(results, name, prov, targets):
+    """The values one test target recorded (RESULTS/NAME.jsonl), in the order of the tests in
+    its source file, headed by the provenance and the command that measures them again."""
+    path = pathlib.Path(results) / f"{name}.jsonl"
+    crate, test = name.split("-", 2)[0] + "-" + name.split("-", 2)[1], name.split("-", 2)[2]
+    target = targets.get((crate, test))
+    command = f"cargo test --release -p {crate} --test {test}"
+    head = (
+        f"*Measured {prov.get('date', 'on an unrecorded date')} on "
+        f"{prov.get('machine', 'an unrecorded machine')}, commit {prov.get('commit', 'unrecorded')}; "
+        f"`{command}`"
+        + (f", {target['seconds']:.0f} s" if target else "")
+        + ".*\n"
+    )
+    if not path.exists():
+        return head + "\nNothing recorded: the tests skipped (see above for what they need).\n"
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    source = ROOT / "crates" / crate / "tests" / f"{test}.rs"
+    text = source.read_text() if source.exists() else ""
+
+    def where(r):
+        i = text.find(f"fn {r['test']}(")
+        return i if i >= 0 else len(text)
+
+    rows = sorted(enumerate(rows), key=lambda ir: (where(ir[1]), ir[0]))
+    out = [head, "| check | value | bound asserted | test |", "|---|---|---|---|"]
+    for _, r in rows:
+        unit = f" {r['unit']}" if r.get("unit") else ""
+        value = number(r["value"]) + (unit if r["value"] is not None else "")
+        out.append(f"| {r['quantity']} | {value} | {r['bound']} | `{r['test']}` |")
+    return "\n".join(out) + "\n"
+
+
+def verification(results):
+    """docs/guide/src/measured/verification.md from its template and RESULTS (verify.sh)."""
+    results = pathlib.Path(results)
+    prov = json.loads((results / "provenance.json").read_text())
+    targets = {}
+    if (results / "targets.json").exists():
+        for t in json.loads((results / "targets.json").read_text()):
+            targets[(t["crate"], t["test"])] = t
+    page = (TEMPLATES / "verification.md").read_text()
+    total = sum(t["seconds"] for t in targets.values())
+    summary = (
+        f"*All the tables: measured {prov.get('date', '?')} on {prov.get('machine', '?')}, commit "
+        f"{prov.get('commit', '?')}, {prov.get('build', '?')}, load average {prov.get('load', '?')} "
+        f"at the start; {len(targets)} test targets, {total / 60:.0f} min of tests; "
+        f"command `bash scripts/guide/verify.sh`.*"
+    )
+    page = page.replace("{{summary}}", summary)
+    return re.sub(
+        r"\{\{table ([\w-]+)\}\}",
+        lambda m: verification_table(results, m.group(1), prov, targets).rstrip("\n"),
+        page,
+    )
+
+
+UNDER_PROBE = ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"]
+
+
+def dic_campaign(pymust_dir, own_dir):
+    """The recorded-frame route on simulated B-mode sequences (bench/independent_us/campaign.py):
+    per renderer and route, each parameter's mean / largest |error| and how many of its 95 %
+    intervals hold the truth, from the campaign.csv and fields.csv kept in the repository
+    (the pymust rows from PYMUST_DIR, femu's own from OWN_DIR)."""
+    out = []
+    body = []
+    for label, d, renderer in [
+        ("pymust (independent: simulated RF of a linear array, delay-and-sum; `bench/independent_us/`)",
+         pymust_dir, "pymust"),
+        ("femu's own (`femu us-sim`, 5 % of the scatterers renewed per step)", own_dir, "femu"),
+    ]:
+        d = ROOT / d
+        rows = [r for r in csv.DictReader(open(d / "campaign.csv")) if r["renderer"] == renderer]
+        fields = [f for f in csv.DictReader(open(d / "fields.csv")) if f["renderer"] == renderer]
+        out.append(f"- {label}: " + provenance(d).strip())
+        ok = [f for f in fields if f["dic"] == "ok"]
+        ux = [float(f["rms_ux_px"]) for f in ok]
+        uy = [float(f["rms_uy_px"]) for f in ok]
+        seeds = sorted({int(r["seed"]) for r in rows})
+        first = True
+        for route in ("plain", "weighted"):
+            cells, covered, total = [], 0, 0
+            for par in UNDER_PROBE:
+                rr = [r for r in rows if r["route"] == route and r["parameter"] == par]
+                e = [abs(float(r["error_pct"])) for r in rr]
+                c = sum(int(r["covered"]) for r in rr)
+                covered, total = covered + c, total + len(rr)
+                cells.append(f"{sum(e) / len(e):.2g} / {max(e):.2g} %, {c}/{len(rr)}" if e else "–")
+            head = (
+                f"{label}, seeds {seeds[0]}–{seeds[-1]} | {len(ok)} of {len(fields)} | "
+                f"{sum(ux) / len(ux):.2f} ({max(ux):.2f}) / {sum(uy) / len(uy):.2f} ({max(uy):.2f})"
+                if first else " | | "
+            )
+            body.append(f"| {head} | {route} | " + " | ".join(cells) + f" | {covered}/{total} |")
+            first = False
+    out.append("")
+    out.append("| frames | sequences converged | composed RMS, lateral / axial (px), mean (max) | route | "
+               + " | ".join(UNDER_PROBE) + " | truths covered |")
+    out.append("|---|---|---|---|" + "---|" * len(UNDER_PROBE) + "---|")
+    out += body
+    return "\n".join(out) + "\n"
+
+
+def idic_campaign(run_dir):
+    """Integrated DIC on the pymust sequences (bench/independent_us/idic_campaign.py), from the
+    idic_campaign.csv kept in the repository: per parameter under the probe, mean and largest
+    |error|, mean error, the 95 % intervals that hold the truth and the seeds they miss."""
+    d = ROOT / run_dir
+    rows = list(csv.DictReader(open(d / "idic_campaign.csv")))
+    out = [provenance(d).strip(), ""]
+    out.append("| parameter | mean / max \\|error\\| | mean error | 95 % intervals holding the truth |")
+    out.append("|---|---|---|---|")
+    for par in UNDER_PROBE:
+        rr = [r for r in rows if r["parameter"] == par]
+        e = [100 * float(r["relative_error"]) for r in rr]
+        missed = [r["seed"] for r in rr if r["covered"] != "1"]
+        held = f"{len(rr) - len(missed)} of {len(rr)}" + (
+            f" (missed: seed{'s' if len(missed) > 1 else ''} {', '.join(missed)})" if missed else "")
+        mean = sum(e) / len(e)
+        out.append(
+            f"| {par} | {sum(map(abs, e)) / len(e):.3g} / {max(map(abs, e)):.3g} % | "
+            f"{'+' if mean >= 0 else '−'}{abs(mean):.3g} % | {held} |"
+        )
+    wall = [float(r["wall_s"]) for r in rows]
+    out.append(f"\n{min(wall):.0f}–{max(wall):.0f} s per realization (`wall_s`), "
+               f"{len({r['seed'] for r in rows})} realizations.")
+    return "\n".join(out) + "\n"
+
+
+def performance(results):
+    """The table of bench/perf/run.py (results.json), headed by its provenance."""
+    d = ROOT / results
+    r = json.loads((d / "results.json").read_text())
+    prev, cur = r["previous"], r["current"]
+    out = [provenance(d).strip(), ""]
+    out.append(
+        f"Previous: a release build of commit {prev['commit']}; current: {cur['commit']}. The two "
+        f"binaries run in turn, {r['runs']} runs each ({r['slow_runs']} for the integrated DIC and "
+        f"`demo --full`), `femu bench --repeat {r['bench_repeat']}`; median (min–max).\n"
+    )
+    out.append("| figure | goal | previous | current |\n|---|---|---|---|")
+    for row in r["rows"]:
+        out.append(f"| {row['figure']} | {row['goal']} | {row['previous'] or 'n/a'} | {row['current'] or 'n/a'} |")
+    return "\n".join(out) + "\n"
+
+
+def render(template):
+    """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
+    table NAME makes of the result files ARG... (paths from the repository's root)."""
+    funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance}
+    page = (TEMPLATES / template).read_text()
+    return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
+                  lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
+
+
+# The generated pages CI checks: page, and how it is made from result files in the repository.
+GENERATED = {
+    "docs/guide/src/measured/verification.md": lambda: verification(ROOT / "bench/verification/results"),
+    "docs/guide/src/measured/performance.md": lambda: render("performance.md"),
+    "docs/guide/src/measured/dic.md": lambda: render("dic.md"),
+    "docs/guide/src/measured/idic.md": lambda: render("idic.md"),
+}
+
+
+def check():
+    """Regenerates every page of GENERATED from the committed result files and fails when one
+    differs from the committed page (nothing is measured again)."""
+    bad = 0
+    for page, make in GENERATED.items():
+        want = make()
+        have = (ROOT / page).read_text()
+        if want != have:
+            bad += 1
+            sys.stderr.writelines(
+                difflib.unified_diff(have.splitlines(True), want.splitlines(True), page, "generated")
+            )
+            print(f"{page} differs from what scripts/guide/tables.py makes of its result files",
+                  file=sys.stderr)
+    if bad:
+        print("regenerate: docs/guide/src/developer/guide.md says how", file=sys.stderr)
+        sys.exit(1)
+    print(f"generated pages up to date: {len(GENERATED)}", file=sys.stderr)
+    return ""
+
+
 def main(argv):
-    if len(argv) < 3:
+    if len(argv) < 2 or (len(argv) < 3 and argv[1] != "check"):
         print(__doc__, file=sys.stderr)
         return 2
     kind, args = argv[1], argv[2:]
-    fn = {"demo": demo, "convergence": convergence, "bench": bench, "page": page}.get(kind)
+    fn = {"demo": demo, "convergence": convergence, "bench": bench, "page": page,
+          "verification": verification, "check": check, "render": render}.get(kind)
     if fn is None:
         print(f"unknown table {kind!r}", file=sys.stderr)
         return 2
