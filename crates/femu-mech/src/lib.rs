@@ -12,7 +12,8 @@
 //!   solutions for verification.
 //! - [`material`]: the registry of hyperelastic laws (compressible Neo-Hookean, seed Eq. 1;
 //!   Mooney–Rivlin; Yeoh; Abaqus forms), their parameters, stress and tangent.
-//! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3.
+//! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3; [`solid3d`]: their 3D counterparts
+//!   C3D8, C3D8H, C3D4, C3D10 (element kernels; not yet assembled by the solver).
 //! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,
 //!   node-to-surface augmented-Lagrangian contact.
 //!
@@ -45,6 +46,7 @@ pub mod model;
 pub mod output;
 pub mod reference;
 pub mod sensitivity;
+pub mod solid3d;
 pub mod solver;
 
 /// The AVX2 dispatch of the element loop, from [`femu_sparse`] (safe to call; its unsafe stays

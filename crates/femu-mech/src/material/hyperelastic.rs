@@ -1,7 +1,9 @@
 //! The hyperelastic core every law and every element shares: in-plane tensors, the
 //! [`Hyperelastic`] trait (an energy through its invariant derivatives, split into isochoric
 //! and volumetric parts), the stress and tangent it gives, and the power functions of J.
-//! Nothing here knows of elements or of the registry, so that both can build on it.
+//! Nothing here knows of elements or of the registry, so that both can build on it. The 3D
+//! counterparts (3x3 tensors, the invariants `(I1, I2, J)`, P and A of a 3D F) serve the
+//! solid elements of [`crate::solid3d`].
 
 /// Which part of the energy a parameter's term `E_k` lives in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,6 +117,241 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
         let d = self.derivatives_isochoric(f)?;
         Ok(assemble_response(f, det2(f), &d, tangent))
     }
+
+    /// The isochoric part in three dimensions through its derivatives at `(I1, I2, J)`, with
+    /// `I1 = tr C`, `I2 = ½ (I1² - C:C)` of the 3D `C = FᵀF`.
+    ///
+    /// [`Hyperelastic::isochoric`] is already the 3D energy as a function of `(I1, J)` for every
+    /// law without an `I2` term (the plane-strain elements only set `F33 = 1`), so the default
+    /// is that, with no `I2` dependence. A law with an `I2` term writes it through the
+    /// plane-strain identity `I2 = J² + I1 - 1` in `isochoric` and must give its 3D form here
+    /// (Mooney–Rivlin does).
+    #[inline]
+    fn isochoric_3d(&self, i1: f64, i2: f64, j: f64) -> InvariantDerivatives3 {
+        let _ = i2;
+        InvariantDerivatives3::from(self.isochoric(i1, j))
+    }
+
+    /// Derivatives of the isochoric part at a 3D deformation gradient F (row-major 3x3).
+    #[inline]
+    fn derivatives_isochoric_3d(
+        &self,
+        f: &Tensor3,
+    ) -> Result<InvariantDerivatives3, NonPositiveJacobian> {
+        let [i1, i2, j] = invariants3(f);
+        if !(j > 0.0) {
+            return Err(NonPositiveJacobian(j));
+        }
+        Ok(self.isochoric_3d(i1, i2, j))
+    }
+
+    /// Derivatives of the whole energy `W_iso + U` at a 3D deformation gradient F.
+    #[inline]
+    fn derivatives_3d(&self, f: &Tensor3) -> Result<InvariantDerivatives3, NonPositiveJacobian> {
+        let mut d = self.derivatives_isochoric_3d(f)?;
+        let [u, du, ddu] = self.volumetric(det3(f));
+        d.w += u;
+        d.w_j += du;
+        d.w_jj += ddu;
+        Ok(d)
+    }
+}
+
+/// A 3x3 tensor stored row-major: `[F11, F12, F13, F21, ..., F33]`.
+pub type Tensor3 = [f64; 9];
+/// A fourth-order 3D tensor `A[(iJ)][(kL)]`, indices as in [`Tensor3`].
+pub type Tensor4x3 = [[f64; 9]; 9];
+
+/// Determinant of a 3x3 tensor.
+#[inline]
+pub fn det3(f: &Tensor3) -> f64 {
+    f[0] * (f[4] * f[8] - f[5] * f[7]) - f[1] * (f[3] * f[8] - f[5] * f[6])
+        + f[2] * (f[3] * f[7] - f[4] * f[6])
+}
+
+/// Cofactor `H = J F^-T` of a 3x3 tensor (`∂ det F / ∂F`; `H_iJ = ½ ε_ijk ε_JKL F_jK F_kL`).
+#[inline]
+pub fn cof3(f: &Tensor3) -> Tensor3 {
+    [
+        f[4] * f[8] - f[5] * f[7],
+        f[5] * f[6] - f[3] * f[8],
+        f[3] * f[7] - f[4] * f[6],
+        f[2] * f[7] - f[1] * f[8],
+        f[0] * f[8] - f[2] * f[6],
+        f[1] * f[6] - f[0] * f[7],
+        f[1] * f[5] - f[2] * f[4],
+        f[2] * f[3] - f[0] * f[5],
+        f[0] * f[4] - f[1] * f[3],
+    ]
+}
+
+/// `(I1, I2, J)` of a 3D deformation gradient: `I1 = F:F = tr C`, `I2 = H:H = tr cof C`
+/// (`= ½ (I1² - C:C)`), `J = det F`.
+#[inline]
+pub fn invariants3(f: &Tensor3) -> [f64; 3] {
+    let h = cof3(f);
+    let i1 = f.iter().map(|v| v * v).sum();
+    let i2 = h.iter().map(|v| v * v).sum();
+    [i1, i2, det3(f)]
+}
+
+/// Derivatives of W with respect to the 3D invariants (I1, I2, J); `w_i`, `w_ii`, `w_ij` are
+/// those of [`InvariantDerivatives`] (with respect to I1), the others name I2 by `2`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct InvariantDerivatives3 {
+    pub w: f64,
+    pub w_i: f64,
+    pub w_2: f64,
+    pub w_j: f64,
+    pub w_ii: f64,
+    pub w_i2: f64,
+    pub w_22: f64,
+    pub w_ij: f64,
+    pub w_2j: f64,
+    pub w_jj: f64,
+}
+
+impl From<InvariantDerivatives> for InvariantDerivatives3 {
+    /// An energy of (I1, J) only.
+    fn from(d: InvariantDerivatives) -> Self {
+        InvariantDerivatives3 {
+            w: d.w,
+            w_i: d.w_i,
+            w_j: d.w_j,
+            w_ii: d.w_ii,
+            w_ij: d.w_ij,
+            w_jj: d.w_jj,
+            ..Default::default()
+        }
+    }
+}
+
+/// `∂I2/∂F = 2 (I1 F - F C)` at F.
+#[inline]
+fn di2_df(f: &Tensor3, i1: f64) -> Tensor3 {
+    let c = right_cauchy_green3(f);
+    std::array::from_fn(|r| {
+        let (i, jj) = (r / 3, r % 3);
+        let fc: f64 = (0..3).map(|m| f[3 * i + m] * c[3 * m + jj]).sum();
+        2.0 * (i1 * f[r] - fc)
+    })
+}
+
+/// `C = FᵀF` (row-major).
+#[inline]
+pub fn right_cauchy_green3(f: &Tensor3) -> Tensor3 {
+    std::array::from_fn(|r| {
+        let (a, b) = (r / 3, r % 3);
+        (0..3).map(|m| f[3 * m + a] * f[3 * m + b]).sum()
+    })
+}
+
+/// First Piola–Kirchhoff stress `P = 2 W_1 F + 2 W_2 (I1 F - F C) + W_J H` (H = cof F) from
+/// the invariant derivatives at a 3D F (Holzapfel, *Nonlinear Solid Mechanics*, 2000, §6.2:
+/// `P = Σ_a W_a ∂I_a/∂F`).
+pub fn pk1_3d(f: &Tensor3, d: &InvariantDerivatives3) -> Tensor3 {
+    let h = cof3(f);
+    let i1: f64 = f.iter().map(|v| v * v).sum();
+    let s2 = if d.w_2 != 0.0 {
+        di2_df(f, i1)
+    } else {
+        [0.0; 9]
+    };
+    std::array::from_fn(|r| 2.0 * d.w_i * f[r] + d.w_2 * s2[r] + d.w_j * h[r])
+}
+
+/// The Levi-Civita symbol `ε_ijk`.
+#[inline]
+fn levi_civita(i: usize, j: usize, k: usize) -> f64 {
+    match (i, j, k) {
+        (0, 1, 2) | (1, 2, 0) | (2, 0, 1) => 1.0,
+        (0, 2, 1) | (2, 1, 0) | (1, 0, 2) => -1.0,
+        _ => 0.0,
+    }
+}
+
+/// The consistent tangent `A = dP/dF` at a 3D F from the invariant derivatives: with
+/// `S_1 = 2F`, `S_2 = ∂I2/∂F`, `S_J = H`,
+///
+/// ```text
+/// A = Σ_ab W_ab S_a ⊗ S_b + 2 W_1 𝕀 + W_2 ∂S_2/∂F + W_J ∂H/∂F,
+/// ∂S_2/∂F_(iJ)(kL) = 2 (2 F_iJ F_kL + I1 δ_ik δ_JL - δ_ik C_JL - F_iL F_kJ - b_ik δ_JL),
+/// ∂H_iJ/∂F_kL = ε_ikm ε_JLM F_mM
+/// ```
+///
+/// (b = F Fᵀ). The 2D tangent of [`Hyperelastic::response`] is its restriction to `F33 = 1`
+/// (`∂H/∂F` then reduces to the constant [`DCOF`]); `tests/solid3d.rs` checks that.
+pub fn tangent_3d(f: &Tensor3, d: &InvariantDerivatives3) -> Tensor4x3 {
+    let h = cof3(f);
+    let s1: Tensor3 = f.map(|v| 2.0 * v);
+    let has_i2 = d.w_2 != 0.0 || d.w_22 != 0.0 || d.w_i2 != 0.0 || d.w_2j != 0.0;
+    let i1: f64 = f.iter().map(|v| v * v).sum();
+    let s2 = if has_i2 { di2_df(f, i1) } else { [0.0; 9] };
+    let mut a = [[0.0; 9]; 9];
+    for r in 0..9 {
+        for c in 0..9 {
+            a[r][c] = d.w_ii * s1[r] * s1[c]
+                + d.w_i2 * (s1[r] * s2[c] + s2[r] * s1[c])
+                + d.w_22 * s2[r] * s2[c]
+                + d.w_ij * (s1[r] * h[c] + h[r] * s1[c])
+                + d.w_2j * (s2[r] * h[c] + h[r] * s2[c])
+                + d.w_jj * h[r] * h[c];
+        }
+        a[r][r] += 2.0 * d.w_i;
+    }
+    // W_J ∂H/∂F
+    for i in 0..3 {
+        for k in 0..3 {
+            for m in 0..3 {
+                let e_ikm = levi_civita(i, k, m);
+                if e_ikm == 0.0 {
+                    continue;
+                }
+                for jj in 0..3 {
+                    for l in 0..3 {
+                        for mm in 0..3 {
+                            let e = levi_civita(jj, l, mm);
+                            if e != 0.0 {
+                                a[3 * i + jj][3 * k + l] += d.w_j * e_ikm * e * f[3 * m + mm];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    if d.w_2 != 0.0 {
+        let c = right_cauchy_green3(f);
+        let b: Tensor3 = std::array::from_fn(|r| {
+            let (p, q) = (r / 3, r % 3);
+            (0..3).map(|m| f[3 * p + m] * f[3 * q + m]).sum()
+        });
+        for i in 0..3 {
+            for jj in 0..3 {
+                for k in 0..3 {
+                    for l in 0..3 {
+                        let (dik, djl) =
+                            (f64::from(u8::from(i == k)), f64::from(u8::from(jj == l)));
+                        let v = 2.0 * f[3 * i + jj] * f[3 * k + l] + i1 * dik * djl
+                            - dik * c[3 * jj + l]
+                            - f[3 * i + l] * f[3 * k + jj]
+                            - b[3 * i + k] * djl;
+                        a[3 * i + jj][3 * k + l] += 2.0 * d.w_2 * v;
+                    }
+                }
+            }
+        }
+    }
+    a
+}
+
+/// Cauchy stress `σ = P Fᵀ / J` in Abaqus order `[σ11, σ22, σ33, σ12, σ13, σ23]` from the
+/// invariant derivatives `d` of the energy at a 3D F.
+pub fn cauchy_3d(f: &Tensor3, d: &InvariantDerivatives3) -> [f64; 6] {
+    let p = pk1_3d(f, d);
+    let j = det3(f);
+    let s = |i: usize, k: usize| (0..3).map(|m| p[3 * i + m] * f[3 * k + m]).sum::<f64>() / j;
+    [s(0, 0), s(1, 1), s(2, 2), s(0, 1), s(0, 2), s(1, 2)]
 }
 
 /// `P = 2 W_I F + W_J cof F` and `τ33` from the invariant derivatives at F (J = det F).

@@ -1,8 +1,10 @@
 //! Compressible Mooney–Rivlin material in the Abaqus form.
 
-use super::hyperelastic::EnergyPart;
+use super::hyperelastic::{
+    inv_cbrt, volumetric_quadratic, EnergyPart, Hyperelastic, InvariantDerivatives,
+    InvariantDerivatives3,
+};
 use super::law::{AbaqusField, Bound, LawSpec, MaterialLaw, ParameterSpec, Unit, C10, D};
-use super::hyperelastic::{inv_cbrt, volumetric_quadratic, Hyperelastic, InvariantDerivatives};
 
 /// Compressible Mooney–Rivlin material (Abaqus `*HYPERELASTIC, MOONEY-RIVLIN`):
 /// `W = C10 (I1bar - 3) + C01 (I2bar - 3) + (1/D) (J - 1)²`, `I1bar = J^(-2/3) I1`,
@@ -16,7 +18,8 @@ use super::hyperelastic::{inv_cbrt, volumetric_quadratic, Hyperelastic, Invarian
 /// W_iso(I1, J) = C10 (J^(-2/3) I1 - 3) + C01 (J^(-4/3) (I1 - 1) + J^(2/3) - 3)
 /// ```
 ///
-/// (the identity is checked against `I2 = ½ (I1² - tr C²)` in a test). Small-strain moduli:
+/// (the identity is checked against `I2 = ½ (I1² - tr C²)` in a test); the 3D solid elements
+/// use the energy in `(I1, I2, J)` ([`Hyperelastic::isochoric_3d`]). Small-strain moduli:
 /// `μ = 2 (C10 + C01)`, `K = 2/D`. C10 > 0 and C01 ≥ 0 keep the energy polyconvex (C01 = 0 is
 /// the Neo-Hookean law). Units: C10, C01 in MPa, D in MPa⁻¹.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,10 +62,41 @@ fn isochoric(c10: f64, c01: f64, i1: f64, j: f64) -> InvariantDerivatives {
     }
 }
 
+/// `c10 (I1bar - 3) + c01 (I2bar - 3)` in 3D (`I2bar = J^(-4/3) I2`, I2 independent of I1
+/// and J) and its invariant derivatives.
+#[inline(always)]
+fn isochoric_3d(c10: f64, c01: f64, i1: f64, i2: f64, j: f64) -> InvariantDerivatives3 {
+    let y = inv_cbrt(j);
+    let jm23 = y * y;
+    let jm1 = jm23 * y;
+    let jm43 = jm23 * jm23;
+    let jm53 = jm23 * jm1;
+    let jm73 = jm43 * jm1;
+    let jm83 = jm53 * jm1;
+    let jm103 = jm73 * jm1;
+    InvariantDerivatives3 {
+        w: c10 * (jm23 * i1 - 3.0) + c01 * (jm43 * i2 - 3.0),
+        w_i: c10 * jm23,
+        w_2: c01 * jm43,
+        w_j: -2.0 / 3.0 * c10 * i1 * jm53 - 4.0 / 3.0 * c01 * i2 * jm73,
+        w_ii: 0.0,
+        w_i2: 0.0,
+        w_22: 0.0,
+        w_ij: -2.0 / 3.0 * c10 * jm53,
+        w_2j: -4.0 / 3.0 * c01 * jm73,
+        w_jj: 10.0 / 9.0 * c10 * i1 * jm83 + 28.0 / 9.0 * c01 * i2 * jm103,
+    }
+}
+
 impl Hyperelastic for MooneyRivlinTerms {
     #[inline]
     fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
         isochoric(self.c10, self.c01, i1, j)
+    }
+
+    #[inline]
+    fn isochoric_3d(&self, i1: f64, i2: f64, j: f64) -> InvariantDerivatives3 {
+        isochoric_3d(self.c10, self.c01, i1, i2, j)
     }
 
     #[inline]
@@ -75,6 +109,11 @@ impl Hyperelastic for MooneyRivlin {
     #[inline]
     fn isochoric(&self, i1: f64, j: f64) -> InvariantDerivatives {
         isochoric(self.c10, self.c01, i1, j)
+    }
+
+    #[inline]
+    fn isochoric_3d(&self, i1: f64, i2: f64, j: f64) -> InvariantDerivatives3 {
+        isochoric_3d(self.c10, self.c01, i1, i2, j)
     }
 
     #[inline]

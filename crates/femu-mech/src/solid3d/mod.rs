@@ -1,0 +1,30 @@
+//! Three-dimensional finite-strain solid elements: C3D8 (trilinear hexahedron, 2x2x2 Gauss),
+//! C3D8H (the same with a constant pressure, mean dilatation), C3D4 (linear tetrahedron) and
+//! C3D10 (quadratic tetrahedron, 4-point rule), in the Abaqus node orders.
+//!
+//! Total Lagrangian form, as the plane-strain elements of [`crate::element`]: with
+//! `F = I + Σ_a u_a ⊗ ∇_X N_a` at each Gauss point,
+//!
+//! ```text
+//! f_ai   = Σ_g w_g P_iJ ∂N_a/∂X_J
+//! K_aibk = Σ_g w_g A_iJkL ∂N_a/∂X_J ∂N_b/∂X_L
+//! ```
+//!
+//! with P and A of the same [`Hyperelastic`](crate::material::Hyperelastic) laws through their
+//! 3D invariant derivatives ([`pk1_3d`](crate::material::pk1_3d),
+//! [`tangent_3d`](crate::material::tangent_3d)). Local dof `3a + i` is component `i` of local
+//! node `a`. The element results are written into the same
+//! [`ElementResult`](crate::element::ElementResult) as the 2D elements'.
+//!
+//! - [`shape`]: the shape functions and integration rules;
+//! - [`kernel`]: reference geometry, energy, force, tangent, averaged Cauchy stress, and the
+//!   parameter-energy forces of the sensitivities.
+
+pub mod kernel;
+pub mod shape;
+
+pub use kernel::{
+    averages, evaluate, rate_forces, unit_energy_forces, Averages3, GaussPoint3, Geometry3,
+    MAX_DOFS_3D, MAX_GAUSS_3D, MAX_NODES_3D,
+};
+pub use shape::Kind3;

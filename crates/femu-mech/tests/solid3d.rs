@@ -1,0 +1,737 @@
+//! Checks of the 3D solid elements (C3D8, C3D8H, C3D4, C3D10) with the registered laws:
+//! tangents, forces and parameter forces against central finite differences, the plane-strain
+//! restriction of the 3D law against the 2D one, patch tests on distorted meshes, and
+//! homogeneous finite deformations against the closed-form Neo-Hookean Cauchy stress.
+//!
+//! The meshes here are solved by a small dense Newton written in this file (a few hundred dofs
+//! at most), so that the checks depend on the element kernels only.
+
+use femu_mech::element::ElementResult;
+use femu_mech::material::{
+    cauchy_3d, det3, Hyperelastic, Material, MaterialLaw, MooneyRivlin, NeoHookean, Yeoh, LAWS,
+};
+use femu_mech::solid3d::{self, Geometry3, Kind3, MAX_DOFS_3D};
+use rand::{Rng, SeedableRng};
+use std::collections::HashMap;
+
+/// Energy, force and dense tangent of one element.
+fn evaluate<M: Hyperelastic + ?Sized>(
+    geo: &Geometry3,
+    mat: &M,
+    u: &[[f64; 3]],
+) -> (f64, Vec<f64>, Vec<f64>) {
+    let nd = 3 * geo.n_nodes;
+    let (mut force, mut k) = (vec![0.0; nd], vec![0.0; nd * nd]);
+    let mut out = ElementResult {
+        energy: 0.0,
+        force: &mut force,
+        stiffness: Some(&mut k),
+    };
+    solid3d::evaluate(geo, mat, u, &mut out).expect("a valid deformation");
+    (out.energy, force, k)
+}
+
+/// A distorted reference element of each type (edge length about 1 mm; the C3D10 mid-edge
+/// nodes off the straight edges, so that its map is curved).
+fn reference_element(kind: Kind3) -> Vec<[f64; 3]> {
+    let tet = [
+        [0.0, 0.0, 0.0],
+        [1.1, 0.1, -0.05],
+        [0.2, 1.0, 0.1],
+        [0.1, 0.2, 0.9],
+    ];
+    match kind {
+        Kind3::C3d8 | Kind3::C3d8h => {
+            let offsets = [
+                [0.02, -0.03, 0.01],
+                [0.1, 0.05, -0.04],
+                [0.15, 0.1, 0.03],
+                [-0.05, 0.08, 0.0],
+                [0.04, 0.0, 0.1],
+                [0.07, -0.06, 0.2],
+                [0.12, 0.14, 0.05],
+                [-0.1, 0.02, 0.12],
+            ];
+            solid3d::shape::HEX_CORNERS
+                .iter()
+                .zip(offsets)
+                .map(|(c, o)| std::array::from_fn(|r| 0.5 * (c[r] + 1.0) + o[r]))
+                .collect()
+        }
+        Kind3::C3d4 => tet.to_vec(),
+        Kind3::C3d10 => {
+            let mut x = tet.to_vec();
+            let bumps = [0.03, -0.02, 0.025, -0.03, 0.02, 0.015];
+            for ([i, j], b) in solid3d::shape::TET10_EDGES.iter().zip(bumps) {
+                x.push(std::array::from_fn(|r| 0.5 * (tet[*i][r] + tet[*j][r]) + b));
+            }
+            x
+        }
+    }
+}
+
+/// Random nodal displacements of size up to `scale` (seeded).
+fn random_displacements(n: usize, scale: f64, rng: &mut impl Rng) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|_| std::array::from_fn(|_| scale * rng.gen_range(-1.0..1.0)))
+        .collect()
+}
+
+/// Random nodal displacements as [`random_displacements`], drawn again until J lies in
+/// `[0.5, 2]` at every Gauss point: finite strains, away from the near-inverted states where
+/// the forces grow without bound and differences of them lose every digit.
+fn random_state(geo: &Geometry3, scale: f64, rng: &mut impl Rng) -> Vec<[f64; 3]> {
+    loop {
+        let u = random_displacements(geo.n_nodes, scale, rng);
+        let fine = (0..geo.n_gauss).all(|g| {
+            let j = det3(&geo.deformation_gradient(g, &u));
+            (0.5..=2.0).contains(&j)
+        });
+        if fine {
+            return u;
+        }
+    }
+}
+
+/// Every registered law at its typical parameters.
+fn registered_laws() -> Vec<Box<dyn Material>> {
+    LAWS.iter()
+        .map(|entry| {
+            let typical: Vec<f64> = entry.spec.parameters.iter().map(|p| p.typical).collect();
+            entry.build(&typical).unwrap()
+        })
+        .collect()
+}
+
+fn max_abs(v: &[f64]) -> f64 {
+    v.iter().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+// Central differences of step h (relative to the element size 1 mm or to the parameter) have a
+// truncation error of order h² |f'''| ≈ 1e-12 relative and a round-off error of order
+// ε |f| / h ≈ 1e-10 relative at h = 1e-6; 1e-6 leaves room for both.
+const FD_STEP: f64 = 1e-6;
+const FD_TOLERANCE: f64 = 1e-6;
+
+/// The tangent is the derivative of the force (and symmetric), for every element type and
+/// every registered law, at random finite deformations (up to 30 % strains).
+#[test]
+fn tangent_is_the_derivative_of_the_force() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(31);
+    for law in registered_laws() {
+        for kind in Kind3::ALL {
+            let geo = Geometry3::new(kind, &reference_element(kind)).unwrap();
+            let nd = 3 * geo.n_nodes;
+            for _ in 0..3 {
+                let u = random_state(&geo, 0.15, &mut rng);
+                let (_, _, k) = evaluate(&geo, &*law, &u);
+                let scale = max_abs(&k);
+                let mut worst = 0.0f64;
+                for c in 0..nd {
+                    let (mut up, mut um) = (u.clone(), u.clone());
+                    up[c / 3][c % 3] += FD_STEP;
+                    um[c / 3][c % 3] -= FD_STEP;
+                    let (_, fp, _) = evaluate(&geo, &*law, &up);
+                    let (_, fm, _) = evaluate(&geo, &*law, &um);
+                    for r in 0..nd {
+                        let fd = (fp[r] - fm[r]) / (2.0 * FD_STEP);
+                        worst = worst.max((fd - k[r * nd + c]).abs() / scale);
+                    }
+                }
+                let name = law.spec().name;
+                assert!(
+                    worst < FD_TOLERANCE,
+                    "{name} {kind:?}: tangent vs FD {worst:e}"
+                );
+                for r in 0..nd {
+                    for c in 0..r {
+                        let d = (k[r * nd + c] - k[c * nd + r]).abs();
+                        assert!(d <= 1e-12 * scale, "{name} {kind:?}: K not symmetric");
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The force is the derivative of the energy, for every element type and law.
+#[test]
+fn force_is_the_derivative_of_the_energy() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(32);
+    for law in registered_laws() {
+        for kind in Kind3::ALL {
+            let geo = Geometry3::new(kind, &reference_element(kind)).unwrap();
+            let nd = 3 * geo.n_nodes;
+            let u = random_state(&geo, 0.15, &mut rng);
+            let (_, f, _) = evaluate(&geo, &*law, &u);
+            let scale = max_abs(&f);
+            assert!(scale > 0.0);
+            for c in 0..nd {
+                let (mut up, mut um) = (u.clone(), u.clone());
+                up[c / 3][c % 3] += FD_STEP;
+                um[c / 3][c % 3] -= FD_STEP;
+                let fd =
+                    (evaluate(&geo, &*law, &up).0 - evaluate(&geo, &*law, &um).0) / (2.0 * FD_STEP);
+                let err = (fd - f[c]).abs() / scale;
+                let name = law.spec().name;
+                assert!(
+                    err < FD_TOLERANCE,
+                    "{name} {kind:?} dof {c}: {fd} vs {}",
+                    f[c]
+                );
+            }
+        }
+    }
+}
+
+/// The parameter forces (`∂f/∂θ_k` from the unit energies) are the derivative of the force in
+/// each parameter, for every element type and law.
+#[test]
+fn parameter_forces_are_the_derivative_of_the_force() {
+    fn check<L: MaterialLaw>(rng: &mut impl Rng) {
+        let typical: Vec<f64> = L::SPEC.parameters.iter().map(|p| p.typical).collect();
+        let law = L::with_parameters(&typical);
+        for kind in Kind3::ALL {
+            let geo = Geometry3::new(kind, &reference_element(kind)).unwrap();
+            let nd = 3 * geo.n_nodes;
+            // Large enough for the Yeoh law's cubic term (I1bar - 3 of order 0.1).
+            let u = random_state(&geo, 0.2, rng);
+            let count = L::SPEC.parameters.len();
+            let mut rates = vec![0.0; count * MAX_DOFS_3D];
+            solid3d::rate_forces(&law, &geo, &u, &mut rates).unwrap();
+            for k in 0..count {
+                let theta = law.parameter_value(k);
+                // The force is linear in each coefficient (C10, C01, C20, C30) and in 1/D, so
+                // the truncation error is nil or of order (h/D)² = 1e-8, while the round-off
+                // (ε |f| / h) asks for a step larger than FD_STEP.
+                let h = 1e-4 * theta.abs().max(1e-3);
+                let (mut lp, mut lm) = (law, law);
+                *lp.parameter_value_mut(k) += h;
+                *lm.parameter_value_mut(k) -= h;
+                let (fp, fm) = (evaluate(&geo, &lp, &u).1, evaluate(&geo, &lm, &u).1);
+                let got = &rates[k * MAX_DOFS_3D..k * MAX_DOFS_3D + nd];
+                let scale = max_abs(got);
+                assert!(scale > 0.0, "{} {kind:?} parameter {k}", L::SPEC.name);
+                for r in 0..nd {
+                    let fd = (fp[r] - fm[r]) / (2.0 * h);
+                    assert!(
+                        (fd - got[r]).abs() < FD_TOLERANCE * scale,
+                        "{} {kind:?} parameter {k} dof {r}: {fd} vs {}",
+                        L::SPEC.name,
+                        got[r]
+                    );
+                }
+            }
+        }
+    }
+    let mut rng = rand::rngs::StdRng::seed_from_u64(33);
+    check::<NeoHookean>(&mut rng);
+    check::<MooneyRivlin>(&mut rng);
+    check::<Yeoh>(&mut rng);
+}
+
+/// The 3D law restricted to plane strain (`F33 = 1`, no out-of-plane shear) is the 2D law of
+/// the plane-strain elements: energy, in-plane P, `P33 = τ33` and the in-plane tangent, for
+/// every registered law (Mooney–Rivlin through its 3D `I2`, the others through `(I1, J)`).
+#[test]
+fn plane_strain_restriction_is_the_2d_law() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(34);
+    for law in registered_laws() {
+        for _ in 0..50 {
+            let f2: [f64; 4] = [
+                1.0 + rng.gen_range(-0.3..0.3),
+                rng.gen_range(-0.3..0.3),
+                rng.gen_range(-0.3..0.3),
+                1.0 + rng.gen_range(-0.3..0.3),
+            ];
+            let f3 = [f2[0], f2[1], 0.0, f2[2], f2[3], 0.0, 0.0, 0.0, 1.0];
+            let r2 = law.response(&f2, true).unwrap();
+            let d3 = law.derivatives_3d(&f3).unwrap();
+            let p3 = femu_mech::material::pk1_3d(&f3, &d3);
+            let a3 = femu_mech::material::tangent_3d(&f3, &d3);
+            let name = law.spec().name;
+            // The same quantities by different sums: round-off of the largest term.
+            let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-13 * scale;
+            assert!(
+                close(d3.w, r2.energy, r2.energy.abs().max(1e-6)),
+                "{name} W"
+            );
+            let in_plane = [0, 1, 3, 4];
+            let ps = max_abs(&r2.pk1).max(r2.tau33.abs());
+            for (a, &r) in in_plane.iter().enumerate() {
+                assert!(close(p3[r], r2.pk1[a], ps), "{name} P {r}");
+            }
+            // P33 = τ33 (F33 = 1). The 2D law writes Mooney–Rivlin's I2 through the
+            // plane-strain identity I2 = J² + I1 - 1, whose derivative in F33 is not that of
+            // I2: its τ33 differs from the 3D law's by 2 W_2 (J² + 2 - I1), W_2 = C01 J^(-4/3)
+            // (so the 2D σzz of Mooney–Rivlin is that of the (I1, J) form).
+            let tau33 = if name == "mooney-rivlin" {
+                let (i1, j) = (f2.iter().map(|v| v * v).sum::<f64>() + 1.0, det3(&f3));
+                let w2 = law.parameter(1) * j.powf(-4.0 / 3.0);
+                r2.tau33 - 2.0 * w2 * (j * j + 2.0 - i1)
+            } else {
+                r2.tau33
+            };
+            assert!(close(p3[8], tau33, ps), "{name} P33: {} vs {tau33}", p3[8]);
+            assert!(p3[2].abs() + p3[5].abs() + p3[6].abs() + p3[7].abs() <= 1e-13 * ps);
+            let ts = r2
+                .tangent
+                .iter()
+                .flatten()
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            for (a, &r) in in_plane.iter().enumerate() {
+                for (b, &c) in in_plane.iter().enumerate() {
+                    assert!(close(a3[r][c], r2.tangent[a][b], ts), "{name} A {r} {c}");
+                }
+            }
+        }
+    }
+}
+
+/// The 3D Mooney–Rivlin energy at a general F against `I2 = ½ (I1² - tr C²)` computed here,
+/// and with C01 = 0 the Neo-Hookean one.
+#[test]
+fn mooney_rivlin_uses_the_second_invariant_in_3d() {
+    let mr = MooneyRivlin {
+        c10: 1.0e-3,
+        c01: 0.75e-3,
+        d: 18.0,
+    };
+    let f = [1.2, 0.1, -0.05, 0.08, 0.9, 0.12, -0.1, 0.03, 1.1];
+    let c: [f64; 9] =
+        std::array::from_fn(|r| (0..3).map(|m| f[3 * m + r / 3] * f[3 * m + r % 3]).sum());
+    let i1 = c[0] + c[4] + c[8];
+    let i2 = 0.5 * (i1 * i1 - c.iter().map(|v| v * v).sum::<f64>());
+    let j = det3(&f);
+    let want = mr.c10 * (j.powf(-2.0 / 3.0) * i1 - 3.0)
+        + mr.c01 * (j.powf(-4.0 / 3.0) * i2 - 3.0)
+        + (j - 1.0).powi(2) / mr.d;
+    let got = mr.derivatives_3d(&f).unwrap().w;
+    assert!((got - want).abs() < 1e-15, "{got} vs {want}");
+    let nh = NeoHookean {
+        c10: 1.0e-3,
+        d: 18.0,
+    };
+    let mr0 = MooneyRivlin { c01: 0.0, ..mr };
+    let (a, b) = (
+        mr0.derivatives_3d(&f).unwrap(),
+        nh.derivatives_3d(&f).unwrap(),
+    );
+    assert!((a.w - b.w).abs() < 1e-17 && (a.w_j - b.w_j).abs() < 1e-17);
+}
+
+/// A mesh of 3D elements.
+struct Mesh {
+    nodes: Vec<[f64; 3]>,
+    elements: Vec<(Kind3, Vec<usize>)>,
+}
+
+/// The `n³` grid of hexahedra on `[0, l]³`, interior grid nodes moved by up to `distortion`
+/// times the spacing (seeded).
+fn hex_mesh(n: usize, l: f64, kind: Kind3, distortion: f64, seed: u64) -> Mesh {
+    let nodes = grid_nodes(n, l, distortion, seed);
+    let id = |i: usize, j: usize, k: usize| i + (n + 1) * (j + (n + 1) * k);
+    let mut elements = Vec::new();
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                let c = solid3d::shape::HEX_CORNERS;
+                let conn = c
+                    .iter()
+                    .map(|s| {
+                        let o = s.map(|v| usize::from(v > 0.0));
+                        id(i + o[0], j + o[1], k + o[2])
+                    })
+                    .collect();
+                elements.push((kind, conn));
+            }
+        }
+    }
+    Mesh { nodes, elements }
+}
+
+fn grid_nodes(n: usize, l: f64, distortion: f64, seed: u64) -> Vec<[f64; 3]> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let h = l / n as f64;
+    let mut nodes = Vec::new();
+    for k in 0..=n {
+        for j in 0..=n {
+            for i in 0..=n {
+                let interior = [i, j, k].iter().all(|&v| v > 0 && v < n);
+                let mut x = [i as f64 * h, j as f64 * h, k as f64 * h];
+                if interior {
+                    for v in &mut x {
+                        *v += distortion * h * rng.gen_range(-1.0..1.0);
+                    }
+                }
+                nodes.push(x);
+            }
+        }
+    }
+    nodes
+}
+
+/// The `n³` grid on `[0, l]³`, each cube split into the six tetrahedra of its main diagonal
+/// (Kuhn's split, conforming across cubes), interior grid nodes moved as in [`hex_mesh`]; C3D10
+/// with its mid-edge nodes on the straight edges.
+fn tet_mesh(n: usize, l: f64, kind: Kind3, distortion: f64, seed: u64) -> Mesh {
+    let mut nodes = grid_nodes(n, l, distortion, seed);
+    let id = |i: usize, j: usize, k: usize| i + (n + 1) * (j + (n + 1) * k);
+    let paths = [
+        [0, 1, 2],
+        [0, 2, 1],
+        [1, 0, 2],
+        [1, 2, 0],
+        [2, 0, 1],
+        [2, 1, 0],
+    ];
+    let mut elements = Vec::new();
+    let mut edges: HashMap<(usize, usize), usize> = HashMap::new();
+    for k in 0..n {
+        for j in 0..n {
+            for i in 0..n {
+                for path in paths {
+                    let mut o = [0; 3];
+                    let mut conn = vec![id(i, j, k)];
+                    for axis in path {
+                        o[axis] = 1;
+                        conn.push(id(i + o[0], j + o[1], k + o[2]));
+                    }
+                    let x: Vec<[f64; 3]> = conn.iter().map(|&a| nodes[a]).collect();
+                    let e = |a: usize| -> [f64; 3] { std::array::from_fn(|r| x[a][r] - x[0][r]) };
+                    let m = [e(1), e(2), e(3)];
+                    let volume6 = det3(&[
+                        m[0][0], m[1][0], m[2][0], m[0][1], m[1][1], m[2][1], m[0][2], m[1][2],
+                        m[2][2],
+                    ]);
+                    if volume6 < 0.0 {
+                        conn.swap(1, 2);
+                    }
+                    if kind == Kind3::C3d10 {
+                        for [a, b] in solid3d::shape::TET10_EDGES {
+                            let key = (conn[a].min(conn[b]), conn[a].max(conn[b]));
+                            let mid = *edges.entry(key).or_insert_with(|| {
+                                let (p, q) = (nodes[key.0], nodes[key.1]);
+                                nodes.push(std::array::from_fn(|r| 0.5 * (p[r] + q[r])));
+                                nodes.len() - 1
+                            });
+                            conn.push(mid);
+                        }
+                    }
+                    elements.push((kind, conn));
+                }
+            }
+        }
+    }
+    Mesh { nodes, elements }
+}
+
+/// Internal force and dense tangent of a mesh at displacements `u`.
+fn assemble<M: Hyperelastic + ?Sized>(
+    mesh: &Mesh,
+    geos: &[Geometry3],
+    mat: &M,
+    u: &[[f64; 3]],
+) -> (Vec<f64>, Vec<f64>) {
+    let n = 3 * mesh.nodes.len();
+    let (mut force, mut k) = (vec![0.0; n], vec![0.0; n * n]);
+    for ((_, conn), geo) in mesh.elements.iter().zip(geos) {
+        let ue: Vec<[f64; 3]> = conn.iter().map(|&a| u[a]).collect();
+        let (_, fe, ke) = evaluate(geo, mat, &ue);
+        let nd = 3 * conn.len();
+        let dof = |r: usize| 3 * conn[r / 3] + r % 3;
+        for r in 0..nd {
+            force[dof(r)] += fe[r];
+            for c in 0..nd {
+                k[dof(r) * n + dof(c)] += ke[r * nd + c];
+            }
+        }
+    }
+    (force, k)
+}
+
+/// Solves `A x = b` (dense, partial pivoting).
+fn dense_solve(mut a: Vec<f64>, mut b: Vec<f64>) -> Vec<f64> {
+    let n = b.len();
+    for col in 0..n {
+        let pivot = (col..n)
+            .max_by(|&p, &q| a[p * n + col].abs().total_cmp(&a[q * n + col].abs()))
+            .unwrap();
+        if pivot != col {
+            for c in 0..n {
+                a.swap(pivot * n + c, col * n + c);
+            }
+            b.swap(pivot, col);
+        }
+        let d = a[col * n + col];
+        for r in col + 1..n {
+            let m = a[r * n + col] / d;
+            if m != 0.0 {
+                for c in col..n {
+                    a[r * n + c] -= m * a[col * n + c];
+                }
+                b[r] -= m * b[col];
+            }
+        }
+    }
+    for r in (0..n).rev() {
+        let s: f64 = (r + 1..n).map(|c| a[r * n + c] * b[c]).sum();
+        b[r] = (b[r] - s) / a[r * n + r];
+    }
+    b
+}
+
+/// Newton on the free dofs (`free[dof]`) with no external load: the free nodes in equilibrium
+/// with the prescribed displacements of the others. Returns the internal force (the
+/// reactions at the fixed dofs) at convergence.
+fn solve<M: Hyperelastic + ?Sized>(
+    mesh: &Mesh,
+    mat: &M,
+    u: &mut [[f64; 3]],
+    free: &[bool],
+) -> Vec<f64> {
+    let geos: Vec<Geometry3> = mesh
+        .elements
+        .iter()
+        .map(|(kind, conn)| {
+            let x: Vec<[f64; 3]> = conn.iter().map(|&a| mesh.nodes[a]).collect();
+            Geometry3::new(*kind, &x).unwrap()
+        })
+        .collect();
+    let map: Vec<usize> = (0..free.len()).filter(|&d| free[d]).collect();
+    let n = free.len();
+    let mut reference = 0.0;
+    for iteration in 0..30 {
+        let (force, k) = assemble(mesh, &geos, mat, u);
+        reference = f64::max(reference, max_abs(&force));
+        let residual: Vec<f64> = map.iter().map(|&d| -force[d]).collect();
+        // Round-off of the assembled forces: ε times the largest force, times a few hundred
+        // terms summed.
+        if max_abs(&residual) <= 1e-13 * reference {
+            return force;
+        }
+        let kf: Vec<f64> = map
+            .iter()
+            .flat_map(|&r| map.iter().map(move |&c| (r, c)))
+            .map(|(r, c)| k[r * n + c])
+            .collect();
+        let du = dense_solve(kf, residual);
+        for (&d, v) in map.iter().zip(du) {
+            u[d / 3][d % 3] += v;
+        }
+        assert!(iteration < 29, "Newton did not converge");
+    }
+    unreachable!()
+}
+
+fn on_boundary(x: &[f64; 3], l: f64) -> bool {
+    x.iter().any(|&v| v.abs() < 1e-12 || (v - l).abs() < 1e-12)
+}
+
+/// The Cauchy stress of the law at a homogeneous F.
+fn stress_at<M: Hyperelastic + ?Sized>(mat: &M, f: &[f64; 9]) -> [f64; 6] {
+    cauchy_3d(f, &mat.derivatives_3d(f).unwrap())
+}
+
+/// Patch test: distorted meshes of each element type, the boundary nodes displaced by an
+/// affine field of finite strain, the interior nodes solved from a perturbed start; the
+/// solution is the affine field and every element's stress the constant one, for every law.
+#[test]
+fn patch_tests_reproduce_affine_deformations() {
+    let fa = [1.2, 0.1, 0.05, -0.05, 0.9, 0.1, 0.02, 0.03, 1.1];
+    let l = 3.0;
+    let affine = |x: &[f64; 3]| -> [f64; 3] {
+        std::array::from_fn(|i| (0..3).map(|j| fa[3 * i + j] * x[j]).sum::<f64>() - x[i] + 0.1)
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(35);
+    for law in registered_laws() {
+        for kind in Kind3::ALL {
+            let mesh = match kind {
+                Kind3::C3d8 | Kind3::C3d8h => hex_mesh(3, l, kind, 0.2, 7),
+                Kind3::C3d4 => tet_mesh(3, l, kind, 0.2, 7),
+                Kind3::C3d10 => tet_mesh(2, l, kind, 0.15, 7),
+            };
+            let free: Vec<bool> = mesh
+                .nodes
+                .iter()
+                .flat_map(|x| [!on_boundary(x, l); 3])
+                .collect();
+            let n_free = free.iter().filter(|&&f| f).count();
+            assert!(n_free >= 3, "{kind:?}: an interior node");
+            let mut u: Vec<[f64; 3]> = mesh.nodes.iter().map(affine).collect();
+            for (a, x) in mesh.nodes.iter().enumerate() {
+                if !on_boundary(x, l) {
+                    for v in &mut u[a] {
+                        *v += 0.05 * rng.gen_range(-1.0..1.0);
+                    }
+                }
+            }
+            solve(&mesh, &*law, &mut u, &free);
+            let name = law.spec().name;
+            for (a, x) in mesh.nodes.iter().enumerate() {
+                let want = affine(x);
+                for i in 0..3 {
+                    // The Newton tolerance (1e-13 of the forces) over a stiffness of order
+                    // the shear modulus gives displacements to about 1e-11 mm.
+                    assert!(
+                        (u[a][i] - want[i]).abs() < 1e-10,
+                        "{name} {kind:?} node {a}: {:?} vs {want:?}",
+                        u[a]
+                    );
+                }
+            }
+            let sigma = stress_at(&*law, &fa);
+            let scale = max_abs(&sigma);
+            for (kind, conn) in &mesh.elements {
+                let x: Vec<[f64; 3]> = conn.iter().map(|&a| mesh.nodes[a]).collect();
+                let ue: Vec<[f64; 3]> = conn.iter().map(|&a| u[a]).collect();
+                let geo = Geometry3::new(*kind, &x).unwrap();
+                let avg = solid3d::averages(&geo, &*law, &ue).unwrap();
+                for (s, w) in avg.cauchy_stress.iter().zip(&sigma) {
+                    assert!((s - w).abs() < 1e-10 * scale, "{name} {kind:?}: {s} vs {w}");
+                }
+                assert!((avg.volume_ratio - det3(&fa)).abs() < 1e-10);
+            }
+        }
+    }
+}
+
+/// The closed-form Cauchy stress of the compressible Neo-Hookean law
+/// `W = C10 (I1bar - 3) + (J - 1)²/D` at F: `σ = (2 C10/J) dev(b̄) + (2/D)(J - 1) I` with
+/// `b̄ = J^(-2/3) F Fᵀ` (Holzapfel 2000, §6.5), in Abaqus order.
+fn neo_hookean_cauchy(c10: f64, d: f64, f: &[f64; 9]) -> [f64; 6] {
+    let j = det3(f);
+    let b = |p: usize, q: usize| (0..3).map(|m| f[3 * p + m] * f[3 * q + m]).sum::<f64>();
+    let scale = 2.0 * c10 / j * j.powf(-2.0 / 3.0);
+    let mean = (b(0, 0) + b(1, 1) + b(2, 2)) / 3.0;
+    let p = 2.0 / d * (j - 1.0);
+    [
+        scale * (b(0, 0) - mean) + p,
+        scale * (b(1, 1) - mean) + p,
+        scale * (b(2, 2) - mean) + p,
+        scale * b(0, 1),
+        scale * b(0, 2),
+        scale * b(1, 2),
+    ]
+}
+
+/// The stretch `μ` of the free directions of `F = diag(λ, λ or μ, μ)` that makes their stress
+/// vanish (uniaxial: one loaded direction; equibiaxial: two), by bisection on the closed form.
+fn free_stretch(c10: f64, d: f64, lambda: f64, loaded: usize) -> f64 {
+    let stress = |mu: f64| {
+        let mut f = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+        for i in 0..3 {
+            f[4 * i] = if i < loaded { lambda } else { mu };
+        }
+        neo_hookean_cauchy(c10, d, &f)[2]
+    };
+    let (mut lo, mut hi) = (0.3, 2.0);
+    assert!(stress(lo) < 0.0 && stress(hi) > 0.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if stress(mid) < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// Uniaxial and equibiaxial stretch with free lateral faces, solved by Newton on a distorted
+/// block of each element type (symmetry planes `x = 0`, `y = 0`, `z = 0`, the loaded faces
+/// displaced, the others free): the free stretch and the reaction over the current area
+/// against the closed-form Neo-Hookean stress; and simple shear, every element's stress
+/// against the closed form.
+#[test]
+fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
+    let (c10, d) = (1.75e-3, 18.0);
+    let law = NeoHookean { c10, d };
+    let l = 2.0;
+    let lambda = 1.3;
+    for kind in Kind3::ALL {
+        for loaded in [1, 2] {
+            let mesh = match kind {
+                Kind3::C3d8 | Kind3::C3d8h => hex_mesh(2, l, kind, 0.15, 11),
+                _ => tet_mesh(2, l, kind, 0.15, 11),
+            };
+            let mu = free_stretch(c10, d, lambda, loaded);
+            let mut free = vec![true; 3 * mesh.nodes.len()];
+            let mut u = vec![[0.0; 3]; mesh.nodes.len()];
+            for (a, x) in mesh.nodes.iter().enumerate() {
+                for i in 0..3 {
+                    if x[i].abs() < 1e-12 {
+                        free[3 * a + i] = false;
+                    } else if i < loaded && (x[i] - l).abs() < 1e-12 {
+                        free[3 * a + i] = false;
+                        u[a][i] = (lambda - 1.0) * l;
+                    } else if i < loaded {
+                        // The start: the loaded directions stretched, the others not.
+                        u[a][i] = (lambda - 1.0) * x[i];
+                    }
+                }
+            }
+            let force = solve(&mesh, &law, &mut u, &free);
+            let mut f = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+            for i in 0..3 {
+                f[4 * i] = if i < loaded { lambda } else { mu };
+            }
+            let sigma = neo_hookean_cauchy(c10, d, &f);
+            // The free stretch: a corner node on the free face z = l.
+            let corner = mesh
+                .nodes
+                .iter()
+                .position(|x| x.iter().all(|v| (v - l).abs() < 1e-12))
+                .unwrap();
+            let got_mu = 1.0 + u[corner][2] / l;
+            // The bisection's closed form and the Newton solution, both to round-off.
+            assert!(
+                (got_mu - mu).abs() < 1e-10,
+                "{kind:?} {loaded}: μ {got_mu} vs {mu}"
+            );
+            // The reaction on x = l over its current area (λ or μ times l, by μ l).
+            let reaction: f64 = (0..mesh.nodes.len())
+                .filter(|&a| (mesh.nodes[a][0] - l).abs() < 1e-12)
+                .map(|a| force[3 * a])
+                .sum();
+            let area = (if loaded == 2 { lambda } else { mu }) * l * mu * l;
+            let s11 = reaction / area;
+            assert!(
+                (s11 - sigma[0]).abs() < 1e-9 * sigma[0].abs(),
+                "{kind:?} {loaded}: σ11 {s11} vs {}",
+                sigma[0]
+            );
+            // The closed form's uniaxial/equibiaxial value: 2 C10 J^(-5/3) (λ² - μ²).
+            let j = det3(&f);
+            let closed = 2.0 * c10 * j.powf(-5.0 / 3.0) * (lambda * lambda - mu * mu);
+            assert!((sigma[0] - closed).abs() < 1e-12 * closed);
+        }
+        // Simple shear F = I + γ e1⊗e2 on every node: σ12 = 2 C10 γ, σ11 = 4/3 C10 γ²,
+        // σ22 = σ33 = -2/3 C10 γ² (J = 1).
+        let gamma = 0.4;
+        let mesh = match kind {
+            Kind3::C3d8 | Kind3::C3d8h => hex_mesh(2, l, kind, 0.15, 12),
+            _ => tet_mesh(2, l, kind, 0.15, 12),
+        };
+        let want = [
+            4.0 / 3.0 * c10 * gamma * gamma,
+            -2.0 / 3.0 * c10 * gamma * gamma,
+            -2.0 / 3.0 * c10 * gamma * gamma,
+            2.0 * c10 * gamma,
+            0.0,
+            0.0,
+        ];
+        for (kind, conn) in &mesh.elements {
+            let x: Vec<[f64; 3]> = conn.iter().map(|&a| mesh.nodes[a]).collect();
+            let ue: Vec<[f64; 3]> = x.iter().map(|p| [gamma * p[1], 0.0, 0.0]).collect();
+            let geo = Geometry3::new(*kind, &x).unwrap();
+            let s = solid3d::averages(&geo, &law, &ue).unwrap().cauchy_stress;
+            for (a, b) in s.iter().zip(want) {
+                assert!(
+                    (a - b).abs() < 1e-12 * want[3],
+                    "{kind:?} shear: {s:?} vs {want:?}"
+                );
+            }
+        }
+    }
+}
