@@ -139,6 +139,7 @@ fn tangent_is_the_derivative_of_the_force() {
                     }
                 }
                 let name = law.spec().name;
+                println!("{name} {kind:?}: tangent vs FD {worst:.1e}");
                 assert!(
                     worst < FD_TOLERANCE,
                     "{name} {kind:?}: tangent vs FD {worst:e}"
@@ -166,6 +167,7 @@ fn force_is_the_derivative_of_the_energy() {
             let (_, f, _) = evaluate(&geo, &*law, &u);
             let scale = max_abs(&f);
             assert!(scale > 0.0);
+            let mut worst = 0.0f64;
             for c in 0..nd {
                 let (mut up, mut um) = (u.clone(), u.clone());
                 up[c / 3][c % 3] += FD_STEP;
@@ -173,6 +175,7 @@ fn force_is_the_derivative_of_the_energy() {
                 let fd =
                     (evaluate(&geo, &*law, &up).0 - evaluate(&geo, &*law, &um).0) / (2.0 * FD_STEP);
                 let err = (fd - f[c]).abs() / scale;
+                worst = worst.max(err);
                 let name = law.spec().name;
                 assert!(
                     err < FD_TOLERANCE,
@@ -180,6 +183,10 @@ fn force_is_the_derivative_of_the_energy() {
                     f[c]
                 );
             }
+            println!(
+                "{} {kind:?}: force vs FD of the energy {worst:.1e}",
+                law.spec().name
+            );
         }
     }
 }
@@ -212,6 +219,10 @@ fn parameter_forces_are_the_derivative_of_the_force() {
                 let got = &rates[k * MAX_DOFS_3D..k * MAX_DOFS_3D + nd];
                 let scale = max_abs(got);
                 assert!(scale > 0.0, "{} {kind:?} parameter {k}", L::SPEC.name);
+                let worst = (0..nd)
+                    .map(|r| ((fp[r] - fm[r]) / (2.0 * h) - got[r]).abs() / scale)
+                    .fold(0.0, f64::max);
+                println!("{} {kind:?} parameter {k}: vs FD {worst:.1e}", L::SPEC.name);
                 for r in 0..nd {
                     let fd = (fp[r] - fm[r]) / (2.0 * h);
                     assert!(
@@ -568,9 +579,11 @@ fn patch_tests_reproduce_affine_deformations() {
             }
             solve(&mesh, &*law, &mut u, &free);
             let name = law.spec().name;
+            let (mut worst_u, mut worst_s) = (0.0f64, 0.0f64);
             for (a, x) in mesh.nodes.iter().enumerate() {
                 let want = affine(x);
                 for i in 0..3 {
+                    worst_u = worst_u.max((u[a][i] - want[i]).abs());
                     // The Newton tolerance (1e-13 of the forces) over a stiffness of order
                     // the shear modulus gives displacements to about 1e-11 mm.
                     assert!(
@@ -588,10 +601,16 @@ fn patch_tests_reproduce_affine_deformations() {
                 let geo = Geometry3::new(*kind, &x).unwrap();
                 let avg = solid3d::averages(&geo, &*law, &ue).unwrap();
                 for (s, w) in avg.cauchy_stress.iter().zip(&sigma) {
+                    worst_s = worst_s.max((s - w).abs() / scale);
                     assert!((s - w).abs() < 1e-10 * scale, "{name} {kind:?}: {s} vs {w}");
                 }
                 assert!((avg.volume_ratio - det3(&fa)).abs() < 1e-10);
             }
+            println!(
+                "{name} {kind:?} patch ({} elements, {n_free} free dofs): |u - u_affine| \
+                 {worst_u:.1e} mm, stress {worst_s:.1e}",
+                mesh.elements.len()
+            );
         }
     }
 }
@@ -696,6 +715,11 @@ fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
                 .sum();
             let area = (if loaded == 2 { lambda } else { mu }) * l * mu * l;
             let s11 = reaction / area;
+            println!(
+                "{kind:?} loaded {loaded}: μ {got_mu} (closed form {mu}, {:.1e}), σ11 {:.1e} rel",
+                (got_mu - mu).abs(),
+                (s11 - sigma[0]).abs() / sigma[0].abs()
+            );
             assert!(
                 (s11 - sigma[0]).abs() < 1e-9 * sigma[0].abs(),
                 "{kind:?} {loaded}: σ11 {s11} vs {}",
