@@ -759,3 +759,139 @@ fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
         }
     }
 }
+
+/// The nominal stress `P11 = μ² σ11` of the Neo-Hookean law in uniaxial tension `λ` with free
+/// lateral faces (`σ22 = σ33 = 0`), and the stretch at which it equals `t`, by bisection on
+/// the closed form.
+fn uniaxial_stretch_under_nominal_stress(c10: f64, d: f64, t: f64) -> (f64, f64) {
+    let nominal = |lambda: f64| {
+        let mu = free_stretch(c10, d, lambda, 1);
+        let j = lambda * mu * mu;
+        mu * mu * 2.0 * c10 * j.powf(-5.0 / 3.0) * (lambda * lambda - mu * mu)
+    };
+    let (mut lo, mut hi) = (1.0, 3.0);
+    assert!(nominal(hi) > t);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if nominal(mid) < t {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let lambda = 0.5 * (lo + hi);
+    (lambda, free_stretch(c10, d, lambda, 1))
+}
+
+/// A block on the symmetry planes `x = 0`, `y = 0`, `z = 0`: its [`solid3d::Body3`] with the
+/// mesh's elements of material 0.
+fn block_body(mesh: &Mesh, law: Box<dyn Material>) -> solid3d::Body3 {
+    let mut prescribed = Vec::new();
+    for (a, x) in mesh.nodes.iter().enumerate() {
+        for i in 0..3 {
+            if x[i].abs() < 1e-12 {
+                prescribed.push((a, i, 0.0));
+            }
+        }
+    }
+    solid3d::Body3 {
+        nodes: mesh.nodes.clone(),
+        elements: mesh
+            .elements
+            .iter()
+            .map(|(kind, nodes)| solid3d::Element3 {
+                kind: *kind,
+                nodes: nodes.clone(),
+                material: 0,
+            })
+            .collect(),
+        materials: vec![law],
+        prescribed,
+        loads: Vec::new(),
+    }
+}
+
+/// The sparse Newton of [`solid3d::solve`]: a Neo-Hookean block under a uniaxial dead load
+/// (nominal traction t on `x = l`, consistent nodal forces, lateral faces free) on distorted
+/// C3D8 and C3D8H meshes, and under a prescribed stretch on a C3D10 mesh: the stretches and the
+/// nominal stress against the closed form.
+#[test]
+fn sparse_newton_solves_a_block_in_uniaxial_tension() {
+    let (c10, d) = (1.75e-3, 18.0);
+    let law = NeoHookean { c10, d };
+    let l = 2.0;
+    let t = 3e-3; // MPa: a stretch of about 1.4
+    let (lambda, mu) = uniaxial_stretch_under_nominal_stress(c10, d, t);
+    assert!(lambda > 1.3 && lambda < 1.6, "λ = {lambda}");
+    let n = 3;
+    let h = l / n as f64;
+    for kind in [Kind3::C3d8, Kind3::C3d8h] {
+        let mesh = hex_mesh(n, l, kind, 0.15, 13);
+        let mut body = block_body(&mesh, Box::new(law));
+        // ∫ N_a t dA over the face x = l: t h²/4 from each of the node's face quads.
+        for (a, x) in mesh.nodes.iter().enumerate() {
+            if (x[0] - l).abs() < 1e-12 {
+                let share = |v: f64| {
+                    if v.abs() < 1e-12 || (v - l).abs() < 1e-12 {
+                        0.5
+                    } else {
+                        1.0
+                    }
+                };
+                body.loads
+                    .push((a, 0, t * h * h * share(x[1]) * share(x[2])));
+            }
+        }
+        let options = solid3d::Options3 {
+            increments: 4,
+            ..Default::default()
+        };
+        let solution = solid3d::solve(&body, &options).unwrap();
+        let corner = mesh
+            .nodes
+            .iter()
+            .position(|x| x.iter().all(|v| (v - l).abs() < 1e-12))
+            .unwrap();
+        let got = [
+            1.0 + solution.u[corner][0] / l,
+            1.0 + solution.u[corner][2] / l,
+        ];
+        println!(
+            "{kind:?} dead load: λ {} (closed form {lambda}), μ {} ({mu}), Newton iterations {:?}",
+            got[0], got[1], solution.iterations
+        );
+        // The Newton tolerance (1e-10 of the forces) over the tangent stiffness: stretches to
+        // about 1e-10.
+        assert!(
+            (got[0] - lambda).abs() < 1e-8,
+            "{kind:?}: λ {} vs {lambda}",
+            got[0]
+        );
+        assert!((got[1] - mu).abs() < 1e-8, "{kind:?}: μ {} vs {mu}", got[1]);
+        // Quadratic convergence: a few iterations per increment.
+        assert!(
+            solution.iterations.iter().all(|&k| k <= 8),
+            "{:?}",
+            solution.iterations
+        );
+    }
+    // Prescribed stretch λ on x = l, C3D10: the reaction is the closed-form nominal stress.
+    let mesh = tet_mesh(2, l, Kind3::C3d10, 0.15, 14);
+    let mut body = block_body(&mesh, Box::new(law));
+    for (a, x) in mesh.nodes.iter().enumerate() {
+        if (x[0] - l).abs() < 1e-12 {
+            body.prescribed.push((a, 0, (lambda - 1.0) * l));
+        }
+    }
+    let solution = solid3d::solve(&body, &solid3d::Options3::default()).unwrap();
+    let reaction: f64 = (0..mesh.nodes.len())
+        .filter(|&a| (mesh.nodes[a][0] - l).abs() < 1e-12)
+        .map(|a| solution.internal_force[3 * a])
+        .sum();
+    let nominal = reaction / (l * l);
+    println!(
+        "C3d10 prescribed stretch: P11 {nominal} (closed form {t}), iterations {:?}",
+        solution.iterations
+    );
+    assert!((nominal - t).abs() < 1e-8 * t, "P11 {nominal} vs {t}");
+}

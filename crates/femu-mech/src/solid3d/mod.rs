@@ -18,11 +18,15 @@
 //!
 //! - [`shape`]: the shape functions and integration rules;
 //! - [`kernel`]: reference geometry, energy, force, tangent, averaged Cauchy stress, and the
-//!   parameter-energy forces of the sensitivities.
+//!   parameter-energy forces of the sensitivities;
+//! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], Newton–Raphson over
+//!   load increments) for prescribed displacements and dead nodal loads.
 
+pub mod assembly;
 pub mod kernel;
 pub mod shape;
 
+pub use assembly::{solve, Body3, Element3, Options3, Solution3, Solve3Error};
 pub use kernel::{
     averages, evaluate, rate_forces, unit_energy_forces, Averages3, GaussPoint3, Geometry3,
     MAX_DOFS_3D, MAX_GAUSS_3D, MAX_NODES_3D,
