@@ -1,14 +1,15 @@
 //! A static 3D solve of the elements of [`crate::solid3d`]: global assembly on a sparse
 //! pattern of [`femu_sparse`] (the same [`CscPattern`] and [`SparseSolver`], LDLᵀ or LU, as the
 //! plane-strain solver) and Newton–Raphson over load increments, for dead nodal loads and
-//! prescribed displacements.
+//! prescribed displacements and follower pressures on faces ([`super::pressure`]).
 //!
-//! This is the first slice of 3D solving: no contact, no follower pressure, no line search or
+//! This is the first slice of 3D solving: no contact, no line search or
 //! cut-back, no sensitivities (the plane-strain [`crate::solver`] has them all, written for two
 //! dofs per node). Dof `3 n + i` is component i of node n; the free dofs are numbered in
 //! increasing dof order.
 
 use super::kernel::{evaluate, Geometry3, MAX_DOFS_3D};
+use super::pressure::{face_pressure, MAX_FACE_DOFS};
 use super::shape::Kind3;
 use crate::element::{BadReferenceGeometry, ElementResult};
 use crate::material::Material;
@@ -23,7 +24,8 @@ pub struct Element3 {
     pub material: usize,
 }
 
-/// A 3D body: nodes (mm), elements, materials, prescribed displacements and dead nodal loads.
+/// A 3D body: nodes (mm), elements, materials, prescribed displacements, dead nodal loads and
+/// follower pressures.
 #[derive(Debug, Clone)]
 pub struct Body3 {
     pub nodes: Vec<[f64; 3]>,
@@ -33,6 +35,9 @@ pub struct Body3 {
     pub prescribed: Vec<(usize, usize, f64)>,
     /// `(node, component, force)` (N), dead loads, reached at the end of the load path.
     pub loads: Vec<(usize, usize, f64)>,
+    /// `(face nodes, pressure)` (MPa): follower pressures on element faces (3 or 4 nodes, in
+    /// the order whose normal points out of the body), reached at the end of the load path.
+    pub pressures: Vec<(Vec<usize>, f64)>,
 }
 
 /// Why a 3D solve failed.
@@ -87,7 +92,8 @@ impl Default for Options3 {
 pub struct Solution3 {
     /// Nodal displacements (mm).
     pub u: Vec<[f64; 3]>,
-    /// Internal force at every dof (N): the reactions at the prescribed dofs.
+    /// Internal force minus the pressure loads at every dof (N): the reactions at the
+    /// prescribed dofs.
     pub internal_force: Vec<f64>,
     /// Newton iterations of each increment.
     pub iterations: Vec<usize>,
@@ -177,7 +183,8 @@ impl System {
         })
     }
 
-    /// The internal force at every dof and the tangent's values on the pattern at `u`; with
+    /// The internal force minus the pressure loads at `lambda` at every dof, and the tangent's
+    /// values (the elements' minus the pressures' load stiffness) on the pattern at `u`; with
     /// `step` (a displacement increment of the prescribed dofs, zero elsewhere) also
     /// `K step` at every dof, the linearized force of the prescribed increment, in `coupling`.
     fn assemble(
@@ -186,6 +193,7 @@ impl System {
         u: &[[f64; 3]],
         values: &mut [f64],
         force: &mut [f64],
+        lambda: f64,
         step: Option<(&[f64], &mut [f64])>,
     ) -> Result<(), (usize, f64)> {
         values.fill(0.0);
@@ -227,6 +235,34 @@ impl System {
                 }
             }
         }
+        let (mut ff, mut kf) = ([0.0; MAX_FACE_DOFS], [0.0; MAX_FACE_DOFS * MAX_FACE_DOFS]);
+        for (nodes, p) in &body.pressures {
+            let x: Vec<[f64; 3]> = nodes
+                .iter()
+                .map(|&n| std::array::from_fn(|i| body.nodes[n][i] + u[n][i]))
+                .collect();
+            face_pressure(&x, lambda * p, &mut ff, Some(&mut kf));
+            let nd = 3 * nodes.len();
+            let dof = |r: usize| 3 * nodes[r / 3] + r % 3;
+            for r in 0..nd {
+                force[dof(r)] -= ff[r];
+                let row = self.eq[dof(r)];
+                for c in 0..nd {
+                    let col = self.eq[dof(c)];
+                    if row != usize::MAX && col != usize::MAX {
+                        let pos = self
+                            .pattern
+                            .position(row, col)
+                            .expect("a face of an element");
+                        values[pos] -= kf[r * nd + c];
+                    }
+                }
+                if let Some((dp, coupling)) = step.as_mut() {
+                    let s: f64 = (0..nd).map(|c| kf[r * nd + c] * dp[dof(c)]).sum();
+                    coupling[dof(r)] -= s;
+                }
+            }
+        }
         Ok(())
     }
 }
@@ -263,7 +299,7 @@ pub fn solve(body: &Body3, options: &Options3) -> Result<Solution3, Solve3Error>
             let first = iteration == 0;
             let predictor = first.then_some((&dp[..], &mut coupling[..]));
             system
-                .assemble(body, &u, &mut values, &mut force, predictor)
+                .assemble(body, &u, &mut values, &mut force, lambda, predictor)
                 .map_err(|(element, j)| Solve3Error::Inverted {
                     element,
                     j,

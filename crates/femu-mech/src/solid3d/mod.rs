@@ -20,10 +20,12 @@
 //! - [`kernel`]: reference geometry, energy, force, tangent, averaged Cauchy stress, and the
 //!   parameter-energy forces of the sensitivities;
 //! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], Newton–Raphson over
-//!   load increments) for prescribed displacements and dead nodal loads.
+//!   load increments) for prescribed displacements, dead nodal loads and follower pressures;
+//! - [`pressure`]: follower pressure on hexahedron and C3D4 faces, with its load stiffness.
 
 pub mod assembly;
 pub mod kernel;
+pub mod pressure;
 pub mod shape;
 
 pub use assembly::{solve, Body3, Element3, Options3, Solution3, Solve3Error};
