@@ -1122,3 +1122,73 @@ fn pressurized_thick_walled_sphere_matches_the_radial_solution() {
         "C3D8: {full:?}"
     );
 }
+
+/// The exact parameter sensitivities of a 3D solution against central differences of the
+/// solve in each parameter: the pressurized sphere (C3D8H, follower pressure) and the block
+/// under a prescribed stretch (C3D10), Mooney–Rivlin and Neo-Hookean.
+#[test]
+fn sensitivities_of_a_3d_solution_match_finite_differences() {
+    let options = solid3d::Options3 {
+        increments: 4,
+        max_iterations: 30,
+        // Tight (round-off leaves about 1e-13), so that differences of solutions resolve the
+        // sensitivities.
+        tolerance: 1e-12,
+    };
+    let (mesh, inner) = sphere_octant(2, 2, 1.0, 2.0, Kind3::C3d8h);
+    let mut sphere = block_body(
+        &mesh,
+        Box::new(MooneyRivlin {
+            c10: 1.0e-3,
+            c01: 0.75e-3,
+            d: 18.0,
+        }),
+    );
+    sphere.pressures = inner.iter().map(|f| (f.clone(), 1e-3)).collect();
+    let mesh = tet_mesh(2, 2.0, Kind3::C3d10, 0.15, 15);
+    let mut block = block_body(
+        &mesh,
+        Box::new(NeoHookean {
+            c10: 1.75e-3,
+            d: 18.0,
+        }),
+    );
+    for (a, x) in mesh.nodes.iter().enumerate() {
+        if (x[0] - 2.0).abs() < 1e-12 {
+            block.prescribed.push((a, 0, 0.6));
+        }
+    }
+    for (name, body) in [("sphere", sphere), ("block", block)] {
+        let solution = solid3d::solve(&body, &options).unwrap();
+        let exact = solid3d::sensitivities(&body, &solution).unwrap();
+        let law = &body.materials[0];
+        for k in 0..law.spec().parameters.len() {
+            let theta = law.parameter(k);
+            let h = 1e-4 * theta;
+            let solve_at = |value: f64| {
+                let mut b = body.clone();
+                b.materials[0].set_parameter(k, value);
+                solid3d::solve(&b, &options).unwrap().u
+            };
+            let (up, um) = (solve_at(theta + h), solve_at(theta - h));
+            let scale = exact[0][k]
+                .iter()
+                .flatten()
+                .fold(0.0f64, |m, v| m.max(v.abs()));
+            let mut worst = 0.0f64;
+            for a in 0..body.nodes.len() {
+                for i in 0..3 {
+                    let fd = (up[a][i] - um[a][i]) / (2.0 * h);
+                    worst = worst.max((fd - exact[0][k][a][i]).abs() / scale);
+                }
+            }
+            println!("{name} parameter {k}: du/dθ vs FD {worst:.1e} (max |du/dθ| {scale:.2e})");
+            // Truncation (h/θ)² = 1e-8; the solves' residual tolerance (1e-12 of the forces)
+            // over h/θ: 1e-8 of the sensitivity.
+            assert!(
+                scale > 0.0 && worst < 1e-6,
+                "{name} parameter {k}: {worst:e}"
+            );
+        }
+    }
+}

@@ -294,6 +294,14 @@ pub trait Material: Hyperelastic {
         u: &[[f64; 2]],
         forces: &mut [f64],
     ) -> Result<(), NonPositiveJacobian>;
+    /// [`Material::rate_forces`] of a 3D element ([`crate::solid3d::rate_forces`]):
+    /// `forces[k * MAX_DOFS_3D..][..3 n]` for parameter k.
+    fn rate_forces_3d(
+        &self,
+        geo: &crate::solid3d::Geometry3,
+        u: &[[f64; 3]],
+        forces: &mut [f64],
+    ) -> Result<(), NonPositiveJacobian>;
     /// A boxed copy.
     fn boxed(&self) -> Box<dyn Material>;
 }
@@ -361,6 +369,15 @@ impl<L: MaterialLaw> Material for L {
             }
         }
         Ok(())
+    }
+
+    fn rate_forces_3d(
+        &self,
+        geo: &crate::solid3d::Geometry3,
+        u: &[[f64; 3]],
+        forces: &mut [f64],
+    ) -> Result<(), NonPositiveJacobian> {
+        crate::solid3d::rate_forces(self, geo, u, forces)
     }
 
     fn boxed(&self) -> Box<dyn Material> {

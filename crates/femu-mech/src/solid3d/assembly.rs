@@ -1,12 +1,12 @@
 //! A static 3D solve of the elements of [`crate::solid3d`]: global assembly on a sparse
 //! pattern of [`femu_sparse`] (the same [`CscPattern`] and [`SparseSolver`], LDLᵀ or LU, as the
-//! plane-strain solver) and Newton–Raphson over load increments, for dead nodal loads and
-//! prescribed displacements and follower pressures on faces ([`super::pressure`]).
+//! plane-strain solver) and Newton–Raphson over load increments, for prescribed
+//! displacements, dead nodal loads and follower pressures on faces ([`super::pressure`]); and
+//! the exact parameter sensitivities of a solution ([`sensitivities`]).
 //!
-//! This is the first slice of 3D solving: no contact, no line search or
-//! cut-back, no sensitivities (the plane-strain [`crate::solver`] has them all, written for two
-//! dofs per node). Dof `3 n + i` is component i of node n; the free dofs are numbered in
-//! increasing dof order.
+//! This is the first slice of 3D solving: no contact, no line search or cut-back (the
+//! plane-strain [`crate::solver`] has them, written for two dofs per node). Dof `3 n + i` is
+//! component i of node n; the free dofs are numbered in increasing dof order.
 
 use super::kernel::{evaluate, Geometry3, MAX_DOFS_3D};
 use super::pressure::{face_pressure, MAX_FACE_DOFS};
@@ -354,4 +354,71 @@ pub fn solve(body: &Body3, options: &Options3) -> Result<Solution3, Solve3Error>
         internal_force: force,
         iterations,
     })
+}
+
+/// The exact parameter sensitivities of a solved body (direct differentiation, as the
+/// plane-strain [`crate::sensitivity`]): for material m and parameter k of its law,
+/// `du/dθ` at every node from `K_ff du_f = -∂f_int,f/∂θ` at the solution, K the tangent with
+/// the pressures' load stiffness (the prescribed displacements and the loads do not depend on
+/// θ). Returned as `[m][k][node]`.
+pub fn sensitivities(
+    body: &Body3,
+    solution: &Solution3,
+) -> Result<Vec<Vec<Vec<[f64; 3]>>>, Solve3Error> {
+    let system = System::new(body)?;
+    let n_dof = 3 * body.nodes.len();
+    let mut values = vec![0.0; system.pattern.nnz()];
+    let mut force = vec![0.0; n_dof];
+    system
+        .assemble(body, &solution.u, &mut values, &mut force, 1.0, None)
+        .map_err(|(element, j)| Solve3Error::Inverted {
+            element,
+            j,
+            load_factor: 1.0,
+        })?;
+    let mut solver = SparseSolver::new(&system.pattern, None)?;
+    solver.factorize(&system.pattern, &values)?;
+    let mut out = Vec::with_capacity(body.materials.len());
+    for (m, material) in body.materials.iter().enumerate() {
+        let count = material.spec().parameters.len();
+        let mut rhs = vec![vec![0.0; system.n_eq]; count];
+        let mut rates = vec![0.0; count * MAX_DOFS_3D];
+        for (e, element) in body.elements.iter().enumerate() {
+            if element.material != m {
+                continue;
+            }
+            let ue: Vec<[f64; 3]> = element.nodes.iter().map(|&n| solution.u[n]).collect();
+            material
+                .rate_forces_3d(&system.geometries[e], &ue, &mut rates)
+                .map_err(|j| Solve3Error::Inverted {
+                    element: e,
+                    j: j.0,
+                    load_factor: 1.0,
+                })?;
+            for (k, column) in rhs.iter_mut().enumerate() {
+                for (r, v) in rates[k * MAX_DOFS_3D..][..3 * element.nodes.len()]
+                    .iter()
+                    .enumerate()
+                {
+                    let q = system.eq[3 * element.nodes[r / 3] + r % 3];
+                    if q != usize::MAX {
+                        column[q] -= v;
+                    }
+                }
+            }
+        }
+        let mut per_parameter = Vec::with_capacity(count);
+        for mut column in rhs {
+            solver.solve_in_place(&mut column);
+            let mut du = vec![[0.0; 3]; body.nodes.len()];
+            for (d, &q) in system.eq.iter().enumerate() {
+                if q != usize::MAX {
+                    du[d / 3][d % 3] = column[q];
+                }
+            }
+            per_parameter.push(du);
+        }
+        out.push(per_parameter);
+    }
+    Ok(out)
 }

@@ -20,7 +20,8 @@
 //! - [`kernel`]: reference geometry, energy, force, tangent, averaged Cauchy stress, and the
 //!   parameter-energy forces of the sensitivities;
 //! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], Newton–Raphson over
-//!   load increments) for prescribed displacements, dead nodal loads and follower pressures;
+//!   load increments) for prescribed displacements, dead nodal loads and follower pressures,
+//!   and the exact parameter sensitivities of its solution;
 //! - [`pressure`]: follower pressure on hexahedron and C3D4 faces, with its load stiffness.
 
 pub mod assembly;
@@ -28,7 +29,7 @@ pub mod kernel;
 pub mod pressure;
 pub mod shape;
 
-pub use assembly::{solve, Body3, Element3, Options3, Solution3, Solve3Error};
+pub use assembly::{sensitivities, solve, Body3, Element3, Options3, Solution3, Solve3Error};
 pub use kernel::{
     averages, evaluate, rate_forces, unit_energy_forces, Averages3, GaussPoint3, Geometry3,
     MAX_DOFS_3D, MAX_GAUSS_3D, MAX_NODES_3D,
