@@ -13,7 +13,8 @@
 //! - [`material`]: the registry of hyperelastic laws (compressible Neo-Hookean, seed Eq. 1;
 //!   Mooney–Rivlin; Yeoh; Abaqus forms), their parameters, stress and tangent.
 //! - [`element`]: CPE4, CPE4H (mean dilatation), CPE3; [`solid3d`]: their 3D counterparts
-//!   C3D8, C3D8H, C3D4, C3D10 (element kernels; not yet assembled by the solver).
+//!   C3D8, C3D8H, C3D4, C3D10, with a static 3D solve and its parameter sensitivities (the
+//!   model, the loading tests and the solver below are plane-strain).
 //! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,
 //!   node-to-surface augmented-Lagrangian contact.
 //!
