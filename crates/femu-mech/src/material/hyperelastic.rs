@@ -299,23 +299,17 @@ pub fn tangent_3d(f: &Tensor3, d: &InvariantDerivatives3) -> Tensor4x3 {
         }
         a[r][r] += 2.0 * d.w_i;
     }
-    // W_J ∂H/∂F
+    // W_J ∂H/∂F: ε_ikm ε_JLM F_mM is non-zero only for i ≠ k and J ≠ L, with m and M the
+    // remaining indices (3 - i - k, 3 - J - L).
     for i in 0..3 {
-        for k in 0..3 {
-            for m in 0..3 {
-                let e_ikm = levi_civita(i, k, m);
-                if e_ikm == 0.0 {
-                    continue;
-                }
-                for jj in 0..3 {
-                    for l in 0..3 {
-                        for mm in 0..3 {
-                            let e = levi_civita(jj, l, mm);
-                            if e != 0.0 {
-                                a[3 * i + jj][3 * k + l] += d.w_j * e_ikm * e * f[3 * m + mm];
-                            }
-                        }
-                    }
+        for k in (0..3).filter(|&k| k != i) {
+            let m = 3 - i - k;
+            let e_ikm = levi_civita(i, k, m);
+            for jj in 0..3 {
+                for l in (0..3).filter(|&l| l != jj) {
+                    let mm = 3 - jj - l;
+                    a[3 * i + jj][3 * k + l] +=
+                        d.w_j * e_ikm * levi_civita(jj, l, mm) * f[3 * m + mm];
                 }
             }
         }
