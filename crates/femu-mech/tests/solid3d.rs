@@ -1192,3 +1192,116 @@ fn sensitivities_of_a_3d_solution_match_finite_differences() {
         }
     }
 }
+
+/// The element faces of `mesh` whose corners all lie on the plane `x = l`, ordered with their
+/// normal along +x (out of the block), C3D10 faces with their mid-edge nodes.
+fn faces_on_x(mesh: &Mesh, l: f64) -> Vec<Vec<usize>> {
+    let mut faces = Vec::new();
+    for (kind, conn) in &mesh.elements {
+        let corner_sets: Vec<Vec<usize>> = match kind {
+            Kind3::C3d8 | Kind3::C3d8h => vec![
+                vec![0, 1, 2, 3],
+                vec![4, 5, 6, 7],
+                vec![0, 1, 5, 4],
+                vec![1, 2, 6, 5],
+                vec![2, 3, 7, 6],
+                vec![3, 0, 4, 7],
+            ],
+            _ => vec![vec![0, 1, 2], vec![0, 1, 3], vec![1, 2, 3], vec![0, 2, 3]],
+        };
+        for mut local in corner_sets {
+            if !local
+                .iter()
+                .all(|&a| (mesh.nodes[conn[a]][0] - l).abs() < 1e-12)
+            {
+                continue;
+            }
+            let x: Vec<[f64; 3]> = local.iter().map(|&a| mesh.nodes[conn[a]]).collect();
+            let last = local.len() - 1;
+            // The x component of (x1 - x0) × (x_last - x0).
+            let (t1, t2) = (
+                [x[1][1] - x[0][1], x[1][2] - x[0][2]],
+                [x[last][1] - x[0][1], x[last][2] - x[0][2]],
+            );
+            if t1[0] * t2[1] - t1[1] * t2[0] < 0.0 {
+                local.reverse();
+            }
+            let mut face: Vec<usize> = local.iter().map(|&a| conn[a]).collect();
+            if *kind == Kind3::C3d10 {
+                for k in 0..3 {
+                    let (a, b) = (local[k], local[(k + 1) % 3]);
+                    let e = solid3d::shape::TET10_EDGES
+                        .iter()
+                        .position(|&[i, j]| (i, j) == (a, b) || (i, j) == (b, a))
+                        .unwrap();
+                    face.push(conn[4 + e]);
+                }
+            }
+            faces.push(face);
+        }
+    }
+    faces
+}
+
+/// A Neo-Hookean block compressed by a follower pressure on `x = l` (lateral faces free), on
+/// every element type (the pressure on hexahedron, C3D4 and C3D10 faces): the stretches against
+/// the closed form `σ11 = -p`, `σ22 = σ33 = 0`.
+#[test]
+fn follower_pressure_compresses_a_block_as_the_closed_form() {
+    let (c10, d) = (1.75e-3, 18.0);
+    let law = NeoHookean { c10, d };
+    let (l, p) = (2.0, 1e-3);
+    let sigma11 = |lambda: f64| {
+        let mu = free_stretch(c10, d, lambda, 1);
+        let j = lambda * mu * mu;
+        2.0 * c10 * j.powf(-5.0 / 3.0) * (lambda * lambda - mu * mu)
+    };
+    let (mut lo, mut hi) = (0.5, 1.0);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if sigma11(mid) < -p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    let lambda = 0.5 * (lo + hi);
+    let mu = free_stretch(c10, d, lambda, 1);
+    for kind in Kind3::ALL {
+        let mesh = match kind {
+            Kind3::C3d8 | Kind3::C3d8h => hex_mesh(2, l, kind, 0.15, 16),
+            _ => tet_mesh(2, l, kind, 0.15, 16),
+        };
+        let mut body = block_body(&mesh, Box::new(law));
+        body.pressures = faces_on_x(&mesh, l).into_iter().map(|f| (f, p)).collect();
+        assert_eq!(
+            body.pressures.len(),
+            if matches!(kind, Kind3::C3d8 | Kind3::C3d8h) {
+                4
+            } else {
+                8
+            }
+        );
+        let solution = solid3d::solve(&body, &solid3d::Options3::default()).unwrap();
+        let corner = mesh
+            .nodes
+            .iter()
+            .position(|x| x.iter().all(|v| (v - l).abs() < 1e-12))
+            .unwrap();
+        let got = [
+            1.0 + solution.u[corner][0] / l,
+            1.0 + solution.u[corner][2] / l,
+        ];
+        println!(
+            "{kind:?} follower pressure: λ {} (closed form {lambda}), μ {} ({mu}), iterations {:?}",
+            got[0], got[1], solution.iterations
+        );
+        // The Newton tolerance (1e-10 of the forces) over the stiffness: about 1e-10.
+        assert!(
+            (got[0] - lambda).abs() < 1e-8,
+            "{kind:?}: λ {} vs {lambda}",
+            got[0]
+        );
+        assert!((got[1] - mu).abs() < 1e-8, "{kind:?}: μ {} vs {mu}", got[1]);
+    }
+}

@@ -35,7 +35,7 @@ pub struct Body3 {
     pub prescribed: Vec<(usize, usize, f64)>,
     /// `(node, component, force)` (N), dead loads, reached at the end of the load path.
     pub loads: Vec<(usize, usize, f64)>,
-    /// `(face nodes, pressure)` (MPa): follower pressures on element faces (3 or 4 nodes, in
+    /// `(face nodes, pressure)` (MPa): follower pressures on element faces (3, 4 or 6 nodes, in
     /// the order whose normal points out of the body), reached at the end of the load path.
     pub pressures: Vec<(Vec<usize>, f64)>,
 }

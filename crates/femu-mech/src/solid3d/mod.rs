@@ -22,7 +22,7 @@
 //! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], Newton–Raphson over
 //!   load increments) for prescribed displacements, dead nodal loads and follower pressures,
 //!   and the exact parameter sensitivities of its solution;
-//! - [`pressure`]: follower pressure on hexahedron and C3D4 faces, with its load stiffness.
+//! - [`pressure`]: follower pressure on the faces of every type, with its load stiffness.
 
 pub mod assembly;
 pub mod kernel;
