@@ -15,7 +15,7 @@ use femu_mech::contact::{RigidContact, RigidPlate, TravelControl};
 use femu_mech::loading::Loading;
 use femu_mech::output::element_fields;
 use femu_mech::sensitivity::{all_parameters, DirectSensitivity};
-use femu_mech::{Model, MooneyRivlin, SolverOptions, StaticSolver};
+use femu_mech::{Material, Model, MooneyRivlin, NeoHookean, SolverOptions, StaticSolver, Yeoh};
 use femu_mesh::generate;
 use femu_mesh::ElementKind;
 use std::sync::Arc;
@@ -89,20 +89,22 @@ fn plate_on_block(control: TravelControl) -> Model {
     model
 }
 
-/// A Mooney–Rivlin CPE4 block, bottom fixed, under a follower pressure on its top.
-fn mooney_rivlin_block() -> Model {
+/// A CPE4 block of `law`, bottom fixed, under a follower pressure on its top.
+fn block_under_pressure(law: impl Material) -> Model {
     let g = generate::rectangle(10.0, 5.0, 8, 4, ElementKind::Cpe4);
     let deck = DeckBuilder::new(g)
-        .law_everywhere(MooneyRivlin {
-            c10: 1.0e-3,
-            c01: 0.75e-3,
-            d: 18.0,
-        })
+        .law_everywhere(law)
         .fix("BOTTOM")
         .pressure("TOP", 2.0e-4)
         .build();
     Model::from_deck(deck).unwrap()
 }
+
+const MOONEY_RIVLIN: MooneyRivlin = MooneyRivlin {
+    c10: 1.0e-3,
+    c01: 0.75e-3,
+    d: 18.0,
+};
 
 #[test]
 fn plane_strain_solves_keep_their_bits() {
@@ -161,7 +163,7 @@ fn plane_strain_solves_keep_their_bits() {
         ),
         (
             "Mooney-Rivlin block (follower pressure)",
-            mooney_rivlin_block(),
+            block_under_pressure(MOONEY_RIVLIN),
             Fingerprint {
                 state: 0x6384_e7c3_296a_3564,
                 iterations: 3,
@@ -179,11 +181,10 @@ fn plane_strain_solves_keep_their_bits() {
     assert!(failed.is_empty(), "changed:\n{}", failed.join("\n"));
 }
 
-/// The in-plane element stresses of the Mooney–Rivlin block (σxx, σyy, σxy) to the bit; σzz
-/// is not pinned here (its value is checked against the 3D law in `mooney_rivlin_sigma_zz`).
-#[test]
-fn mooney_rivlin_in_plane_stresses_keep_their_bits() {
-    let model = mooney_rivlin_block();
+/// Hashes of the element-average in-plane Cauchy stress (σxx, σyy, σxy), of σzz and of the
+/// logarithmic strain of the pressurized block of `law`.
+fn stress_hashes(law: impl Material) -> [u64; 3] {
+    let model = block_under_pressure(law);
     let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
     let sol = solver.solve(&model).unwrap();
     let fields = element_fields(&model, &sol.state);
@@ -191,8 +192,43 @@ fn mooney_rivlin_in_plane_stresses_keep_their_bits() {
     let zz = hash(fields.cauchy_stress.iter().map(|s| s[2]));
     let strain = hash(fields.log_strain.iter().flatten().copied());
     println!("in-plane stress {in_plane:#018x}, σzz {zz:#018x}, log strain {strain:#018x}");
+    [in_plane, zz, strain]
+}
+
+/// The element stresses and strains of the pressurized block to the bit: all of them for the
+/// laws of `(I1, J)`; for Mooney–Rivlin the in-plane stresses and the strains (its σzz, through
+/// the `I2` term, is checked against the 3D law in `tests/mooney_rivlin_sigma_zz.rs`).
+#[test]
+fn element_stresses_keep_their_bits() {
+    let [in_plane, _, strain] = stress_hashes(MOONEY_RIVLIN);
+    let neo_hookean = stress_hashes(NeoHookean {
+        c10: 1.75e-3,
+        d: 18.0,
+    });
+    let yeoh = stress_hashes(Yeoh {
+        c10: 1.0e-3,
+        c20: 2.0e-4,
+        c30: 3.0e-5,
+        d: 18.0,
+    });
     assert_eq!(
         (in_plane, strain),
         (0x3243_acbf_7c0d_dacc, 0x588e_3258_bfb0_19c7)
+    );
+    assert_eq!(
+        neo_hookean,
+        [
+            0x05e5_7c3e_df54_1f51,
+            0x3742_22dd_1bc2_4f4d,
+            0xa943_1621_c6bb_7aeb
+        ]
+    );
+    assert_eq!(
+        yeoh,
+        [
+            0xec16_6137_59aa_476e,
+            0x2add_facc_d268_4602,
+            0x603b_38b9_0dc8_12a2
+        ]
     );
 }
