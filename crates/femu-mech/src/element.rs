@@ -204,12 +204,13 @@ pub struct ElementAverages {
 fn average_fields(
     geo: &ElementGeometry,
     u: &[[f64; 2]],
+    mat: &dyn Hyperelastic,
     derivatives: impl Fn(&Tensor2) -> Result<InvariantDerivatives, NonPositiveJacobian>,
 ) -> Result<ElementAverages, NonPositiveJacobian> {
     let mut avg = ElementAverages::default();
     for g in 0..geo.n_gauss {
         let f = geo.deformation_gradient(g, u);
-        let s = cauchy_from_derivatives(&f, &derivatives(&f)?);
+        let s = cauchy_from_derivatives(mat, &f, &derivatives(&f)?);
         let le = log_strain(&f);
         let w = geo.gauss[g].weight / geo.area;
         for k in 0..4 {
@@ -476,7 +477,7 @@ impl SolidElement for DisplacementElement {
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
     ) -> Result<ElementAverages, NonPositiveJacobian> {
-        average_fields(geo, u, |f| mat.derivatives(f))
+        average_fields(geo, u, mat, |f| mat.derivatives(f))
     }
 }
 
@@ -554,7 +555,7 @@ impl SolidElement for MeanDilatationElement {
         mat: &dyn Hyperelastic,
         u: &[[f64; 2]],
     ) -> Result<ElementAverages, NonPositiveJacobian> {
-        let mut avg = average_fields(geo, u, |f| mat.derivatives_isochoric(f))?;
+        let mut avg = average_fields(geo, u, mat, |f| mat.derivatives_isochoric(f))?;
         let p = mat.volumetric(avg.volume_ratio)[1];
         for k in 0..3 {
             avg.cauchy_stress[k] += p;

@@ -46,7 +46,8 @@ pub struct StressResponse {
     pub energy: f64,
     /// First Piola–Kirchhoff stress (in-plane).
     pub pk1: Tensor2,
-    /// Kirchhoff stress `τ33 = F33 ∂W/∂F33` out of plane (the constraint stress of plane strain).
+    /// Kirchhoff stress `τ33 = F33 ∂W/∂F33` out of plane (the constraint stress of plane strain),
+    /// of the 3D energy at `F33 = 1` (see [`Hyperelastic::plane_strain_i2_tau33`]).
     pub tau33: f64,
     /// `dP/dF` (only filled when asked for).
     pub tangent: Tensor4,
@@ -105,7 +106,9 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
     /// Full energy, stress and (if `tangent`) consistent tangent at F.
     fn response(&self, f: &Tensor2, tangent: bool) -> Result<StressResponse, NonPositiveJacobian> {
         let d = self.derivatives(f)?;
-        Ok(assemble_response(f, det2(f), &d, tangent))
+        let mut r = assemble_response(f, det2(f), &d, tangent);
+        r.tau33 = with_i2_term(r.tau33, self.plane_strain_i2_tau33(f));
+        Ok(r)
     }
 
     /// Isochoric energy, stress and tangent only (the hybrid element adds the volumetric part).
@@ -115,7 +118,29 @@ pub trait Hyperelastic: Send + Sync + std::fmt::Debug {
         tangent: bool,
     ) -> Result<StressResponse, NonPositiveJacobian> {
         let d = self.derivatives_isochoric(f)?;
-        Ok(assemble_response(f, det2(f), &d, tangent))
+        let mut r = assemble_response(f, det2(f), &d, tangent);
+        r.tau33 = with_i2_term(r.tau33, self.plane_strain_i2_tau33(f));
+        Ok(r)
+    }
+
+    /// The part of the out-of-plane Kirchhoff stress `τ33 = F33 ∂W/∂F33` (at `F33 = 1`) that
+    /// the plane-strain energy `W(I1, J)` of [`Hyperelastic::isochoric`] misses when it writes
+    /// an `I2` term through the identity `I2 = J² + I1 - 1`: `2 W_2 (I1 - 2 - J²)`, with
+    /// `W_2 = ∂W/∂I2` of the 3D form ([`Hyperelastic::isochoric_3d`]) at the plane-strain state.
+    ///
+    /// With `C = diag(C_2D, 1)`: `∂I1/∂F33 = 2`, `∂I2/∂F33 = 2 (I1 - C33) = 2 (I1 - 1)`,
+    /// `∂J/∂F33 = J`, so the 3D law gives `τ33 = 2 W_1 + 2 W_2 (I1 - 1) + W_J J`; the chain rule
+    /// through the identity gives the plane-strain derivatives `w_I = W_1 + W_2`,
+    /// `w_J = W_J + 2 J W_2`, whose `τ33 = 2 w_I + w_J J` (of `stress`) is short by the term
+    /// returned. The in-plane stress and tangent are exact either way (I2 and its identity
+    /// agree for every in-plane F). Zero for a law of `(I1, J)` (the default
+    /// `isochoric_3d` has no `I2` dependence).
+    #[inline]
+    fn plane_strain_i2_tau33(&self, f: &Tensor2) -> f64 {
+        let j = det2(f);
+        let i1 = f[0] * f[0] + f[1] * f[1] + f[2] * f[2] + f[3] * f[3] + 1.0;
+        let w2 = self.isochoric_3d(i1, j * j + i1 - 1.0, j).w_2;
+        2.0 * w2 * (i1 - 2.0 - j * j)
     }
 
     /// The isochoric part in three dimensions through its derivatives at `(I1, I2, J)`, with
@@ -358,10 +383,27 @@ fn stress(f: &Tensor2, j: f64, d: &InvariantDerivatives) -> (Tensor2, f64) {
 }
 
 /// Cauchy stress `[σxx, σyy, σzz, σxy]` at F from the invariant derivatives `d` of the energy
-/// there.
-pub fn cauchy_from_derivatives(f: &Tensor2, d: &InvariantDerivatives) -> [f64; 4] {
+/// of `law` there (its whole energy, or its isochoric part for the hybrid element), σzz with
+/// the `I2` term of [`Hyperelastic::plane_strain_i2_tau33`].
+pub fn cauchy_from_derivatives<H: Hyperelastic + ?Sized>(
+    law: &H,
+    f: &Tensor2,
+    d: &InvariantDerivatives,
+) -> [f64; 4] {
     let (pk1, tau33) = stress(f, det2(f), d);
+    let tau33 = with_i2_term(tau33, law.plane_strain_i2_tau33(f));
     cauchy_from_pk1(f, &pk1, tau33)
+}
+
+/// `tau33 + i2_term`, and `tau33` itself (to the bit, signed zero included) when the term is
+/// zero: a law of `(I1, J)` keeps its τ33 unchanged.
+#[inline(always)]
+fn with_i2_term(tau33: f64, i2_term: f64) -> f64 {
+    if i2_term == 0.0 {
+        tau33
+    } else {
+        tau33 + i2_term
+    }
 }
 
 /// Builds P, τ33 and A from the invariant derivatives (see the module documentation).

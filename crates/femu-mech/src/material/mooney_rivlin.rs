@@ -19,9 +19,12 @@ use super::law::{AbaqusField, Bound, LawSpec, MaterialLaw, ParameterSpec, Unit, 
 /// ```
 ///
 /// (the identity is checked against `I2 = ½ (I1² - tr C²)` in a test); the 3D solid elements
-/// use the energy in `(I1, I2, J)` ([`Hyperelastic::isochoric_3d`]). Small-strain moduli:
-/// `μ = 2 (C10 + C01)`, `K = 2/D`. C10 > 0 and C01 ≥ 0 keep the energy polyconvex (C01 = 0 is
-/// the Neo-Hookean law). Units: C10, C01 in MPa, D in MPa⁻¹.
+/// use the energy in `(I1, I2, J)` ([`Hyperelastic::isochoric_3d`]). The identity holds for
+/// every in-plane F, so the in-plane stress and tangent are exact, but its derivative along
+/// F33 is not that of I2: the out-of-plane stress σzz adds the difference from the 3D form
+/// ([`Hyperelastic::plane_strain_i2_tau33`], `2 C01 J^(-4/3) (I1 - 2 - J²)` in τ33).
+/// Small-strain moduli: `μ = 2 (C10 + C01)`, `K = 2/D`. C10 > 0 and C01 ≥ 0 keep the energy
+/// polyconvex (C01 = 0 is the Neo-Hookean law). Units: C10, C01 in MPa, D in MPa⁻¹.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MooneyRivlin {
     pub c10: f64,
