@@ -11,13 +11,12 @@
 # binary's path in FEMU_BIN, when set, written as `femu`).
 
 provenance_commit=${COMMIT:-$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- crates Cargo.toml Cargo.lock || echo " with uncommitted changes")}
-provenance_build=${BUILD:-release build}
 provenance_machine="$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ *//'), $(nproc) cores, $(awk '/MemTotal/ {printf "%.0f GiB", $2 / 1048576}' /proc/meminfo), $(uname -sr)"
 
 write_provenance() { # FILE COMMAND...
     local file=$1
     shift
-    python3 - "$file" "$provenance_machine" "$provenance_commit" "$provenance_build" "$*" <<'PY'
+    python3 - "$file" "$provenance_machine" "$provenance_commit" "${BUILD:-release build}" "$*" <<'PY'
 import datetime, json, os, sys
 path, machine, commit, build, command = sys.argv[1:]
 femu = os.environ.get("FEMU_BIN", "")
