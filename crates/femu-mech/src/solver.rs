@@ -13,17 +13,21 @@
 //!   element results in element order, point loads and follower pressure;
 //! - `contact_state`: the rigid bodies' penalties, multipliers, active sets and step limit;
 //! - `factor`: the tangent's factorization ([`femu_sparse::SparseSolver`]) and its timers;
-//! - `newton`: the driver (increments, Newton, line search, cut-back) and its reports.
+//! - `newton`: the driver (increments, Newton, line search, cut-back) and its reports, written
+//!   once for any problem through `system::NewtonSystem` (assemble the residual and the tangent
+//!   at a state, their norms, the correction, the contact hooks): the plane-strain problem
+//!   (`system::Plane`, the parts above) and the 3D solve of [`crate::solid3d`] implement it.
 //!
 //! The sensitivities read a converged state through [`Linearization`] (`linearization`):
 //! the state, its tangent, the factors and the active contact constraints.
 
 mod active_set;
-mod assembly;
+pub(crate) mod assembly;
 mod contact_state;
-mod factor;
+pub(crate) mod factor;
 mod linearization;
-mod newton;
+pub(crate) mod newton;
+pub(crate) mod system;
 
 pub use assembly::AssemblyError;
 pub use contact_state::ActiveConstraint;
@@ -38,6 +42,7 @@ use femu_sparse::{CscPattern, LinearSolveError, NodeGraph};
 use newton::NewtonWork;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
+use system::{NewtonSystem, Plane};
 
 /// Newton and increment settings.
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
@@ -100,9 +105,11 @@ impl Default for SolverOptions {
     }
 }
 
-/// Why a solve did not reach the end of the step.
+/// Why a solve did not reach the end of the step; `S` is the solution of the last converged
+/// state inside ([`Solution`] for the plane-strain solver, [`crate::solid3d::Solution3`] for the
+/// 3D one).
 #[derive(thiserror::Error)]
-pub enum SolveError {
+pub enum SolveError<S = Solution> {
     #[error("Newton did not converge: {reason} (load factor reached {lambda:.4}, increment size {dlambda:.3e} below the minimum {min:.3e})")]
     NotConverged {
         reason: String,
@@ -110,13 +117,13 @@ pub enum SolveError {
         dlambda: f64,
         min: f64,
         /// The last converged state and the full increment history.
-        partial: Box<Solution>,
+        partial: Box<S>,
     },
     #[error("more than {max} increments needed (load factor reached {lambda:.4})")]
     TooManyIncrements {
         max: usize,
         lambda: f64,
-        partial: Box<Solution>,
+        partial: Box<S>,
     },
     #[error("linear solver setup failed: {0}")]
     Setup(#[from] LinearSolveError),
@@ -129,7 +136,7 @@ pub enum SolveError {
     Interrupted(#[source] femu_mesh::stop::Interrupted),
 }
 
-impl std::fmt::Debug for SolveError {
+impl<S> std::fmt::Debug for SolveError<S> {
     /// The message only: the partial solution inside would print every nodal value.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "SolveError({self})")
@@ -250,30 +257,27 @@ impl StaticSolver {
         lambda: f64,
         with_tangent: bool,
     ) -> Result<(), AssemblyError> {
-        let contact = &mut self.contact;
-        self.assembly
-            .assemble(model, u, lambda, with_tangent, |system| {
-                contact.add_terms(model, u, lambda, with_tangent, system)
-            })
-    }
-
-    /// ‖R‖ on the free dofs and the reference force scale, at the last assembly.
-    fn norms(&self) -> (f64, f64) {
-        self.assembly.system.norms(&self.assembly.dofs)
+        system::assemble_plane(
+            &mut self.assembly,
+            &mut self.contact,
+            model,
+            u,
+            lambda,
+            with_tangent,
+        )
     }
 
     /// Sets each body's penalty from the largest diagonal stiffness of its candidate dofs at
     /// the undeformed state (the "automatic penalty") and clears the multipliers.
     fn init_contact(&mut self, model: &Model) -> Result<(), AssemblyError> {
-        if model.contacts.is_empty() {
-            return Ok(());
+        Plane {
+            model,
+            assembly: &mut self.assembly,
+            contact: &mut self.contact,
+            active_set: &mut self.active_set,
+            factor: &mut self.factor,
         }
-        let zero = vec![0.0; model.state_len()];
-        self.contact.clear_penalties();
-        self.assemble(model, &zero, 0.0, true)?;
-        self.contact
-            .set_penalties(model, &self.assembly.system.values);
-        Ok(())
+        .init_contact()
     }
 }
 

@@ -1,19 +1,27 @@
 //! A static 3D solve of the elements of [`crate::solid3d`]: global assembly on a sparse
 //! pattern of [`femu_sparse`] (the same [`CscPattern`] and [`SparseSolver`], LDLᵀ or LU, as the
-//! plane-strain solver) and Newton–Raphson over load increments, for prescribed
-//! displacements, dead nodal loads and follower pressures on faces ([`super::pressure`]); and
-//! the exact parameter sensitivities of a solution ([`sensitivities`]).
+//! plane-strain solver), for prescribed displacements, dead nodal loads and follower pressures
+//! on faces ([`super::pressure`]), solved by the plane-strain solver's Newton driver (load
+//! increments with a linear predictor, Newton–Raphson with its convergence tests, line search
+//! and cut-back, [`crate::solver::SolveReport`]) through `NewtonSystem` (in the solver's
+//! `system` module); and the exact parameter sensitivities of a solution ([`sensitivities`]).
 //!
-//! This is the first slice of 3D solving: no contact, no line search or cut-back (the
-//! plane-strain [`crate::solver`] has them, written for two dofs per node). Dof `3 n + i` is
-//! component i of node n; the free dofs are numbered in increasing dof order.
+//! No contact yet. Dof `3 n + i` is component i of node n; the free dofs are numbered in
+//! increasing dof order.
 
 use super::kernel::{evaluate, Geometry3, MAX_DOFS_3D};
 use super::pressure::{face_pressure, MAX_FACE_DOFS};
 use super::shape::Kind3;
 use crate::element::{BadReferenceGeometry, ElementResult};
 use crate::material::Material;
+use crate::solver::assembly::{AssemblyError, DofMap, System as Assembled, NONE};
+use crate::solver::factor::TangentFactor;
+use crate::solver::newton::{Newton, NewtonWork};
+use crate::solver::system::NewtonSystem;
+use crate::solver::{SolveError, SolveReport, SolverOptions};
+use femu_mesh::StepDef;
 use femu_sparse::{CscPattern, LinearSolveError, SparseSolver};
+use std::time::Instant;
 
 /// One element: its type, its nodes (in the type's node order) and its material (an index
 /// into [`Body3::materials`]).
@@ -55,12 +63,10 @@ pub enum Solve3Error {
         j: f64,
         load_factor: f64,
     },
-    #[error("no convergence at load factor {load_factor}: residual {residual:e} after {iterations} iterations")]
-    NotConverged {
-        load_factor: f64,
-        residual: f64,
-        iterations: usize,
-    },
+    /// The Newton driver did not reach the end of the load path (with the last converged
+    /// state).
+    #[error(transparent)]
+    Newton(#[from] Box<SolveError<Solution3>>),
     #[error(transparent)]
     Linear(#[from] LinearSolveError),
 }
@@ -68,13 +74,38 @@ pub enum Solve3Error {
 /// Options of [`solve`].
 #[derive(Debug, Clone, Copy)]
 pub struct Options3 {
-    /// Equal load increments from 0 to 1.
+    /// The load increments: the step starts with increments of `1 / increments` and never
+    /// takes larger ones (the driver cuts them back when Newton fails).
     pub increments: usize,
-    /// Newton iterations allowed per increment.
+    /// Newton iterations allowed per increment (before a cut-back).
     pub max_iterations: usize,
-    /// Convergence: the largest free residual at most this fraction of the largest internal
-    /// force (or of the largest load).
+    /// Relative force-residual tolerance of the last increment, as
+    /// [`SolverOptions::residual_tolerance`]: `‖R‖₂ ≤ tolerance · max(‖λ f_ext‖₂,
+    /// ‖reactions‖₂)` on the free dofs, with the energy test of the plane-strain solver.
     pub tolerance: f64,
+}
+
+impl Options3 {
+    /// The Newton options of the plane-strain solver with these iterations and tolerance.
+    fn solver_options(&self) -> SolverOptions {
+        SolverOptions {
+            residual_tolerance: self.tolerance,
+            max_iterations: self.max_iterations,
+            ..SolverOptions::default()
+        }
+    }
+
+    /// The step: increments of `1 / increments`, at most that, at least 1e-5 of it.
+    fn step(&self) -> StepDef {
+        let size = 1.0 / self.increments.max(1) as f64;
+        StepDef {
+            initial_increment: size,
+            max_increment: size,
+            min_increment: 1e-5 * size,
+            max_increments: 100 * self.increments.max(1),
+            ..StepDef::default()
+        }
+    }
 }
 
 impl Default for Options3 {
@@ -95,15 +126,17 @@ pub struct Solution3 {
     /// Internal force minus the pressure loads at every dof (N): the reactions at the
     /// prescribed dofs.
     pub internal_force: Vec<f64>,
-    /// Newton iterations of each increment.
+    /// Newton iterations of each converged increment.
     pub iterations: Vec<usize>,
+    /// The Newton driver's report (increments, iterations, cut-backs, timings);
+    /// `reaction_total` holds the x and y sums of the reactions.
+    pub report: SolveReport,
 }
 
 /// The assembled system: equation numbers, sparse pattern, and each element's matrix slots.
 struct System {
-    /// `eq[dof]`: the equation of a free dof, `usize::MAX` for a prescribed one.
-    eq: Vec<usize>,
-    n_eq: usize,
+    /// The equation of each dof ([`NONE`] for a prescribed one) and the prescribed values.
+    dofs: DofMap,
     pattern: CscPattern,
     /// Per element, the value position of each entry (r, c) of its matrix (row-major), or
     /// `usize::MAX` when a dof is prescribed.
@@ -114,16 +147,22 @@ struct System {
 impl System {
     fn new(body: &Body3) -> Result<Self, Solve3Error> {
         let n_dof = 3 * body.nodes.len();
-        let mut prescribed = vec![false; n_dof];
-        for &(node, i, _) in &body.prescribed {
-            prescribed[3 * node + i] = true;
+        // A condition repeated on one dof keeps its last value (as in the plane-strain
+        // numbering).
+        let mut value: Vec<Option<f64>> = vec![None; n_dof];
+        for &(node, i, v) in &body.prescribed {
+            value[3 * node + i] = Some(v);
         }
-        let mut eq = vec![usize::MAX; n_dof];
+        let mut eq = vec![NONE; n_dof];
         let mut n_eq = 0;
-        for (d, p) in prescribed.iter().enumerate() {
-            if !p {
-                eq[d] = n_eq;
-                n_eq += 1;
+        let mut prescribed = Vec::new();
+        for (d, v) in value.iter().enumerate() {
+            match v {
+                Some(v) => prescribed.push((d, *v)),
+                None => {
+                    eq[d] = n_eq;
+                    n_eq += 1;
+                }
             }
         }
         let element_eqs = |e: &Element3| -> Vec<usize> {
@@ -175,41 +214,46 @@ impl System {
             })
             .collect::<Result<_, _>>()?;
         Ok(System {
-            eq,
-            n_eq,
+            dofs: DofMap {
+                eq,
+                n_eq,
+                n_eq_nodes: n_eq,
+                prescribed,
+            },
             pattern,
             slots,
             geometries,
         })
     }
 
-    /// The internal force minus the pressure loads at `lambda` at every dof, and the tangent's
-    /// values (the elements' minus the pressures' load stiffness) on the pattern at `u`; with
-    /// `step` (a displacement increment of the prescribed dofs, zero elsewhere) also
-    /// `K step` at every dof, the linearized force of the prescribed increment, in `coupling`.
+    /// At the state `u` (3 per node): the internal force minus the pressure loads at `lambda`
+    /// (`force`) and the pressure loads alone (`pressure`) at every dof, and (with `values`)
+    /// the tangent's values on the pattern, the elements' minus the pressures' load stiffness.
+    /// `Err((element, J))` for an inverted element.
     fn assemble(
         &self,
         body: &Body3,
-        u: &[[f64; 3]],
-        values: &mut [f64],
+        u: &[f64],
+        values: Option<&mut [f64]>,
         force: &mut [f64],
+        pressure: &mut [f64],
         lambda: f64,
-        step: Option<(&[f64], &mut [f64])>,
     ) -> Result<(), (usize, f64)> {
-        values.fill(0.0);
-        force.fill(0.0);
-        let mut step = step;
-        if let Some((_, coupling)) = step.as_mut() {
-            coupling.fill(0.0);
+        let mut values = values;
+        if let Some(v) = values.as_deref_mut() {
+            v.fill(0.0);
         }
+        force.fill(0.0);
+        pressure.fill(0.0);
+        let node = |n: usize| [u[3 * n], u[3 * n + 1], u[3 * n + 2]];
         let mut fe = [0.0; MAX_DOFS_3D];
         let mut ke = vec![0.0; MAX_DOFS_3D * MAX_DOFS_3D];
         for (k, e) in body.elements.iter().enumerate() {
-            let ue: Vec<[f64; 3]> = e.nodes.iter().map(|&n| u[n]).collect();
+            let ue: Vec<[f64; 3]> = e.nodes.iter().map(|&n| node(n)).collect();
             let mut out = ElementResult {
                 energy: 0.0,
                 force: &mut fe,
-                stiffness: Some(&mut ke),
+                stiffness: values.is_some().then_some(&mut ke[..]),
             };
             evaluate(
                 &self.geometries[k],
@@ -222,16 +266,11 @@ impl System {
             for (r, &f) in fe[..nd].iter().enumerate() {
                 force[3 * e.nodes[r / 3] + r % 3] += f;
             }
-            for (slot, v) in self.slots[k].iter().zip(&ke[..nd * nd]) {
-                if *slot != usize::MAX {
-                    values[*slot] += v;
-                }
-            }
-            if let Some((dp, coupling)) = step.as_mut() {
-                let dof = |r: usize| 3 * e.nodes[r / 3] + r % 3;
-                for r in 0..nd {
-                    let s: f64 = (0..nd).map(|c| ke[r * nd + c] * dp[dof(c)]).sum();
-                    coupling[dof(r)] += s;
+            if let Some(v) = values.as_deref_mut() {
+                for (slot, k) in self.slots[k].iter().zip(&ke[..nd * nd]) {
+                    if *slot != usize::MAX {
+                        v[*slot] += k;
+                    }
                 }
             }
         }
@@ -239,27 +278,28 @@ impl System {
         for (nodes, p) in &body.pressures {
             let x: Vec<[f64; 3]> = nodes
                 .iter()
-                .map(|&n| std::array::from_fn(|i| body.nodes[n][i] + u[n][i]))
+                .map(|&n| std::array::from_fn(|i| body.nodes[n][i] + u[3 * n + i]))
                 .collect();
-            face_pressure(&x, lambda * p, &mut ff, Some(&mut kf));
+            let with_tangent = values.is_some();
+            face_pressure(&x, lambda * p, &mut ff, with_tangent.then_some(&mut kf));
             let nd = 3 * nodes.len();
             let dof = |r: usize| 3 * nodes[r / 3] + r % 3;
             for r in 0..nd {
                 force[dof(r)] -= ff[r];
-                let row = self.eq[dof(r)];
+                pressure[dof(r)] += ff[r];
+                let Some(v) = values.as_deref_mut() else {
+                    continue;
+                };
+                let row = self.dofs.eq[dof(r)];
                 for c in 0..nd {
-                    let col = self.eq[dof(c)];
-                    if row != usize::MAX && col != usize::MAX {
+                    let col = self.dofs.eq[dof(c)];
+                    if row != NONE && col != NONE {
                         let pos = self
                             .pattern
                             .position(row, col)
                             .expect("a face of an element");
-                        values[pos] -= kf[r * nd + c];
+                        v[pos] -= kf[r * nd + c];
                     }
-                }
-                if let Some((dp, coupling)) = step.as_mut() {
-                    let s: f64 = (0..nd).map(|c| kf[r * nd + c] * dp[dof(c)]).sum();
-                    coupling[dof(r)] -= s;
                 }
             }
         }
@@ -267,93 +307,145 @@ impl System {
     }
 }
 
-/// Solves `body` for equilibrium: the prescribed displacements and the loads applied in
-/// [`Options3::increments`] equal steps, full Newton–Raphson in each. The first iteration of
-/// an increment starts from the converged state of the last one and moves the prescribed dofs
-/// through the tangent (`K_ff du_f = r_f - K_fp Δu_p`), so that a prescribed increment does not
-/// distort the elements next to it.
+/// The 3D body as the Newton driver sees it ([`NewtonSystem`]): the residual
+/// `R = f_int - f_pressure - λ f_dead` and its tangent at a state, on the body's sparse pattern.
+struct Solid<'b> {
+    body: &'b Body3,
+    system: &'b System,
+    factor: TangentFactor,
+    /// `f_int - f_pressure` and `f_pressure` at every dof, at the last assembly.
+    force: Vec<f64>,
+    pressure: Vec<f64>,
+    /// Dead nodal loads at λ = 1.
+    load: Vec<f64>,
+    /// Tangent values, residual, external force and right-hand side of the last assembly.
+    assembled: Assembled,
+}
+
+impl NewtonSystem for Solid<'_> {
+    type Solution = Solution3;
+
+    fn dofs(&self) -> &DofMap {
+        &self.system.dofs
+    }
+
+    fn assemble(
+        &mut self,
+        u: &[f64],
+        lambda: f64,
+        with_tangent: bool,
+    ) -> Result<(), AssemblyError> {
+        let a = &mut self.assembled;
+        let values = with_tangent.then_some(&mut a.values[..]);
+        self.system
+            .assemble(
+                self.body,
+                u,
+                values,
+                &mut self.force,
+                &mut self.pressure,
+                lambda,
+            )
+            .map_err(|(element, det)| AssemblyError::Inverted {
+                element_label: element as i64,
+                det,
+            })?;
+        for (d, &q) in self.system.dofs.eq.iter().enumerate() {
+            a.residual[d] = self.force[d] - lambda * self.load[d];
+            a.fext[d] = self.pressure[d] + lambda * self.load[d];
+            if q != NONE {
+                a.rhs[q] = -a.residual[d];
+            }
+        }
+        Ok(())
+    }
+
+    fn norms(&self) -> (f64, f64) {
+        self.assembled.norms(&self.system.dofs)
+    }
+
+    fn rhs(&self) -> &[f64] {
+        &self.assembled.rhs
+    }
+
+    fn factorize(&mut self) -> Result<(), LinearSolveError> {
+        self.factor
+            .factorize(&self.system.pattern, &self.assembled.values)
+            .map(|_| ())
+    }
+
+    fn solve_correction(&mut self, _u: &[f64], du: &mut [f64]) {
+        self.factor.solve_many(du, 1);
+    }
+
+    fn solution(&self, u: &[f64], report: SolveReport) -> Solution3 {
+        let reactions = self.assembled.reactions(&self.system.dofs);
+        let mut report = report;
+        report.factorization = self.factor.last();
+        report.factorization_time_s = self.factor.factorization_time_s;
+        report.triangular_solve_time_s = self.factor.solve_time_s;
+        report.reaction_total = [
+            reactions.iter().step_by(3).sum(),
+            reactions.iter().skip(1).step_by(3).sum(),
+        ];
+        Solution3 {
+            u: u.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            internal_force: self.force.clone(),
+            iterations: report
+                .increments
+                .iter()
+                .filter(|r| r.converged)
+                .map(|r| r.iterations.len())
+                .collect(),
+            report,
+        }
+    }
+}
+
+/// Solves `body` for equilibrium with the Newton driver of the plane-strain solver
+/// ([`crate::solver::StaticSolver`]): the prescribed displacements and the loads applied over
+/// load increments of at most `1 / increments` ([`Options3`]), each predicted by extrapolating
+/// the last two converged states with the prescribed dofs set, then Newton–Raphson with the
+/// line search, and cut back when Newton fails (e.g. an element inverted by the predictor);
+/// the last increment is converged to [`Options3::tolerance`].
 pub fn solve(body: &Body3, options: &Options3) -> Result<Solution3, Solve3Error> {
+    let t0 = Instant::now();
     let system = System::new(body)?;
     let n_dof = 3 * body.nodes.len();
-    let mut solver = SparseSolver::new(&system.pattern, None)?;
-    let mut values = vec![0.0; system.pattern.nnz()];
-    let mut force = vec![0.0; n_dof];
+    let factor = TangentFactor::new(SparseSolver::new(&system.pattern, None)?);
     let mut load = vec![0.0; n_dof];
     for &(node, i, f) in &body.loads {
         load[3 * node + i] += f;
     }
-    let load_scale = load.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let mut u = vec![[0.0; 3]; body.nodes.len()];
-    let mut iterations = Vec::with_capacity(options.increments);
-    let mut rhs = vec![0.0; system.n_eq];
-    let mut dp = vec![0.0; n_dof];
-    let mut coupling = vec![0.0; n_dof];
-    for step in 1..=options.increments {
-        let lambda = step as f64 / options.increments as f64;
-        for &(node, i, value) in &body.prescribed {
-            dp[3 * node + i] = lambda * value - u[node][i];
-        }
-        let mut converged = None;
-        let mut residual = f64::INFINITY;
-        for iteration in 0..=options.max_iterations {
-            let first = iteration == 0;
-            let predictor = first.then_some((&dp[..], &mut coupling[..]));
-            system
-                .assemble(body, &u, &mut values, &mut force, lambda, predictor)
-                .map_err(|(element, j)| Solve3Error::Inverted {
-                    element,
-                    j,
-                    load_factor: lambda,
-                })?;
-            let scale = force
-                .iter()
-                .fold(lambda * load_scale, |m, v| m.max(v.abs()));
-            residual = 0.0;
-            for (d, &q) in system.eq.iter().enumerate() {
-                if q != usize::MAX {
-                    rhs[q] = lambda * load[d] - force[d];
-                    residual = residual.max(rhs[q].abs());
-                    if first {
-                        rhs[q] -= coupling[d];
-                    }
-                }
-            }
-            if !first && residual <= options.tolerance * scale {
-                converged = Some(iteration);
-                break;
-            }
-            if iteration == options.max_iterations {
-                break;
-            }
-            solver.factorize(&system.pattern, &values)?;
-            solver.solve_in_place(&mut rhs);
-            for (d, &q) in system.eq.iter().enumerate() {
-                if q != usize::MAX {
-                    u[d / 3][d % 3] += rhs[q];
-                }
-            }
-            if first {
-                for &(node, i, _) in &body.prescribed {
-                    u[node][i] += dp[3 * node + i];
-                }
-            }
-        }
-        match converged {
-            Some(k) => iterations.push(k),
-            None => {
-                return Err(Solve3Error::NotConverged {
-                    load_factor: lambda,
-                    residual,
-                    iterations: options.max_iterations,
-                })
-            }
-        }
+    let n_eq = system.dofs.n_eq;
+    let report = SolveReport {
+        equations: n_eq,
+        matrix_nonzeros: system.pattern.nnz(),
+        setup_time_s: t0.elapsed().as_secs_f64(),
+        ..Default::default()
+    };
+    let solid = Solid {
+        body,
+        system: &system,
+        factor,
+        force: vec![0.0; n_dof],
+        pressure: vec![0.0; n_dof],
+        load,
+        assembled: Assembled {
+            values: vec![0.0; system.pattern.nnz()],
+            residual: vec![0.0; n_dof],
+            fext: vec![0.0; n_dof],
+            rhs: vec![0.0; n_eq],
+        },
+    };
+    let mut work = NewtonWork::new(n_eq, n_dof);
+    Newton {
+        options: options.solver_options(),
+        work: &mut work,
+        system: solid,
     }
-    Ok(Solution3 {
-        u,
-        internal_force: force,
-        iterations,
-    })
+    .solve_with(&options.step(), None, report, &mut |_| {}, t0)
+    .map_err(|e| Solve3Error::Newton(Box::new(e)))
 }
 
 /// The exact parameter sensitivities of a solved body (direct differentiation, as the
@@ -368,9 +460,10 @@ pub fn sensitivities(
     let system = System::new(body)?;
     let n_dof = 3 * body.nodes.len();
     let mut values = vec![0.0; system.pattern.nnz()];
-    let mut force = vec![0.0; n_dof];
+    let (mut force, mut pressure) = (vec![0.0; n_dof], vec![0.0; n_dof]);
+    let u: Vec<f64> = solution.u.iter().flatten().copied().collect();
     system
-        .assemble(body, &solution.u, &mut values, &mut force, 1.0, None)
+        .assemble(body, &u, Some(&mut values), &mut force, &mut pressure, 1.0)
         .map_err(|(element, j)| Solve3Error::Inverted {
             element,
             j,
@@ -381,7 +474,7 @@ pub fn sensitivities(
     let mut out = Vec::with_capacity(body.materials.len());
     for (m, material) in body.materials.iter().enumerate() {
         let count = material.spec().parameters.len();
-        let mut rhs = vec![vec![0.0; system.n_eq]; count];
+        let mut rhs = vec![vec![0.0; system.dofs.n_eq]; count];
         let mut rates = vec![0.0; count * MAX_DOFS_3D];
         for (e, element) in body.elements.iter().enumerate() {
             if element.material != m {
@@ -400,7 +493,7 @@ pub fn sensitivities(
                     .iter()
                     .enumerate()
                 {
-                    let q = system.eq[3 * element.nodes[r / 3] + r % 3];
+                    let q = system.dofs.eq[3 * element.nodes[r / 3] + r % 3];
                     if q != usize::MAX {
                         column[q] -= v;
                     }
@@ -411,8 +504,8 @@ pub fn sensitivities(
         for mut column in rhs {
             solver.solve_in_place(&mut column);
             let mut du = vec![[0.0; 3]; body.nodes.len()];
-            for (d, &q) in system.eq.iter().enumerate() {
-                if q != usize::MAX {
+            for (d, &q) in system.dofs.eq.iter().enumerate() {
+                if q != NONE {
                     du[d / 3][d % 3] = column[q];
                 }
             }

@@ -19,9 +19,10 @@
 //! - [`shape`]: the shape functions and integration rules;
 //! - [`kernel`]: reference geometry, energy, force, tangent, averaged Cauchy stress, and the
 //!   parameter-energy forces of the sensitivities;
-//! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], Newton–Raphson over
-//!   load increments) for prescribed displacements, dead nodal loads and follower pressures,
-//!   and the exact parameter sensitivities of its solution;
+//! - [`assembly`]: a static solve (sparse assembly on [`femu_sparse`], and the Newton driver
+//!   of the plane-strain solver: load increments, line search, cut-back) for prescribed
+//!   displacements, dead nodal loads and follower pressures, and the exact parameter
+//!   sensitivities of its solution;
 //! - [`pressure`]: follower pressure on the faces of every type, with its load stiffness.
 
 pub mod assembly;

@@ -1,11 +1,13 @@
 //! The Newton driver: load increments with a linear predictor, Newton–Raphson iterations with
 //! a contact step limit, a backtracking line search and active-set cycle detection, automatic
 //! cut-back and growth of the increments, the augmented-Lagrangian updates of the last
-//! increment, and the reports of all of it ([`SolveReport`]).
+//! increment, and the reports of all of it ([`SolveReport`]). Written once for the plane-strain
+//! and the 3D problems, through [`NewtonSystem`].
 
 use super::assembly::AssemblyError;
 use super::contact_state::ActiveSet;
-use super::{SolveError, StaticSolver};
+use super::system::{NewtonSystem, Plane};
+use super::{SolveError, SolverOptions, StaticSolver};
 use crate::contact::{BodyState, TravelControl};
 use crate::model::Model;
 use femu_mesh::StepDef;
@@ -315,6 +317,15 @@ fn directional(du: &[f64], rhs: &[f64]) -> f64 {
     -du.iter().zip(rhs).map(|(a, b)| a * b).sum::<f64>()
 }
 
+/// The Newton driver of one solve: load increments, Newton iterations, line search, cut-back
+/// and reports, on any [`NewtonSystem`] (the plane-strain [`Plane`] and the 3D solve of
+/// [`crate::solid3d`]).
+pub(crate) struct Newton<'w, S> {
+    pub options: SolverOptions,
+    pub work: &'w mut NewtonWork,
+    pub system: S,
+}
+
 impl StaticSolver {
     /// Solves the step of `model` from zero displacement.
     pub fn solve(&mut self, model: &Model) -> Result<Solution, SolveError> {
@@ -333,39 +344,66 @@ impl StaticSolver {
         let t0 = Instant::now();
         self.assembly.time_s = 0.0;
         self.factor.reset_timers();
-        let mut report = SolveReport {
+        let report = SolveReport {
             equations: self.assembly.dofs.n_eq,
             matrix_nonzeros: self.assembly.pattern.nnz(),
             setup_time_s: self.setup_time_s,
             ..Default::default()
         };
-        let mut u = vec![0.0; model.state_len()];
+        let system = Plane {
+            model,
+            assembly: &mut self.assembly,
+            contact: &mut self.contact,
+            active_set: &mut self.active_set,
+            factor: &mut self.factor,
+        };
+        Newton {
+            options: self.options,
+            work: &mut self.work,
+            system,
+        }
+        .solve_with(&model.step, initial, report, on_increment, t0)
+    }
+}
+
+impl<S: NewtonSystem> Newton<'_, S> {
+    /// Solves the step from zero or (`initial`, the state or its leading part) from a warm
+    /// start tried at the full load first; `report` has the setup fields, `t0` the start time.
+    pub fn solve_with(
+        &mut self,
+        step: &StepDef,
+        initial: Option<&[f64]>,
+        report: SolveReport,
+        on_increment: &mut dyn FnMut(&IncrementRecord),
+        t0: Instant,
+    ) -> Result<S::Solution, SolveError<S::Solution>> {
+        let mut report = report;
+        let mut u = vec![0.0; self.system.dofs().eq.len()];
         // A warm start keeps the contact penalties and multipliers of the previous solve (the
         // contact forces of a nearby state), so that few augmentations remain.
-        let keep_contact = initial.is_some() && self.contact.has_penalties();
+        let keep_contact = initial.is_some() && self.system.has_penalties();
         if !keep_contact {
-            self.init_contact(model).map_err(SolveError::Undeformed)?;
+            self.system.init_contact().map_err(SolveError::Undeformed)?;
         }
         if let Some(u0) = initial {
-            if self.warm_start(model, u0, &mut u, &mut report, on_increment) {
+            if self.warm_start(u0, &mut u, &mut report, on_increment) {
                 report.lambda = 1.0;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
-                return Ok(self.solution(model, &u, report));
+                return Ok(self.system.solution(&u, report));
             }
             u.fill(0.0);
-            self.init_contact(model).map_err(SolveError::Undeformed)?;
+            self.system.init_contact().map_err(SolveError::Undeformed)?;
         }
-        self.increments(model, &mut u, &mut report, on_increment, t0)?;
+        self.increments(step, &mut u, &mut report, on_increment, t0)?;
         report.lambda = 1.0;
         report.wall_time_s = t0.elapsed().as_secs_f64();
-        Ok(self.solution(model, &u, report))
+        Ok(self.system.solution(&u, report))
     }
 
     /// Newton at the full load from `u0` (2 per node, or the whole state); whether it
     /// converged (`u` then holds the solution). A failure counts as a cut-back.
     fn warm_start(
         &mut self,
-        model: &Model,
         u0: &[f64],
         u: &mut Vec<f64>,
         report: &mut SolveReport,
@@ -374,9 +412,9 @@ impl StaticSolver {
         report.warm_start = true;
         let k = u0.len().min(u.len());
         u[..k].copy_from_slice(&u0[..k]);
-        self.assembly.dofs.set_prescribed(u, 1.0);
+        self.system.dofs().set_prescribed(u, 1.0);
         let mut rec = IncrementRecord::attempt(1, 1.0, 1.0);
-        let outcome = self.newton_augmented(model, u, 1.0, &mut rec);
+        let outcome = self.newton_augmented(u, 1.0, &mut rec);
         rec.converged = outcome.is_ok();
         rec.failure = outcome.as_ref().err().map(|e| format!("warm start: {e}"));
         report.count(&rec);
@@ -394,14 +432,13 @@ impl StaticSolver {
     /// holds the solution.
     fn increments(
         &mut self,
-        model: &Model,
+        step: &StepDef,
         u: &mut Vec<f64>,
         report: &mut SolveReport,
         on_increment: &mut dyn FnMut(&IncrementRecord),
         t0: Instant,
-    ) -> Result<(), SolveError> {
-        let step = model.step;
-        let mut stepping = Stepping::new(&step);
+    ) -> Result<(), SolveError<S::Solution>> {
+        let mut stepping = Stepping::new(step);
         self.work.u_conv.fill(0.0);
         self.work.u_prev.fill(0.0);
         let mut increment = 0;
@@ -413,7 +450,7 @@ impl StaticSolver {
                 report.lambda = stepping.lambda;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
                 let u_conv = self.work.u_conv.clone();
-                let partial = Box::new(self.solution(model, &u_conv, std::mem::take(report)));
+                let partial = Box::new(self.system.solution(&u_conv, std::mem::take(report)));
                 return Err(SolveError::TooManyIncrements {
                     max: step.max_increments,
                     lambda: stepping.lambda,
@@ -423,14 +460,14 @@ impl StaticSolver {
             increment += 1;
             let target = stepping.target();
             let dl = target - stepping.lambda;
-            let extrapolated = self.predict(model, u, dl, stepping.last_dlambda, target);
+            let extrapolated = self.predict(u, dl, stepping.last_dlambda, target);
             let mut rec = IncrementRecord::attempt(increment, target, dl);
-            let mut outcome = self.newton_augmented(model, u, target, &mut rec);
+            let mut outcome = self.newton_augmented(u, target, &mut rec);
             if outcome.is_err() && extrapolated && rec.iterations.is_empty() {
                 // The extrapolated predictor inverted an element: retry from the last state.
                 u.copy_from_slice(&self.work.u_conv);
-                self.assembly.dofs.set_prescribed(u, target);
-                outcome = self.newton_augmented(model, u, target, &mut rec);
+                self.system.dofs().set_prescribed(u, target);
+                outcome = self.newton_augmented(u, target, &mut rec);
             }
             report.count(&rec);
             match outcome {
@@ -444,7 +481,9 @@ impl StaticSolver {
                     self.work.u_conv.copy_from_slice(u);
                     // The first correction's residual as a fraction of the full load (the
                     // reference force scales with the load factor).
-                    let first_residual = (!model.contacts.is_empty())
+                    let first_residual = self
+                        .system
+                        .has_bodies()
                         .then(|| first_correction_residual(&report.increments, target))
                         .flatten();
                     stepping.converged(target, iterations, self.options.growth, first_residual);
@@ -459,7 +498,7 @@ impl StaticSolver {
                     report.cutbacks += 1;
                     stepping.dlambda = dl * self.options.cutback;
                     if stepping.dlambda < stepping.min {
-                        return Err(self.stalled(model, &stepping, failure, report, t0));
+                        return Err(self.stalled(&stepping, failure, report, t0));
                     }
                 }
             }
@@ -477,17 +516,17 @@ impl StaticSolver {
     /// skin nodes about to touch are carried through them (0.3–0.7 mm on the 4 000-quad
     /// indentation, contact forces 10–70 times the load), and Newton spends its first
     /// iterations pushing them back.
-    fn predict(&self, model: &Model, u: &mut [f64], dl: f64, last_dl: f64, target: f64) -> bool {
+    fn predict(&self, u: &mut [f64], dl: f64, last_dl: f64, target: f64) -> bool {
         let work = &self.work;
         u.copy_from_slice(&work.u_conv);
-        let extrapolate = last_dl > 0.0 && model.contacts.is_empty();
+        let extrapolate = last_dl > 0.0 && !self.system.has_bodies();
         if extrapolate {
             let s = dl / last_dl;
             for d in 0..u.len() {
                 u[d] += s * (work.u_conv[d] - work.u_prev[d]);
             }
         }
-        self.assembly.dofs.set_prescribed(u, target);
+        self.system.dofs().set_prescribed(u, target);
         extrapolate
     }
 
@@ -495,22 +534,21 @@ impl StaticSolver {
     /// (re-assembled, so that the reactions are consistent), with a limit-point hint.
     fn stalled(
         &mut self,
-        model: &Model,
         stepping: &Stepping,
         failure: AttemptFailure,
         report: &mut SolveReport,
         t0: Instant,
-    ) -> SolveError {
+    ) -> SolveError<S::Solution> {
         let uc = self.work.u_conv.clone();
-        let _ = self.assemble(model, &uc, stepping.lambda, false);
+        let _ = self.system.assemble(&uc, stepping.lambda, false);
         report.lambda = stepping.lambda;
         report.wall_time_s = t0.elapsed().as_secs_f64();
         let mut reason = failure.to_string();
-        if let Some(hint) = limit_point_hint(model, report) {
+        if let Some(hint) = self.system.stall_hint(report) {
             reason.push_str("; ");
             reason.push_str(&hint);
         }
-        let partial = Box::new(self.solution(model, &uc, std::mem::take(report)));
+        let partial = Box::new(self.system.solution(&uc, std::mem::take(report)));
         SolveError::NotConverged {
             reason,
             lambda: stepping.lambda,
@@ -526,24 +564,18 @@ impl StaticSolver {
     /// restores the multipliers on failure.
     fn newton_augmented(
         &mut self,
-        model: &Model,
         u: &mut Vec<f64>,
         lambda: f64,
         record: &mut IncrementRecord,
     ) -> Result<(), AttemptFailure> {
-        let saved: Vec<Vec<f64>> = self.contact.multipliers().to_vec();
-        match self.newton_then_augment(model, u, lambda, record) {
+        let saved: Vec<Vec<f64>> = self.system.multipliers();
+        match self.newton_then_augment(u, lambda, record) {
             Ok(()) => {
-                record.bodies = self
-                    .contact
-                    .body_states(model, u)
-                    .iter()
-                    .map(|b| [b.travel, b.force])
-                    .collect();
+                record.bodies = self.system.body_records(u);
                 Ok(())
             }
             Err(e) => {
-                self.contact.restore_multipliers(saved);
+                self.system.restore_multipliers(saved);
                 Err(e)
             }
         }
@@ -554,22 +586,21 @@ impl StaticSolver {
     /// the Uzawa re-solves there.
     fn newton_then_augment(
         &mut self,
-        model: &Model,
         u: &mut Vec<f64>,
         lambda: f64,
         record: &mut IncrementRecord,
     ) -> Result<(), AttemptFailure> {
-        self.newton(model, u, lambda, record)?;
+        self.newton(u, lambda, record)?;
         if lambda < 1.0 - 1e-12 {
             return Ok(());
         }
         for _ in 0..20 {
             // The last assembly was at `u` (Newton's accepted state).
-            let force_tolerance = self.options.residual_tolerance * self.norms().1;
-            if !self.contact.augment(model, u, force_tolerance) {
+            let force_tolerance = self.options.residual_tolerance * self.system.norms().1;
+            if !self.system.augment(u, force_tolerance) {
                 break;
             }
-            self.newton(model, u, lambda, record)?;
+            self.newton(u, lambda, record)?;
         }
         Ok(())
     }
@@ -578,15 +609,14 @@ impl StaticSolver {
     /// set).
     fn newton(
         &mut self,
-        model: &Model,
         u: &mut Vec<f64>,
         lambda: f64,
         record: &mut IncrementRecord,
     ) -> Result<(), AttemptFailure> {
         let opt = self.options;
         let last_increment = lambda >= 1.0 - 1e-12;
-        self.assemble(model, u, lambda, true)?;
-        let (mut rnorm, mut fref) = self.norms();
+        self.system.assemble(u, lambda, true)?;
+        let (mut rnorm, mut fref) = self.system.norms();
         let mut energy0 = 0.0;
         let mut first_residual = f64::INFINITY;
         // Active sets of the states the accepted steps started from (cycle detection).
@@ -599,9 +629,9 @@ impl StaticSolver {
                 return Ok(()); // already in equilibrium (e.g. a warm start at the solution)
             }
             if !tangent_at_u {
-                self.assemble(model, u, lambda, true)?;
+                self.system.assemble(u, lambda, true)?;
             }
-            let correction = self.correction(model, u, it, fref, record)?;
+            let correction = self.correction(u, it, fref, record)?;
             let energy = correction.energy;
             if it == 0 {
                 energy0 = energy.max(FLOOR);
@@ -620,7 +650,7 @@ impl StaticSolver {
                 at_round_off,
                 rnorm,
             };
-            let step = self.line_search(model, u, &search, &set_history)?;
+            let step = self.line_search(u, &search, &set_history)?;
             (rnorm, fref, tangent_at_u) = (step.rnorm, step.fref, step.tangent_at_u);
             std::mem::swap(u, &mut self.work.u_trial);
             set_history.push(step.active_before);
@@ -643,12 +673,10 @@ impl StaticSolver {
             if last_increment
                 && !res_ok
                 && rnorm <= EARLY_AUGMENTATION * fref.max(FLOOR)
-                && self
-                    .contact
-                    .augment(model, u, opt.residual_tolerance * fref)
+                && self.system.augment(u, opt.residual_tolerance * fref)
             {
-                self.assemble(model, u, lambda, true)?;
-                (rnorm, fref) = self.norms();
+                self.system.assemble(u, lambda, true)?;
+                (rnorm, fref) = self.system.norms();
                 if it == 0 {
                     first_residual = rnorm;
                 }
@@ -680,15 +708,12 @@ impl StaticSolver {
     /// the work vector); records the iteration (its results are filled in after the step).
     fn correction(
         &mut self,
-        model: &Model,
         u: &[f64],
         it: usize,
         fref: f64,
         record: &mut IncrementRecord,
     ) -> Result<Correction, AttemptFailure> {
-        let (assembly, work) = (&mut self.assembly, &mut self.work);
-        self.factor
-            .factorize(&assembly.pattern, &assembly.system.values)?;
+        self.system.factorize()?;
         record.iterations.push(IterationRecord {
             iteration: it + 1,
             residual_norm: f64::NAN,
@@ -697,16 +722,10 @@ impl StaticSolver {
             step_length: 1.0,
             max_correction: 0.0,
         });
-        work.du.copy_from_slice(&assembly.system.rhs);
-        self.factor.solve_many(&mut work.du, 1);
-        if !model.contacts.is_empty() {
-            self.contact
-                .linearize(model, u, &assembly.dofs.eq, &mut self.active_set.candidates);
-            let store = &mut assembly.ke;
-            self.active_set
-                .correct(&mut self.factor, &mut work.du, store);
-        }
-        let s0 = directional(&work.du, &assembly.system.rhs);
+        let work = &mut *self.work;
+        work.du.copy_from_slice(self.system.rhs());
+        self.system.solve_correction(u, &mut work.du);
+        let s0 = directional(&work.du, self.system.rhs());
         let max_du = work.du.iter().fold(0.0f64, |m, v| m.max(v.abs()));
         if !max_du.is_finite() {
             return Err(AttemptFailure::NonFiniteCorrection);
@@ -724,7 +743,6 @@ impl StaticSolver {
     /// accepted state is left in the trial work vector.
     fn line_search(
         &mut self,
-        model: &Model,
         u: &[f64],
         search: &LineSearch,
         set_history: &[ActiveSet],
@@ -735,28 +753,23 @@ impl StaticSolver {
         // penalty there with a huge residual, and the next step swings back (active-set
         // chattering on coarse meshes). Cap the step so that no node that is free now ends
         // deeper than a tenth of the element size (gaps linear along the step).
-        let alpha_cap = self.contact_step_limit(model, u);
+        let alpha_cap = self.contact_step_limit(u);
         let mut alpha = alpha_cap;
-        let active_before = self.contact.active_set();
+        let active_before = self.system.active_set();
         let mut halved_cycle = false;
         for _ in 0..8 {
             let mut trial = std::mem::take(&mut self.work.u_trial);
-            self.assembly
-                .dofs
+            self.system
+                .dofs()
                 .add_free(u, alpha, &self.work.du, &mut trial);
-            let along = self.active_set.along();
-            if !along.is_empty() {
-                let candidates = &self.active_set.candidates;
-                self.contact
-                    .second_order_correction(model, candidates, along, alpha, &mut trial);
-            }
+            self.system.second_order_correction(alpha, &mut trial);
             // A step that passes the energy test ends the increment if its residual passes
             // too: its tangent is then only needed at the end of the last increment, and
             // only if asked for.
             let may_end = search.iteration > 0
                 && correction.energy * alpha <= opt.energy_tolerance * search.energy0;
             let with_tangent = !may_end || (search.last_increment && opt.final_tangent);
-            let res = self.assemble(model, &trial, search.lambda, with_tangent);
+            let res = self.system.assemble(&trial, search.lambda, with_tangent);
             self.work.u_trial = trial;
             match res {
                 Err(AssemblyError::Inverted { .. }) if opt.line_search => {
@@ -766,8 +779,8 @@ impl StaticSolver {
                 Err(e) => return Err(e.into()),
                 Ok(()) => {}
             }
-            let (rnorm, fref) = self.norms();
-            let active = self.contact.active_set();
+            let (rnorm, fref) = self.system.norms();
+            let active = self.system.active_set();
             let step = AcceptedStep {
                 alpha,
                 rnorm,
@@ -805,7 +818,7 @@ impl StaticSolver {
                 break;
             }
             // s(α) = δu · R(u + α δu); accept when it dropped enough (Crisfield 0.8).
-            let s = directional(&self.work.du, &self.assembly.system.rhs);
+            let s = directional(&self.work.du, self.system.rhs());
             if s.abs() <= 0.8 * correction.s0.abs() || alpha < 0.02 {
                 return Ok(step);
             }
@@ -825,38 +838,15 @@ impl StaticSolver {
     /// The largest step length in (0, 1] along the current correction for which no contact
     /// node that is free at `u` penetrates its body deeper than 0.1 element size; 1 without
     /// contact. The full step is formed in the trial work vector.
-    fn contact_step_limit(&mut self, model: &Model, u: &[f64]) -> f64 {
-        if model.contacts.is_empty() {
+    fn contact_step_limit(&mut self, u: &[f64]) -> f64 {
+        if !self.system.has_bodies() {
             return 1.0;
         }
-        let work = &mut self.work;
-        self.assembly
-            .dofs
+        let work = &mut *self.work;
+        self.system
+            .dofs()
             .add_free(u, 1.0, &work.du, &mut work.u_trial);
-        self.contact
-            .step_limit(model, u, &work.u_trial, self.active_set.along())
-    }
-
-    /// The solution at `u` with the reactions of the last assembly and the solver's timers.
-    pub(super) fn solution(&self, model: &Model, u: &[f64], report: SolveReport) -> Solution {
-        let n = 2 * model.node_count();
-        let reactions = self.assembly.system.reactions(&self.assembly.dofs);
-        let mut report = report;
-        report.factorization = self.factor.last();
-        report.assembly_time_s = self.assembly.time_s;
-        report.factorization_time_s = self.factor.factorization_time_s;
-        report.triangular_solve_time_s = self.factor.solve_time_s;
-        report.reaction_total = [
-            reactions[..n].iter().step_by(2).sum(),
-            reactions[..n].iter().skip(1).step_by(2).sum(),
-        ];
-        Solution {
-            u: u[..n].to_vec(),
-            state: u.to_vec(),
-            bodies: self.contact.body_states(model, u),
-            reactions: reactions[..n].to_vec(),
-            report,
-        }
+        self.system.step_limit(u, &work.u_trial)
     }
 }
 
@@ -916,7 +906,7 @@ fn check_progress(
 /// The secant stiffness `ΔF/Δt` between consecutive converged increments is compared with the
 /// largest over the step; the last one below [`LIMIT_POINT_STIFFNESS_RATIO`] of it is a limit
 /// point.
-fn limit_point_hint(model: &Model, report: &SolveReport) -> Option<String> {
+pub(crate) fn limit_point_hint(model: &Model, report: &SolveReport) -> Option<String> {
     for (b, c) in model.contacts.iter().enumerate() {
         let TravelControl::Force(target) = c.control else {
             continue;
