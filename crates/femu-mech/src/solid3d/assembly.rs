@@ -320,6 +320,8 @@ struct Solid<'b> {
     load: Vec<f64>,
     /// Tangent values, residual, external force and right-hand side of the last assembly.
     assembled: Assembled,
+    /// Time spent assembling (s).
+    assembly_time_s: f64,
 }
 
 impl NewtonSystem for Solid<'_> {
@@ -335,6 +337,7 @@ impl NewtonSystem for Solid<'_> {
         lambda: f64,
         with_tangent: bool,
     ) -> Result<(), AssemblyError> {
+        let t = Instant::now();
         let a = &mut self.assembled;
         let values = with_tangent.then_some(&mut a.values[..]);
         self.system
@@ -346,6 +349,7 @@ impl NewtonSystem for Solid<'_> {
                 &mut self.pressure,
                 lambda,
             )
+            // The 3D body has no element labels: its element index.
             .map_err(|(element, det)| AssemblyError::Inverted {
                 element_label: element as i64,
                 det,
@@ -357,6 +361,7 @@ impl NewtonSystem for Solid<'_> {
                 a.rhs[q] = -a.residual[d];
             }
         }
+        self.assembly_time_s += t.elapsed().as_secs_f64();
         Ok(())
     }
 
@@ -382,6 +387,7 @@ impl NewtonSystem for Solid<'_> {
         let reactions = self.assembled.reactions(&self.system.dofs);
         let mut report = report;
         report.factorization = self.factor.last();
+        report.assembly_time_s = self.assembly_time_s;
         report.factorization_time_s = self.factor.factorization_time_s;
         report.triangular_solve_time_s = self.factor.solve_time_s;
         report.reaction_total = [
@@ -437,6 +443,7 @@ pub fn solve(body: &Body3, options: &Options3) -> Result<Solution3, Solve3Error>
             fext: vec![0.0; n_dof],
             rhs: vec![0.0; n_eq],
         },
+        assembly_time_s: 0.0,
     };
     let mut work = NewtonWork::new(n_eq, n_dof);
     Newton {

@@ -102,7 +102,8 @@ pub struct SolveReport {
     pub matrix_nonzeros: usize,
     /// Load factor reached (1 when the step completed).
     pub lambda: f64,
-    /// Sum of reaction forces on the prescribed dofs (N per mm).
+    /// Sum of reaction forces on the prescribed dofs, x and y (N per mm in plane strain, N for
+    /// a 3D body).
     pub reaction_total: [f64; 2],
     pub wall_time_s: f64,
     /// Pattern, dof numbering and symbolic factorization (once per model).
