@@ -16,7 +16,8 @@ use femu_mech::SolverOptions;
 use femu_study::schema::MeasurementSource;
 use femu_study::steps::identify;
 use femu_study::steps::measure;
-use femu_study::steps::measure::Measured;
+use femu_study::steps::measure::{MeasureInputs, Measured};
+use femu_study::steps::parameters::IdentificationInputs;
 use pyo3::prelude::*;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
@@ -186,9 +187,11 @@ pub fn identify_field(
     let study = &study.study;
     let summary = running::run(py, reporter.as_ref(), |progress| {
         let built = femu_study::model::build(&study.model)?;
-        let prepared = identify::measured_prepared(study, measured, &source)?;
+        let prepared =
+            identify::measured_prepared(&study.measurements, &study.tests, measured, &source)?;
         let grouped = grouped.unwrap_or(study.identification.grouped());
-        identify::identify_on(study, grouped, &built, &prepared, &out, progress)
+        let inputs = IdentificationInputs::of(study);
+        identify::identify_on(&inputs, grouped, &built, &prepared, &out, progress)
     })?;
     convert::json(&summary)
 }
@@ -206,8 +209,13 @@ pub fn virtual_field(
         let built = femu_study::model::build(&study.model)?;
         no_ultrasound(study)?;
         // Only an ultrasound measurement writes into the folder, and there is none.
-        let prepared = measure::prepare(study, &built, Path::new("."), progress)?;
-        let fields = femu_study::steps::joint::realized(study, &built, &prepared)?;
+        let prepared =
+            measure::prepare(&MeasureInputs::of(study), &built, Path::new("."), progress)?;
+        let fields = femu_study::steps::joint::realized(
+            &IdentificationInputs::of(study),
+            &built,
+            &prepared,
+        )?;
         Ok(fields
             .into_iter()
             .map(|(p, points)| {
@@ -292,7 +300,12 @@ pub fn least_squares(
         let prepared = match field {
             Some(f) => {
                 let measured = Measured::plain(f, "NumPy arrays (x, y, ux, uy)".into());
-                identify::measured_prepared(study, measured, "NumPy arrays")?
+                identify::measured_prepared(
+                    &study.measurements,
+                    &study.tests,
+                    measured,
+                    "NumPy arrays",
+                )?
             }
             None => {
                 no_ultrasound(study)?;
@@ -302,16 +315,16 @@ pub fn least_squares(
                         study.measurements.len()
                     );
                 }
-                measure::prepare(study, &built, Path::new("."), progress)?
+                measure::prepare(&MeasureInputs::of(study), &built, Path::new("."), progress)?
             }
         };
-        let (p, points) = femu_study::steps::joint::realized(study, &built, &prepared)?
+        let inputs = IdentificationInputs::of(study);
+        let (p, points) = femu_study::steps::joint::realized(&inputs, &built, &prepared)?
             .pop()
             .expect("one measurement");
         let model = built.loaded(&study.tests[p.test].loading)?;
         let grouped = grouped.unwrap_or(study.identification.grouped());
-        let (free, reference) =
-            femu_study::steps::parameters::free_parameters(study, &model, grouped)?;
+        let (free, reference) = inputs.free_parameters(&model, grouped)?;
         let field = MeasuredField {
             points,
             comments: vec![],

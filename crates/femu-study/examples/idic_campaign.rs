@@ -19,6 +19,7 @@ use femu_study::progress::Progress;
 use femu_study::steps::images::{
     identify_image_measurement, identify_images, read_sequence, ImageRouteOptions,
 };
+use femu_study::steps::parameters::IdentificationInputs;
 use femu_study::steps::ultrasound::{sim, SimInputs, SimOptions};
 use serde::Serialize;
 use std::io::Write;
@@ -198,7 +199,7 @@ fn main() -> Result<()> {
             }
         }
         identify_images(
-            &study,
+            &IdentificationInputs::of(&study),
             true,
             &seq,
             true,
@@ -244,8 +245,14 @@ fn main() -> Result<()> {
         )?;
         let render_and_dic = t.elapsed().as_secs_f64();
         let t = Instant::now();
-        let (dic, weighted, idic) =
-            identify_image_measurement(&study, true, &s, &dir.join("identify"), &Print)?;
+        let (dic, weighted, idic) = identify_image_measurement(
+            &IdentificationInputs::of(&study),
+            &study.measurements[0],
+            true,
+            &s,
+            &dir.join("identify"),
+            &Print,
+        )?;
         let all = t.elapsed().as_secs_f64();
         for ((p, q), w) in idic
             .parameters

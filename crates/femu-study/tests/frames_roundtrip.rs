@@ -29,6 +29,7 @@
 use femu_identify::idic::ImageFrame;
 use femu_study::progress::Quiet;
 use femu_study::schema;
+use femu_study::steps::parameters::IdentificationInputs;
 use femu_study::steps::{frames, images};
 use std::path::{Path, PathBuf};
 
@@ -127,7 +128,15 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
     };
     let built = femu_study::model::build(&study.model).unwrap();
     let measured = base.join("frames-measurement");
-    let recorded = frames::measure(&study, &built, m, spec, &measured, &Quiet).unwrap();
+    let recorded = frames::measure(
+        &study.tests[m.test],
+        &study.probe,
+        &built,
+        spec,
+        &measured,
+        &Quiet,
+    )
+    .unwrap();
     assert!(
         recorded.record.dic.is_some() && recorded.measured.is_some(),
         "no DIC of the sequence: {:?}",
@@ -139,8 +148,13 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
     // rounding (the probe's px/mm is the reciprocal of the frames' pixel size).
     let mut by_probe = (**spec).clone();
     by_probe.placement = None;
-    let (p, from) =
-        frames::placement(&study, &built, &by_probe, &by_probe.resolve().unwrap()).unwrap();
+    let (p, from) = frames::placement(
+        &study.probe,
+        &built,
+        &by_probe,
+        &by_probe.resolve().unwrap(),
+    )
+    .unwrap();
     assert!(from.starts_with("[probe]"), "{from}");
     let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs().max((a[1] - b[1]).abs()) < 1e-9;
     assert!(
@@ -175,12 +189,23 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
             s.parameters.iter().map(|p| p.identified).collect()
         })
         .collect();
-    let mut once = study.clone();
-    once.identification.starts = 0;
+    let mut once = study.identification.clone();
+    once.starts = 0;
     let route = images::ImageRouteOptions::for_study(&study);
     let t1 = std::time::Instant::now();
     let fr = base.join("frames-idic");
-    images::identify_images(&once, true, &fr_seq, false, starts, &route, &fr, &Quiet).unwrap();
+    let inputs = IdentificationInputs::of(&study);
+    images::identify_images(
+        &inputs.with(&once),
+        true,
+        &fr_seq,
+        false,
+        starts,
+        &route,
+        &fr,
+        &Quiet,
+    )
+    .unwrap();
     let us_params = printed(&grouped.join("parameters.csv"));
     let fr_params = printed(&fr.join("parameters.csv"));
     for ((name, u), (_, f)) in us_params.iter().zip(&fr_params) {
@@ -352,6 +377,6 @@ fn dicom_round_trip(base: &Path, seq: &images::ImageSequence, png_study: &Path) 
         assert!(a.data == b.data, "cine frame {k} differs from the PNG");
     }
     let built = femu_study::model::build(&study.model).unwrap();
-    let (frame, _) = frames::placement(&study, &built, spec, &r).unwrap();
+    let (frame, _) = frames::placement(&study.probe, &built, spec, &r).unwrap();
     assert_eq!(frame, seq.frame);
 }

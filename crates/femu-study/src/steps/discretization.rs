@@ -6,10 +6,11 @@
 
 use super::joint::{JointFit, TestModels};
 use super::measure::{Prepared, PreparedData};
+use super::parameters::IdentificationInputs;
 use crate::error::{Context, Result};
 use crate::model::{build_refined, CachedLevel, CheckMeshes, StudyModel};
 use crate::progress::Progress;
-use crate::schema::{Discretization, Geometry, Study};
+use crate::schema::{Discretization, Geometry, ModelSpec};
 use femu_identify::discretization::{self, DiscretizationCheck, Evaluated};
 use femu_identify::fit::{
     levenberg_marquardt, FitResult, FreeParameter, LeastSquares, LmOptions, Problem,
@@ -26,18 +27,18 @@ use femu_mesh::locate::PointLocator;
 /// doubled.
 pub const RATIOS: [f64; 2] = [std::f64::consts::SQRT_2, 2.0];
 
-/// The study's model refined by `ratio` (see [`build_refined`]); `None` for a deck.
-pub fn refined(study: &Study, built: &StudyModel, ratio: f64) -> Result<Option<StudyModel>> {
-    build_refined(&study.model, built, ratio)
+/// The model `built` of `spec` refined by `ratio` (see [`build_refined`]); `None` for a deck.
+pub fn refined(spec: &ModelSpec, built: &StudyModel, ratio: f64) -> Result<Option<StudyModel>> {
+    build_refined(spec, built, ratio)
 }
 
 /// Whether the data were made by the model's own mesh: virtual data without
 /// `data_refinement`, or images simulated on it (`[ultrasound] render_refine = 1`; the default
 /// 2 renders them from a finer mesh). Their intervals need no widening.
-pub fn data_from_model(study: &Study, prepared: &[Prepared]) -> bool {
+pub fn data_from_model(inputs: &IdentificationInputs, prepared: &[Prepared]) -> bool {
     prepared.iter().all(|p| match &p.data {
-        PreparedData::Virtual { .. } => study.identification.data_refinement == 1.0,
-        PreparedData::Measured(m) => m.reference_known && study.ultrasound.render_refine == 1,
+        PreparedData::Virtual { .. } => inputs.identification.data_refinement == 1.0,
+        PreparedData::Measured(m) => m.reference_known && inputs.render_refine == 1,
     })
 }
 
@@ -51,14 +52,14 @@ pub struct Checked {
 /// measured tests' models; those of an earlier check on this model (the demo's ungrouped
 /// identification before its grouped one) taken back with their last solutions.
 fn check_levels(
-    study: &Study,
+    inputs: &IdentificationInputs,
     built: &StudyModel,
     models: &TestModels,
 ) -> Result<Vec<CachedLevel>> {
     let tests: Vec<String> = models
         .tests
         .iter()
-        .map(|&t| format!("{:?}", study.tests[t].loading))
+        .map(|&t| format!("{:?}", inputs.tests[t].loading))
         .collect();
     let mut cached =
         std::mem::take(&mut *built.check_meshes.lock().unwrap_or_else(|e| e.into_inner()));
@@ -81,7 +82,7 @@ fn check_levels(
             levels.push(level);
             continue;
         }
-        let fine = refined(study, built, ratio)?.context("the model cannot be refined")?;
+        let fine = refined(inputs.model, built, ratio)?.context("the model cannot be refined")?;
         levels.push(CachedLevel {
             ratio,
             tests: tests.clone(),
@@ -89,7 +90,7 @@ fn check_levels(
             models: models
                 .tests
                 .iter()
-                .map(|&t| fine.loaded(&study.tests[t].loading))
+                .map(|&t| fine.loaded(&inputs.tests[t].loading))
                 .collect::<Result<Vec<_>>>()?,
             states: Vec::new(),
         });
@@ -99,7 +100,7 @@ fn check_levels(
 
 /// The check of `fit` (its first repeat, relative sds `sd`).
 pub fn check(
-    study: &Study,
+    inputs: &IdentificationInputs,
     built: &StudyModel,
     models: &TestModels,
     prepared: &[Prepared],
@@ -107,7 +108,7 @@ pub fn check(
     sd: &[f64],
     progress: &dyn Progress,
 ) -> Result<Checked> {
-    if matches!(study.model.geometry, Geometry::Deck(_)) {
+    if matches!(inputs.model.geometry, Geometry::Deck(_)) {
         return Ok(Checked {
             check: DiscretizationCheck::unknown(
                 models.elements(),
@@ -117,7 +118,7 @@ pub fn check(
         });
     }
     let task = progress.task("discretization check on refined meshes", None);
-    let mut levels = check_levels(study, built, models)?;
+    let mut levels = check_levels(inputs, built, models)?;
     let fields: Vec<MeasuredField> = (0..models.tests.len())
         .map(|b| {
             let meshes: Vec<&Model> = levels.iter().map(|l| &l.models[b]).collect();
@@ -125,7 +126,7 @@ pub fn check(
         })
         .collect();
     let finest = discretization::finest_level(levels.iter().map(|l| l.ratio))?;
-    let keep_finest = study.identification.discretization == Discretization::Refine;
+    let keep_finest = inputs.identification.discretization == Discretization::Refine;
     let phi: Vec<f64> = fit.campaign.best[0].theta.iter().map(|t| t.ln()).collect();
     // One level's problem at a time (the finest's solver alone holds more memory than the
     // model's), the finest last.
@@ -154,8 +155,9 @@ pub fn check(
     }
     let jacobian =
         jacobian.context("the finest mesh of the discretization check gave no Jacobian")?;
-    let check = discretization::assess(sd, &evaluated, &jacobian, data_from_model(study, prepared))
-        .context("the discretization check")?;
+    let check =
+        discretization::assess(sd, &evaluated, &jacobian, data_from_model(inputs, prepared))
+            .context("the discretization check")?;
     // Kept for the next check on this model; the model's own mesh by its state alone.
     levels[0].models.clear();
     *built.check_meshes.lock().unwrap_or_else(|e| e.into_inner()) = CheckMeshes { levels };

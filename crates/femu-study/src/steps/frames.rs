@@ -24,8 +24,9 @@ use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
-use crate::schema::{Measurement, Study};
+use crate::schema::{Measurement, ProbeSection, TestSpec};
 use crate::steps::images::{identify_images, ImageRouteOptions};
+use crate::steps::parameters::IdentificationInputs;
 use crate::steps::sequence::ImageSequence;
 use femu_dic::GreyImage;
 use femu_identify::idic::ImageFrame;
@@ -92,10 +93,10 @@ fn crop(img: &GreyImage, r: femu_dic::cine::Region) -> Result<GreyImage> {
 }
 
 /// Where the frames lie in the model: the study's `origin_mm`, `x_axis`, `y_axis` with the
-/// frames' pixel size, or the `[probe]` placement (`femu_ultrasound::probe::probe_on_skin` on
-/// the model's skin, the window the frames' own width and depth at their pixel size).
+/// frames' pixel size, or the placement of `[probe]` `probe` (`femu_ultrasound::probe::probe_on_skin`
+/// on the model's skin, the window the frames' own width and depth at their pixel size).
 pub fn placement(
-    study: &Study,
+    probe: &ProbeSection,
     built: &StudyModel,
     spec: &FramesSpec,
     r: &ResolvedFrames,
@@ -108,7 +109,7 @@ pub fn placement(
             "[measurement] origin_mm, x_axis, y_axis".into(),
         )),
         None => {
-            let mut section = study.probe.clone();
+            let mut section = probe.clone();
             section.width_mm = r.width as f64 * s;
             section.depth_mm = r.height as f64 * s;
             section.px_per_mm = 1.0 / s;
@@ -165,13 +166,14 @@ impl RecordedFrames {
     }
 }
 
-/// The measurement step of recorded frames: reads and places them, gives each its load, writes
-/// the record and figures, and correlates the sequence for the identification's start (a DIC
-/// that fails is a note: the identification then starts from the Latin-hypercube starts).
+/// The measurement step of recorded frames `spec` of the test `test` on `built`: reads and
+/// places them (by `spec`'s keys or `[probe]` `probe`), gives each its load, writes the record
+/// and figures, and correlates the sequence for the identification's start (a DIC that fails is
+/// a note: the identification then starts from the Latin-hypercube starts).
 pub fn measure(
-    study: &Study,
+    test: &TestSpec,
+    probe: &ProbeSection,
     built: &StudyModel,
-    m: &Measurement,
     spec: &FramesSpec,
     out: &Path,
     progress: &dyn Progress,
@@ -180,10 +182,9 @@ pub fn measure(
     let resolved = spec
         .resolve()
         .map_err(|e| crate::input!("[measurement] {}: {}", e.key, e.message))?;
-    let test = &study.tests[m.test];
     let force = test_force(test).context("the frames' test has no force")?;
     let frames = read_frames(&resolved)?;
-    let (placement, placement_from) = placement(study, built, spec, &resolved)?;
+    let (placement, placement_from) = placement(probe, built, spec, &resolved)?;
     let mut notes = Vec::new();
     if let Some(log) = &resolved.force_log {
         let f0 = log.at_frames[0];
@@ -511,10 +512,12 @@ fn write_measured(path: &Path, f: &MeasuredField) -> Result<MeasuredField> {
     Ok(MeasuredField::parse(&s, &path.display().to_string())?)
 }
 
-/// The identification from recorded frames: DIC → FEMU on the sequence's DIC (`dic/`, its
-/// optimum the start), then integrated DIC from the frames (`out`).
+/// The identification from recorded frames of the measurement `m` (what `inputs` reads of a
+/// study): DIC → FEMU on the sequence's DIC (`dic/`, its optimum the start), then integrated DIC
+/// from the frames (`out`).
 pub fn identify_frames(
-    study: &Study,
+    inputs: &IdentificationInputs,
+    m: &Measurement,
     grouped: bool,
     built: &StudyModel,
     recorded: &RecordedFrames,
@@ -523,15 +526,14 @@ pub fn identify_frames(
 ) -> Result<super::images::ImageIdentificationSummary> {
     use crate::steps::measure::{Measured, Prepared, PreparedData};
     let seq = recorded.sequence();
-    let m = &study.measurements[0];
-    let mut study_idic = study.clone();
-    study_idic.identification.test = m.test;
+    let mut idic_spec = inputs.identification.clone();
+    idic_spec.test = m.test;
     let mut starts = Vec::new();
     if let Some((measured, path)) = &recorded.measured {
         let (field, _) = measured.weighted_points();
         let prepared = Prepared {
             name: m.name.clone(),
-            label: m.label(&study.tests),
+            label: m.label(inputs.tests),
             test: m.test,
             data: PreparedData::Measured(Measured::plain(
                 field,
@@ -539,11 +541,11 @@ pub fn identify_frames(
             )),
             travel: None,
         };
-        let mut squared = study_idic.clone();
-        squared.identification.loss = femu_identify::weighted::Loss::Squared;
+        let mut squared = idic_spec.clone();
+        squared.loss = femu_identify::weighted::Loss::Squared;
         progress.note("DIC -> FEMU on the sequence's DIC (the start of the integrated DIC):");
         let a = super::identify::identify_on(
-            &squared,
+            &inputs.with(&squared),
             grouped,
             built,
             &[prepared],
@@ -552,11 +554,11 @@ pub fn identify_frames(
         )?;
         starts.push(a.parameters.iter().map(|p| p.identified).collect());
         // The optimum is the start (as for simulated images): no Latin-hypercube starts.
-        study_idic.identification.starts = 0;
+        idic_spec.starts = 0;
     }
-    let route = ImageRouteOptions::for_study(study);
+    let route = ImageRouteOptions::for_identification(inputs.identification);
     identify_images(
-        &study_idic,
+        &inputs.with(&idic_spec),
         grouped,
         &seq,
         false,

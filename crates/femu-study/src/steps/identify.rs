@@ -13,13 +13,15 @@
 
 use super::discretization;
 use super::joint::{self, FitFailure, JointFit, TestModels};
-use super::measure::{self, Measured, Prepared, PreparedData};
-use super::parameters::free_parameters;
+use super::measure::{self, MeasureInputs, Measured, Prepared, PreparedData};
+use super::parameters::IdentificationInputs;
 use crate::error::{Kept, Result};
 use crate::model::StudyModel;
 use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
-use crate::schema::{Discretization, MeasurementSource, Study, Weighting};
+use crate::schema::{
+    Discretization, IdentificationSpec, Measurement, MeasurementSource, Study, TestSpec, Weighting,
+};
 use femu_identify::campaign::{self, CampaignOptions, Estimate, Event, StartRecord};
 use femu_identify::discretization::DiscretizationCheck;
 use femu_identify::error_model::{self, ErrorModel};
@@ -164,8 +166,14 @@ pub fn synth(study: &Study, out: &Path, progress: &dyn Progress) -> Result<()> {
     femu_mesh::folder::refuse_inputs_in(out, &study.input_files())?;
     create_dir(out)?;
     let built = crate::model::build(&study.model)?;
-    let prepared = measure::prepare(study, &built, out, progress)?;
-    joint::write_measured(study, &built, &prepared, out, progress)
+    let prepared = measure::prepare(&MeasureInputs::of(study), &built, out, progress)?;
+    joint::write_measured(
+        &IdentificationInputs::of(study),
+        &built,
+        &prepared,
+        out,
+        progress,
+    )
 }
 
 /// `femu identify`: the study's identification (grouped unless `grouped = false`) from
@@ -206,9 +214,9 @@ fn identify_measured(
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<IdentificationSummary> {
-    let mut inputs = study.input_files();
-    inputs.extend(measured);
-    femu_mesh::folder::refuse_inputs_in(out, &inputs)?;
+    let mut files = study.input_files();
+    files.extend(measured);
+    femu_mesh::folder::refuse_inputs_in(out, &files)?;
     if study
         .measurements
         .iter()
@@ -235,12 +243,17 @@ fn identify_measured(
                 _ => (crate::schema::Frame::model(), None, Weighting::PerPoint),
             };
             let measured = measure::read_measured(p, &frame, covariance, weighting)?;
-            measured_prepared(study, measured, &format!("file {}", p.display()))?
+            measured_prepared(
+                &study.measurements,
+                &study.tests,
+                measured,
+                &format!("file {}", p.display()),
+            )?
         }
-        None => measure::prepare(study, &built, out, progress)?,
+        None => measure::prepare(&MeasureInputs::of(study), &built, out, progress)?,
     };
     identify_on(
-        study,
+        &IdentificationInputs::of(study),
         study.identification.grouped(),
         &built,
         &prepared,
@@ -249,20 +262,25 @@ fn identify_measured(
     )
 }
 
-/// The study's one measurement replaced by `measured` (a field in the model frame, from
-/// `--measured CSV` or handed over by a script; `what` names it in the label): `femu identify
-/// --measured`'s data.
-pub fn measured_prepared(study: &Study, measured: Measured, what: &str) -> Result<Vec<Prepared>> {
-    if study.measurements.len() > 1 {
+/// The study's one measurement (of `measurements`, on `tests`) replaced by `measured` (a field
+/// in the model frame, from `--measured CSV` or handed over by a script; `what` names it in the
+/// label): `femu identify --measured`'s data.
+pub fn measured_prepared(
+    measurements: &[Measurement],
+    tests: &[TestSpec],
+    measured: Measured,
+    what: &str,
+) -> Result<Vec<Prepared>> {
+    if measurements.len() > 1 {
         crate::bail!(
             "--measured replaces the one measurement of a study, and this study has {}: name the file in its [[measurement]]",
-            study.measurements.len()
+            measurements.len()
         );
     }
-    let m = &study.measurements[0];
+    let m = &measurements[0];
     Ok(vec![Prepared {
         name: m.name.clone(),
-        label: format!("{}, {what}", study.tests[m.test].loading.name()),
+        label: format!("{}, {what}", tests[m.test].loading.name()),
         test: m.test,
         data: PreparedData::Measured(measured),
         travel: m.travel.map(|t| campaign::TravelTerm {
@@ -333,14 +351,14 @@ fn show_events<'a>(progress: &'a dyn Progress, repeats: usize) -> impl Fn(Event)
 /// per-point weights first, then with its covariance plus the error its residuals show beyond
 /// it (returned with the fit).
 fn fit_or_keep(
-    study: &Study,
+    inputs: &IdentificationInputs,
     grouped: bool,
     models: &TestModels,
     prepared: &[Prepared],
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<(JointFit, Option<usize>, Option<ErrorModel>)> {
-    let spec = &study.identification;
+    let spec = inputs.identification;
     let any_virtual = prepared
         .iter()
         .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
@@ -377,11 +395,11 @@ fn fit_or_keep(
         }
     };
     let Some((field, base)) = &estimated else {
-        let (fit, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+        let (fit, stopped) = fit_once(inputs, grouped, models, prepared, out, progress, &options)?;
         return Ok((fit, stopped, None));
     };
     progress.note("weighted fit, stage 1 of 2: the field's per-point weights");
-    let (first, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+    let (first, stopped) = fit_once(inputs, grouped, models, prepared, out, progress, &options)?;
     if stopped.is_some() {
         return Ok((first, stopped, None));
     }
@@ -404,7 +422,7 @@ fn fit_or_keep(
         }
     });
     progress.note("weighted fit, stage 2 of 2: the covariance and the estimated error");
-    let (fit, stopped) = fit_once(study, grouped, models, prepared, out, progress, &options)?;
+    let (fit, stopped) = fit_once(inputs, grouped, models, prepared, out, progress, &options)?;
     Ok((fit, stopped, model))
 }
 
@@ -430,7 +448,7 @@ fn per_point_covariance(field: &MeasuredField) -> FieldCovariance {
 
 /// One campaign of [`fit_or_keep`] with `options`.
 fn fit_once(
-    study: &Study,
+    inputs: &IdentificationInputs,
     grouped: bool,
     models: &TestModels,
     prepared: &[Prepared],
@@ -439,7 +457,7 @@ fn fit_once(
     options: &CampaignOptions,
 ) -> Result<(JointFit, Option<usize>)> {
     let on_event = show_events(progress, options.repeats);
-    match joint::fit(study, grouped, models, prepared, options, &on_event) {
+    match joint::fit(inputs, grouped, models, prepared, options, &on_event) {
         Ok(fit) => Ok((fit, None)),
         Err(FitFailure::Setup(e)) => Err(e),
         Err(FitFailure::Campaign(
@@ -457,7 +475,7 @@ fn fit_once(
                     Kept::Files(vec!["starts.csv".into()]),
                 ));
             }
-            let (_, reference) = free_parameters(study, &models.full[0], grouped)?;
+            let (_, reference) = inputs.free_parameters(&models.full[0], grouped)?;
             Ok((
                 JointFit {
                     campaign: *finished,
@@ -535,7 +553,7 @@ fn width_note(parameters: &[Estimate]) -> Option<String> {
 /// repeat identified again on the finest mesh of the check; without the check when `stopped`.
 #[allow(clippy::too_many_arguments)]
 fn estimate_with_check(
-    study: &Study,
+    inputs: &IdentificationInputs,
     built: &StudyModel,
     models: &TestModels,
     prepared: &[Prepared],
@@ -574,7 +592,7 @@ fn estimate_with_check(
         })
     };
     let (mut parameters, mut id) = estimates(fit)?;
-    if study.identification.discretization == Discretization::Off {
+    if inputs.identification.discretization == Discretization::Off {
         return Ok((parameters, id, None));
     }
     if stopped {
@@ -586,7 +604,7 @@ fn estimate_with_check(
     let sd: Vec<f64> = parameters.iter().map(|p| p.relative_sd).collect();
     progress.note("discretization check: the fit on refined meshes");
     let mut checked =
-        match discretization::check(study, built, models, prepared, fit, &sd, progress) {
+        match discretization::check(inputs, built, models, prepared, fit, &sd, progress) {
             Ok(c) => c,
             // A stop during the check's solves: the finished fit is kept, unchecked.
             Err(e) if crate::progress::is_interrupted(&e) => {
@@ -602,12 +620,12 @@ fn estimate_with_check(
         };
     let flagged = checked.check.flagged();
     if flagged
-        && study.identification.discretization == Discretization::Refine
+        && inputs.identification.discretization == Discretization::Refine
         && refine_on_finest(&mut checked, fit, progress)?
     {
         (parameters, id) = estimates(fit)?;
     }
-    let widen = checked.check.flagged() && !discretization::data_from_model(study, prepared);
+    let widen = checked.check.flagged() && !discretization::data_from_model(inputs, prepared);
     if widen {
         campaign::widen(
             &mut parameters,
@@ -665,11 +683,11 @@ fn refine_on_finest(
     Ok(true)
 }
 
-/// The identification of `study` (groups tied when `grouped`) on the model `built` from its
-/// `prepared` measurements (virtual ones drawn for `[identification] repeat` noise
-/// realizations); writes `out`.
+/// The identification of what `inputs` reads of a study (groups tied when `grouped`) on the
+/// model `built` from its `prepared` measurements (virtual ones drawn for `[identification]
+/// repeat` noise realizations); writes `out`.
 pub fn identify_on(
-    study: &Study,
+    inputs: &IdentificationInputs,
     grouped: bool,
     built: &StudyModel,
     prepared: &[Prepared],
@@ -678,20 +696,20 @@ pub fn identify_on(
 ) -> Result<IdentificationSummary> {
     let t0 = Instant::now();
     create_dir(out)?;
-    let spec = &study.identification;
-    let models = TestModels::new(study, built, prepared)?;
+    let spec = inputs.identification;
+    let models = TestModels::new(inputs, built, prepared)?;
     let data = DataKind::of(prepared);
     let tests: Vec<String> = models
         .tests
         .iter()
-        .map(|&t| study.tests[t].loading.name())
+        .map(|&t| inputs.tests[t].loading.name())
         .collect();
-    note_identification(study, &models, prepared, &tests, progress);
+    note_identification(spec, &models, prepared, &tests, progress);
     let (mut fit, interrupted, error_model) =
-        fit_or_keep(study, grouped, &models, prepared, out, progress)?;
+        fit_or_keep(inputs, grouped, &models, prepared, out, progress)?;
     write_starts_csv(&out.join("starts.csv"), &fit.free, &fit.campaign.starts)?;
     let (parameters, id, check) = estimate_with_check(
-        study,
+        inputs,
         built,
         &models,
         prepared,
@@ -712,7 +730,14 @@ pub fn identify_on(
     let best = &c.best[0];
     // What finished is written even after a stop (the field figures need one more solve).
     femu_mesh::stop::shielded(|| {
-        write_result_figures(study, &models, &fit, &parameters, data.reference_known, out)
+        write_result_figures(
+            inputs.measurement_list,
+            &models,
+            &fit,
+            &parameters,
+            data.reference_known,
+            out,
+        )
     })?;
     let summary = IdentificationSummary {
         command: "identify".into(),
@@ -724,7 +749,7 @@ pub fn identify_on(
         measured: measured_sources(prepared),
         points_in_tissue: c.points_in_tissue,
         points_masked: measurements.iter().map(|m| m.points_masked).sum(),
-        noise_sigma_mm: data.sigma.unwrap_or(study.measurement.sigma_mm),
+        noise_sigma_mm: data.sigma.unwrap_or(inputs.sigma_mm),
         free_parameters: fit.free.iter().map(FreeParameterSummary::from).collect(),
         parameters,
         correlation: id.correlation,
@@ -823,13 +848,12 @@ impl DataKind {
 
 /// What an identification is about to fit, for the user.
 fn note_identification(
-    study: &Study,
+    spec: &IdentificationSpec,
     models: &TestModels,
     prepared: &[Prepared],
     tests: &[String],
     progress: &dyn Progress,
 ) {
-    let spec = &study.identification;
     let any_virtual = prepared
         .iter()
         .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
@@ -882,9 +906,9 @@ fn interrupted_note(
 }
 
 /// `errors.png`, `cost_history.png` and the field figure of each measurement (`fields.png`,
-/// or `fields_NAME.png` for a list of measurements) of the best start of the first repeat.
+/// or `fields_NAME.png` for a `measurement_list`) of the best start of the first repeat.
 fn write_result_figures(
-    study: &Study,
+    measurement_list: bool,
     models: &TestModels,
     fit: &JointFit,
     parameters: &[Estimate],
@@ -896,7 +920,7 @@ fn write_result_figures(
     write_figures(out, parameters, best, reference_known, c.best.len())?;
     for (b, block) in c.blocks.iter().enumerate() {
         for seg in &block.segments {
-            let name = if study.measurement_list() {
+            let name = if measurement_list {
                 format!("fields_{}.png", seg.name)
             } else {
                 "fields.png".to_string()

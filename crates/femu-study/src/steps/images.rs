@@ -20,9 +20,9 @@ use crate::bail;
 use crate::error::{Context, Result};
 use crate::output::{create_dir, read_json, write_json};
 use crate::progress::Progress;
-use crate::schema::Study;
+use crate::schema::{IdentificationSpec, Measurement, Study, TestSpec};
 use crate::steps::identify::FreeParameterSummary;
-use crate::steps::parameters::free_parameters;
+use crate::steps::parameters::IdentificationInputs;
 use crate::steps::ultrasound::{SimSummary, SimulatedImages};
 use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
@@ -98,9 +98,15 @@ impl ImageRouteOptions {
     /// The defaults with the study's own choices (`[identification] image_normalization_px`,
     /// `image_pairing`).
     pub fn for_study(study: &Study) -> ImageRouteOptions {
+        ImageRouteOptions::for_identification(&study.identification)
+    }
+
+    /// The defaults with the choices of `[identification]` `spec` (`image_normalization_px`,
+    /// `image_pairing`).
+    pub fn for_identification(spec: &IdentificationSpec) -> ImageRouteOptions {
         let mut route = ImageRouteOptions::default();
-        route.correlation.local_normalization_px = study.identification.image_normalization_px;
-        route.correlation.pairing = study.identification.image_pairing;
+        route.correlation.local_normalization_px = spec.image_normalization_px;
+        route.correlation.pairing = spec.image_pairing;
         route
     }
 }
@@ -211,13 +217,13 @@ pub struct ImageIdentificationSummary {
     pub notes: Vec<String>,
 }
 
-/// The study's test at each load fraction on `model` (a copy each).
+/// The test `test` at each load fraction on `built` (a copy each).
 fn step_models(
-    study: &Study,
+    test: &TestSpec,
     built: &crate::model::StudyModel,
     fractions: &[f64],
 ) -> Result<Vec<Model>> {
-    let test = study.identification_test().loading.clone();
+    let test = test.loading.clone();
     fractions
         .iter()
         .map(|&f| built.loaded(&test.scaled(f)))
@@ -251,11 +257,16 @@ fn refined_spec(
 /// model's elements (never the renderer's `render_refine²`).
 const REFINEMENT_FACTORS: [usize; 2] = [2, 3];
 
-/// The sequence's load steps on the study's mesh with `factor` times the elements.
-fn refined_step_models(study: &Study, seq: &ImageSequence, factor: usize) -> Result<Vec<Model>> {
-    let spec = refined_spec(&study.model, factor).context("a deck cannot be refined")?;
+/// The sequence's load steps of the identification's test on the model of `inputs` meshed
+/// with `factor` times the elements.
+fn refined_step_models(
+    inputs: &IdentificationInputs,
+    seq: &ImageSequence,
+    factor: usize,
+) -> Result<Vec<Model>> {
+    let spec = refined_spec(inputs.model, factor).context("a deck cannot be refined")?;
     let built = crate::model::build(&spec)?;
-    step_models(study, &built, &seq.load_fractions)
+    step_models(inputs.identification_test(), &built, &seq.load_fractions)
 }
 
 /// The estimates from the identified `theta` and their uncertainty budget, three terms added
@@ -415,7 +426,7 @@ fn run_error(e: idic::IdicRunError) -> crate::Error {
 /// mean, `sd` the larger magnitude. Returned as a [`MeshCorrection`] that corrected nothing
 /// (`corrected: false`).
 fn discretization_shift(
-    study: &Study,
+    inputs: &IdentificationInputs,
     seq: &ImageSequence,
     problem: &IdicProblem,
     moving: &[bool],
@@ -424,7 +435,7 @@ fn discretization_shift(
     let mut elements = Vec::new();
     let mut biases: Vec<Vec<f64>> = Vec::new();
     for factor in REFINEMENT_FACTORS {
-        let models = refined_step_models(study, seq, factor)?;
+        let models = refined_step_models(inputs, seq, factor)?;
         elements.push(models[0].mesh.elements.len());
         let shift = problem
             .discretization_shift(models, moving)
@@ -465,7 +476,7 @@ fn discretization_shift(
 /// `outcome` then holds the corrected estimate and its noise; the correction's uncertainty is
 /// half the spread of the one-step Gauss–Newton shifts its rates `p ∓ 1` would give.
 fn mesh_correction(
-    study: &Study,
+    inputs: &IdentificationInputs,
     seq: &ImageSequence,
     problem: &mut IdicProblem,
     outcome: &mut idic::IdicOutcome,
@@ -479,7 +490,7 @@ fn mesh_correction(
     let mut levels = Vec::new();
     let mut elements = Vec::new();
     for factor in REFINEMENT_FACTORS {
-        let models = refined_step_models(study, seq, factor)?;
+        let models = refined_step_models(inputs, seq, factor)?;
         elements.push(models[0].mesh.elements.len());
         levels.push(Level {
             ratio: (factor as f64).sqrt(),
@@ -545,11 +556,12 @@ fn mesh_correction(
     })
 }
 
-/// The integrated-DIC identification of `study` (groups tied when `grouped`) from `seq`;
-/// `extra_starts` join the Latin-hypercube starts (e.g. the DIC → FEMU optimum). Writes `out`.
+/// The integrated-DIC identification of what `inputs` reads of a study (its test, groups and
+/// `[identification]`; groups tied when `grouped`) from `seq`; `extra_starts` join the
+/// Latin-hypercube starts (e.g. the DIC → FEMU optimum). Writes `out`.
 #[allow(clippy::too_many_arguments)]
 pub fn identify_images(
-    study: &Study,
+    inputs: &IdentificationInputs,
     grouped: bool,
     seq: &ImageSequence,
     reference_known: bool,
@@ -560,10 +572,11 @@ pub fn identify_images(
 ) -> Result<ImageIdentificationSummary> {
     let t0 = Instant::now();
     create_dir(out)?;
-    let built = crate::model::build(&study.model)?;
-    let models = step_models(study, &built, &seq.load_fractions)?;
+    let built = crate::model::build(inputs.model)?;
+    let test = inputs.identification_test();
+    let models = step_models(test, &built, &seq.load_fractions)?;
     let last = models.last().context("no load step")?;
-    let (free, reference) = free_parameters(study, last, grouped)?;
+    let (free, reference) = inputs.free_parameters(last, grouped)?;
     let options = route.correlation;
     let stop = progress.stop_flag();
     let make = || {
@@ -577,15 +590,15 @@ pub fn identify_images(
         .map(|p| p.with_stop(stop.clone()))
     };
     let settings = IdicSettings {
-        starts: study.identification.starts,
-        seed: study.identification.seed,
+        starts: inputs.identification.starts,
+        seed: inputs.identification.seed,
         extra_starts,
         scales_px: route.scales_px.clone(),
         ..IdicSettings::default()
     };
     progress.note(&format!(
         "identify from images (integrated DIC): {}, {} elements, {} free parameters, {}",
-        study.identification_test().loading.name(),
+        test.loading.name(),
         last.mesh.elements.len(),
         free.len(),
         what_is_correlated(seq, &options, &settings)
@@ -602,7 +615,7 @@ pub fn identify_images(
         outcome: &mut outcome,
     };
     let mesh =
-        identified.discretization(study, seq, route, &settings.fine, &mut notes, progress)?;
+        identified.discretization(inputs, seq, route, &settings.fine, &mut notes, progress)?;
     let discretization_s = t1.elapsed().as_secs_f64();
     let parameters = identified.estimates(&reference, reference_known, mesh.as_ref());
     notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
@@ -612,7 +625,7 @@ pub fn identify_images(
         command: "identify (images)".into(),
         version: env!("CARGO_PKG_VERSION").into(),
         method: "integrated DIC".into(),
-        test: study.identification_test().loading.name(),
+        test: test.loading.name(),
         grouped,
         elements: last.mesh.elements.len(),
         refined_elements: mesh.as_ref().and_then(|m| m.elements.first().copied()),
@@ -725,7 +738,7 @@ impl Identified<'_> {
     /// stop request ends the step.
     fn discretization(
         &mut self,
-        study: &Study,
+        inputs: &IdentificationInputs,
         seq: &ImageSequence,
         route: &ImageRouteOptions,
         lm: &femu_identify::fit::LmOptions,
@@ -739,7 +752,7 @@ impl Identified<'_> {
             );
             return Ok(None);
         }
-        if refined_spec(&study.model, 2).is_none() {
+        if refined_spec(inputs.model, 2).is_none() {
             notes.push(
                 "the discretization error of a deck's mesh is unknown: femu cannot refine it; solve a finer deck of the same geometry and compare".into(),
             );
@@ -747,7 +760,7 @@ impl Identified<'_> {
         }
         let moving = moving_parameters(self.free, self.outcome);
         let (result, what, without) = if route.mesh_correction {
-            let r = mesh_correction(study, seq, self.problem, self.outcome, lm, &moving);
+            let r = mesh_correction(inputs, seq, self.problem, self.outcome, lm, &moving);
             if let Ok(m) = &r {
                 progress.note(&format!(
                     "  mesh correction: meshes of {:?} elements, rate {:.2} ({}), correction RMS {:.3} px; identified again: cost {:.4e}, {} iterations ({})",
@@ -767,7 +780,7 @@ impl Identified<'_> {
             )
         } else {
             (
-                discretization_shift(study, seq, self.problem, &moving),
+                discretization_shift(inputs, seq, self.problem, &moving),
                 "check",
                 "the intervals leave the mesh's error out",
             )
@@ -985,8 +998,8 @@ fn write_figures(
     Ok(())
 }
 
-/// The three routes from the same images, side by side (`femu run` with `[measurement] source =
-/// "ultrasound"`), each in its folder under `out`:
+/// The three routes from the same images of the measurement `m`, side by side (`femu run` with
+/// `[measurement] source = "ultrasound"`), each in its folder under `out`:
 ///
 /// - `dic/` — DIC → FEMU, plain: the composed incremental DIC field (`measured.csv` of
 ///   `simulated`) with one weight per point, as `identify --measured` fits it;
@@ -999,7 +1012,8 @@ fn write_figures(
 ///
 /// Returns the three summaries.
 pub fn identify_image_measurement(
-    study: &Study,
+    inputs: &IdentificationInputs,
+    m: &Measurement,
     grouped: bool,
     simulated: &SimulatedImages,
     out: &Path,
@@ -1017,12 +1031,11 @@ pub fn identify_image_measurement(
     let covariance = simulated.covariance.clone();
     // Its own model, as `femu identify` builds it (the discretization check's meshes start
     // afresh for each grouping).
-    let built = crate::model::build(&study.model)?;
-    let m = &study.measurements[0];
+    let built = crate::model::build(inputs.model)?;
     let source = "DIC of the simulated B-mode images (incremental, composed)".to_string();
     let prepared = |covariance: Option<femu_identify::weighted::FieldCovariance>| Prepared {
         name: m.name.clone(),
-        label: m.label(&study.tests),
+        label: m.label(inputs.tests),
         test: m.test,
         data: PreparedData::Measured(Measured {
             field: field.clone(),
@@ -1042,22 +1055,22 @@ pub fn identify_image_measurement(
         }),
         travel: None,
     };
-    let mut squared = study.clone();
-    squared.identification.loss = Loss::Squared;
+    let mut squared = inputs.identification.clone();
+    squared.loss = Loss::Squared;
     progress.note("DIC -> FEMU, one weight per point:");
     let a = identify_on(
-        &squared,
+        &inputs.with(&squared),
         grouped,
         &built,
         &[prepared(None)],
         &out.join("dic"),
         progress,
     )?;
-    let mut huber = study.clone();
-    huber.identification.loss = Loss::Huber { k: HUBER_K };
+    let mut huber = inputs.identification.clone();
+    huber.loss = Loss::Huber { k: HUBER_K };
     progress.note("DIC -> FEMU, weighted by the DIC's covariance, Huber's loss:");
     let b = identify_on(
-        &huber,
+        &inputs.with(&huber),
         grouped,
         &built,
         &[prepared(Some(covariance))],
@@ -1069,12 +1082,12 @@ pub fn identify_image_measurement(
         a.parameters.iter().map(|p| p.identified).collect(),
         b.parameters.iter().map(|p| p.identified).collect(),
     ];
-    let route = ImageRouteOptions::for_study(study);
-    let mut study_idic = study.clone();
+    let route = ImageRouteOptions::for_identification(inputs.identification);
+    let mut idic_spec = inputs.identification.clone();
     // The integrated DIC's starts are the two optima (see above).
-    study_idic.identification.starts = 0;
+    idic_spec.starts = 0;
     let c = identify_images(
-        &study_idic,
+        &inputs.with(&idic_spec),
         grouped,
         &seq,
         true,

@@ -3,11 +3,11 @@
 //! the shared free parameters (`femu_identify::campaign::run_joint`).
 
 use super::measure::{Prepared, PreparedData};
-use super::parameters::free_parameters;
+use super::parameters::IdentificationInputs;
 use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::progress::Progress;
-use crate::schema::Study;
+use crate::schema::TestSpec;
 use femu_identify::campaign::{
     self, BlockSpec, Campaign, CampaignOptions, Data, Event, FieldBlock,
 };
@@ -27,8 +27,13 @@ pub struct TestModels {
 }
 
 impl TestModels {
-    /// The models of the tests `prepared` measures.
-    pub fn new(study: &Study, built: &StudyModel, prepared: &[Prepared]) -> Result<TestModels> {
+    /// The models on `built` of the tests `prepared` measures (of `inputs.tests`), and on the
+    /// meshes `inputs` asks for (`coarse_elements`, `data_refinement`).
+    pub fn new(
+        inputs: &IdentificationInputs,
+        built: &StudyModel,
+        prepared: &[Prepared],
+    ) -> Result<TestModels> {
         let mut tests: Vec<usize> = Vec::new();
         for p in prepared {
             if !tests.contains(&p.test) {
@@ -38,13 +43,13 @@ impl TestModels {
         let load = |b: &StudyModel| -> Result<Vec<Model>> {
             tests
                 .iter()
-                .map(|&t| b.loaded(&study.tests[t].loading))
+                .map(|&t| b.loaded(&inputs.tests[t].loading))
                 .collect()
         };
-        let coarse = match study.identification.coarse_elements {
+        let coarse = match inputs.identification.coarse_elements {
             None => Vec::new(),
             Some(n) => {
-                let mut spec = study.model.clone();
+                let mut spec = inputs.model.clone();
                 spec.resolution = crate::schema::Resolution::Elements(n);
                 load(&crate::model::build(&spec).context("[identification] coarse_elements")?)?
             }
@@ -52,11 +57,11 @@ impl TestModels {
         let virtual_data = prepared
             .iter()
             .any(|p| matches!(p.data, PreparedData::Virtual { .. }));
-        let truth = if virtual_data && study.identification.data_refinement > 1.0 {
+        let truth = if virtual_data && inputs.identification.data_refinement > 1.0 {
             let fine = crate::model::build_refined(
-                &study.model,
+                inputs.model,
                 built,
-                study.identification.data_refinement,
+                inputs.identification.data_refinement,
             )?
             .context("[identification] data_refinement: femu cannot refine this model")?;
             load(&fine)?
@@ -84,11 +89,12 @@ pub struct JointFit {
     pub reference: Vec<f64>,
 }
 
-/// The field blocks of `prepared` on `models`: one per test, its measurements in order.
+/// The field blocks of `prepared` on `models`: one per test (named from `tests`), its
+/// measurements in order.
 pub fn blocks<'a>(
     prepared: &'a [Prepared],
     models: &'a TestModels,
-    study: &Study,
+    tests: &[TestSpec],
 ) -> Vec<BlockSpec<'a>> {
     models
         .tests
@@ -97,7 +103,7 @@ pub fn blocks<'a>(
         .map(|(b, &t)| {
             let mine: Vec<&Prepared> = prepared.iter().filter(|p| p.test == t).collect();
             BlockSpec::Field(FieldBlock {
-                name: study.tests[t].loading.name(),
+                name: tests[t].loading.name(),
                 model: &models.full[b],
                 coarse: models.coarse.get(b),
                 truth: models.truth.get(b),
@@ -122,16 +128,17 @@ pub fn blocks<'a>(
 
 /// Fits every prepared measurement at once (groups tied when `grouped`).
 pub fn fit(
-    study: &Study,
+    inputs: &IdentificationInputs,
     grouped: bool,
     models: &TestModels,
     prepared: &[Prepared],
     options: &CampaignOptions,
     on_event: &(dyn Fn(Event) + Sync),
 ) -> Result<JointFit, FitFailure> {
-    let (free, reference) =
-        free_parameters(study, &models.full[0], grouped).map_err(FitFailure::Setup)?;
-    let specs = blocks(prepared, models, study);
+    let (free, reference) = inputs
+        .free_parameters(&models.full[0], grouped)
+        .map_err(FitFailure::Setup)?;
+    let specs = blocks(prepared, models, inputs.tests);
     let campaign = campaign::run_joint(
         &models.full[0],
         &free,
@@ -159,15 +166,15 @@ pub enum FitFailure {
 /// Each prepared measurement with its field as the identification fits it in its first repeat
 /// (a virtual one's first noise realization; a file's mapped to the model frame).
 pub fn realized<'a>(
-    study: &Study,
+    inputs: &IdentificationInputs,
     built: &StudyModel,
     prepared: &'a [Prepared],
 ) -> Result<Vec<(&'a Prepared, Vec<MeasuredPoint>)>> {
-    let models = TestModels::new(study, built, prepared)?;
+    let models = TestModels::new(inputs, built, prepared)?;
     let (free, reference) =
-        super::parameters::free_parameters(study, &models.full[0], study.identification.grouped())?;
-    let blocks = blocks(prepared, &models, study);
-    let seed = study.identification.seed;
+        inputs.free_parameters(&models.full[0], inputs.identification.grouped())?;
+    let blocks = blocks(prepared, &models, inputs.tests);
+    let seed = inputs.identification.seed;
     let fields = campaign::realized_fields(&models.full[0], &free, &reference, &blocks, seed, 0)?;
     let mut fitted = Vec::new();
     for (b, &t) in models.tests.iter().enumerate() {
@@ -183,16 +190,16 @@ pub fn realized<'a>(
 /// ([`realized`]) to `dir/measured.csv`, or `dir/NAME/measured.csv` for a list of measurements
 /// (an ultrasound measurement's folder already holds its own).
 pub fn write_measured(
-    study: &Study,
+    inputs: &IdentificationInputs,
     built: &StudyModel,
     prepared: &[Prepared],
     dir: &Path,
     progress: &dyn Progress,
 ) -> Result<()> {
-    let seed = study.identification.seed;
-    let fitted = realized(study, built, prepared)?;
+    let seed = inputs.identification.seed;
+    let fitted = realized(inputs, built, prepared)?;
     for (p, points) in fitted {
-        let path = if study.measurement_list() {
+        let path = if inputs.measurement_list {
             dir.join(&p.name).join("measured.csv")
         } else {
             dir.join("measured.csv")

@@ -6,7 +6,10 @@ use crate::bail;
 use crate::error::{Context, Result};
 use crate::model::StudyModel;
 use crate::progress::Progress;
-use crate::schema::{Measurement, MeasurementSource, Region, Study, WindowSpec};
+use crate::schema::{
+    GridSpec, Measurement, MeasurementSource, ModelSpec, ProbeSection, Region, Study, TestSpec,
+    UltrasoundSection, WindowSpec,
+};
 use crate::steps::ultrasound::{SimInputs, SimulatedImages};
 use femu_identify::campaign::{self, TravelTerm};
 use femu_identify::measured::{DeclaredUnits, MeasuredField};
@@ -118,39 +121,70 @@ pub fn window_points(built: &StudyModel, w: &WindowSpec) -> Result<(Vec<[f64; 2]
     Ok((points, nl * nd))
 }
 
-/// The points of a virtual measurement on `built` (its `[grid]` or its window) in the tissue,
-/// and how many the grid or window has.
+/// The points of a virtual measurement on `built` (the study's `grid`, or its window) in the
+/// tissue, and how many the grid or window has.
 pub fn virtual_points(
-    study: &Study,
+    grid: &GridSpec,
     built: &StudyModel,
     m: &Measurement,
 ) -> Result<(Vec<[f64; 2]>, usize)> {
     match &m.region {
         Region::Grid => {
             let (lo, hi) = built.model.mesh.bounding_box();
-            let grid = study.measurement.grid.points(lo, hi);
+            let grid = grid.points(lo, hi);
             Ok((campaign::points_in_tissue(&built.model, &grid), grid.len()))
         }
         Region::Window(w) => window_points(built, w),
     }
 }
 
-/// The study's measurements made ready to fit; an ultrasound measurement's images and DIC are
-/// simulated into `dir` (its sub-folder `NAME` for a list of measurements).
+/// What the measurement step reads of a study: its measurements and tests, the `[grid]` of a
+/// virtual one, and for simulated images the model, `[probe]` and `[ultrasound]`.
+#[derive(Debug, Clone, Copy)]
+pub struct MeasureInputs<'a> {
+    pub measurements: &'a [Measurement],
+    pub tests: &'a [TestSpec],
+    /// `[grid]`: the points of a virtual measurement without a window.
+    pub grid: &'a GridSpec,
+    /// Whether the measurements were written as a `[[measurement]]` list (a folder each).
+    pub measurement_list: bool,
+    /// The model the images of an ultrasound measurement are rendered from.
+    pub model: &'a ModelSpec,
+    pub probe: &'a ProbeSection,
+    pub ultrasound: &'a UltrasoundSection,
+}
+
+impl<'a> MeasureInputs<'a> {
+    /// The study's measurements, tests, grid, model, probe and ultrasound settings.
+    pub fn of(study: &'a Study) -> MeasureInputs<'a> {
+        MeasureInputs {
+            measurements: &study.measurements,
+            tests: &study.tests,
+            grid: &study.measurement.grid,
+            measurement_list: study.measurement_list(),
+            model: &study.model,
+            probe: &study.probe,
+            ultrasound: &study.ultrasound,
+        }
+    }
+}
+
+/// The measurements of `inputs` made ready to fit on `built`; an ultrasound measurement's
+/// images and DIC are simulated into `dir` (its sub-folder `NAME` for a list of measurements).
 pub fn prepare(
-    study: &Study,
+    inputs: &MeasureInputs,
     built: &StudyModel,
     dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Vec<Prepared>> {
-    study
+    inputs
         .measurements
         .iter()
         .map(|m| {
-            let label = m.label(&study.tests);
+            let label = m.label(inputs.tests);
             let data = match &m.source {
                 MeasurementSource::Virtual => {
-                    let (points, total) = virtual_points(study, built, m)
+                    let (points, total) = virtual_points(inputs.grid, built, m)
                         .with_context(|| format!("measurement {label}"))?;
                     if points.is_empty() {
                         bail!("measurement {label}: no point of its grid lies in the tissue");
@@ -176,12 +210,12 @@ pub fn prepare(
                     "measurement {label}: recorded frames are identified from the frames themselves by `femu run` (integrated DIC); to fit a measured field, correlate them with `femu dic F0 F1 ...` and give its field.csv with --measured"
                 ),
                 MeasurementSource::Ultrasound => {
-                    let out = if study.measurement_list() {
+                    let out = if inputs.measurement_list {
                         dir.join(&m.name)
                     } else {
                         dir.to_path_buf()
                     };
-                    PreparedData::Measured(ultrasound_measurement(study, m, &out, progress)?)
+                    PreparedData::Measured(ultrasound_measurement(inputs, m, &out, progress)?)
                 }
             };
             Ok(Prepared {
@@ -303,25 +337,25 @@ pub(crate) fn read_covariance(
 /// The DIC field of simulated B-mode images of `m`'s test under its window (or `[probe]`),
 /// written into `out` by `femu us-sim`'s step, with the experiment it came from.
 fn ultrasound_measurement(
-    study: &Study,
+    inputs: &MeasureInputs,
     m: &Measurement,
     out: &Path,
     progress: &dyn Progress,
 ) -> Result<Measured> {
-    let mut probe = study.probe.clone();
+    let mut probe = inputs.probe.clone();
     if let Region::Window(w) = &m.region {
         probe.side = w.side.clone();
         probe.width_mm = w.width_mm;
         probe.depth_mm = w.depth_mm;
     }
-    let inputs = SimInputs {
-        model: &study.model,
-        test: &study.tests[m.test].loading,
+    let sim_inputs = SimInputs {
+        model: inputs.model,
+        test: &inputs.tests[m.test].loading,
         probe: &probe,
-        ultrasound: &study.ultrasound,
+        ultrasound: inputs.ultrasound,
     };
     let simulated = super::ultrasound::sim(
-        inputs,
+        sim_inputs,
         &super::ultrasound::SimOptions::default(),
         out,
         progress,

@@ -1,13 +1,20 @@
 //! The pipeline's steps as library functions, each writing its own output folder and returning
-//! its typed summary (the same struct its `summary.json` holds, read back by the report):
+//! its typed summary (the same struct its `summary.json` holds, read back by the report). A
+//! step takes the part of the study it reads — a section (`&ModelSpec`, `&[TestSpec]`,
+//! `&ProbeSection`, ...) or the inputs the caller builds once from the study
+//! ([`sensitivity::SensitivityInputs`], [`design::DesignInputs`], [`ultrasound::SimInputs`],
+//! [`measure::MeasureInputs`], [`parameters::IdentificationInputs`]) — and the artifacts of the
+//! steps before it (the built model, the prepared measurements, the recorded frames, the
+//! simulated images); the commands (`run`, `demo`, `synth`, `identify`, `sensitivity::run`,
+//! `us-scan`) take the whole study and hand each step its part.
 //!
 //! | step | function | folder |
 //! |---|---|---|
 //! | model | [`model::write_study_model`], [`model::mesh_thigh`], [`model::mesh_labels`] | `model/` |
 //! | forward | [`solve::solve_model`], [`solve::solve_file`], [`solve::forward`] | `forward/TEST/` |
 //! | sensitivity | [`sensitivity::run`] | `sensitivity/` |
-//! | measurement | [`identify::synth`], [`ultrasound::sim`], [`frames::measure`] | `measurement/` |
-//! | identification | [`identify::identify`] | `identify/GROUPING/` |
+//! | measurement | [`identify::synth`], [`measure::prepare`], [`ultrasound::sim`], [`frames::measure`] | `measurement/` |
+//! | identification | [`identify::identify`], [`identify::identify_on`], [`images::identify_images`], [`frames::identify_frames`] | `identify/GROUPING/` |
 //! | the whole study | [`run::run`], [`run::demo`] | all of the above, `report.html` |
 
 pub mod design;

@@ -20,9 +20,10 @@
 
 use super::frames::RecordedFrames;
 use super::identify;
-use super::measure::{self, Prepared, PreparedData};
+use super::measure::{self, MeasureInputs, Prepared, PreparedData};
+use super::parameters::IdentificationInputs;
 use super::record::{begin, finish, skip, RunRecord};
-use super::sensitivity::{self, SensitivityOptions};
+use super::sensitivity::{self, SensitivityInputs, SensitivityOptions};
 use super::solve::{write_solved, SolveContext};
 use super::ultrasound::SimulatedImages;
 use crate::bail;
@@ -30,7 +31,9 @@ use crate::error::Result;
 use crate::model::{build, StudyModel};
 use crate::output::{create_dir, write_text};
 use crate::progress::Progress;
-use crate::schema::{self, Grouping, MeasurementSource, Study, EXAMPLE_STUDY};
+use crate::schema::{
+    self, Grouping, Measurement, MeasurementSource, Steps, Study, TestSpec, EXAMPLE_STUDY,
+};
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use std::path::Path;
 use std::sync::Arc;
@@ -244,7 +247,14 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     // 2–3. The forward tests and their sensitivities (one solve per test serves both); a test
     // that fails is left out, and only the steps that need it are skipped.
     progress.check()?;
-    let failed = forward_and_sensitivity(study, &built, out, progress, record)?;
+    let failed = forward_and_sensitivity(
+        &study.steps,
+        SensitivityInputs::of(study),
+        &built,
+        out,
+        progress,
+        record,
+    )?;
 
     // The design of the experiment (tests x probe windows), when asked.
     if study.steps.design {
@@ -266,13 +276,20 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         )?;
         return Ok(());
     }
-    refuse_unsolved_tests(study, &failed, out, record)?;
+    refuse_unsolved_tests(&study.measurements, &study.tests, &failed, out, record)?;
     progress.check()?;
     let t = begin(record, out, "measurement", Some("measurement"))?;
-    let measured = measure_step(study, &built, &out.join("measurement"), progress)?;
+    let identification = IdentificationInputs::of(study);
+    let measured = measure_step(
+        &MeasureInputs::of(study),
+        &identification,
+        &built,
+        &out.join("measurement"),
+        progress,
+    )?;
     finish(record, out, t)?;
 
-    for (grouped, name) in groupings(study) {
+    for (grouped, name) in groupings(study.identification.grouping) {
         progress.check()?;
         let folder = format!("identify/{name}");
         let t = begin(
@@ -284,15 +301,28 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         let into = out.join(&folder);
         match &measured {
             Measurements::Frames(recorded) => {
-                super::frames::identify_frames(study, grouped, &built, recorded, &into, progress)?;
+                super::frames::identify_frames(
+                    &identification,
+                    &study.measurements[0],
+                    grouped,
+                    &built,
+                    recorded,
+                    &into,
+                    progress,
+                )?;
             }
             Measurements::Images(simulated) => {
                 super::images::identify_image_measurement(
-                    study, grouped, simulated, &into, progress,
+                    &identification,
+                    &study.measurements[0],
+                    grouped,
+                    simulated,
+                    &into,
+                    progress,
                 )?;
             }
             Measurements::Fields(prepared) => {
-                identify::identify_on(study, grouped, &built, prepared, &into, progress)?;
+                identify::identify_on(&identification, grouped, &built, prepared, &into, progress)?;
             }
         }
         finish(record, out, t)?;
@@ -300,16 +330,17 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
     Ok(())
 }
 
-/// The measurement and identification steps skipped, and an error, when a measured test could
-/// not be solved.
+/// The measurement and identification steps skipped, and an error, when the test of one of
+/// `measurements` (of `tests`) could not be solved.
 fn refuse_unsolved_tests(
-    study: &Study,
+    measurements: &[Measurement],
+    tests: &[TestSpec],
     failed: &[(String, String)],
     out: &Path,
     record: &mut RunRecord,
 ) -> Result<()> {
-    for m in &study.measurements {
-        let test = &study.tests[m.test].loading;
+    for m in measurements {
+        let test = &tests[m.test].loading;
         if let Some((_, why)) = failed.iter().find(|(name, _)| *name == test.name()) {
             let reason = format!("its test {} could not be solved: {why}", test.name());
             skip(record, out, "measurement", &reason)?;
@@ -333,23 +364,26 @@ enum Measurements {
     Fields(Vec<Prepared>),
 }
 
-/// The measurement step into `dir`: recorded frames read, placed and correlated; any other
-/// measurement prepared once for the identifications, its fields written.
+/// The measurement step of `inputs` into `dir`: recorded frames read, placed and correlated;
+/// any other measurement prepared once for the identifications, its fields written as the
+/// identification of `identification` fits them.
 fn measure_step(
-    study: &Study,
+    inputs: &MeasureInputs,
+    identification: &IdentificationInputs,
     built: &StudyModel,
     dir: &Path,
     progress: &dyn Progress,
 ) -> Result<Measurements> {
     create_dir(dir)?;
-    if let [m] = study.measurements.as_slice() {
+    if let [m] = inputs.measurements {
         if let MeasurementSource::Frames(spec) = &m.source {
-            let recorded = super::frames::measure(study, built, m, spec, dir, progress)?;
+            let test = &inputs.tests[m.test];
+            let recorded = super::frames::measure(test, inputs.probe, built, spec, dir, progress)?;
             return Ok(Measurements::Frames(Box::new(recorded)));
         }
     }
-    let prepared = measure::prepare(study, built, dir, progress)?;
-    super::joint::write_measured(study, built, &prepared, dir, progress)?;
+    let prepared = measure::prepare(inputs, built, dir, progress)?;
+    super::joint::write_measured(identification, built, &prepared, dir, progress)?;
     let simulated = match prepared.as_slice() {
         [p] => match &p.data {
             PreparedData::Measured(m) => m.simulated.clone(),
@@ -364,19 +398,20 @@ fn measure_step(
 }
 
 /// The groupings the identification runs (`[identification] grouped`), with their folders.
-fn groupings(study: &Study) -> Vec<(bool, &'static str)> {
-    match study.identification.grouping {
+fn groupings(grouping: Grouping) -> Vec<(bool, &'static str)> {
+    match grouping {
         Grouping::Both => vec![(false, "ungrouped"), (true, "grouped")],
         Grouping::Grouped => vec![(true, "grouped")],
         Grouping::Ungrouped => vec![(false, "ungrouped")],
     }
 }
 
-/// Steps 2–3: each test solved (its forward folder written) and, unless `[run] sensitivity =
-/// false`, differentiated. Returns the tests that could not be solved, with the reason (the
-/// step records them as a note).
+/// Steps 2–3: each test of `inputs` solved on `built` (its forward folder written) and, unless
+/// `[run] sensitivity = false` (`steps`), differentiated. Returns the tests that could not be
+/// solved, with the reason (the step records them as a note).
 fn forward_and_sensitivity(
-    study: &Study,
+    steps: &Steps,
+    inputs: SensitivityInputs,
     built: &StudyModel,
     out: &Path,
     progress: &dyn Progress,
@@ -403,7 +438,7 @@ fn forward_and_sensitivity(
         )
         .map(|_| ())
     };
-    if study.steps.sensitivity {
+    if steps.sensitivity {
         let t = begin(record, out, "forward and sensitivity", Some("sensitivity"))?;
         let options = SensitivityOptions {
             out: out.join("sensitivity"),
@@ -412,7 +447,7 @@ fn forward_and_sensitivity(
             figures: true,
         };
         let summary = sensitivity::run_on(
-            sensitivity::SensitivityInputs::of(study),
+            inputs,
             &built.model,
             &built.skin,
             &options,
@@ -421,10 +456,10 @@ fn forward_and_sensitivity(
         )?;
         failed = summary.failed_tests;
         finish(record, out, t)?;
-    } else if study.steps.forward {
+    } else if steps.forward {
         let t = begin(record, out, "forward", Some("forward"))?;
-        let bar = progress.task("forward tests", Some(study.tests.len()));
-        for test in &study.tests {
+        let bar = progress.task("forward tests", Some(inputs.tests.len()));
+        for test in inputs.tests {
             progress.check()?;
             let loading = &test.loading;
             let model = built.loaded(loading)?;
@@ -455,7 +490,7 @@ fn forward_and_sensitivity(
     } else {
         skip(record, out, "forward", "[run] forward = false")?;
     }
-    if !study.steps.sensitivity {
+    if !steps.sensitivity {
         skip(record, out, "sensitivity", "[run] sensitivity = false")?;
     }
     if !failed.is_empty() {
