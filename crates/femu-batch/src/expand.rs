@@ -3,6 +3,7 @@
 //! variables — and checked by femu-study's schema, with the files it names, before anything
 //! runs. Every bad case is reported at once, each with its row and key.
 
+pub use crate::error::CaseErrors;
 use crate::folder::fingerprint;
 use crate::spec::{BatchFile, CaseInput, Cell, KeySetting};
 use femu_study::schema::files::{absolute_file_names, is_file_key, resolve_from};
@@ -19,14 +20,6 @@ pub struct Case {
     /// The case's study file (TOML), checked.
     pub text: String,
     pub fingerprint: String,
-}
-
-/// Cases that cannot run: one line per problem, each naming its case, row and key.
-#[derive(Debug, thiserror::Error)]
-#[error("{} of {total} cases cannot run (nothing was run):\n  {}", .problems.len(), .problems.join("\n  "))]
-pub struct CaseErrors {
-    pub problems: Vec<String>,
-    pub total: usize,
 }
 
 /// The cases of `batch`, each checked; every problem reported together.

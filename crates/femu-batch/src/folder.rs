@@ -15,7 +15,7 @@
 //! Records are written whole (a temporary file renamed over the old one), so that a reader —
 //! `femu batch status` while the cases run — never sees half a file.
 
-use anyhow::{Context, Result};
+use crate::error::{IoContext, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -60,7 +60,7 @@ impl BatchDir {
     pub fn read_plan(&self) -> Result<Plan> {
         let path = self.plan_file();
         if !path.is_file() {
-            anyhow::bail!(
+            crate::bail!(
                 "{} is not a femu batch folder (no batch.json)",
                 self.0.display()
             );
@@ -151,8 +151,8 @@ pub fn write_atomic(path: &Path, text: &str) -> Result<()> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, text).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
+    std::fs::write(&tmp, text).at(&tmp, || format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).at(path, || format!("cannot write {}", path.display()))
 }
 
 /// Seconds since 1970.

@@ -13,12 +13,14 @@
 //! - [`slurm`]: the array script, its submission, the queue's state;
 //! - [`status`]: the state of every case from its record and the queue;
 //! - [`run`](mod@run): `femu batch run`, with `--resume` and `--slurm`;
-//! - [`collect`]: the population table (CSV, JSON) and report.
+//! - [`collect`]: the population table (CSV, JSON) and report;
+//! - [`error`]: the crate's one typed [`Error`].
 //!
 //! The crate sits on femu-study (the schema, `femu run`, the typed summaries) and femu-plot;
 //! the command line calls one function of it per subcommand.
 
 pub mod collect;
+pub mod error;
 pub mod expand;
 pub mod folder;
 pub mod local;
@@ -29,6 +31,7 @@ pub mod status;
 pub mod task;
 
 pub use collect::{collect, Collected, Population};
+pub use error::{Error, Result};
 pub use folder::BatchDir;
 pub use run::{run, RunOptions, RunOutcome, SlurmRequest};
 pub use status::{status, BatchStatus, CaseState};

@@ -9,8 +9,8 @@
 //! cases are recorded process-wide, so that a second Ctrl-C, which ends the runner at once, ends
 //! them too ([`end_case_groups`]: SIGTERM, then SIGKILL) instead of leaving them running.
 
+use crate::error::{IoContext, Result};
 use crate::folder::{BatchDir, CaseRecord, RecordStatus};
-use anyhow::{Context, Result};
 use femu_study::Progress;
 use std::path::PathBuf;
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -127,7 +127,10 @@ pub fn run_local(
         bar.message(&names.join(", "));
         let mut k = 0;
         while k < running.len() {
-            match running[k].child.try_wait()? {
+            let ended = running[k].child.try_wait().at(&opts.femu, || {
+                format!("cannot wait for the process of case {}", running[k].name)
+            })?;
+            match ended {
                 Some(status) => {
                     let r = running.swap_remove(k);
                     case_groups().retain(|&g| g != r.child.id());
@@ -158,14 +161,17 @@ pub fn run_local(
 fn spawn(dir: &BatchDir, name: &str, opts: &LocalOptions) -> Result<Child> {
     let log_path = dir.case_log(name);
     let log = std::fs::File::create(&log_path)
-        .with_context(|| format!("cannot write {}", log_path.display()))?;
+        .at(&log_path, || format!("cannot write {}", log_path.display()))?;
+    let out = log
+        .try_clone()
+        .at(&log_path, || format!("cannot write {}", log_path.display()))?;
     let mut cmd = Command::new(&opts.femu);
     cmd.arg("batch")
         .arg("case")
         .arg(dir.root())
         .arg(name)
         .stdin(Stdio::null())
-        .stdout(log.try_clone()?)
+        .stdout(out)
         .stderr(log)
         .env("RAYON_NUM_THREADS", opts.threads_per_case.to_string());
     #[cfg(unix)]
@@ -173,8 +179,9 @@ fn spawn(dir: &BatchDir, name: &str, opts: &LocalOptions) -> Result<Child> {
         use std::os::unix::process::CommandExt;
         cmd.process_group(0);
     }
-    cmd.spawn()
-        .with_context(|| format!("cannot start {} for case {name}", opts.femu.display()))
+    cmd.spawn().at(&opts.femu, || {
+        format!("cannot start {} for case {name}", opts.femu.display())
+    })
 }
 
 /// The record of a case whose process ended with `status`: its own, or — when the process ended

@@ -4,12 +4,13 @@
 //! the cases not done — failed, interrupted, lost, never run, or changed since they ran — run
 //! again; cases Slurm still has queued or running are left to it.
 
+use crate::bail;
+use crate::error::{Error, IoContext, Result};
 use crate::expand::{expand, Case};
 use crate::folder::{unix_now, BatchDir, Plan, PlannedCase};
 use crate::local::{run_local, LocalOptions, LocalOutcome};
 use crate::slurm::{self, SlurmResources, Submission};
 use crate::status::{status, CaseState};
-use anyhow::{bail, Context, Result};
 use femu_study::Progress;
 use std::path::{Path, PathBuf};
 
@@ -58,7 +59,7 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
     let batch = crate::spec::read(batch_file)?;
     let cases = expand(&batch)?;
     let root =
-        std::path::absolute(&opts.out).with_context(|| format!("--out {}", opts.out.display()))?;
+        std::path::absolute(&opts.out).at(&opts.out, || format!("--out {}", opts.out.display()))?;
     let dir = BatchDir::new(&root);
     progress.note(&format!(
         "femu batch: {} cases of {} checked -> {}",
@@ -74,7 +75,8 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
     let names: Vec<String> = to_run.iter().map(|c| c.name.clone()).collect();
     if let Some(req) = opts.slurm.as_ref().filter(|r| r.dry_run) {
         let res = batch.slurm.with(&req.resources);
-        res.check().map_err(|e| anyhow::anyhow!("--slurm: {e}"))?;
+        res.check()
+            .map_err(|e| Error::input(format!("--slurm: {e}")))?;
         let femu = femu_on_nodes(&res, &opts.femu);
         let script = slurm::script(&dir, &names, &res, &femu)?;
         return Ok(RunOutcome::DryRun {
@@ -96,7 +98,8 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
     match &opts.slurm {
         Some(req) => {
             let res = batch.slurm.with(&req.resources);
-            res.check().map_err(|e| anyhow::anyhow!("--slurm: {e}"))?;
+            res.check()
+                .map_err(|e| Error::input(format!("--slurm: {e}")))?;
             let femu = femu_on_nodes(&res, &opts.femu);
             let submission = slurm::submit(&dir, &names, &res, &femu)?;
             Ok(RunOutcome::Submitted {
@@ -121,8 +124,9 @@ pub fn run(batch_file: &Path, opts: &RunOptions, progress: &dyn Progress) -> Res
 
 /// The fingerprint of the batch file's text (what `batch.json` records of it).
 fn batch_text_fingerprint(path: &Path) -> Result<String> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("cannot read batch file {}", path.display()))?;
+    let text = std::fs::read_to_string(path).at(path, || {
+        format!("cannot read batch file {}", path.display())
+    })?;
     Ok(crate::folder::fingerprint(&text))
 }
 
@@ -255,13 +259,14 @@ fn write_plan(
     }
     for c in to_run {
         let case_dir = dir.case_dir(&c.name);
-        std::fs::create_dir_all(&case_dir)
-            .with_context(|| format!("cannot create {}", case_dir.display()))?;
+        std::fs::create_dir_all(&case_dir).at(&case_dir, || {
+            format!("cannot create {}", case_dir.display())
+        })?;
         crate::folder::write_atomic(&dir.case_study(&c.name), &c.text)?;
         let record = dir.case_record(&c.name);
         if record.exists() {
             std::fs::remove_file(&record)
-                .with_context(|| format!("cannot remove {}", record.display()))?;
+                .at(&record, || format!("cannot remove {}", record.display()))?;
         }
     }
     let plan = Plan {

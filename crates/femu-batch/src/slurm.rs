@@ -10,8 +10,9 @@
 //! DIR/slurm/logs/JOB_TASK.out  Slurm's output of each task (the case's own is cases/NAME/femu.log)
 //! ```
 
+use crate::bail;
+use crate::error::{IoContext, Result};
 use crate::folder::{write_atomic, BatchDir};
-use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -258,8 +259,10 @@ pub fn submit(
 ) -> Result<Submission> {
     let text = script(dir, cases, res, femu)?;
     let mut jobs = Submissions::read(dir)?;
-    std::fs::create_dir_all(dir.slurm_dir().join("logs"))
-        .with_context(|| format!("cannot create {}", dir.slurm_dir().display()))?;
+    let logs = dir.slurm_dir().join("logs");
+    std::fs::create_dir_all(&logs).at(&logs, || {
+        format!("cannot create {}", dir.slurm_dir().display())
+    })?;
     let name = format!("array-{}.sbatch", jobs.submissions.len() + 1);
     let path = dir.slurm_dir().join(&name);
     write_atomic(&path, &text)?;
@@ -267,7 +270,9 @@ pub fn submit(
         .arg("--parsable")
         .arg(&path)
         .output()
-        .context("cannot run sbatch (is Slurm installed on this machine?)")?;
+        .at(Path::new("sbatch"), || {
+            "cannot run sbatch (is Slurm installed on this machine?)"
+        })?;
     if !out.status.success() {
         bail!(
             "sbatch {} failed: {}",
@@ -325,7 +330,7 @@ pub fn queue(job_ids: &[&str]) -> Result<BTreeMap<(String, usize), TaskState>> {
     let out = Command::new("squeue")
         .args(["-h", "-r", "-t", "all", "-o", "%F|%K|%T|%r"])
         .output()
-        .context("cannot run squeue")?;
+        .at(Path::new("squeue"), || "cannot run squeue")?;
     if !out.status.success() {
         bail!("squeue: {}", String::from_utf8_lossy(&out.stderr).trim());
     }
@@ -342,7 +347,7 @@ pub fn accounting(job_ids: &[&str]) -> Result<BTreeMap<(String, usize), TaskStat
         .args(["-n", "-P", "-X", "-o", "JobID,State,ExitCode", "-j"])
         .arg(job_ids.join(","))
         .output()
-        .context("cannot run sacct")?;
+        .at(Path::new("sacct"), || "cannot run sacct")?;
     if !out.status.success() {
         bail!("sacct: {}", String::from_utf8_lossy(&out.stderr).trim());
     }

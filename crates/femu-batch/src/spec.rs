@@ -26,6 +26,7 @@
 //! `identification.seed`, `test.2.force_n_per_mm` for the second `[[test]]`). An empty cell
 //! keeps the template's value. Relative file names in a row start from the table's folder.
 
+pub use crate::error::SpecError;
 use crate::slurm::SlurmResources;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
@@ -91,11 +92,6 @@ pub struct BatchFile {
     pub slurm: SlurmResources,
     pub jobs: Option<usize>,
 }
-
-/// A batch file that cannot be used: the message names the file and line, the row and key.
-#[derive(Debug, thiserror::Error)]
-#[error("{0}")]
-pub struct SpecError(pub String);
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]

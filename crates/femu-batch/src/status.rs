@@ -5,9 +5,9 @@
 //! record cannot: that a task waits, or that it ended without recording anything (killed at
 //! its time or memory limit, its node lost).
 
+use crate::error::Result;
 use crate::folder::{host_name, BatchDir, CaseRecord, PlannedCase, RecordStatus};
 use crate::slurm::{self, Submissions, TaskState};
-use anyhow::Result;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::fmt;

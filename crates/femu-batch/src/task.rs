@@ -4,8 +4,9 @@
 //! when it starts and when it ends, so that the batch knows a case's state without the process
 //! that ran it.
 
+use crate::bail;
+use crate::error::{IoContext, Result};
 use crate::folder::{fingerprint, host_name, unix_now, BatchDir, CaseRecord, RecordStatus};
-use anyhow::{bail, Context, Result};
 use femu_study::Progress;
 use std::time::Instant;
 
@@ -24,8 +25,9 @@ pub fn run_case(dir: &BatchDir, name: &str, progress: &dyn Progress) -> Result<C
         bail!("{}: the batch has no case {name}", dir.root().display());
     };
     let study = dir.case_study(name);
-    let text = std::fs::read_to_string(&study)
-        .with_context(|| format!("case {name}: cannot read {}", study.display()))?;
+    let text = std::fs::read_to_string(&study).at(&study, || {
+        format!("case {name}: cannot read {}", study.display())
+    })?;
     if fingerprint(&text) != planned.fingerprint {
         bail!(
             "case {name}: {} is not the study planned in batch.json (changed since): run `femu batch run BATCH --out {} --resume` to plan it again",

@@ -99,8 +99,20 @@ pub fn run(cmd: BatchCommand, progress: &dyn Progress, quiet: bool) -> anyhow::R
             Ok(())
         }
         BatchCommand::Case { dir, name } => {
-            femu_batch::run_case(&BatchDir::new(&dir), &name, progress).map(|_| ())
+            femu_batch::run_case(&BatchDir::new(&dir), &name, progress)
+                .map(|_| ())
+                .map_err(case_error)
         }
+    }
+}
+
+/// A case's error as the command line reports it: femu-study's own when the case's `femu run`
+/// failed (as `femu run` reports it: a stop found in it ends with status 130), else
+/// femu-batch's.
+fn case_error(e: femu_batch::Error) -> anyhow::Error {
+    match e {
+        femu_batch::Error::Study(e) => e.into(),
+        e => e.into(),
     }
 }
 

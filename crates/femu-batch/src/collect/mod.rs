@@ -12,9 +12,9 @@
 
 mod report;
 
+use crate::error::{Context, IoContext, Result};
 use crate::folder::BatchDir;
 use crate::status::{status, CaseState};
-use anyhow::{Context, Result};
 use femu_mech::material::{Unit, LAWS};
 use femu_study::steps::identify::IdentificationSummary;
 use femu_study::steps::record::RunRecord;
@@ -118,8 +118,9 @@ pub fn collect(dir: &BatchDir) -> Result<Collected> {
         cases,
     };
     let out = dir.collect_dir();
-    std::fs::create_dir_all(out.join("figures"))
-        .with_context(|| format!("cannot create {}", out.display()))?;
+    let figures = out.join("figures");
+    std::fs::create_dir_all(&figures)
+        .at(&figures, || format!("cannot create {}", out.display()))?;
     let mut files = vec![
         out.join("population.csv"),
         out.join("cases.csv"),
@@ -287,7 +288,7 @@ fn write_population_csv(path: &Path, p: &Population) -> Result<()> {
         }
     }
     w.flush()
-        .with_context(|| format!("cannot write {}", path.display()))
+        .at(path, || format!("cannot write {}", path.display()))
 }
 
 /// `cases.csv`: one row per case.
@@ -313,7 +314,7 @@ fn write_cases_csv(path: &Path, p: &Population) -> Result<()> {
         w.write_record(&row)?;
     }
     w.flush()
-        .with_context(|| format!("cannot write {}", path.display()))
+        .at(path, || format!("cannot write {}", path.display()))
 }
 
 #[cfg(test)]

@@ -5,8 +5,8 @@
 //! the subject against the population's median) — and the quality of every fit.
 
 use super::{unit_of, CaseResult, Fit, ParameterResult, Population};
+use crate::error::Result;
 use crate::status::CaseState;
-use anyhow::Result;
 use femu_plot::{box_plot_png, forest_plot_png, quantile, BoxPlot, ForestPlot, ForestRow};
 use femu_study::html::{esc, g, Page};
 use std::collections::BTreeMap;
