@@ -13,7 +13,9 @@
 //! - [`image_field_png`]: a per-pixel field over a grey image (DIC maps);
 //! - [`box_plot_png`]: distributions per group (DIC random error per pair, a population's
 //!   parameters per tissue);
-//! - [`forest_plot_png`]: estimates with their intervals, one row each (per-subject results).
+//! - [`forest_plot_png`]: estimates with their intervals, one row each (per-subject results);
+//! - [`overlay::outline_overlay_png`]: outlines (solid or dashed, one colour per set) over a
+//!   grey image, axes in mm (an image's pose in a model, before and after a refinement).
 //!
 //! Drawing uses `plotters`' bitmap backend; text uses the DejaVu Sans font embedded by the
 //! `dejavu` crate (no system font library needed), registered once per process; the PNG is
@@ -34,6 +36,7 @@ mod field;
 mod forest;
 mod image_field;
 mod line;
+pub mod overlay;
 mod text;
 mod tile;
 

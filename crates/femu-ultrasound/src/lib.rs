@@ -14,6 +14,8 @@
 //! - [`settings`]: optimal gain per dynamic range (seed Figs. 5–6), texture per frequency
 //!   (Fig. 4).
 //! - [`noise`]: DIC random error per setting and the t-tests between settings (Fig. 7).
+//! - [`pose`]: the image's pose in the model refined from the unloaded frame (model outlines
+//!   matched to the bright lines), with its covariance.
 //! - [`experiment`]: the virtual experiment (images of the unloaded and loaded tissue, DIC,
 //!   comparison with the FE field).
 
@@ -24,6 +26,7 @@ pub mod experiment;
 pub mod manifest;
 pub mod noise;
 pub mod phantom;
+pub mod pose;
 pub mod probe;
 pub mod render;
 pub mod settings;
