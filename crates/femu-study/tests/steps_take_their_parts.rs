@@ -11,9 +11,14 @@ use femu_study::steps::measure::{self, MeasureInputs, PreparedData};
 use femu_study::steps::parameters::IdentificationInputs;
 use std::path::PathBuf;
 
+/// This test's scratch folder (removed when it passes).
+fn base() -> PathBuf {
+    std::env::temp_dir().join(format!("femu-steps-parts-{}", std::process::id()))
+}
+
 /// A scratch folder of its own for `name`, emptied.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("femu-steps-parts-{}-{name}", std::process::id()));
+    let dir = base().join(name);
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
@@ -90,4 +95,5 @@ fn the_steps_read_the_sections_they_are_given() {
     assert_eq!(own_fit.starts_per_repeat, 2);
     assert_ne!(own_fit.points_in_tissue, whole.points_in_tissue);
     assert_ne!(outcome(&own_fit).0, outcome(&whole).0);
+    std::fs::remove_dir_all(base()).ok();
 }
