@@ -39,6 +39,7 @@ import json
 import os
 import platform
 import re
+import shlex
 import shutil
 import statistics
 import subprocess
@@ -381,7 +382,7 @@ def main() -> None:
     }, indent=1) + "\n")
     (a.results / "provenance.json").write_text(json.dumps({
         "date": started, "machine": machine(), "commit": cur_commit, "build": "release builds",
-        "load": f"{load:.1f}", "command": f"python3 bench/perf/run.py {' '.join(sys.argv[1:])}",
+        "load": f"{load:.1f}", "command": "python3 bench/perf/run.py " + shlex.join(sys.argv[1:]),
     }, indent=1) + "\n")
     log(f"written {a.results}/results.json and provenance.json")
 

@@ -327,8 +327,11 @@ def performance(results):
     out = [provenance(d).strip(), ""]
     out.append(
         f"Previous: a release build of commit {prev['commit']}; current: {cur['commit']}. The two "
-        f"binaries run in turn, {r['runs']} runs each ({r['slow_runs']} for the integrated DIC and "
-        f"`demo --full`), `femu bench --repeat {r['bench_repeat']}`; median (min–max).\n"
+        f"binaries run in turn, {r['runs']} runs each"
+        + (f" ({r['slow_runs']} for the integrated DIC and `demo --full`)"
+           if any("integrated DIC" in x["figure"] or "--full" in x["figure"] for x in r["rows"]) else "")
+        + (f", `femu bench --repeat {r['bench_repeat']}`" if any("femu bench" in x["figure"] for x in r["rows"]) else "")
+        + "; median (min–max).\n"
     )
     out.append("| figure | goal | previous | current |\n|---|---|---|---|")
     for row in r["rows"]:
