@@ -144,11 +144,11 @@ fn a_pose_off_by_millimetres_and_degrees_is_recovered() {
             "{mhz} MHz seed {seed}: error {:.3} mm, {:.3} mm, {:.3} deg; predicted sd {:.3} mm, {:.3} mm, {:.3} deg; {:.2} s",
             e[0], e[1], e[2].to_degrees(), fit.sd[0], fit.sd[1], fit.sd[2], fit.seconds
         );
-        // Tolerances: the campaign of the example (pose_check) over 10 seeds at 9 and 11 MHz
-        // recovers depth within 0.05 mm and the tilt within 0.5 deg; along the skin the
-        // concentric outlines leave a turn about the thigh's centre weakly seen (predicted sd
-        // about 0.2 mm, see the module documentation), so 0.5 mm.
-        assert!(e[0].abs() < 0.5, "t_x error {}", e[0]);
+        // Tolerances: over 10 seeds at 9 and 11 MHz and 10 pymust frames, the example
+        // pose_check recovers depth within 0.03 mm, the tilt within 0.25 deg and the position
+        // along the skin within 0.27 mm (a turn about the thigh's centre is seen through the
+        // bone's cap only: module documentation); 0.3 mm, 0.1 mm and 0.5 deg here.
+        assert!(e[0].abs() < 0.3, "t_x error {}", e[0]);
         assert!(e[1].abs() < 0.1, "t_y error {}", e[1]);
         assert!(
             e[2].to_degrees().abs() < 0.5,
