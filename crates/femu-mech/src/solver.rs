@@ -27,12 +27,13 @@ mod contact_state;
 pub(crate) mod factor;
 mod linearization;
 pub(crate) mod newton;
+pub(crate) mod report;
 pub(crate) mod system;
 
 pub use assembly::AssemblyError;
 pub use contact_state::ActiveConstraint;
 pub use linearization::Linearization;
-pub use newton::{IncrementRecord, IterationRecord, Solution, SolveReport};
+pub use report::{IncrementRecord, IterationRecord, Solution, SolveReport};
 
 use crate::model::Model;
 use assembly::{Assembly, DofMap, Layout};

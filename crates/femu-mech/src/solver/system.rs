@@ -8,7 +8,7 @@ use super::active_set::ActiveSetSolver;
 use super::assembly::{Assembly, AssemblyError, DofMap};
 use super::contact_state::{ActiveSet, ContactState};
 use super::factor::TangentFactor;
-use super::newton::{limit_point_hint, Solution, SolveReport};
+use super::report::{limit_point_hint, Solution, SolveReport};
 use crate::model::Model;
 use femu_sparse::LinearSolveError;
 
