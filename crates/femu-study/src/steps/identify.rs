@@ -777,6 +777,16 @@ pub fn identify_on(
         discretization: check,
         error_model,
     };
+    write_summary(summary, out, progress)
+}
+
+/// Writes `summary.json` and prints the table; an identification a stop cut short is then the
+/// error that says what was kept.
+fn write_summary(
+    summary: IdentificationSummary,
+    out: &Path,
+    progress: &dyn Progress,
+) -> Result<IdentificationSummary> {
     write_json(&out.join("summary.json"), &summary)?;
     print_table(&summary, progress);
     progress.note(&format!(

@@ -227,9 +227,13 @@ fn last_step_seconds(t0: Instant, steps: &[super::record::StepRecord]) -> f64 {
     (t0.elapsed().as_secs_f64() - before).max(0.0)
 }
 
-/// The steps of a run, each recorded in `record` (and `out/steps.json`) as it begins and ends.
-fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
-    // 1. The model.
+/// The model step: the study's model built and written to `out/model`.
+fn model_step(
+    study: &Study,
+    out: &Path,
+    progress: &dyn Progress,
+    record: &mut RunRecord,
+) -> Result<StudyModel> {
     let t = begin(record, out, "model", Some("model"))?;
     let spin = progress.task("meshing the model", None);
     let built = build(&study.model)?;
@@ -243,6 +247,13 @@ fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRec
         progress,
     )?;
     finish(record, out, t)?;
+    Ok(built)
+}
+
+/// The steps of a run, each recorded in `record` (and `out/steps.json`) as it begins and ends.
+fn steps(study: &Study, out: &Path, progress: &dyn Progress, record: &mut RunRecord) -> Result<()> {
+    // 1. The model.
+    let built = model_step(study, out, progress, record)?;
 
     // 2–3. The forward tests and their sensitivities (one solve per test serves both); a test
     // that fails is left out, and only the steps that need it are skipped.
