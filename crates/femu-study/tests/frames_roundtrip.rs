@@ -166,6 +166,71 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
         us_seq.frame
     );
 
+    // The placement refined from the unloaded frame (`pose = "refined"`), started 1 mm along
+    // the image's columns, 0.5 mm along its rows and 2° off: it comes back to the simulator's
+    // pose within three of its own standard deviations (and 0.05 mm, the rendering's own
+    // resolution) at the probe face's centre, and writes its fit and overlay.
+    let truth = us_seq.frame;
+    let turn = |v: [f64; 2], a: f64| {
+        [
+            v[0] * a.cos() - v[1] * a.sin(),
+            v[0] * a.sin() + v[1] * a.cos(),
+        ]
+    };
+    let a = 2f64.to_radians();
+    let mut off = (**spec).clone();
+    off.placement = Some(schema::frames::Placement {
+        origin_mm: [
+            truth.origin_mm[0] + truth.x_axis[0] + 0.5 * truth.y_axis[0],
+            truth.origin_mm[1] + truth.x_axis[1] + 0.5 * truth.y_axis[1],
+        ],
+        x_axis: turn(truth.x_axis, a),
+        y_axis: turn(truth.y_axis, a),
+    });
+    off.refine_pose = true;
+    let posed = base.join("frames-pose");
+    let refined = frames::measure(
+        &study.tests[m.test],
+        &study.probe,
+        &built,
+        &off,
+        &posed,
+        &Quiet,
+    )
+    .unwrap();
+    let pose = refined.record.pose.as_ref().expect("the pose was refined");
+    let r = refined.record.placement;
+    let w = fr_seq.frames[0].width as f64;
+    let face = |f: &ImageFrame| {
+        let (x, y) = (0.5 * (w - 1.0) * f.mm_per_px, -0.5 * f.mm_per_px);
+        [
+            f.origin_mm[0] + x * f.x_axis[0] + y * f.y_axis[0],
+            f.origin_mm[1] + x * f.x_axis[1] + y * f.y_axis[1],
+        ]
+    };
+    let (fr, ft) = (face(&r), face(&truth));
+    let d = [fr[0] - ft[0], fr[1] - ft[1]];
+    let along = d[0] * truth.x_axis[0] + d[1] * truth.x_axis[1];
+    let depth = d[0] * truth.y_axis[0] + d[1] * truth.y_axis[1];
+    let angle = (truth.x_axis[0] * r.x_axis[1] - truth.x_axis[1] * r.x_axis[0])
+        .asin()
+        .to_degrees();
+    eprintln!(
+        "refined pose: error along {along:+.3} mm, depth {depth:+.3} mm, angle {angle:+.3}°; predicted sd {:.3} mm, {:.3} mm, {:.3}°; outlines {:?}",
+        pose.sd[0], pose.sd[1], pose.sd[2], pose.found
+    );
+    for (name, err, sd) in [
+        ("along", along, pose.sd[0]),
+        ("depth", depth, pose.sd[1]),
+        ("angle", angle, pose.sd[2]),
+    ] {
+        assert!(
+            err.abs() <= 3.0 * sd + 0.05,
+            "{name}: error {err}, predicted sd {sd}"
+        );
+    }
+    assert!(posed.join("pose.json").is_file() && posed.join("pose_overlay.png").is_file());
+
     // The inputs, to the bit.
     assert_eq!(fr_seq.frames.len(), us_seq.frames.len());
     for (k, (a, b)) in fr_seq.frames.iter().zip(&us_seq.frames).enumerate() {

@@ -43,6 +43,9 @@ pub struct FramesSpec {
     /// The acquisition time of each listed file (s), for a force log; with a cine, the times
     /// that choose its frames.
     pub frame_times_s: Option<Vec<f64>>,
+    /// Whether the placement is refined from the unloaded frame (`pose = "refined"`:
+    /// `femu_ultrasound::pose`).
+    pub refine_pose: bool,
 }
 
 /// Where the frames come from.
@@ -114,7 +117,7 @@ impl LogUnits {
 }
 
 /// The keys of recorded frames, for the other sources' refusals.
-pub(crate) const FRAME_KEYS: [&str; 8] = [
+pub(crate) const FRAME_KEYS: [&str; 9] = [
     "frames",
     "cine",
     "frame_indices",
@@ -123,6 +126,7 @@ pub(crate) const FRAME_KEYS: [&str; 8] = [
     "force_log",
     "force_log_offset_s",
     "force_log_units",
+    "pose",
 ];
 
 /// The frame keys `m` gives.
@@ -136,6 +140,7 @@ pub(crate) fn given_frame_keys(m: &MeasurementEntry) -> Vec<&'static str> {
         m.force_log.is_some(),
         m.force_log_offset_s.is_some(),
         m.force_log_units.is_some(),
+        m.pose.is_some(),
     ];
     FRAME_KEYS
         .iter()
@@ -210,12 +215,16 @@ pub(crate) fn parse(
             force_log_loads(m, resolve(base, log), at)?
         }
     };
+    let refine_pose = super::keys::word_or_default("measurement", "pose", m.pose.as_deref())
+        .map_err(|e| at.err("pose", e))?
+        == "refined";
     Ok(FramesSpec {
         images,
         pixel_size_mm,
         placement,
         loads,
         frame_times_s: times,
+        refine_pose,
     })
 }
 

@@ -1441,6 +1441,17 @@ force_n_per_mm = 0.1
                 )
                 .example("0.0", "the log's clock minus the frames'"),
             ),
+            Item::Key(
+                key(
+                    "pose",
+                    Ty::Text,
+                    "",
+                    Allowed::Words { what: "pose", words: &["given", "refined"] },
+                    Def::Value("\"given\""),
+                    "the frames' placement as given (keys or [probe]), or refined from the unloaded frame: the model's skin, fascia and bone matched to its bright lines",
+                )
+                .example("\"refined\"", "as given, or refined from the unloaded frame's bright lines"),
+            ),
             Item::Note(
                 "
 # A joint identification fits several measurements at once: replace the [measurement] table

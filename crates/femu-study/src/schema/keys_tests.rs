@@ -139,6 +139,10 @@ fn context(table: &str, key: &str) -> &'static str {
             "[measurement]\nsource = \"frames\"\nframes = [\"f0.png\", \"f1.png\"]\n\
              force_log = \"force.csv\"\nframe_times_s = [0.0, 1.0]\npixel_size_mm = 0.1\n"
         }
+        ("measurement", "pose") => {
+            "[measurement]\nsource = \"frames\"\nframes = [\"f0.png\", \"f1.png\"]\n\
+             loads_n_per_mm = [0.1]\npixel_size_mm = 0.1\n"
+        }
         ("measurement", "pixel_size_mm") => {
             "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\nunits = \"px\"\n"
         }

@@ -130,6 +130,8 @@ pub(crate) struct MeasurementEntry {
     pub force_log: Option<String>,
     pub force_log_offset_s: Option<f64>,
     pub force_log_units: Option<Vec<String>>,
+    /// The frames' pose: as given, or refined from the unloaded frame (`given`, `refined`).
+    pub pose: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -49,6 +49,50 @@ pub struct FramesRecord {
     /// The DIC of the sequence (the identification's start), when it converged.
     pub dic: Option<SequenceDic>,
     pub notes: Vec<String>,
+    /// The refinement of the placement from the unloaded frame (`pose = "refined"`; the whole
+    /// fit in `pose.json`).
+    #[serde(default)]
+    pub pose: Option<PoseRefinement>,
+}
+
+/// The placement's refinement from the unloaded frame (`femu_ultrasound::pose`): the
+/// correction from the given placement and its standard deviation, as a rigid motion of the
+/// image about the middle of its top edge (the probe face's centre).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PoseRefinement {
+    /// `t_x`, `t_y` (mm, along the image's columns and rows) and the turn (degrees).
+    pub correction: [f64; 3],
+    /// Their standard deviations (mm, mm, degrees), from the sandwich over outline blocks.
+    pub sd: [f64; 3],
+    /// The model's outlines that supported the pose.
+    pub found: Vec<String>,
+}
+
+impl PoseRefinement {
+    /// The refinement in words, for the placement's origin.
+    fn describe(&self) -> String {
+        format!(
+            "refined from the unloaded frame by ({:+.3}, {:+.3}) mm and {:+.3}° (sd {:.3} mm, {:.3} mm, {:.3}°; outlines {})",
+            self.correction[0],
+            self.correction[1],
+            self.correction[2],
+            self.sd[0],
+            self.sd[1],
+            self.sd[2],
+            self.found.join(", ")
+        )
+    }
+
+    /// A note when the outlines pin the pose only weakly along the skin or in its turn (sd
+    /// above 1 mm or 1°).
+    fn weakly_pinned(&self) -> Option<String> {
+        (self.sd[0] > 1.0 || self.sd[2] > 1.0).then(|| format!(
+            "the refined placement is pinned only weakly along the skin and in its turn (sd {:.2} mm and {:.2}°): the outlines in view ({}) are nearly parallel; a window that shows the bone or a septum across the beam pins it",
+            self.sd[0],
+            self.sd[2],
+            self.found.join(", ")
+        ))
+    }
 }
 
 /// The DIC of the sequence: per increment, and the composed field.
@@ -184,8 +228,20 @@ pub fn measure(
         .map_err(|e| crate::input!("[measurement] {}: {}", e.key, e.message))?;
     let force = test_force(test).context("the frames' test has no force")?;
     let frames = read_frames(&resolved)?;
-    let (placement, placement_from) = placement(probe, built, spec, &resolved)?;
+    let (mut placement, mut placement_from) = placement(probe, built, spec, &resolved)?;
     let mut notes = Vec::new();
+    let pose = if spec.refine_pose {
+        let (refined, record) = refine_placement(&frames[0], &placement, built, out)?;
+        placement = refined;
+        placement_from = format!("{placement_from}, {}", record.describe());
+        notes.extend(record.weakly_pinned());
+        Some(record)
+    } else {
+        None
+    };
+    if let Some(note) = pose.as_ref().and_then(PoseRefinement::weakly_pinned) {
+        progress.warn(&note);
+    }
     if let Some(log) = &resolved.force_log {
         let f0 = log.at_frames[0];
         let fmax = log.at_frames.iter().fold(0.0f64, |a, b| a.max(b.abs()));
@@ -237,6 +293,7 @@ pub fn measure(
         placement_from,
         dic,
         notes,
+        pose,
     };
     write_json(&out.join("frames.json"), &record)?;
     Ok(RecordedFrames {
@@ -244,6 +301,78 @@ pub fn measure(
         frames,
         measured,
     })
+}
+
+/// The placement refined from the unloaded frame `frame0` (`femu_ultrasound::pose`): the
+/// model's skin, fascia and bone surface matched to the frame's bright lines, starting from
+/// `given`. Writes the whole fit (`pose.json`) and the outlines on the frame before and after
+/// (`pose_overlay.png`); a pose that no interface supports is an error naming the outlines.
+fn refine_placement(
+    frame0: &GreyImage,
+    given: &ImageFrame,
+    built: &StudyModel,
+    out: &Path,
+) -> Result<(ImageFrame, PoseRefinement)> {
+    use femu_ultrasound::pose::{model_outlines, refine_pose, ImagePose, PoseOptions};
+    let mesh = &built.model.mesh;
+    let bone = super::ultrasound::bone_faces(mesh, &built.skin);
+    let outlines = model_outlines(mesh, &built.model.region_names, &bone);
+    let initial = ImagePose::new(given.origin_mm, given.x_axis, given.y_axis, given.mm_per_px)?;
+    let fit = refine_pose(frame0, &initial, &outlines, &PoseOptions::default())
+        .context("[measurement] pose = \"refined\": refining the frames' placement")?;
+    write_json(&out.join("pose.json"), &fit)?;
+    let to_px = |p: &ImagePose| -> Vec<[[f64; 2]; 2]> {
+        outlines
+            .iter()
+            .flat_map(|o| o.segments.iter())
+            .map(|s| [p.model_to_pixel(s[0]), p.model_to_pixel(s[1])])
+            .collect()
+    };
+    let overlay = out.join("pose_overlay.png");
+    femu_plot::overlay::outline_overlay_png(
+        &overlay,
+        &frame0.data,
+        frame0.width,
+        frame0.height,
+        fit.pose.pixel_size_mm,
+        &[
+            femu_plot::overlay::OutlineSet {
+                label: "given placement".into(),
+                segments_px: to_px(&fit.initial),
+                color: (230, 60, 40),
+                dashed: true,
+            },
+            femu_plot::overlay::OutlineSet {
+                label: "refined placement".into(),
+                segments_px: to_px(&fit.pose),
+                color: (40, 200, 255),
+                dashed: false,
+            },
+        ],
+        &femu_plot::overlay::OverlayOptions {
+            title: "The model's outlines on the unloaded frame".into(),
+            ..Default::default()
+        },
+    )
+    .with_context(|| format!("cannot write {}", overlay.display()))?;
+    let p = fit.pose;
+    let refined = ImageFrame::new(p.origin_mm, p.pixel_size_mm, p.x_axis, p.y_axis)
+        .map_err(|e| crate::input!("the refined placement: {e}"))?;
+    let record = PoseRefinement {
+        correction: [
+            fit.correction[0],
+            fit.correction[1],
+            fit.correction[2].to_degrees(),
+        ],
+        sd: fit.sd,
+        found: fit
+            .support
+            .iter()
+            .filter(|o| o.found)
+            .map(|o| o.name.clone())
+            .collect(),
+    };
+    Ok((refined, record))
 }
 
 /// The force log against time (the log's clock), the chosen frames marked.
