@@ -6,6 +6,7 @@ use crate::colorbar::{draw_color_bar, ColorBarPlace};
 use crate::colormap::{round_u8, ColorMap};
 use crate::text::{draw_title, font, Sizes};
 use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -139,19 +140,7 @@ pub fn image_field_png(
                 -((cy + ch) as f64)..-(cy as f64),
             )
             .map_err(de)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("x (px)")
-            .y_desc("y (px)")
-            .label_style(font(s.tick()))
-            .axis_desc_style(font(s.desc()))
-            .x_labels(6)
-            .y_labels(6)
-            .y_label_formatter(&|v| format!("{}", (-v).round()))
-            .x_label_formatter(&|v| format!("{}", v.round()))
-            .draw()
-            .map_err(de)?;
+        draw_image_axes(&mut chart, "x (px)", "y (px)", s)?;
         let place = ColorBarPlace {
             left: left + pw + cb_gap,
             top,
@@ -162,6 +151,29 @@ pub fn image_field_png(
         // NaN pixels show the grey image: no "no value" swatch.
         draw_color_bar(root, &cmap, &opts.value_label, false, place, s)
     })
+}
+
+/// The axes of an image drawn with its rows going down (the chart's y runs over −row, labelled
+/// positive): no grid, six labels a side.
+pub(crate) fn draw_image_axes<DB: DrawingBackend>(
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
+    x_desc: &str,
+    y_desc: &str,
+    s: Sizes,
+) -> Result<(), String> {
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .label_style(font(s.tick()))
+        .axis_desc_style(font(s.desc()))
+        .x_labels(6)
+        .y_labels(6)
+        .y_label_formatter(&|v| format!("{}", (-v).round()))
+        .x_label_formatter(&|v| format!("{}", v.round()))
+        .draw()
+        .map_err(de)
 }
 
 #[cfg(test)]

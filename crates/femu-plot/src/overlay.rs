@@ -3,6 +3,7 @@
 //! mm (lateral across, depth down, as the image is displayed). Used to check an image's pose
 //! in a model at a glance: the model's skin and interfaces before and after a refinement.
 
+use crate::image_field::draw_image_axes;
 use crate::text::{draw_title, font, Sizes};
 use crate::{check_size, de, Canvas, PlotError};
 use plotters::prelude::*;
@@ -123,19 +124,7 @@ pub fn outline_overlay_png(
             .x_label_area_size(xla)
             .build_cartesian_2d(0.0..wmm, -hmm..0.0)
             .map_err(de)?;
-        chart
-            .configure_mesh()
-            .disable_mesh()
-            .x_desc("lateral (mm)")
-            .y_desc("depth (mm)")
-            .label_style(font(s.tick()))
-            .axis_desc_style(font(s.desc()))
-            .x_labels(6)
-            .y_labels(6)
-            .y_label_formatter(&|v| format!("{}", (-v).round()))
-            .x_label_formatter(&|v| format!("{}", v.round()))
-            .draw()
-            .map_err(de)?;
+        draw_image_axes(&mut chart, "lateral (mm)", "depth (mm)", s)?;
         // Pixel position (centre at integers) → chart point: the pixel's centre is at
         // (u + ½) mm-units from the corner.
         let to_mm = |p: [f64; 2]| ((p[0] + 0.5) * pixel_size_mm, -(p[1] + 0.5) * pixel_size_mm);

@@ -41,18 +41,23 @@ pub struct MooneyRivlinTerms {
     pub inv_d: f64,
 }
 
-/// `c10 (I1bar - 3) + c01 (I2bar - 3)` in plane strain and its invariant derivatives.
+/// `J^(-1/3), J^(-2/3), J^(-4/3), J^(-5/3), J^(-7/3), J^(-8/3), J^(-10/3)` from `J^(-1/3)` by
+/// products (no other root, no division).
 #[inline(always)]
-fn isochoric(c10: f64, c01: f64, i1: f64, j: f64) -> InvariantDerivatives {
-    // Powers of J from J^(-1/3) by products (no other root, no division).
+fn j_powers(j: f64) -> [f64; 7] {
     let y = inv_cbrt(j);
     let jm23 = y * y;
     let jm1 = jm23 * y;
     let jm43 = jm23 * jm23;
     let jm53 = jm23 * jm1;
     let jm73 = jm43 * jm1;
-    let jm83 = jm53 * jm1;
-    let jm103 = jm73 * jm1;
+    [y, jm23, jm43, jm53, jm73, jm53 * jm1, jm73 * jm1]
+}
+
+/// `c10 (I1bar - 3) + c01 (I2bar - 3)` in plane strain and its invariant derivatives.
+#[inline(always)]
+fn isochoric(c10: f64, c01: f64, i1: f64, j: f64) -> InvariantDerivatives {
+    let [y, jm23, jm43, jm53, jm73, jm83, jm103] = j_powers(j);
     let j23 = j * y;
     let i1m1 = i1 - 1.0;
     InvariantDerivatives {
@@ -69,14 +74,7 @@ fn isochoric(c10: f64, c01: f64, i1: f64, j: f64) -> InvariantDerivatives {
 /// and J) and its invariant derivatives.
 #[inline(always)]
 fn isochoric_3d(c10: f64, c01: f64, i1: f64, i2: f64, j: f64) -> InvariantDerivatives3 {
-    let y = inv_cbrt(j);
-    let jm23 = y * y;
-    let jm1 = jm23 * y;
-    let jm43 = jm23 * jm23;
-    let jm53 = jm23 * jm1;
-    let jm73 = jm43 * jm1;
-    let jm83 = jm53 * jm1;
-    let jm103 = jm73 * jm1;
+    let [_, jm23, jm43, jm53, jm73, jm83, jm103] = j_powers(j);
     InvariantDerivatives3 {
         w: c10 * (jm23 * i1 - 3.0) + c01 * (jm43 * i2 - 3.0),
         w_i: c10 * jm23,

@@ -9,8 +9,8 @@
 //! No contact yet. Dof `3 n + i` is component i of node n; the free dofs are numbered in
 //! increasing dof order.
 
-use super::kernel::{evaluate, Geometry3, MAX_DOFS_3D};
-use super::pressure::{face_pressure, MAX_FACE_DOFS};
+use super::kernel::{evaluate, Geometry3, MAX_DOFS_3D, MAX_NODES_3D};
+use super::pressure::{face_pressure, MAX_FACE_DOFS, MAX_FACE_NODES};
 use super::shape::Kind3;
 use crate::element::{BadReferenceGeometry, ElementResult};
 use crate::material::Material;
@@ -141,6 +141,8 @@ struct System {
     /// Per element, the value position of each entry (r, c) of its matrix (row-major), or
     /// `usize::MAX` when a dof is prescribed.
     slots: Vec<Vec<usize>>,
+    /// The same for each pressure face (`Body3::pressures`).
+    face_slots: Vec<Vec<usize>>,
     geometries: Vec<Geometry3>,
 }
 
@@ -165,15 +167,15 @@ impl System {
                 }
             }
         }
-        let element_eqs = |e: &Element3| -> Vec<usize> {
-            e.nodes
+        let node_eqs = |nodes: &[usize]| -> Vec<usize> {
+            nodes
                 .iter()
                 .flat_map(|&n| [eq[3 * n], eq[3 * n + 1], eq[3 * n + 2]])
                 .collect()
         };
         let mut pairs = Vec::new();
         for e in &body.elements {
-            let eqs = element_eqs(e);
+            let eqs = node_eqs(&e.nodes);
             for &r in eqs.iter().filter(|&&r| r != usize::MAX) {
                 for &c in eqs.iter().filter(|&&c| c != usize::MAX) {
                     pairs.push((r, c));
@@ -181,22 +183,25 @@ impl System {
             }
         }
         let pattern = CscPattern::from_pairs(n_eq, &mut pairs);
-        let slots = body
-            .elements
+        // The value position of each entry of the matrix of `nodes` (row-major).
+        let slots_of = |nodes: &[usize]| -> Vec<usize> {
+            let eqs = node_eqs(nodes);
+            eqs.iter()
+                .flat_map(|&r| eqs.iter().map(move |&c| (r, c)))
+                .map(|(r, c)| {
+                    if r == usize::MAX || c == usize::MAX {
+                        usize::MAX
+                    } else {
+                        pattern.position(r, c).expect("a face of an element")
+                    }
+                })
+                .collect()
+        };
+        let slots = body.elements.iter().map(|e| slots_of(&e.nodes)).collect();
+        let face_slots = body
+            .pressures
             .iter()
-            .map(|e| {
-                let eqs = element_eqs(e);
-                eqs.iter()
-                    .flat_map(|&r| eqs.iter().map(move |&c| (r, c)))
-                    .map(|(r, c)| {
-                        if r == usize::MAX || c == usize::MAX {
-                            usize::MAX
-                        } else {
-                            pattern.position(r, c).expect("in the pattern")
-                        }
-                    })
-                    .collect()
-            })
+            .map(|(nodes, _)| slots_of(nodes))
             .collect();
         let geometries = body
             .elements
@@ -222,6 +227,7 @@ impl System {
             },
             pattern,
             slots,
+            face_slots,
             geometries,
         })
     }
@@ -248,8 +254,12 @@ impl System {
         let node = |n: usize| [u[3 * n], u[3 * n + 1], u[3 * n + 2]];
         let mut fe = [0.0; MAX_DOFS_3D];
         let mut ke = vec![0.0; MAX_DOFS_3D * MAX_DOFS_3D];
+        let mut ue = [[0.0; 3]; MAX_NODES_3D];
         for (k, e) in body.elements.iter().enumerate() {
-            let ue: Vec<[f64; 3]> = e.nodes.iter().map(|&n| node(n)).collect();
+            let ue = &mut ue[..e.nodes.len()];
+            for (x, &n) in ue.iter_mut().zip(&e.nodes) {
+                *x = node(n);
+            }
             let mut out = ElementResult {
                 energy: 0.0,
                 force: &mut fe,
@@ -258,7 +268,7 @@ impl System {
             evaluate(
                 &self.geometries[k],
                 &*body.materials[e.material],
-                &ue,
+                ue,
                 &mut out,
             )
             .map_err(|j| (k, j.0))?;
@@ -275,30 +285,24 @@ impl System {
             }
         }
         let (mut ff, mut kf) = ([0.0; MAX_FACE_DOFS], [0.0; MAX_FACE_DOFS * MAX_FACE_DOFS]);
-        for (nodes, p) in &body.pressures {
-            let x: Vec<[f64; 3]> = nodes
-                .iter()
-                .map(|&n| std::array::from_fn(|i| body.nodes[n][i] + u[3 * n + i]))
-                .collect();
+        let mut x = [[0.0; 3]; MAX_FACE_NODES];
+        for ((nodes, p), slots) in body.pressures.iter().zip(&self.face_slots) {
+            let x = &mut x[..nodes.len()];
+            for (x, &n) in x.iter_mut().zip(nodes) {
+                *x = std::array::from_fn(|i| body.nodes[n][i] + u[3 * n + i]);
+            }
             let with_tangent = values.is_some();
-            face_pressure(&x, lambda * p, &mut ff, with_tangent.then_some(&mut kf));
+            face_pressure(x, lambda * p, &mut ff, with_tangent.then_some(&mut kf));
             let nd = 3 * nodes.len();
             let dof = |r: usize| 3 * nodes[r / 3] + r % 3;
             for r in 0..nd {
                 force[dof(r)] -= ff[r];
                 pressure[dof(r)] += ff[r];
-                let Some(v) = values.as_deref_mut() else {
-                    continue;
-                };
-                let row = self.dofs.eq[dof(r)];
-                for c in 0..nd {
-                    let col = self.dofs.eq[dof(c)];
-                    if row != NONE && col != NONE {
-                        let pos = self
-                            .pattern
-                            .position(row, col)
-                            .expect("a face of an element");
-                        v[pos] -= kf[r * nd + c];
+            }
+            if let Some(v) = values.as_deref_mut() {
+                for (slot, k) in slots.iter().zip(&kf[..nd * nd]) {
+                    if *slot != usize::MAX {
+                        v[*slot] -= k;
                     }
                 }
             }
@@ -483,13 +487,17 @@ pub fn sensitivities(
         let count = material.spec().parameters.len();
         let mut rhs = vec![vec![0.0; system.dofs.n_eq]; count];
         let mut rates = vec![0.0; count * MAX_DOFS_3D];
+        let mut ue = [[0.0; 3]; MAX_NODES_3D];
         for (e, element) in body.elements.iter().enumerate() {
             if element.material != m {
                 continue;
             }
-            let ue: Vec<[f64; 3]> = element.nodes.iter().map(|&n| solution.u[n]).collect();
+            let ue = &mut ue[..element.nodes.len()];
+            for (x, &n) in ue.iter_mut().zip(&element.nodes) {
+                *x = solution.u[n];
+            }
             material
-                .rate_forces_3d(&system.geometries[e], &ue, &mut rates)
+                .rate_forces_3d(&system.geometries[e], ue, &mut rates)
                 .map_err(|j| Solve3Error::Inverted {
                     element: e,
                     j: j.0,
