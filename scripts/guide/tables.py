@@ -339,10 +339,32 @@ def performance(results):
     return "\n".join(out) + "\n"
 
 
+def contact(results):
+    """The rigid-body contact tests (bench/contact/run.py's contact.csv), headed by its
+    provenance."""
+    d = ROOT / results
+    rows = list(csv.DictReader(open(d / "contact.csv")))
+    out = [provenance(d).strip(), ""]
+    out.append("| test | elements | Newton iterations (increments, cut-backs) | solve (s), median (min–max) "
+               "| whole process CPU (s) | peak memory (MiB) | off the tight solve | plate/indenter travel (mm) |")
+    out.append("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        elements = f"{int(r['elements']):,}".replace(",", " ")
+        out.append(
+            f"| {r['test']} | {elements} | {r['iterations']} ({r['increments']}, {r['cutbacks']}) "
+            f"| {r['solve_s_median']} ({r['solve_s_min']}–{r['solve_s_max']}) | {r['process_cpu_s_median']} "
+            f"| {r['peak_mib_median']} "
+            f"| {float(r['difference_from_tight']):.1e} | {r['travel_mm']} |"
+        )
+    out.append(f"\n{rows[0]['runs']} runs of each case with the default settings.")
+    return "\n".join(out) + "\n"
+
+
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
-    funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance}
+    funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
+             "contact": contact}
     page = (TEMPLATES / template).read_text()
     return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
                   lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
@@ -354,6 +376,7 @@ GENERATED = {
     "docs/guide/src/measured/performance.md": lambda: render("performance.md"),
     "docs/guide/src/measured/dic.md": lambda: render("dic.md"),
     "docs/guide/src/measured/idic.md": lambda: render("idic.md"),
+    "docs/guide/src/measured/contact.md": lambda: render("contact.md"),
 }
 
 
