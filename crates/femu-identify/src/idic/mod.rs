@@ -25,6 +25,8 @@
 //!   fixed in a second identification.
 //! - [`uncertainty`]: the sandwich covariance from the residual's own correlation, the
 //!   discretization shift.
+//! - [`pose_term`]: the probe pose's part of the uncertainty (the placement moved within its
+//!   own covariance).
 //! - [`identify`]: coarse to fine, from several starts.
 
 pub mod brightness;
@@ -32,6 +34,7 @@ pub mod correction;
 pub mod frame;
 pub mod identify;
 pub mod pixels;
+pub mod pose_term;
 pub mod problem;
 pub mod uncertainty;
 
