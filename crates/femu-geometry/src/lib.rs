@@ -41,6 +41,7 @@ pub mod mesher;
 pub mod parametric;
 pub mod picture;
 pub mod quality;
+pub mod thigh3d;
 
 pub use error::GeometryError;
 pub use export::{

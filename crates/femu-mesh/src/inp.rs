@@ -1663,10 +1663,78 @@ pub const ALL_NODES_SET: &str = "NALL";
 /// materials), holds a non-finite number, or a name cannot be written.
 pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
     let mesh = &deck.mesh;
-    let n_el = mesh.elements.len();
-    let n_nodes = mesh.nodes.len();
-    if mesh.node_labels.len() != n_nodes
-        || mesh.element_labels.len() != n_el
+    let elements: Vec<WriteElement> = mesh
+        .elements
+        .iter()
+        .map(|el| WriteElement {
+            order: el.kind as usize,
+            name: el.kind.deck_name(),
+            nodes: el.nodes(),
+            faces: el.face_count(),
+        })
+        .collect();
+    write_deck(
+        &DeckParts {
+            dim: 2,
+            coordinates: mesh.nodes.as_flattened(),
+            node_labels: &mesh.node_labels,
+            elements: &elements,
+            element_labels: &mesh.element_labels,
+            element_sets: &mesh.element_sets,
+            node_sets: &mesh.node_sets,
+            surfaces: None,
+            materials: &deck.materials,
+            element_material: &deck.element_material,
+            element_region: &deck.element_region,
+            region_names: &deck.region_names,
+            step: &deck.step,
+            boundaries: &deck.boundaries,
+            pressures: &deck.pressures,
+            point_loads: &deck.point_loads,
+        },
+        w,
+    )
+}
+
+/// One element as the writer sees it: the order of its type (the `*ELEMENT` blocks are sorted
+/// by region, then by it), its deck type name, its nodes and its number of faces.
+pub(crate) struct WriteElement<'a> {
+    pub(crate) order: usize,
+    pub(crate) name: &'static str,
+    pub(crate) nodes: &'a [usize],
+    pub(crate) faces: usize,
+}
+
+/// The parts of a 2D or 3D deck that [`write_deck`] writes.
+pub(crate) struct DeckParts<'a> {
+    /// 2 (plane strain: coordinates x, y; dofs 1, 2; a thickness line of 1) or 3.
+    pub(crate) dim: usize,
+    /// `dim` coordinates per node.
+    pub(crate) coordinates: &'a [f64],
+    pub(crate) node_labels: &'a [i64],
+    pub(crate) elements: &'a [WriteElement<'a>],
+    pub(crate) element_labels: &'a [i64],
+    pub(crate) element_sets: &'a BTreeMap<String, Vec<usize>>,
+    pub(crate) node_sets: &'a BTreeMap<String, Vec<usize>>,
+    /// Element-face surfaces written as `*SURFACE, NAME=, TYPE=ELEMENT` (`label, Sn`).
+    pub(crate) surfaces: Option<&'a BTreeMap<String, Vec<(usize, usize)>>>,
+    pub(crate) materials: &'a [MaterialDef],
+    pub(crate) element_material: &'a [usize],
+    pub(crate) element_region: &'a [usize],
+    pub(crate) region_names: &'a [String],
+    pub(crate) step: &'a StepDef,
+    pub(crate) boundaries: &'a [BoundaryCondition],
+    pub(crate) pressures: &'a [FacePressure],
+    pub(crate) point_loads: &'a [PointLoad],
+}
+
+/// The writer of [`write_inp`] and of the 3D decks (`write_inp3`).
+pub(crate) fn write_deck(deck: &DeckParts, w: &mut impl Write) -> io::Result<()> {
+    let dim = deck.dim;
+    let n_el = deck.elements.len();
+    let n_nodes = deck.node_labels.len();
+    if deck.coordinates.len() != dim * n_nodes
+        || deck.element_labels.len() != n_el
         || deck.element_region.len() != n_el
         || deck.element_material.len() != n_el
     {
@@ -1674,11 +1742,11 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             "deck is inconsistent: node_labels, element_labels, element_region and element_material must match the mesh".to_string(),
         ));
     }
-    for (e, el) in mesh.elements.iter().enumerate() {
-        if el.nodes().iter().any(|&n| n >= n_nodes) {
+    for (e, el) in deck.elements.iter().enumerate() {
+        if el.nodes.iter().any(|&n| n >= n_nodes) {
             return Err(invalid(format!(
                 "element {} refers to a node index that does not exist",
-                mesh.element_labels[e]
+                deck.element_labels[e]
             )));
         }
     }
@@ -1689,7 +1757,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
         if r >= deck.region_names.len() || m >= deck.materials.len() {
             return Err(invalid(format!(
                 "element {}: region or material index out of range",
-                mesh.element_labels[e]
+                deck.element_labels[e]
             )));
         }
         match region_material[r] {
@@ -1723,12 +1791,12 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             .iter()
             .any(|r| r.eq_ignore_ascii_case(name))
     };
-    let extra_elsets: Vec<(&String, &Vec<usize>)> = mesh
+    let extra_elsets: Vec<(&String, &Vec<usize>)> = deck
         .element_sets
         .iter()
         .filter(|(n, _)| !is_region(n))
         .collect();
-    let nsets: Vec<(&String, &Vec<usize>)> = mesh
+    let nsets: Vec<(&String, &Vec<usize>)> = deck
         .node_sets
         .iter()
         .filter(|(n, _)| !n.eq_ignore_ascii_case(ALL_NODES_SET))
@@ -1762,52 +1830,53 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
     };
 
     writeln!(w, "*HEADING")?;
-    writeln!(w, "femu deck (plane strain, mm, N, MPa)")?;
-    writeln!(w, "*NODE, NSET={ALL_NODES_SET}")?;
-    for (i, p) in mesh.nodes.iter().enumerate() {
-        finite("node coordinate", p[0])?;
-        finite("node coordinate", p[1])?;
-        writeln!(
-            w,
-            "{}, {}, {}",
-            mesh.node_labels[i],
-            fmt_f64(p[0]),
-            fmt_f64(p[1])
-        )?;
+    if dim == 2 {
+        writeln!(w, "femu deck (plane strain, mm, N, MPa)")?;
+    } else {
+        writeln!(w, "femu deck (3D, mm, N, MPa)")?;
     }
-    // One *ELEMENT block per (type, region), in order of first appearance.
-    let mut groups: BTreeMap<(usize, ElementKind), Vec<usize>> = BTreeMap::new();
-    for (e, el) in mesh.elements.iter().enumerate() {
+    writeln!(w, "*NODE, NSET={ALL_NODES_SET}")?;
+    for (i, p) in deck.coordinates.chunks_exact(dim).enumerate() {
+        let mut line = deck.node_labels[i].to_string();
+        for &v in p {
+            finite("node coordinate", v)?;
+            line.push_str(", ");
+            line.push_str(&fmt_f64(v));
+        }
+        writeln!(w, "{line}")?;
+    }
+    // One *ELEMENT block per (region, type).
+    let mut groups: BTreeMap<(usize, usize), Vec<usize>> = BTreeMap::new();
+    for (e, el) in deck.elements.iter().enumerate() {
         groups
-            .entry((deck.element_region[e], el.kind))
+            .entry((deck.element_region[e], el.order))
             .or_default()
             .push(e);
     }
-    for ((r, kind), elems) in &groups {
+    for ((r, _), elems) in &groups {
         writeln!(
             w,
             "*ELEMENT, TYPE={}, ELSET={}",
-            kind.deck_name(),
-            deck.region_names[*r]
+            deck.elements[elems[0]].name, deck.region_names[*r]
         )?;
         for &e in elems {
-            let nodes: Vec<String> = mesh.elements[e]
-                .nodes()
+            let nodes: Vec<String> = deck.elements[e]
+                .nodes
                 .iter()
-                .map(|&n| mesh.node_labels[n].to_string())
+                .map(|&n| deck.node_labels[n].to_string())
                 .collect();
-            writeln!(w, "{}, {}", mesh.element_labels[e], nodes.join(", "))?;
+            writeln!(w, "{}, {}", deck.element_labels[e], nodes.join(", "))?;
         }
     }
     for (name, set) in &extra_elsets {
         writeln!(w, "*ELSET, ELSET={name}")?;
-        write_labels(w, set.iter().map(|&e| mesh.element_labels[e]))?;
+        write_labels(w, set.iter().map(|&e| deck.element_labels[e]))?;
     }
     for (name, set) in &nsets {
         writeln!(w, "*NSET, NSET={name}")?;
-        write_labels(w, set.iter().map(|&n| mesh.node_labels[n]))?;
+        write_labels(w, set.iter().map(|&n| deck.node_labels[n]))?;
     }
-    for m in &deck.materials {
+    for m in deck.materials {
         let keyword_ok = !m.keyword.is_empty()
             && m.keyword
                 .chars()
@@ -1836,17 +1905,33 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
                 "*SOLID SECTION, ELSET={name}, MATERIAL={}",
                 deck.materials[m].name
             )?;
-            writeln!(w, "1.0")?;
+            if dim == 2 {
+                writeln!(w, "1.0")?;
+            }
         }
     }
-    for bc in &deck.boundaries {
-        if bc.node >= n_nodes || bc.dof > 1 {
+    for bc in deck.boundaries {
+        if bc.node >= n_nodes || bc.dof >= dim {
             return Err(invalid(format!(
                 "boundary condition on node index {} dof {} does not exist",
                 bc.node, bc.dof
             )));
         }
         finite("boundary value", bc.value)?;
+    }
+    if let Some(surfaces) = deck.surfaces {
+        for (name, faces) in surfaces {
+            check_name("surface", name)?;
+            writeln!(w, "*SURFACE, NAME={name}, TYPE=ELEMENT")?;
+            for &(e, f) in faces {
+                if e >= n_el || f >= deck.elements[e].faces {
+                    return Err(invalid(format!(
+                        "surface '{name}': element index {e} face {f} does not exist"
+                    )));
+                }
+                writeln!(w, "{}, S{}", deck.element_labels[e], f + 1)?;
+            }
+        }
     }
     let zero_bcs: Vec<&BoundaryCondition> =
         deck.boundaries.iter().filter(|b| b.value == 0.0).collect();
@@ -1856,7 +1941,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             writeln!(
                 w,
                 "{}, {}, {}",
-                mesh.node_labels[b.node],
+                deck.node_labels[b.node],
                 b.dof + 1,
                 b.dof + 1
             )?;
@@ -1894,7 +1979,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             writeln!(
                 w,
                 "{}, {}, {}, {}",
-                mesh.node_labels[b.node],
+                deck.node_labels[b.node],
                 b.dof + 1,
                 b.dof + 1,
                 fmt_f64(b.value)
@@ -1903,8 +1988,8 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
     }
     if !deck.pressures.is_empty() {
         writeln!(w, "*DLOAD")?;
-        for p in &deck.pressures {
-            if p.element >= n_el || p.face >= mesh.elements[p.element].face_count() {
+        for p in deck.pressures {
+            if p.element >= n_el || p.face >= deck.elements[p.element].faces {
                 return Err(invalid(format!(
                     "pressure on element index {} face {} does not exist",
                     p.element, p.face
@@ -1914,7 +1999,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             writeln!(
                 w,
                 "{}, P{}, {}",
-                mesh.element_labels[p.element],
+                deck.element_labels[p.element],
                 p.face + 1,
                 fmt_f64(p.magnitude)
             )?;
@@ -1922,8 +2007,8 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
     }
     if !deck.point_loads.is_empty() {
         writeln!(w, "*CLOAD")?;
-        for l in &deck.point_loads {
-            if l.node >= n_nodes || l.dof > 1 {
+        for l in deck.point_loads {
+            if l.node >= n_nodes || l.dof >= dim {
                 return Err(invalid(format!(
                     "point load on node index {} dof {} does not exist",
                     l.node, l.dof
@@ -1933,7 +2018,7 @@ pub fn write_inp(deck: &Deck, w: &mut impl Write) -> io::Result<()> {
             writeln!(
                 w,
                 "{}, {}, {}",
-                mesh.node_labels[l.node],
+                deck.node_labels[l.node],
                 l.dof + 1,
                 fmt_f64(l.magnitude)
             )?;
@@ -2026,6 +2111,8 @@ fn fortran_float(s: &str) -> Option<f64> {
 
 mod labels;
 use labels::LabelMap;
+mod solid;
+pub use solid::{parse_ccx_dat_displacements3, write_inp3, write_inp3_file, Deck3};
 
 #[cfg(test)]
 mod tests;

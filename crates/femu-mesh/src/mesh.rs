@@ -102,6 +102,13 @@ pub enum MeshError {
         area: f64,
         corner: usize,
     },
+    /// A 3D element with a non-positive corner volume (see `Mesh3::check_orientation`).
+    #[error("element {label} is inverted or degenerate (signed volume {volume:.3e} mm^3 at its corner {corner})")]
+    InvertedSolid {
+        label: i64,
+        volume: f64,
+        corner: usize,
+    },
     #[error("element set '{0}' is not defined")]
     UnknownElementSet(String),
     #[error("node set '{0}' is not defined")]

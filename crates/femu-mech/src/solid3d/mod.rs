@@ -26,6 +26,7 @@
 //! - [`pressure`]: follower pressure on the faces of every type, with its load stiffness.
 
 pub mod assembly;
+pub mod deck;
 pub mod kernel;
 pub mod pressure;
 pub mod shape;
