@@ -36,6 +36,7 @@
 
 pub mod error;
 pub mod export;
+pub mod interface_split;
 pub mod labels;
 pub mod mesher;
 pub mod parametric;

@@ -16,7 +16,8 @@
 //!   C3D8, C3D8H, C3D4, C3D10, with a static 3D solve and its parameter sensitivities (the
 //!   model, the loading tests and the solver below are plane-strain).
 //! - [`load`]: follower pressure with load stiffness; [`contact`]: rigid plate and cylinder,
-//!   node-to-surface augmented-Lagrangian contact.
+//!   node-to-surface augmented-Lagrangian contact; [`interface`]: sliding interfaces between
+//!   regions (node-to-segment contact, frictionless or with Coulomb friction).
 //!
 //! Solving ([`solver`], one file per part under `solver/`):
 //! - `assembly`: dof numbering, sparse pattern built once, element slots, residual and tangent
@@ -40,6 +41,7 @@
 pub mod build;
 pub mod contact;
 pub mod element;
+pub mod interface;
 pub mod load;
 pub mod loading;
 pub mod material;

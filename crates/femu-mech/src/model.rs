@@ -8,6 +8,7 @@
 
 use crate::contact::RigidContact;
 use crate::element::{ElementGeometry, MAX_NODES};
+use crate::interface::Interface;
 use crate::load::PressureFace;
 use crate::material::{material_def, material_from_def, Material, MaterialError};
 use femu_mesh::{BoundaryCondition, Deck, FacePressure, MaterialDef, Mesh, PointLoad, StepDef};
@@ -212,6 +213,9 @@ pub struct Model {
     /// Rigid bodies in frictionless contact (plate, indenter); each adds its travel to the
     /// unknowns of the state (after the nodal displacements).
     pub contacts: Vec<RigidContact>,
+    /// Sliding interfaces between regions (contact of slave nodes with master segments, see
+    /// [`crate::interface`]); none by default (regions sharing nodes are tied).
+    pub interfaces: Vec<Interface>,
     pub step: StepDef,
 }
 
@@ -313,6 +317,7 @@ impl Model {
             pressures: faces,
             point_loads,
             contacts: Vec::new(),
+            interfaces: Vec::new(),
             step,
         })
     }

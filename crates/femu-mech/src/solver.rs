@@ -25,6 +25,7 @@ mod active_set;
 pub(crate) mod assembly;
 mod contact_state;
 pub(crate) mod factor;
+mod interface_state;
 mod linearization;
 pub(crate) mod newton;
 pub(crate) mod report;
@@ -172,9 +173,21 @@ impl StaticSolver {
     pub fn new(model: &Model, options: SolverOptions) -> Result<Self, SolveError> {
         let t0 = Instant::now();
         let dofs = DofMap::new(model);
+        // Each slave node of an interface is coupled with the nodes of its candidate segments
+        // (none without interfaces: the graph of the elements alone).
+        let groups: Vec<Vec<usize>> = model
+            .interfaces
+            .iter()
+            .flat_map(|i| i.coupled_nodes())
+            .collect();
         let graph = NodeGraph::from_elements(
             model.node_count(),
-            model.mesh.elements.iter().map(|e| e.nodes()),
+            model
+                .mesh
+                .elements
+                .iter()
+                .map(|e| e.nodes())
+                .chain(groups.iter().map(Vec::as_slice)),
         );
         // Bordered system: each force-controlled body couples its travel with the free dofs of
         // its candidate nodes; the travels are numbered and eliminated last.
@@ -241,6 +254,22 @@ impl StaticSolver {
     /// [`Self::assemble_at`] with contact).
     pub fn prepare_contact(&mut self, model: &Model) -> Result<(), AssemblyError> {
         self.init_contact(model)
+    }
+
+    /// The state of every sliding interface's slave nodes at `u` (a state of this solver's
+    /// last solve: its penalties, multipliers and stick points), one list per
+    /// [`Model::interfaces`].
+    pub fn interface_states(
+        &self,
+        model: &Model,
+        u: &[f64],
+    ) -> Vec<Vec<crate::interface::SlaveState>> {
+        self.contact.interfaces.states(model, u)
+    }
+
+    /// Uzawa updates of each interface's multipliers in the last solve.
+    pub fn interface_augmentations(&self) -> Vec<usize> {
+        self.contact.interfaces.augmentations()
     }
 
     /// Whether the last assembly was of the tangent at `u` and λ = 1.

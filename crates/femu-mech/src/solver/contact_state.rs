@@ -6,6 +6,7 @@
 
 use super::active_set::{Along, Candidate};
 use super::assembly::{DofMap, System, NONE};
+use super::interface_state::InterfaceState;
 use crate::contact::BodyState;
 use crate::contact::TravelControl;
 use crate::model::Model;
@@ -53,6 +54,8 @@ pub(crate) struct ContactState {
     limits: Vec<f64>,
     /// The active set of the last assembly.
     active_set: ActiveSet,
+    /// The sliding interfaces between regions.
+    pub interfaces: InterfaceState,
 }
 
 impl ContactState {
@@ -111,6 +114,7 @@ impl ContactState {
                 .map(|c| c.penetration_tolerance * c.element_size)
                 .collect(),
             active_set: (0, 0),
+            interfaces: InterfaceState::new(model, dofs, pattern),
         }
     }
 

@@ -304,6 +304,7 @@ impl<S: NewtonSystem> Newton<'_, S> {
         on_increment(&rec);
         report.increments.push(rec);
         if outcome.is_ok() {
+            self.system.commit(u);
             report.converged_increments = 1;
         } else {
             report.cutbacks += 1;
@@ -362,6 +363,7 @@ impl<S: NewtonSystem> Newton<'_, S> {
                     report.converged_increments += 1;
                     std::mem::swap(&mut self.work.u_prev, &mut self.work.u_conv);
                     self.work.u_conv.copy_from_slice(u);
+                    self.system.commit(u);
                     // The first correction's residual as a fraction of the full load (the
                     // reference force scales with the load factor).
                     let first_residual = self

@@ -80,6 +80,8 @@ pub(crate) trait NewtonSystem {
     fn stall_hint(&self, _report: &SolveReport) -> Option<String> {
         None
     }
+    /// Records the history of a converged increment at `u` (the friction stick points).
+    fn commit(&mut self, _u: &[f64]) {}
 }
 
 /// The plane-strain problem: a model and the parts of its [`super::StaticSolver`].
@@ -92,7 +94,7 @@ pub(crate) struct Plane<'a> {
 }
 
 /// Assembles the residual (always) and the tangent (if `with_tangent`) of `model` at `u`, load
-/// factor `lambda`, with the contact terms.
+/// factor `lambda`, with the contact terms (rigid bodies, then sliding interfaces).
 pub(crate) fn assemble_plane(
     assembly: &mut Assembly,
     contact: &mut ContactState,
@@ -102,7 +104,10 @@ pub(crate) fn assemble_plane(
     with_tangent: bool,
 ) -> Result<(), AssemblyError> {
     assembly.assemble(model, u, lambda, with_tangent, |system| {
-        contact.add_terms(model, u, lambda, with_tangent, system)
+        contact.add_terms(model, u, lambda, with_tangent, system);
+        if !model.interfaces.is_empty() {
+            contact.interfaces.add_terms(model, u, with_tangent, system);
+        }
     })
 }
 
@@ -186,23 +191,33 @@ impl NewtonSystem for Plane<'_> {
     /// Sets each body's penalty from the largest diagonal stiffness of its candidate dofs at
     /// the undeformed state (the "automatic penalty") and clears the multipliers.
     fn init_contact(&mut self) -> Result<(), AssemblyError> {
-        if self.model.contacts.is_empty() {
+        if self.model.contacts.is_empty() && self.model.interfaces.is_empty() {
             return Ok(());
         }
         let zero = vec![0.0; self.model.state_len()];
         self.contact.clear_penalties();
+        self.contact.interfaces.clear_penalties();
         self.assemble(&zero, 0.0, true)?;
         self.contact
+            .set_penalties(self.model, &self.assembly.system.values);
+        self.contact
+            .interfaces
             .set_penalties(self.model, &self.assembly.system.values);
         Ok(())
     }
 
     fn has_penalties(&self) -> bool {
-        self.contact.has_penalties()
+        self.contact.has_penalties() && self.contact.interfaces.has_penalties()
     }
 
     fn active_set(&self) -> ActiveSet {
-        self.contact.active_set()
+        let (n, print) = self.contact.active_set();
+        let (ni, printi) = self.contact.interfaces.active;
+        if ni == 0 {
+            (n, print)
+        } else {
+            (n + ni, print.wrapping_mul(0x9e37_79b9).wrapping_add(printi))
+        }
     }
 
     fn step_limit(&self, u: &[f64], full: &[f64]) -> f64 {
@@ -220,15 +235,37 @@ impl NewtonSystem for Plane<'_> {
     }
 
     fn augment(&mut self, u: &mut [f64], force_tolerance: f64) -> bool {
-        self.contact.augment(self.model, u, force_tolerance)
+        let bodies = self.contact.augment(self.model, u, force_tolerance);
+        if self.model.interfaces.is_empty() {
+            return bodies;
+        }
+        let interfaces = self
+            .contact
+            .interfaces
+            .augment(self.model, u, force_tolerance);
+        bodies || interfaces
     }
 
+    /// The multipliers of the rigid bodies, then those of the interfaces.
     fn multipliers(&self) -> Vec<Vec<f64>> {
-        self.contact.multipliers().to_vec()
+        let mut all = self.contact.multipliers().to_vec();
+        all.extend(self.contact.interfaces.multipliers());
+        all
     }
 
     fn restore_multipliers(&mut self, saved: Vec<Vec<f64>>) {
+        let mut saved = saved;
+        let interfaces = saved.split_off(self.model.contacts.len());
         self.contact.restore_multipliers(saved);
+        self.contact
+            .interfaces
+            .restore_multipliers(interfaces.into_iter());
+    }
+
+    fn commit(&mut self, u: &[f64]) {
+        if !self.model.interfaces.is_empty() {
+            self.contact.interfaces.commit(self.model, u);
+        }
     }
 
     fn body_records(&self, u: &[f64]) -> Vec<[f64; 2]> {
