@@ -290,6 +290,62 @@ mod tests {
         }
     }
 
+    /// The built-in thigh split between the quadriceps and the hamstrings (ISCHIO): the copies
+    /// sit on their originals, each side's faces form chains whose normals face the other
+    /// side's, the ends are tied, and the regions' areas and the other regions are unchanged.
+    #[test]
+    fn splits_the_built_in_thigh_between_quadriceps_and_ischio() {
+        let thigh =
+            crate::parametric_thigh(&crate::ThighParams::coarse(), ElementKind::Cpe4).unwrap();
+        let mut mesh = thigh.mesh.mesh.clone();
+        let split = split_interface(&mut mesh, "QUADRICEPS", "ISCHIO").unwrap();
+        let (na, nb) = (split.a.faces.len(), split.b.faces.len());
+        println!(
+            "QUADRICEPS-ISCHIO: {na} faces per side in {} chain(s), {} nodes duplicated, {} tied",
+            split.a.chain_starts.len(),
+            split.pairs.len(),
+            split.tied.len()
+        );
+        assert_eq!(na, nb);
+        assert!(na >= 5, "{na} faces");
+        assert_eq!(
+            split.pairs.len() + split.tied.len(),
+            na + split.a.chain_starts.len()
+        );
+        assert!(!split.tied.is_empty());
+        for &(n, c) in &split.pairs {
+            assert_eq!(mesh.nodes[n], mesh.nodes[c]);
+        }
+        // Each face of a has a face of b on the same two positions, with the opposite normal.
+        let na_ = outward_normals(&mesh, &split.a.faces);
+        let nb_ = outward_normals(&mesh, &split.b.faces);
+        for (fa, n) in split.a.faces.iter().zip(&na_) {
+            let [p, q] = mesh.elements[fa.0].face_nodes(fa.1);
+            let k = split
+                .b
+                .faces
+                .iter()
+                .position(|fb| {
+                    let [r, s] = mesh.elements[fb.0].face_nodes(fb.1);
+                    mesh.nodes[r] == mesh.nodes[q] && mesh.nodes[s] == mesh.nodes[p]
+                })
+                .expect("a matching face on the other side");
+            assert!((n[0] + nb_[k][0]).abs() < 1e-12 && (n[1] + nb_[k][1]).abs() < 1e-12);
+        }
+        // No element uses both a node and its copy; the other regions keep their nodes.
+        for el in &mesh.elements {
+            for &(n, c) in &split.pairs {
+                assert!(!(el.nodes().contains(&n) && el.nodes().contains(&c)));
+            }
+        }
+        for (e, el) in mesh.elements.iter().enumerate() {
+            assert!(
+                el.nodes().iter().all(|&n| n < thigh.mesh.mesh.nodes.len())
+                    || mesh.element_sets["ISCHIO"].contains(&e)
+            );
+        }
+    }
+
     #[test]
     fn errors_name_the_problem() {
         let mut mesh = three_regions();

@@ -377,3 +377,88 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
     );
     assert!(law < 1e-12);
 }
+
+/// The built-in thigh (about 1 500 quads) under the seed's compression test (rigid plate), the
+/// quadriceps free to slide on the hamstrings (a frictionless QUADRICEPS–ISCHIO interface, the
+/// nodes split along it, its ends tied) against the tied thigh: the solve converges, the
+/// surfaces do not interpenetrate beyond the penetration limit, the muscles slide on one
+/// another, and the displacement field differs from the tied one by a fraction of the plate's
+/// travel.
+#[test]
+fn thigh_with_a_sliding_quadriceps_under_compression() {
+    use femu_geometry::interface_split::split_interface;
+    use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
+    use femu_mech::loading::{apply_loading, Loading};
+    let t = parametric_thigh(&ThighParams::coarse(), ElementKind::Cpe4).unwrap();
+    let skin = t.mesh.surfaces["SKIN"].clone();
+    let model_of = |thigh: &femu_geometry::ThighModel| {
+        let mut deck = contention_deck(thigh, &table1_materials(), 0.0).unwrap();
+        deck.pressures.clear();
+        let mut model = Model::from_deck(deck).unwrap();
+        apply_loading(&mut model, &skin, &Loading::seed_compression()).unwrap();
+        model
+    };
+    let tied = model_of(&t);
+    let mut split_thigh = t.clone();
+    let split = split_interface(&mut split_thigh.mesh.mesh, "QUADRICEPS", "ISCHIO").unwrap();
+    let mut sliding = model_of(&split_thigh);
+    let iface = Interface::new(
+        "QUADRICEPS_ISCHIO",
+        &sliding.mesh,
+        &split.a.faces,
+        &split.b.faces,
+        InterfaceKind::Frictionless,
+        2.0 * t.element_size_mm,
+    )
+    .unwrap();
+    sliding.interfaces.push(iface);
+    let mut tied_solver = StaticSolver::new(&tied, SolverOptions::default()).unwrap();
+    let tied_sol = tied_solver.solve(&tied).unwrap();
+    let mut solver = StaticSolver::new(&sliding, SolverOptions::default()).unwrap();
+    let sol = solver.solve(&sliding).unwrap();
+    // The original nodes keep their indices: compare them.
+    let n = tied.node_count();
+    let (mut du, mut umax) = (0.0f64, 0.0f64);
+    for k in 0..n {
+        let d = (sol.u[2 * k] - tied_sol.u[2 * k]).hypot(sol.u[2 * k + 1] - tied_sol.u[2 * k + 1]);
+        du = du.max(d);
+        umax = umax.max(tied_sol.u[2 * k].hypot(tied_sol.u[2 * k + 1]));
+    }
+    let states = solver.interface_states(&sliding, &sol.state).remove(0);
+    let iface = &sliding.interfaces[0];
+    let zero = vec![0.0; sliding.state_len()];
+    let slips: Vec<f64> = states
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let (seg, g) = iface
+                .closest(k, |m| sliding.current_position(m, &zero))
+                .unwrap();
+            s.arc - iface.arc(seg, g.xi)
+        })
+        .collect();
+    let max_slip = slips.iter().fold(0.0f64, |m, s| m.max(s.abs()));
+    let pen = states.iter().fold(0.0f64, |m, s| m.max(-s.gap));
+    let open = states.iter().filter(|s| s.normal_force == 0.0).count();
+    println!(
+        "compression: tied max |u| {umax:.4} mm, sliding - tied max |Δu| {du:.4} mm, max slip \
+         {max_slip:.4} mm, max penetration {pen:.2e} mm, {open} of {} slave nodes open, \
+         {} increments, {} Uzawa updates",
+        states.len(),
+        sol.report.increments.len(),
+        solver.interface_augmentations()[0]
+    );
+    // The slip along the interface, in the order of the master surface's arc.
+    let mut along: Vec<(f64, f64, f64, f64)> = states
+        .iter()
+        .zip(&slips)
+        .map(|(s, &slip)| (s.arc, slip, s.normal_force, s.gap))
+        .collect();
+    along.sort_by(|a, b| a.0.total_cmp(&b.0));
+    for (arc, slip, force, gap) in along {
+        println!("  arc {arc:8.3} mm  slip {slip:+.4} mm  N {force:.3e} N/mm  gap {gap:+.2e} mm");
+    }
+    assert!(pen <= 1e-3 * iface.element_size, "penetration {pen:.3e}");
+    assert!(max_slip > 1e-3 * umax, "no slip: {max_slip:.3e}");
+    assert!(du > 0.0 && du < umax, "{du:.3e} vs {umax:.3e}");
+}
