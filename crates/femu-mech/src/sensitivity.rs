@@ -20,7 +20,8 @@
 //! ```
 //!
 //! with `G` the gap gradients of the active nodes (including the rigid body's travel under
-//! force control). The penalty terms of `K_T` vanish on `Gᵀ x = 0`, so the result does not
+//! force control, and the master segment's nodes for a frictionless sliding interface's slave
+//! node). The penalty terms of `K_T` vanish on `Gᵀ x = 0`, so the result does not
 //! depend on the penalty. `Z` costs one back-substitution per active node, shared by all
 //! parameters.
 //!
@@ -284,7 +285,7 @@ impl DirectSensitivity {
         // solver's element-matrix buffer (13 MB at paper scale, idle until the next assembly,
         // and already in memory: a fresh 12 MB would cost thousands of page faults) and gives
         // it back below, whatever the outcome.
-        let active = lin.active_constraints().len();
+        let active = lin.active_constraints().len() + lin.interface_constraints().len();
         let columns = parameters.len().max(active).clamp(1, MAX_RHS);
         let need = 3 * columns * lin.equations();
         let borrowed = self.work.len() < need && lin.scratch().len() >= need;
@@ -318,7 +319,6 @@ impl DirectSensitivity {
 
         // Contact: Z = K⁻¹ G and the Schur complement S = Gᵀ Z (dense, LU-factorized).
         let active = lin.active_constraints();
-        report.active_constraints = active.len();
         let base = 2 * model.node_count();
         let g_entries: Vec<Vec<(usize, f64)>> = active
             .iter()
@@ -332,8 +332,15 @@ impl DirectSensitivity {
                     .filter_map(|&(d, v)| eqs[d].map(|q| (q, v)))
                     .collect()
             })
+            // The frictionless sliding interfaces' slave nodes in contact keep their gap too.
+            .chain(lin.interface_constraints().iter().map(|c| {
+                c.iter()
+                    .filter_map(|&(d, v)| eqs[d].map(|q| (q, v)))
+                    .collect()
+            }))
             .collect();
-        let m = active.len();
+        report.active_constraints = g_entries.len();
+        let m = g_entries.len();
         // Z = K⁻¹ G, column-major (column i at i·n_eq).
         let mut z = vec![0.0; m * n_eq];
         for (i, entries) in g_entries.iter().enumerate() {

@@ -381,6 +381,28 @@ impl InterfaceState {
             .collect()
     }
 
+    /// The gap gradient `(state dof, ∂g_N)` of every slave node of the frictionless interfaces
+    /// with a positive contact force at `u`: the constraints `∂g_N·δu = 0` of the exactly
+    /// constrained problem the Uzawa updates converge to (for the sensitivities).
+    pub fn active_gradients(&self, model: &Model, u: &[f64]) -> Vec<Vec<(usize, f64)>> {
+        let mut out = Vec::new();
+        for (iface, st) in model.interfaces.iter().zip(&self.slaves) {
+            if iface.kind != InterfaceKind::Frictionless {
+                continue;
+            }
+            for k in 0..iface.slaves.len() {
+                let Some((_, gap)) = iface.closest(k, |n| model.current_position(n, u)) else {
+                    continue;
+                };
+                let t = slave_terms(model, iface, st, k, u);
+                if t.active && t.state.normal_force > 0.0 {
+                    out.push(t.dofs.iter().copied().zip(gap.dg).collect());
+                }
+            }
+        }
+        out
+    }
+
     /// Uzawa updates made in this solve, per interface.
     pub fn augmentations(&self) -> Vec<usize> {
         self.slaves.iter().map(|s| s.augmentations).collect()

@@ -23,6 +23,8 @@ pub struct Linearization<'s> {
     tangent: &'s [f64],
     factor: &'s mut TangentFactor,
     active: Vec<ActiveConstraint>,
+    /// The gap gradients of the frictionless interfaces' slave nodes in contact.
+    interface_active: Vec<Vec<(usize, f64)>>,
     residual_tolerance: f64,
     /// The solver's element-matrix buffer, idle until its next assembly.
     scratch: &'s mut Vec<f64>,
@@ -43,6 +45,7 @@ impl StaticSolver {
             self.assemble(model, state, 1.0, true)?;
         }
         let active = self.contact.active_constraints(model, state);
+        let interface_active = self.contact.interfaces.active_gradients(model, state);
         let assembly = &mut self.assembly;
         Ok(Linearization {
             state,
@@ -51,6 +54,7 @@ impl StaticSolver {
             tangent: &assembly.system.values,
             factor: &mut self.factor,
             active,
+            interface_active,
             residual_tolerance: self.options.residual_tolerance,
             scratch: &mut assembly.ke,
         })
@@ -77,6 +81,13 @@ impl Linearization<'_> {
     /// `⟨λ̂ - ε g⟩₊` is positive.
     pub fn active_constraints(&self) -> &[ActiveConstraint] {
         &self.active
+    }
+
+    /// The constraints of the frictionless sliding interfaces active at the state: for each
+    /// slave node with a positive contact force, its gap gradient as `(state dof, value)` over
+    /// the node and its master segment's two nodes ([`crate::interface::SegmentGap`]).
+    pub fn interface_constraints(&self) -> &[Vec<(usize, f64)>] {
+        &self.interface_active
     }
 
     /// The relative force-residual tolerance the state was converged to
