@@ -43,6 +43,7 @@ use std::path::Path;
 
 use crate::deck::{BoundaryCondition, Deck, FacePressure, MaterialDef, PointLoad, StepDef};
 use crate::mesh::{Element, ElementKind, Mesh, MeshError};
+use crate::mesh3d::{Element3, ElementKind3, Mesh3};
 
 /// An error reading a deck (or a ccx `.dat` file): names the file and, where there is one, the
 /// 1-based line.
@@ -96,6 +97,26 @@ pub fn parse_inp(text: &str, file_name: &str) -> Result<Deck> {
     let mut p = Parser::new(file_name);
     lex(text, file_name, |b| p.block(b))?;
     p.finish()
+}
+
+/// Reads and resolves a 3D input deck: the subset of [`parse_inp`] with `*NODE` lines
+/// `label, x, y, z`, `*ELEMENT, TYPE=C3D8|C3D8H|C3D4|C3D10`, faces `S1..S6` / `P1..P6` (as
+/// [`crate::mesh3d`] numbers them), dofs 1–3 in `*BOUNDARY` and `*CLOAD`; the named surfaces
+/// are kept in the mesh ([`Mesh3::surfaces`]).
+pub fn read_inp3(path: &Path) -> Result<Deck3> {
+    let file = path.display().to_string();
+    let text = fs::read_to_string(path).map_err(|source| InpError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    parse_inp3(&text, &file)
+}
+
+/// The text version of [`read_inp3`]; `file_name` is used in error messages.
+pub fn parse_inp3(text: &str, file_name: &str) -> Result<Deck3> {
+    let mut p = Parser::with_dim(file_name, 3);
+    lex(text, file_name, |b| p.block(b))?;
+    p.finish3()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -260,9 +281,39 @@ struct SetDef {
     members: Vec<(i64, usize)>,
 }
 
+/// A plane-strain or a 3D element type (the reader's `dim` decides which it reads).
+#[derive(Clone, Copy)]
+enum RawKind {
+    Two(ElementKind),
+    Three(ElementKind3),
+}
+
+impl RawKind {
+    fn node_count(self) -> usize {
+        match self {
+            RawKind::Two(k) => k.node_count(),
+            RawKind::Three(k) => k.node_count(),
+        }
+    }
+
+    fn face_count(self) -> usize {
+        match self {
+            RawKind::Two(k) => k.node_count(),
+            RawKind::Three(k) => k.face_count(),
+        }
+    }
+
+    fn deck_name(self) -> &'static str {
+        match self {
+            RawKind::Two(k) => k.deck_name(),
+            RawKind::Three(k) => k.deck_name(),
+        }
+    }
+}
+
 struct RawElement {
-    kind: ElementKind,
-    nodes: [i64; 4],
+    kind: RawKind,
+    nodes: [i64; 10],
     line: usize,
 }
 
@@ -316,7 +367,11 @@ enum State {
 
 struct Parser<'f> {
     file: &'f str,
-    nodes: Vec<[f64; 2]>,
+    /// 2 (plane strain: `CPE*` elements, dofs 1–2, faces 1–4) or 3 (`C3D*`, dofs 1–3, faces
+    /// up to 6).
+    dim: usize,
+    /// Coordinates (z is 0 when a plane-strain deck leaves it out, and unused there).
+    nodes: Vec<[f64; 3]>,
     node_labels: Vec<i64>,
     node_map: LabelMap,
     elements: Vec<RawElement>,
@@ -411,8 +466,13 @@ output requests";
 
 impl<'f> Parser<'f> {
     fn new(file: &'f str) -> Self {
+        Self::with_dim(file, 2)
+    }
+
+    fn with_dim(file: &'f str, dim: usize) -> Self {
         Parser {
             file,
+            dim,
             nodes: Vec::new(),
             node_labels: Vec::new(),
             node_map: LabelMap::default(),
@@ -713,15 +773,26 @@ impl<'f> Parser<'f> {
             }
             let x = self.num(&r.fields[1])?;
             let y = self.num(&r.fields[2])?;
-            self.opt_num(&r.fields, 3)?;
-            for v in [x, y] {
+            let z = self.opt_num(&r.fields, 3)?;
+            let checked = match (self.dim, z) {
+                (2, _) => [x, y, 0.0],
+                (_, Some(z)) => [x, y, z],
+                (_, None) => {
+                    return Err(self.err(
+                        r.line,
+                        format!("*NODE: node {label}: expected 'label, x, y, z' in a 3D deck"),
+                    ))
+                }
+            };
+            for v in &checked[..self.dim] {
+                let v = *v;
                 crate::mesh::check_coordinate(v)
                     .map_err(|m| self.err(r.line, format!("node {label}: {m}")))?;
             }
             if !self.node_map.insert(label, self.nodes.len()) {
                 return Err(self.err(r.line, format!("node {label} is defined twice")));
             }
-            self.nodes.push([x, y]);
+            self.nodes.push([x, y, z.unwrap_or(0.0)]);
             self.node_labels.push(label);
             if let Some(s) = nset {
                 self.nsets[s].members.push((label, r.line));
@@ -733,10 +804,21 @@ impl<'f> Parser<'f> {
     fn element(&mut self, b: &Block) -> Result<()> {
         self.check_params(b, &["TYPE", "ELSET"])?;
         let ty = self.required(b, "TYPE")?;
-        let kind = ElementKind::from_deck_name(&ty).ok_or_else(|| {
+        let kind = match self.dim {
+            2 => ElementKind::from_deck_name(&ty).map(RawKind::Two),
+            _ => ElementKind3::from_deck_name(&ty).map(RawKind::Three),
+        }
+        .ok_or_else(|| {
             self.err(
                 b.line,
-                format!("unknown element type '{ty}' in *ELEMENT (supported: CPE4, CPE4H, CPE3)"),
+                format!(
+                    "unknown element type '{ty}' in *ELEMENT (supported: {})",
+                    if self.dim == 2 {
+                        "CPE4, CPE4H, CPE3"
+                    } else {
+                        "C3D8, C3D8H, C3D4, C3D10 in a 3D deck"
+                    }
+                ),
             )
         })?;
         let elset = self.value(b, "ELSET")?.map(|s| self.set_entry(true, s));
@@ -758,7 +840,7 @@ impl<'f> Parser<'f> {
                     ),
                 ));
             }
-            let mut nodes = [0i64; 4];
+            let mut nodes = [0i64; 10];
             for (k, f) in r.fields[1..].iter().enumerate() {
                 nodes[k] = self.int(f, "a node label")?;
             }
@@ -880,10 +962,11 @@ impl<'f> Parser<'f> {
                 .get(1)
                 .filter(|f| !f.text.is_empty())
                 .ok_or_else(|| self.err(r.line, "*SURFACE: the face (S1..S4) is missing"))?;
-            let face = face_number(face_field.text, 'S').ok_or_else(|| {
+            let max = self.max_face();
+            let face = face_number(face_field.text, 'S', max).ok_or_else(|| {
                 self.err(
                     face_field.line,
-                    format!("*SURFACE: face '{}' is not S1..S4", face_field.text),
+                    format!("*SURFACE: face '{}' is not S1..S{max}", face_field.text),
                 )
             })?;
             faces.push((target, face, r.line));
@@ -1057,7 +1140,11 @@ impl<'f> Parser<'f> {
                     format!("*BOUNDARY: last dof {last} is smaller than first dof {first}"),
                 ));
             }
-            check_plane_strain_dofs(first, last).map_err(|m| self.err(r.line, m))?;
+            match self.dim {
+                2 => check_plane_strain_dofs(first, last),
+                _ => check_solid_dofs(first, last),
+            }
+            .map_err(|m| self.err(r.line, m))?;
             let value = self.opt_num(&r.fields, 3)?.unwrap_or(0.0);
             self.boundaries.push(RawBoundary {
                 target,
@@ -1186,11 +1273,12 @@ impl<'f> Parser<'f> {
             let face = if t.text.eq_ignore_ascii_case("P") {
                 None
             } else {
-                Some(face_number(t.text, 'P').ok_or_else(|| {
+                let max = self.max_face();
+                Some(face_number(t.text, 'P', max).ok_or_else(|| {
                     self.err(
                         t.line,
                         format!(
-                            "*DLOAD: load type '{}' is not supported (only pressure P1..P4 on an \
+                            "*DLOAD: load type '{}' is not supported (only pressure P1..P{max} on an \
                              element face, or P on a *SURFACE)",
                             t.text
                         ),
@@ -1221,10 +1309,15 @@ impl<'f> Parser<'f> {
             }
             let target = self.target(&r.fields[0], "a node or node set")?;
             let dof = self.dof(&r.fields[1])?;
-            if dof > 2 {
+            if dof > self.dim {
                 return Err(self.err(
                     r.fields[1].line,
-                    format!("*CLOAD: dof {dof} does not exist in plane strain (only 1 and 2)"),
+                    match self.dim {
+                        2 => format!(
+                            "*CLOAD: dof {dof} does not exist in plane strain (only 1 and 2)"
+                        ),
+                        _ => format!("*CLOAD: dof {dof} is not a displacement dof (1, 2 or 3)"),
+                    },
                 ));
             }
             let magnitude = self.num(&r.fields[2])?;
@@ -1236,6 +1329,15 @@ impl<'f> Parser<'f> {
             });
         }
         Ok(())
+    }
+
+    /// The largest face number of the deck's elements: 4 in plane strain, 6 in 3D.
+    fn max_face(&self) -> usize {
+        if self.dim == 2 {
+            4
+        } else {
+            6
+        }
     }
 
     // --- resolution ----------------------------------------------------------------------------
@@ -1259,6 +1361,44 @@ impl<'f> Parser<'f> {
     }
 
     fn finish(self) -> Result<Deck> {
+        let r = self.resolve()?;
+        let AnyMesh::Two(mesh) = r.mesh else {
+            unreachable!("a plane-strain parser makes a 2D mesh")
+        };
+        Ok(Deck {
+            mesh,
+            materials: r.materials,
+            element_material: r.element_material,
+            element_region: r.element_region,
+            region_names: r.region_names,
+            step: r.step,
+            boundaries: r.boundaries,
+            pressures: r.pressures,
+            point_loads: r.point_loads,
+        })
+    }
+
+    fn finish3(self) -> Result<Deck3> {
+        let r = self.resolve()?;
+        let AnyMesh::Three(mesh) = r.mesh else {
+            unreachable!("a 3D parser makes a 3D mesh")
+        };
+        Ok(Deck3 {
+            mesh,
+            materials: r.materials,
+            element_material: r.element_material,
+            element_region: r.element_region,
+            region_names: r.region_names,
+            step: r.step,
+            boundaries: r.boundaries,
+            pressures: r.pressures,
+            point_loads: r.point_loads,
+        })
+    }
+
+    /// Resolves the deck: its mesh (2D or 3D as `dim`), sets, materials, sections, supports
+    /// and loads.
+    fn resolve(self) -> Result<Resolved> {
         match self.state {
             State::Model => {
                 return Err(InpError::Deck {
@@ -1278,14 +1418,9 @@ impl<'f> Parser<'f> {
         }
 
         // Mesh.
-        let mut mesh = Mesh {
-            nodes: self.nodes.clone(),
-            node_labels: self.node_labels.clone(),
-            element_labels: self.element_labels.clone(),
-            ..Mesh::default()
-        };
+        let mut conns: Vec<[usize; 10]> = Vec::with_capacity(self.elements.len());
         for (e, raw) in self.elements.iter().enumerate() {
-            let mut conn = [usize::MAX; 4];
+            let mut conn = [usize::MAX; 10];
             let n = raw.kind.node_count();
             for (slot, label) in conn.iter_mut().zip(&raw.nodes[..n]) {
                 *slot = self.node_map.get(*label).ok_or_else(|| {
@@ -1298,28 +1433,65 @@ impl<'f> Parser<'f> {
                     )
                 })?;
             }
-            mesh.elements.push(Element {
-                kind: raw.kind,
-                conn,
-            });
+            conns.push(conn);
         }
+        let mut mesh = if self.dim == 2 {
+            AnyMesh::Two(Mesh {
+                nodes: self.nodes.iter().map(|p| [p[0], p[1]]).collect(),
+                node_labels: self.node_labels.clone(),
+                element_labels: self.element_labels.clone(),
+                elements: self
+                    .elements
+                    .iter()
+                    .zip(&conns)
+                    .map(|(raw, c)| match raw.kind {
+                        RawKind::Two(kind) => Element {
+                            kind,
+                            conn: [c[0], c[1], c[2], c[3]],
+                        },
+                        RawKind::Three(_) => unreachable!("2D deck"),
+                    })
+                    .collect(),
+                ..Mesh::default()
+            })
+        } else {
+            AnyMesh::Three(Mesh3 {
+                nodes: self.nodes.clone(),
+                node_labels: self.node_labels.clone(),
+                element_labels: self.element_labels.clone(),
+                elements: self
+                    .elements
+                    .iter()
+                    .zip(&conns)
+                    .map(|(raw, c)| match raw.kind {
+                        RawKind::Three(kind) => Element3 { kind, conn: *c },
+                        RawKind::Two(_) => unreachable!("3D deck"),
+                    })
+                    .collect(),
+                ..Mesh3::default()
+            })
+        };
         let mut nsets: HashMap<String, Vec<usize>> = HashMap::new();
         for s in &self.nsets {
             let idx = self.resolve_set(s, &self.node_map, "node")?;
             nsets.insert(s.name.to_ascii_uppercase(), idx.clone());
-            mesh.node_sets.insert(s.name.clone(), idx);
+            mesh.sets_mut().0.insert(s.name.clone(), idx);
         }
         let mut elsets: HashMap<String, Vec<usize>> = HashMap::new();
         for s in &self.elsets {
             let idx = self.resolve_set(s, &self.element_map, "element")?;
             elsets.insert(s.name.to_ascii_uppercase(), idx.clone());
-            mesh.element_sets.insert(s.name.clone(), idx);
+            mesh.sets_mut().1.insert(s.name.clone(), idx);
         }
-        mesh.check_orientation().map_err(|e| {
+        let checked = match &mesh {
+            AnyMesh::Two(m) => m.check_orientation(),
+            AnyMesh::Three(m) => m.check_orientation(),
+        };
+        checked.map_err(|e| {
             let label = match &e {
-                MeshError::Inverted { label, .. } | MeshError::MissingNode { label, .. } => {
-                    Some(*label)
-                }
+                MeshError::Inverted { label, .. }
+                | MeshError::InvertedSolid { label, .. }
+                | MeshError::MissingNode { label, .. } => Some(*label),
                 _ => None,
             };
             match label.and_then(|l| self.element_map.get(l)) {
@@ -1350,7 +1522,7 @@ impl<'f> Parser<'f> {
                 line: Some(*line),
             });
         }
-        let n_el = mesh.elements.len();
+        let n_el = self.elements.len();
         let mut element_material = vec![usize::MAX; n_el];
         let mut element_region = vec![usize::MAX; n_el];
         let mut region_names = Vec::with_capacity(self.sections.len());
@@ -1373,7 +1545,7 @@ impl<'f> Parser<'f> {
                         s.line,
                         format!(
                             "element {} is in two *SOLID SECTIONs (lines {} and {})",
-                            mesh.element_labels[e], self.sections[element_region[e]].line, s.line
+                            self.element_labels[e], self.sections[element_region[e]].line, s.line
                         ),
                     ));
                 }
@@ -1385,7 +1557,7 @@ impl<'f> Parser<'f> {
         if let Some(e) = element_region.iter().position(|&r| r == usize::MAX) {
             return Err(self.err(
                 self.elements[e].line,
-                format!("element {} has no *SOLID SECTION", mesh.element_labels[e]),
+                format!("element {} has no *SOLID SECTION", self.element_labels[e]),
             ));
         }
 
@@ -1407,7 +1579,7 @@ impl<'f> Parser<'f> {
         let mut bc_index: HashMap<(usize, usize), usize> = HashMap::new();
         for bc in &self.boundaries {
             for node in nodes_of(&bc.target, bc.line, "*BOUNDARY")? {
-                for dof in bc.first..=bc.last.min(2) {
+                for dof in bc.first..=bc.last.min(self.dim) {
                     let c = BoundaryCondition {
                         node,
                         dof: dof - 1,
@@ -1454,15 +1626,15 @@ impl<'f> Parser<'f> {
             }
         };
         let check_face = |e: usize, face: usize, line: usize, kw: &str, p: char| -> Result<()> {
-            let el = &mesh.elements[e];
-            if face >= el.face_count() {
+            let kind = self.elements[e].kind;
+            if face >= kind.face_count() {
                 return Err(self.err(
                     line,
                     format!(
                         "{kw}: element {} is a {} with faces {p}1..{p}{}, not {p}{}",
-                        mesh.element_labels[e],
-                        el.kind.deck_name(),
-                        el.face_count(),
+                        self.element_labels[e],
+                        kind.deck_name(),
+                        kind.face_count(),
                         face + 1
                     ),
                 ));
@@ -1517,7 +1689,22 @@ impl<'f> Parser<'f> {
             }
         }
 
-        Ok(Deck {
+        // The named surfaces of a 3D deck are kept in its mesh.
+        if let AnyMesh::Three(m) = &mut mesh {
+            for surface in &self.surfaces {
+                let kw = format!("*SURFACE '{}'", surface.name);
+                let mut faces = Vec::new();
+                for (t, face, line) in &surface.faces {
+                    for e in elements_of(t, *line, &kw)? {
+                        check_face(e, *face, *line, &kw, 'S')?;
+                        faces.push((e, *face));
+                    }
+                }
+                m.surfaces.insert(surface.name.clone(), faces);
+            }
+        }
+
+        Ok(Resolved {
             mesh,
             materials,
             element_material,
@@ -1529,6 +1716,41 @@ impl<'f> Parser<'f> {
             point_loads,
         })
     }
+}
+
+/// A 2D or a 3D mesh being read.
+enum AnyMesh {
+    Two(Mesh),
+    Three(Mesh3),
+}
+
+impl AnyMesh {
+    /// The node sets and element sets.
+    #[allow(clippy::type_complexity)]
+    fn sets_mut(
+        &mut self,
+    ) -> (
+        &mut BTreeMap<String, Vec<usize>>,
+        &mut BTreeMap<String, Vec<usize>>,
+    ) {
+        match self {
+            AnyMesh::Two(m) => (&mut m.node_sets, &mut m.element_sets),
+            AnyMesh::Three(m) => (&mut m.node_sets, &mut m.element_sets),
+        }
+    }
+}
+
+/// A resolved deck of either dimension.
+struct Resolved {
+    mesh: AnyMesh,
+    materials: Vec<MaterialDef>,
+    element_material: Vec<usize>,
+    element_region: Vec<usize>,
+    region_names: Vec<String>,
+    step: StepDef,
+    boundaries: Vec<BoundaryCondition>,
+    pressures: Vec<FacePressure>,
+    point_loads: Vec<PointLoad>,
 }
 
 /// `P3` → face 2 (0-based), for prefix `P` or `S`.
@@ -1561,14 +1783,31 @@ fn check_plane_strain_dofs(first: usize, last: usize) -> std::result::Result<(),
 /// allocated (issue 28.4).
 const MAX_GENERATED: usize = 10_000_000;
 
-fn face_number(text: &str, prefix: char) -> Option<usize> {
+fn face_number(text: &str, prefix: char, max: usize) -> Option<usize> {
     let rest = text
         .strip_prefix(prefix)
         .or_else(|| text.strip_prefix(prefix.to_ascii_lowercase()))?;
     match rest.parse::<usize>() {
-        Ok(n @ 1..=4) => Some(n - 1),
+        Ok(n) if (1..=max).contains(&n) => Some(n - 1),
         _ => None,
     }
+}
+
+/// The dofs of a `*BOUNDARY` line of a 3D deck: 1–3 (x, y, z) exist; a range from 1–3 may run
+/// up to 6 (the rotations 4–6 being absent from solid nodes); a line constraining none of
+/// 1–3, or naming a dof above 6, is refused (the node would stay free).
+fn check_solid_dofs(first: usize, last: usize) -> std::result::Result<(), String> {
+    if first > 3 {
+        return Err(format!(
+            "*BOUNDARY: dof {first}: not a displacement dof (1 = x, 2 = y, 3 = z): the node would stay free"
+        ));
+    }
+    if last > 6 {
+        return Err(format!(
+            "*BOUNDARY: dof {last} is not a displacement dof (solids have dofs 1, 2, 3; ranges up to 6 are accepted)"
+        ));
+    }
+    Ok(())
 }
 
 // ---------------------------------------------------------------------------------------------

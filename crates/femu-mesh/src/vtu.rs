@@ -21,6 +21,7 @@ use std::io::{self, Write};
 use std::path::Path;
 
 use crate::mesh::Mesh;
+use crate::mesh3d::Mesh3;
 
 /// A named `f64` field: `data` holds `components` values per point (or per cell), point after
 /// point. Pass 3 components for vectors (x, y, 0) so ParaView's *Warp By Vector* can use them.
@@ -174,26 +175,17 @@ fn check(
         }
         finite("displacement", u.iter().flatten().copied(), 2)?;
     }
-    for (fields, n, what) in [(point_fields, np, "point"), (cell_fields, nc, "cell")] {
-        for f in fields {
-            if f.components == 0 || f.data.len() != n * f.components {
-                return Err(invalid(
-                    io::ErrorKind::InvalidInput,
-                    format!(
-                        "{what} field '{}' has {} values; expected {} components x {n} {what}s",
-                        f.name,
-                        f.data.len(),
-                        f.components
-                    ),
-                ));
-            }
-            finite(
-                &format!("{what} field '{}'", f.name),
-                f.data.iter().copied(),
-                f.components,
-            )?;
-        }
-    }
+    check_fields(point_fields, np, "point")?;
+    check_cell_fields(nc, cell_fields, int_cell_fields)
+}
+
+/// Checks the cell fields' lengths and values (`nc` cells).
+fn check_cell_fields(
+    nc: usize,
+    cell_fields: &[VtuField],
+    int_cell_fields: &[VtuIntField],
+) -> io::Result<()> {
+    check_fields(cell_fields, nc, "cell")?;
     for f in int_cell_fields {
         if f.data.len() != nc {
             return Err(invalid(
@@ -205,6 +197,29 @@ fn check(
                 ),
             ));
         }
+    }
+    Ok(())
+}
+
+/// Checks `f64` fields of `n` items (`what`: point or cell).
+fn check_fields(fields: &[VtuField], n: usize, what: &str) -> io::Result<()> {
+    for f in fields {
+        if f.components == 0 || f.data.len() != n * f.components {
+            return Err(invalid(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "{what} field '{}' has {} values; expected {} components x {n} {what}s",
+                    f.name,
+                    f.data.len(),
+                    f.components
+                ),
+            ));
+        }
+        finite(
+            &format!("{what} field '{}'", f.name),
+            f.data.iter().copied(),
+            f.components,
+        )?;
     }
     Ok(())
 }
@@ -300,10 +315,12 @@ fn write_array<T: Binary>(
 }
 
 fn write_field(w: &mut impl Write, f: &VtuField) -> io::Result<()> {
-    let names = if f.components == 4 {
-        r#" ComponentName0="xx" ComponentName1="yy" ComponentName2="zz" ComponentName3="xy""#
-    } else {
-        ""
+    let names = match f.components {
+        4 => r#" ComponentName0="xx" ComponentName1="yy" ComponentName2="zz" ComponentName3="xy""#,
+        6 => {
+            r#" ComponentName0="xx" ComponentName1="yy" ComponentName2="zz" ComponentName3="xy" ComponentName4="xz" ComponentName5="yz""#
+        }
+        _ => "",
     };
     let attributes = format!(
         r#" Name="{}" NumberOfComponents="{}"{names}"#,
@@ -321,6 +338,48 @@ fn write_to(
     cell_fields: &[VtuField],
     int_cell_fields: &[VtuIntField],
 ) -> io::Result<()> {
+    let u3: Option<Vec<f64>> =
+        displacement.map(|u| u.iter().flat_map(|d| [d[0], d[1], 0.0]).collect());
+    write_grid(
+        w,
+        Grid {
+            n_points: mesh.nodes.len(),
+            n_cells: mesh.elements.len(),
+            displacement: u3.as_deref(),
+            point_fields,
+            cell_fields,
+            int_cell_fields,
+        },
+        mesh.nodes.iter().flat_map(|p| [p[0], p[1], 0.0]),
+        mesh.elements
+            .iter()
+            .flat_map(|el| el.nodes().iter().map(|&n| n as i64)),
+        mesh.elements.iter().map(|el| el.kind.node_count()),
+        mesh.elements.iter().map(|el| el.kind.vtk_cell_type()),
+    )
+}
+
+/// The counts and fields of a grid for [`write_grid`]; `displacement` has 3 components per
+/// point.
+struct Grid<'a> {
+    n_points: usize,
+    n_cells: usize,
+    displacement: Option<&'a [f64]>,
+    point_fields: &'a [VtuField<'a>],
+    cell_fields: &'a [VtuField<'a>],
+    int_cell_fields: &'a [VtuIntField<'a>],
+}
+
+/// Writes a grid: its fields, `points` (x, y, z per point), the cells' `connectivity`, the
+/// node count of each cell and the VTK cell types.
+fn write_grid(
+    w: &mut impl Write,
+    g: Grid,
+    points: impl Iterator<Item = f64>,
+    connectivity: impl Iterator<Item = i64>,
+    cell_sizes: impl Iterator<Item = usize>,
+    types: impl Iterator<Item = u8>,
+) -> io::Result<()> {
     writeln!(w, r#"<?xml version="1.0"?>"#)?;
     writeln!(
         w,
@@ -330,22 +389,19 @@ fn write_to(
     writeln!(
         w,
         r#"    <Piece NumberOfPoints="{}" NumberOfCells="{}">"#,
-        mesh.nodes.len(),
-        mesh.elements.len()
+        g.n_points, g.n_cells
     )?;
 
     // Point data.
-    let u3: Option<Vec<f64>> =
-        displacement.map(|u| u.iter().flat_map(|d| [d[0], d[1], 0.0]).collect());
     let mut pfields: Vec<VtuField> = Vec::new();
-    if let Some(u3) = &u3 {
+    if let Some(u3) = g.displacement {
         pfields.push(VtuField {
             name: "displacement",
             components: 3,
             data: u3,
         });
     }
-    pfields.extend_from_slice(point_fields);
+    pfields.extend_from_slice(g.point_fields);
     if pfields.is_empty() {
         writeln!(w, "      <PointData>")?;
     } else {
@@ -363,10 +419,10 @@ fn write_to(
 
     // Cell data.
     writeln!(w, "      <CellData>")?;
-    for f in cell_fields {
+    for f in g.cell_fields {
         write_field(w, f)?;
     }
-    for f in int_cell_fields {
+    for f in g.int_cell_fields {
         let attributes = format!(r#" Name="{}""#, xml_escape(f.name));
         write_array(w, &attributes, f.data.iter().copied())?;
     }
@@ -374,34 +430,78 @@ fn write_to(
 
     // Geometry.
     writeln!(w, "      <Points>")?;
-    write_array(
-        w,
-        r#" Name="Points" NumberOfComponents="3""#,
-        mesh.nodes.iter().flat_map(|p| [p[0], p[1], 0.0]),
-    )?;
+    write_array(w, r#" Name="Points" NumberOfComponents="3""#, points)?;
     writeln!(w, "      </Points>")?;
 
     writeln!(w, "      <Cells>")?;
-    let connectivity = mesh
-        .elements
-        .iter()
-        .flat_map(|el| el.nodes().iter().map(|&n| n as i64));
     write_array(w, r#" Name="connectivity""#, connectivity)?;
-    let offsets = mesh.elements.iter().scan(0i64, |offset, el| {
-        *offset += el.kind.node_count() as i64;
+    let offsets = cell_sizes.scan(0i64, |offset, n| {
+        *offset += n as i64;
         Some(*offset)
     });
     write_array(w, r#" Name="offsets""#, offsets)?;
-    write_array(
-        w,
-        r#" Name="types""#,
-        mesh.elements.iter().map(|el| el.kind.vtk_cell_type()),
-    )?;
+    write_array(w, r#" Name="types""#, types)?;
     writeln!(w, "      </Cells>")?;
     writeln!(w, "    </Piece>")?;
     writeln!(w, "  </UnstructuredGrid>")?;
     writeln!(w, "</VTKFile>")?;
     Ok(())
+}
+
+/// Writes a 3D mesh to `path` as a VTU file: hexahedra (`VTK_HEXAHEDRON`, 12), tetrahedra
+/// (`VTK_TETRA`, 10) and quadratic tetrahedra (`VTK_QUADRATIC_TETRA`, 24), whose VTK node
+/// orders are the Abaqus ones; the point field `displacement` (`[ux, uy, uz]` per node) when
+/// given, and `f64` and `Int32` cell fields (a 6-component cell field is named as the
+/// symmetric tensor `xx, yy, zz, xy, xz, yz`, the order of [`Mesh3`] stresses). Checked as the
+/// 2D files are (lengths, indices, finite values).
+pub fn write_vtu3(
+    path: &Path,
+    mesh: &Mesh3,
+    displacement: Option<&[[f64; 3]]>,
+    cell_fields: &[VtuField],
+    int_cell_fields: &[VtuIntField],
+) -> io::Result<()> {
+    let (np, nc) = (mesh.nodes.len(), mesh.elements.len());
+    finite("node coordinates", mesh.nodes.iter().flatten().copied(), 3)?;
+    if mesh
+        .elements
+        .iter()
+        .any(|el| el.nodes().iter().any(|&n| n >= np))
+    {
+        return Err(invalid(
+            io::ErrorKind::InvalidInput,
+            "an element refers to a node that does not exist".to_string(),
+        ));
+    }
+    if let Some(u) = displacement {
+        if u.len() != np {
+            return Err(invalid(
+                io::ErrorKind::InvalidInput,
+                format!("displacement has {} values for {np} nodes", u.len()),
+            ));
+        }
+        finite("displacement", u.iter().flatten().copied(), 3)?;
+    }
+    check_cell_fields(nc, cell_fields, int_cell_fields)?;
+    crate::atomic::write_with(path, |w| {
+        write_grid(
+            w,
+            Grid {
+                n_points: np,
+                n_cells: nc,
+                displacement: displacement.map(|u| u.as_flattened()),
+                point_fields: &[],
+                cell_fields,
+                int_cell_fields,
+            },
+            mesh.nodes.iter().flatten().copied(),
+            mesh.elements
+                .iter()
+                .flat_map(|el| el.nodes().iter().map(|&n| n as i64)),
+            mesh.elements.iter().map(|el| el.kind.node_count()),
+            mesh.elements.iter().map(|el| el.kind.vtk_cell_type()),
+        )
+    })
 }
 
 #[cfg(test)]
@@ -707,5 +807,70 @@ print('ok')
         assert!(!scratch("trait-bad.vtu").exists());
         let _ = std::fs::remove_file(a);
         let _ = std::fs::remove_file(b);
+    }
+
+    /// A 3D block of each element type written and read back: points with their z, the
+    /// connectivity in the Abaqus order, offsets, cell types, displacement and cell fields.
+    #[test]
+    fn writes_a_3d_grid() {
+        use crate::mesh3d::{generate::block, ElementKind3};
+        for kind in ElementKind3::ALL {
+            let m = block([1.0, 2.0, 3.0], [1, 1, 2], kind);
+            let u: Vec<[f64; 3]> = m
+                .nodes
+                .iter()
+                .map(|p| [0.1 * p[2], 0.0, -0.2 * p[0]])
+                .collect();
+            let stress: Vec<f64> = (0..6 * m.elements.len()).map(|i| i as f64).collect();
+            let region: Vec<i32> = (0..m.elements.len() as i32).collect();
+            let path = scratch(&format!("block3-{}.vtu", kind.deck_name()));
+            write_vtu3(
+                &path,
+                &m,
+                Some(&u),
+                &[VtuField {
+                    name: "stress",
+                    components: 6,
+                    data: &stress,
+                }],
+                &[VtuIntField {
+                    name: "region",
+                    data: &region,
+                }],
+            )
+            .unwrap();
+            let text = fs::read_to_string(&path).unwrap();
+            let (_, points) = array_bytes(&text, "Points");
+            assert_eq!(f64s(&points), m.nodes.as_flattened());
+            let (_, disp) = array_bytes(&text, "displacement");
+            assert_eq!(f64s(&disp), u.as_flattened());
+            let (_, conn) = array_bytes(&text, "connectivity");
+            let expected: Vec<i64> = m
+                .elements
+                .iter()
+                .flat_map(|e| e.nodes().iter().map(|&n| n as i64))
+                .collect();
+            assert_eq!(i64s(&conn), expected);
+            let (_, offsets) = array_bytes(&text, "offsets");
+            let n = kind.node_count() as i64;
+            assert_eq!(*i64s(&offsets).last().unwrap(), n * m.elements.len() as i64);
+            let (_, types) = array_bytes(&text, "types");
+            assert!(types.iter().all(|&t| t == kind.vtk_cell_type()));
+            let (tag, s) = array_bytes(&text, "stress");
+            assert!(tag.contains(r#"ComponentName5="yz""#), "{tag}");
+            assert_eq!(f64s(&s), stress);
+            let (_, r) = array_bytes(&text, "region");
+            let r: Vec<i32> = r
+                .chunks_exact(4)
+                .map(|c| i32::from_le_bytes(c.try_into().unwrap()))
+                .collect();
+            assert_eq!(r, region);
+            // A displacement of the wrong length and a non-finite value are refused.
+            assert!(write_vtu3(&path, &m, Some(&u[1..]), &[], &[]).is_err());
+            let mut bad = u.clone();
+            bad[0][2] = f64::NAN;
+            assert!(write_vtu3(&path, &m, Some(&bad), &[], &[]).is_err());
+            let _ = fs::remove_file(&path);
+        }
     }
 }
