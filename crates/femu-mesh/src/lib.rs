@@ -41,7 +41,7 @@ pub use inp::{read_inp, read_inp3, write_inp, write_inp3, write_inp_file, Deck3,
 pub use locate::{PointInterpolation, PointLocation, PointLocator};
 pub use mesh::{Element, ElementKind, Mesh, MeshError};
 pub use mesh3d::{Element3, ElementKind3, Mesh3};
-pub use msh::{read_msh, MshError, MshModel};
+pub use msh::{read_msh, read_msh3, MshError, MshModel};
 pub use vtu::{
     write_vtu, write_vtu3, write_vtu_with_int_cells, FieldSet, FieldWriter, VtuField, VtuIntField,
     VtuWriter,

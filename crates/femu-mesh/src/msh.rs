@@ -179,6 +179,20 @@ fn gmsh_type_name(t: i64) -> String {
     }
 }
 
+/// What [`Reader::front`] reads.
+struct Front<'a> {
+    sections: Vec<(&'a str, usize, usize)>,
+    /// `$PhysicalNames` by (dimension, tag).
+    names: HashMap<(i64, i64), String>,
+    /// The physical tags of each (dimension, entity tag).
+    physicals: HashMap<(i64, i64), Vec<i64>>,
+    /// Node tags with their lines, in file order.
+    node_tags: Vec<(i64, usize)>,
+    coords: Vec<[f64; 3]>,
+    /// File index of each node tag.
+    node_of_tag: HashMap<i64, usize>,
+}
+
 struct RawElement {
     tag: i64,
     nodes: [i64; 4],
@@ -244,7 +258,9 @@ impl<'a> Reader<'a> {
         }
     }
 
-    fn read(&self) -> Result<MshModel> {
+    /// The sections, physical names, entities' physical groups and nodes (3 coordinates) of
+    /// the file: what the 2D and the 3D readers share.
+    fn front(&self) -> Result<Front<'a>> {
         let sections = self.sections()?;
         let Some(&(_, fstart, fend)) = sections.iter().find(|s| s.0 == "MeshFormat") else {
             return Err(self.file_err("no $MeshFormat section: this is not a Gmsh .msh file"));
@@ -346,7 +362,7 @@ impl<'a> Reader<'a> {
         t.int("the minimum node tag")?;
         t.int("the maximum node tag")?;
         let mut node_tags: Vec<(i64, usize)> = Vec::new();
-        let mut coords: Vec<[f64; 2]> = Vec::new();
+        let mut coords: Vec<[f64; 3]> = Vec::new();
         for _ in 0..blocks {
             let (dim, _) = t.int("an entity dimension")?;
             t.int("an entity tag")?;
@@ -362,11 +378,11 @@ impl<'a> Reader<'a> {
             };
             for _ in 0..n {
                 let (x, y) = (t.coordinate()?, t.coordinate()?);
-                t.float("a node coordinate")?;
+                let z = t.float("a node coordinate")?;
                 for _ in 0..extra {
                     t.float("a parametric coordinate")?;
                 }
-                coords.push([x, y]);
+                coords.push([x, y, z]);
             }
         }
         if node_tags.len() != declared_nodes {
@@ -385,6 +401,25 @@ impl<'a> Reader<'a> {
             }
         }
 
+        Ok(Front {
+            sections,
+            names,
+            physicals,
+            node_tags,
+            coords,
+            node_of_tag,
+        })
+    }
+
+    fn read(&self) -> Result<MshModel> {
+        let Front {
+            sections,
+            names,
+            physicals,
+            node_tags,
+            coords,
+            node_of_tag,
+        } = self.front()?;
         // $Elements.
         let Some(&(name, start, end)) = sections.iter().find(|s| s.0 == "Elements") else {
             return Err(self.file_err("no $Elements section"));
@@ -474,7 +509,7 @@ impl<'a> Reader<'a> {
         for (i, &(tag, _)) in node_tags.iter().enumerate() {
             if used[i] {
                 index_of_file_node[i] = mesh.nodes.len();
-                mesh.nodes.push(coords[i]);
+                mesh.nodes.push([coords[i][0], coords[i][1]]);
                 mesh.node_labels.push(tag);
             }
         }
@@ -573,6 +608,9 @@ impl<'a> Reader<'a> {
         Ok(MshModel { mesh, edge_sets })
     }
 }
+
+mod solid;
+pub use solid::{parse_msh3, read_msh3};
 
 #[cfg(test)]
 mod tests {
