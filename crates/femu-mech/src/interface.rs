@@ -33,10 +33,12 @@
 //! segment to the next (finite sliding): on segment `k` from reference arc `S_k` of reference
 //! length `L⁰_k`, `ξ̄ = (s̄ - S_k) / L⁰_k`.
 //!
-//! Each slave node is paired, at every assembly, with the closest of its candidate segments
-//! (the master segments within a search radius of it in the reference configuration): the
-//! tangent's pattern holds the coupling of the slave node with every node of its candidates,
-//! so that switching segments needs no new pattern.
+//! Each slave node is paired with one of its candidate segments (the master segments within a
+//! search radius of it in the reference configuration): the closest at the start of a solve,
+//! kept through an increment's Newton iterations, moved to the closest when the node's
+//! projection has left it at a converged increment and at the end of the step
+//! ([`Interface::closest_preferring`]). The tangent's pattern holds the coupling of the slave
+//! node with every node of its candidates, so that switching segments needs no new pattern.
 
 use std::collections::BTreeMap;
 
@@ -249,8 +251,10 @@ impl Interface {
     }
 
     /// The candidate segment of slave `k` closest to its current position (`position(node)`)
-    /// and its gap; `None` if the closest point lies beyond the ends of every candidate (by more
-    /// than a thousandth of the segment), i.e. off the master surface.
+    /// and its gap. A node whose closest point lies on no candidate (beyond the ends of every
+    /// segment: outside a convex master vertex) is paired with the nearest segment, its gap
+    /// measured from that segment's line, as long as its projection lies within half a
+    /// segment of it; otherwise (off the master surface) `None`.
     pub fn closest(
         &self,
         k: usize,
@@ -258,19 +262,48 @@ impl Interface {
     ) -> Option<(usize, SegmentGap)> {
         let xs = position(self.slaves[k]);
         let mut best: Option<(f64, usize, SegmentGap)> = None;
+        let mut nearest: Option<(f64, usize, SegmentGap)> = None;
         for &s in &self.candidates[k] {
             let [a, b] = self.segments[s];
             let (xa, xb) = (position(a), position(b));
             let gap = SegmentGap::new(xs, xa, xb);
+            let d = segment_distance(xs, xa, xb);
+            if nearest.as_ref().is_none_or(|(bd, _, _)| d < *bd) {
+                nearest = Some((d, s, gap));
+            }
             if !(-1e-3..=1.0 + 1e-3).contains(&gap.xi) {
                 continue;
             }
-            let d = segment_distance(xs, xa, xb);
             if best.as_ref().is_none_or(|(bd, _, _)| d < *bd) {
                 best = Some((d, s, gap));
             }
         }
-        best.map(|(_, s, g)| (s, g))
+        best.or(nearest.filter(|(_, _, g)| (-0.5..=1.5).contains(&g.xi)))
+            .map(|(_, s, g)| (s, g))
+    }
+
+    /// The gap of slave `k` on the segment `preferred` (its pairing, kept through the Newton
+    /// iterations of an increment; see `solver::interface_state`) while the node's projection
+    /// stays within half a segment of it, measured from the segment's line beyond its ends;
+    /// otherwise, or without a pairing, [`Self::closest`].
+    ///
+    /// Re-pairing at every iterate would switch a node near a master vertex between two
+    /// segments of different normals: its force turns by the angle between them, a jump Newton
+    /// cannot converge through (every slave node of a split interface starts on a vertex).
+    pub fn closest_preferring(
+        &self,
+        k: usize,
+        position: impl Fn(usize) -> [f64; 2],
+        preferred: Option<usize>,
+    ) -> Option<(usize, SegmentGap)> {
+        if let Some(s) = preferred {
+            let [a, b] = self.segments[s];
+            let gap = SegmentGap::new(position(self.slaves[k]), position(a), position(b));
+            if (-0.5..=1.5).contains(&gap.xi) {
+                return Some((s, gap));
+            }
+        }
+        self.closest(k, position)
     }
 
     /// The reference arc coordinate of the point `xi` of segment `s`.

@@ -6,6 +6,7 @@
 
 use femu_mech::build::DeckBuilder;
 use femu_mech::interface::{Interface, InterfaceKind, Penalty};
+use femu_mech::loading::Loading;
 use femu_mech::{Model, SolverOptions, StaticSolver};
 use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::ElementKind;
@@ -217,10 +218,21 @@ fn frictionless_residual_is_the_gradient_of_the_contact_energy() {
     solver.prepare_contact(&model).unwrap();
     let u = pressed_state(&model, &solver, 0.3, 5);
     let iface = &model.interfaces[0];
+    // Each slave node keeps the segment it was paired with at the start (the solver's pairing
+    // through an increment's iterations).
+    let zero = vec![0.0; model.state_len()];
+    let paired: Vec<Option<usize>> = (0..iface.slaves.len())
+        .map(|k| {
+            iface
+                .closest(k, |n| model.current_position(n, &zero))
+                .map(|(s, _)| s)
+        })
+        .collect();
     let energy = |u: &[f64]| -> f64 {
         (0..iface.slaves.len())
             .filter_map(|k| {
-                let (_, g) = iface.closest(k, |n| model.current_position(n, u))?;
+                let (_, g) =
+                    iface.closest_preferring(k, |n| model.current_position(n, u), paired[k])?;
                 let eps = k_pen * iface.tributary[k];
                 Some(0.5 * eps * (-g.g).max(0.0).powi(2))
             })
@@ -378,24 +390,34 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
     assert!(law < 1e-12);
 }
 
-/// The built-in thigh (about 1 500 quads) under the seed's compression test (rigid plate), the
-/// quadriceps free to slide on the hamstrings (a frictionless QUADRICEPS–ISCHIO interface, the
-/// nodes split along it, its ends tied) against the tied thigh: the solve converges, the
-/// surfaces do not interpenetrate beyond the penetration limit, the muscles slide on one
-/// another, and the displacement field differs from the tied one by a fraction of the plate's
-/// travel.
+/// The built-in thigh (about 1 500 quads) under the seed's compression (rigid plate) and
+/// indentation tests, the quadriceps free to slide on the hamstrings (a frictionless
+/// QUADRICEPS–ISCHIO interface, the nodes split along it, its ends tied), against the tied
+/// thigh: the solve converges, the surfaces do not interpenetrate beyond the penetration limit,
+/// the muscles slide on one another, and the displacement field differs from the tied one by
+/// less than the largest displacement. (Under contention the solve still stalls at a quarter
+/// of the load: see the guide's sliding-interfaces page.)
 #[test]
-fn thigh_with_a_sliding_quadriceps_under_compression() {
+fn thigh_with_a_sliding_quadriceps_under_compression_and_indentation() {
+    for (name, loading) in [
+        ("compression", Loading::seed_compression()),
+        ("indentation", Loading::anterior_indentation(0.1)),
+    ] {
+        sliding_thigh(name, &loading);
+    }
+}
+
+fn sliding_thigh(name: &str, loading: &femu_mech::loading::Loading) {
     use femu_geometry::interface_split::split_interface;
     use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
-    use femu_mech::loading::{apply_loading, Loading};
+    use femu_mech::loading::apply_loading;
     let t = parametric_thigh(&ThighParams::coarse(), ElementKind::Cpe4).unwrap();
     let skin = t.mesh.surfaces["SKIN"].clone();
     let model_of = |thigh: &femu_geometry::ThighModel| {
         let mut deck = contention_deck(thigh, &table1_materials(), 0.0).unwrap();
         deck.pressures.clear();
         let mut model = Model::from_deck(deck).unwrap();
-        apply_loading(&mut model, &skin, &Loading::seed_compression()).unwrap();
+        apply_loading(&mut model, &skin, loading).unwrap();
         model
     };
     let tied = model_of(&t);
@@ -441,7 +463,7 @@ fn thigh_with_a_sliding_quadriceps_under_compression() {
     let pen = states.iter().fold(0.0f64, |m, s| m.max(-s.gap));
     let open = states.iter().filter(|s| s.normal_force == 0.0).count();
     println!(
-        "compression: tied max |u| {umax:.4} mm, sliding - tied max |Δu| {du:.4} mm, max slip \
+        "{name}: tied max |u| {umax:.4} mm, sliding - tied max |Δu| {du:.4} mm, max slip \
          {max_slip:.4} mm, max penetration {pen:.2e} mm, {open} of {} slave nodes open, \
          {} increments, {} Uzawa updates",
         states.len(),
@@ -458,9 +480,12 @@ fn thigh_with_a_sliding_quadriceps_under_compression() {
     for (arc, slip, force, gap) in along {
         println!("  arc {arc:8.3} mm  slip {slip:+.4} mm  N {force:.3e} N/mm  gap {gap:+.2e} mm");
     }
-    assert!(pen <= 1e-3 * iface.element_size, "penetration {pen:.3e}");
-    assert!(max_slip > 1e-3 * umax, "no slip: {max_slip:.3e}");
-    assert!(du > 0.0 && du < umax, "{du:.3e} vs {umax:.3e}");
+    assert!(
+        pen <= 1e-3 * iface.element_size,
+        "{name}: penetration {pen:.3e}"
+    );
+    assert!(max_slip > 1e-3 * umax, "{name}: no slip: {max_slip:.3e}");
+    assert!(du > 0.0 && du < umax, "{name}: {du:.3e} vs {umax:.3e}");
 }
 
 /// The material parameters' direct sensitivities of the thigh with a frictionless

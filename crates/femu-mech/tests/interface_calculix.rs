@@ -208,14 +208,14 @@ fn frictionless_blocks_match_ccx() {
 }
 
 /// Coulomb friction (μ = 0.3): with part of the interface sticking and part slipping (shear
-/// 0.1 mm), within the 1e-4 criterion at stiff penalties. When every node slips (shear 0.3 mm)
-/// the two codes differ by about 1e-3 of max |u| whatever the penalties (k = 10 to 100, stick
-/// slopes 3 to 30: 1.04e-3 to 1.15e-3), and by 1.7e-4 when the lower block is held rigid: the
-/// difference is not a penalty effect and involves the master's deformation under the sliding
-/// nodes. Its cause is not traced yet (ccx pairs the slave nodes with master faces at every
-/// iteration without `SMALL SLIDING`, as femu does; how each code spreads the friction force
-/// over a deformed master face, or ccx's tangential slip measure, remain to be compared), so
-/// the full-slip cases are held to their measured values, not to 1e-4.
+/// 0.1 mm), within the 1e-4 criterion at stiff penalties (7.6e-5 at k = 100, 4.3e-5 at
+/// k = 1000). With every node slipping (shear 0.3 mm) the difference is 4.0e-4, and 1.7e-4
+/// with the lower block held rigid. Its cause is not traced yet: a penalty effect would fall
+/// with the penalty, and the slip cases differ at every penalty tried. Candidates are how each
+/// code spreads the friction force over a master face, ccx's tangential slip measure, and the
+/// moment each code re-pairs a slave node with a master face (femu keeps the pairing through
+/// an increment's iterations; pairing at every iteration gave 1.1e-3). So the full-slip cases
+/// are held to their measured values, not to 1e-4.
 #[test]
 fn frictional_blocks_match_ccx() {
     if !ccx_installed() {
@@ -228,5 +228,5 @@ fn frictional_blocks_match_ccx() {
     let (slip_rigid, _) = compare("friction_slip_rigid", 0.3, 100.0, 10.0, 0.05, 0.3, true);
     let (slip, _) = compare("friction_slip", 0.3, 100.0, 10.0, 0.05, 0.3, false);
     assert!(slip_rigid < 5e-4, "{slip_rigid:.3e}");
-    assert!(slip < 2e-3, "{slip:.3e}");
+    assert!(slip < 1e-3, "{slip:.3e}");
 }

@@ -26,6 +26,11 @@ struct Slaves {
     /// Stick point of each slave node as a reference arc coordinate on the master surface
     /// (NaN: none, the node was not in contact at the last converged increment).
     stick: Vec<f64>,
+    /// The segment each slave node is paired with (`usize::MAX`: none): set at the start of a
+    /// solve, kept through Newton's iterations, and moved to the closest segment at each
+    /// converged increment and at the end of the step (see
+    /// [`Interface::closest_preferring`]).
+    segment: Vec<usize>,
     augmentations: usize,
     /// The complementarity error allowed at the last update check.
     limit: f64,
@@ -52,6 +57,20 @@ struct SlaveTerms {
     state: SlaveState,
     /// Whether the node is in contact (its terms count).
     active: bool,
+    /// The node's convective coordinate on its segment.
+    xi: f64,
+}
+
+/// The segment of slave `k` at `u` and its gap (see [`Interface::closest_preferring`]).
+fn pairing(
+    model: &Model,
+    iface: &Interface,
+    st: &Slaves,
+    k: usize,
+    u: &[f64],
+) -> Option<(usize, SegmentGap)> {
+    let preferred = (st.segment[k] != usize::MAX).then_some(st.segment[k]);
+    iface.closest_preferring(k, |n| model.current_position(n, u), preferred)
 }
 
 /// The contribution of slave `k` of `iface` at `u` (`st`: its interface's state).
@@ -66,13 +85,15 @@ fn slave_terms(model: &Model, iface: &Interface, st: &Slaves, k: usize, u: &[f64
             ..Default::default()
         },
         active: false,
+        xi: f64::NAN,
     };
-    let Some((s, gap)) = iface.closest(k, |n| model.current_position(n, u)) else {
+    let Some((s, gap)) = pairing(model, iface, st, k, u) else {
         return out;
     };
     let [a, b] = iface.segments[s];
     out.dofs = [2 * node, 2 * node + 1, 2 * a, 2 * a + 1, 2 * b, 2 * b + 1];
     out.state.segment = Some(s);
+    out.xi = gap.xi;
     out.state.gap = gap.g;
     out.state.arc = iface.arc(s, gap.xi);
     let eps = st.eps[k];
@@ -171,6 +192,7 @@ impl InterfaceState {
                     eps_t: vec![0.0; n],
                     multipliers: vec![0.0; n],
                     stick: vec![f64::NAN; n],
+                    segment: vec![usize::MAX; n],
                     augmentations: 0,
                     limit: i.penetration_tolerance * i.element_size,
                 }
@@ -230,7 +252,9 @@ impl InterfaceState {
                 st.eps[k] = eps;
                 st.eps_t[k] = eps_t;
                 st.multipliers[k] = 0.0;
-                st.stick[k] = match iface.closest(k, |m| model.current_position(m, &zero)) {
+                let closest = iface.closest(k, |m| model.current_position(m, &zero));
+                st.segment[k] = closest.map_or(usize::MAX, |(s, _)| s);
+                st.stick[k] = match closest {
                     Some((s, g)) if g.g <= 1e-9 * iface.element_size => iface.arc(s, g.xi),
                     _ => f64::NAN,
                 };
@@ -273,13 +297,36 @@ impl InterfaceState {
         }
     }
 
-    /// Uzawa update `λ̂ ← ⟨λ̂ - ε g⟩₊` of the interfaces with automatic penalties whose
-    /// complementarity error exceeds their limit (as for the rigid contact, see
-    /// `ContactState::augment`): each slave node that keeps a force is moved onto its segment
-    /// along the normal, which keeps its force as it was; returns whether any was updated.
+    /// The outer updates at a converged state `u`: the slave nodes whose projection left their
+    /// segment are paired with their closest one; otherwise, the Uzawa update
+    /// `λ̂ ← ⟨λ̂ - ε g⟩₊` of the interfaces with automatic penalties whose complementarity error
+    /// exceeds their limit (as for the rigid contact, see `ContactState::augment`), each slave
+    /// node that keeps a force moved onto its segment along the normal, which keeps its force
+    /// as it was. Returns whether anything was updated (Newton then converges again).
     pub fn augment(&mut self, model: &Model, u: &mut [f64], force_tolerance: f64) -> bool {
         let mut updated = false;
         for (iface, st) in model.interfaces.iter().zip(&mut self.slaves) {
+            let gaps: Vec<Option<SegmentGap>> = (0..iface.slaves.len())
+                .map(|k| pairing(model, iface, st, k, u).map(|(_, g)| g))
+                .collect();
+            // Re-pairing first: the nodes whose projection left their segment take their
+            // closest one, and Newton converges again with it before any multiplier update.
+            let mut repaired = false;
+            for (k, gap) in gaps.iter().enumerate() {
+                if gap.is_some_and(|g| (-1e-3..=1.0 + 1e-3).contains(&g.xi)) {
+                    continue;
+                }
+                if let Some((s, g)) = iface.closest(k, |n| model.current_position(n, u)) {
+                    if s != st.segment[k] && (-1e-3..=1.0 + 1e-3).contains(&g.xi) {
+                        st.segment[k] = s;
+                        repaired = true;
+                    }
+                }
+            }
+            if repaired {
+                updated = true;
+                continue;
+            }
             if !matches!(iface.penalty, Penalty::Automatic { .. }) {
                 continue;
             }
@@ -290,13 +337,6 @@ impl InterfaceState {
             } else {
                 geometric
             };
-            let gaps: Vec<Option<SegmentGap>> = (0..iface.slaves.len())
-                .map(|k| {
-                    iface
-                        .closest(k, |n| model.current_position(n, u))
-                        .map(|(_, g)| g)
-                })
-                .collect();
             let violation = gaps.iter().enumerate().fold(0.0f64, |m, (k, g)| match g {
                 Some(g) if g.g < 0.0 => m.max(-g.g),
                 Some(g) if st.multipliers[k] - st.eps[k] * g.g > 0.0 => m.max(g.g),
@@ -333,16 +373,27 @@ impl InterfaceState {
         }
     }
 
-    /// The friction history at a converged increment `u`: a slave node out of contact loses
-    /// its stick point, one coming into contact sticks where it touches, one slipping has its
-    /// stick point moved to where its spring holds `μ N` exactly (the return mapping).
+    /// The history at a converged increment `u`: each slave node's segment, and the friction
+    /// stick points (a slave node out of contact loses its stick point, one coming into contact
+    /// sticks where it touches, one slipping has its stick point moved to where its spring
+    /// holds `μ N` exactly: the return mapping).
     pub fn commit(&mut self, model: &Model, u: &[f64]) {
         for (iface, st) in model.interfaces.iter().zip(&mut self.slaves) {
-            if !matches!(iface.kind, InterfaceKind::Friction { .. }) {
-                continue;
-            }
+            let friction = matches!(iface.kind, InterfaceKind::Friction { .. });
             for k in 0..iface.slaves.len() {
                 let t = slave_terms(model, iface, st, k, u);
+                // A node whose projection left its segment starts the next increment on its
+                // closest one (a node within its segment keeps it: at a master vertex, where
+                // two segments are equally close, re-pairing would turn its force at every
+                // increment, whatever the increment's size).
+                let inside = t.state.segment.is_some() && (-1e-3..=1.0 + 1e-3).contains(&t.xi);
+                if !inside {
+                    let closest = iface.closest(k, |n| model.current_position(n, u));
+                    st.segment[k] = closest.map_or(usize::MAX, |(s, _)| s);
+                }
+                if !friction {
+                    continue;
+                }
                 let Some(s) = t.state.segment else {
                     st.stick[k] = f64::NAN;
                     continue;
@@ -391,7 +442,7 @@ impl InterfaceState {
                 continue;
             }
             for k in 0..iface.slaves.len() {
-                let Some((_, gap)) = iface.closest(k, |n| model.current_position(n, u)) else {
+                let Some((_, gap)) = pairing(model, iface, st, k, u) else {
                     continue;
                 };
                 let t = slave_terms(model, iface, st, k, u);
