@@ -16,7 +16,10 @@
 //!   frame, mm) and its increments, the starting point of the identification.
 //!
 //! The identification step writes `dic/` (DIC → FEMU on `measured.csv`) and, in its own folder,
-//! what `identify_images` writes (`parameters.csv`, residual maps, `summary.json`).
+//! what `identify_images` writes (`parameters.csv`, residual maps, `summary.json`). With a
+//! refined placement its intervals carry the pose term (`pose_sd`: the estimate's sensitivity
+//! to the placement times the refinement's covariance, `femu_identify::idic::pose_term`); a
+//! given placement is taken as exact.
 
 use crate::bail;
 use crate::error::{Context, Result};
@@ -25,10 +28,11 @@ use crate::output::{create_dir, write_json};
 use crate::progress::Progress;
 use crate::schema::frames::{test_force, FramesSpec, ResolvedFrames};
 use crate::schema::{Measurement, ProbeSection, TestSpec};
-use crate::steps::images::{identify_images, ImageRouteOptions};
+use crate::steps::images::{identify_images, ImageRouteOptions, PlacementKnown};
 use crate::steps::parameters::IdentificationInputs;
 use crate::steps::sequence::ImageSequence;
 use femu_dic::GreyImage;
+use femu_identify::idic::pose_term::PlacementUncertainty;
 use femu_identify::idic::ImageFrame;
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use serde::{Deserialize, Serialize};
@@ -66,6 +70,14 @@ pub struct PoseRefinement {
     pub sd: [f64; 3],
     /// The model's outlines that supported the pose.
     pub found: Vec<String>,
+    /// The pivot of the rigid motion (pixel; the probe face's centre) and the covariance of a
+    /// further move of the refined placement about it, along the refined placement's own axes
+    /// (mm², mm·rad, rad²): the refinement's sandwich turned by the correction's angle. The
+    /// identification's pose term moves the placement by it.
+    #[serde(default)]
+    pub pivot_px: Option<[f64; 2]>,
+    #[serde(default)]
+    pub covariance: Option<[[f64; 3]; 3]>,
 }
 
 impl PoseRefinement {
@@ -365,6 +377,8 @@ fn refine_placement(
             fit.correction[2].to_degrees(),
         ],
         sd: fit.sd,
+        pivot_px: Some(fit.pivot_px),
+        covariance: Some(in_refined_axes(&fit.covariance, fit.correction[2])),
         found: fit
             .support
             .iter()
@@ -373,6 +387,24 @@ fn refine_placement(
             .collect(),
     };
     Ok((refined, record))
+}
+
+/// The covariance `cov` of a correction `(t_x, t_y, α)` along a placement's axes, along the
+/// axes of that placement turned by `angle` (rad): a move `(t_x, t_y)` along the old axes is
+/// `(c t_x + s t_y, −s t_x + c t_y)` along the turned ones (`c, s` the angle's cosine and
+/// sine), the turn unchanged; `J cov Jᵀ`.
+fn in_refined_axes(cov: &[[f64; 3]; 3], angle: f64) -> [[f64; 3]; 3] {
+    let (c, s) = (angle.cos(), angle.sin());
+    let j = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+    let mut out = [[0.0; 3]; 3];
+    for (a, row) in out.iter_mut().enumerate() {
+        for (b, v) in row.iter_mut().enumerate() {
+            *v = (0..3)
+                .map(|k| (0..3).map(|l| j[a][k] * cov[k][l] * j[b][l]).sum::<f64>())
+                .sum();
+        }
+    }
+    out
 }
 
 /// The force log against time (the log's clock), the chosen frames marked.
@@ -685,7 +717,18 @@ pub fn identify_frames(
         // The optimum is the start (as for simulated images): no Latin-hypercube starts.
         idic_spec.starts = 0;
     }
-    let route = ImageRouteOptions::for_identification(inputs.identification);
+    let mut route = ImageRouteOptions::for_identification(inputs.identification);
+    route.placement = match &recorded.record.pose {
+        Some(PoseRefinement {
+            pivot_px: Some(pivot_px),
+            covariance: Some(covariance),
+            ..
+        }) => PlacementKnown::Refined(PlacementUncertainty {
+            pivot_px: *pivot_px,
+            covariance: *covariance,
+        }),
+        _ => PlacementKnown::Given,
+    };
     identify_images(
         &inputs.with(&idic_spec),
         grouped,

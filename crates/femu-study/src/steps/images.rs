@@ -28,6 +28,7 @@ use femu_dic::GreyImage;
 use femu_identify::campaign::StartRecord;
 use femu_identify::fit::FreeParameter;
 use femu_identify::idic::pixels::MaskCounts;
+use femu_identify::idic::pose_term::{PlacementUncertainty, PoseTerm};
 use femu_identify::idic::{
     self, IdicEvent, IdicOptions, IdicProblem, IdicSettings, Pairing, PixelOptions,
 };
@@ -75,6 +76,26 @@ pub struct ImageRouteOptions {
     /// 6 % (README, images → parameters).
     #[serde(default)]
     pub mesh_correction: bool,
+    /// How well the frames' placement in the model is known: refined from the unloaded frame,
+    /// its uncertainty enters the intervals as the pose term ([`PlacementKnown::Refined`]).
+    #[serde(default)]
+    pub placement: PlacementKnown,
+}
+
+/// How well the frames' placement in the model is known, for the intervals.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PlacementKnown {
+    /// The frames were made at it (simulated images): exact.
+    #[default]
+    Exact,
+    /// Given by the study (recorded frames, `origin_mm`/`x_axis`/`y_axis` or `[probe]`): taken
+    /// as exact, which a note says.
+    Given,
+    /// Refined from the unloaded frame, with the covariance of the refinement: the estimate's
+    /// sensitivity to the placement times it is the pose term of the intervals
+    /// (`femu_identify::idic::pose_term`).
+    Refined(PlacementUncertainty),
 }
 
 impl Default for ImageRouteOptions {
@@ -90,6 +111,7 @@ impl Default for ImageRouteOptions {
             scales_px: IdicSettings::default().scales_px,
             discretization_check: true,
             mesh_correction: false,
+            placement: PlacementKnown::Exact,
         }
     }
 }
@@ -141,7 +163,11 @@ pub struct ImageEstimate {
     /// The change of `ln θ` from the last smoothed scale to the images as recorded (see
     /// [`estimates`]).
     pub scale_change: Option<f64>,
-    /// `√(sd_statistical² + discretization_sd² + scale_change²)`: the interval's.
+    /// `sd(ln θ)` of the frames' placement (the pose term `S Σ Sᵀ`, see [`PoseTerm`]), when
+    /// the placement was refined from the unloaded frame.
+    #[serde(default)]
+    pub pose_sd: Option<f64>,
+    /// `√(sd_statistical² + discretization_sd² + scale_change² + pose_sd²)`: the interval's.
     pub relative_sd: f64,
     /// 95 % interval `θ exp(±1.96 sd)`, clipped to the bounds.
     pub ci95: [f64; 2],
@@ -185,6 +211,10 @@ pub struct ImageIdentificationSummary {
     /// The discretization correction, when made.
     #[serde(default)]
     pub mesh_correction: Option<MeshCorrection>,
+    /// The placement's part of the intervals (refined placement only): the estimate's
+    /// sensitivity to the pose and its covariance `S Σ Sᵀ`.
+    #[serde(default)]
+    pub pose_term: Option<PoseTerm>,
     pub source: String,
     pub load_fractions: Vec<f64>,
     pub image_px: (usize, usize),
@@ -206,9 +236,11 @@ pub struct ImageIdentificationSummary {
     pub residual_rms_before: f64,
     pub residual_rms_after: f64,
     pub forward_solves: usize,
-    /// Identification (starts and scales), discretization check, whole step (s).
+    /// Identification (starts and scales), discretization check, pose term, whole step (s).
     pub identification_s: f64,
     pub discretization_s: f64,
+    #[serde(default)]
+    pub pose_s: f64,
     /// Of the best start's problem: time in the forward solves and sensitivities, and in the
     /// image work (s).
     pub solve_s: f64,
@@ -269,8 +301,8 @@ fn refined_step_models(
     step_models(inputs.identification_test(), &built, &seq.load_fractions)
 }
 
-/// The estimates from the identified `theta` and their uncertainty budget, three terms added
-/// in quadrature:
+/// The estimates from the identified `theta` and their uncertainty budget, terms added in
+/// quadrature:
 ///
 /// - the noise: the larger of the block sandwich (the residual's own correlation) and the
 ///   jackknife over image regions (`femu_identify::idic::uncertainty`);
@@ -282,7 +314,10 @@ fn refined_step_models(
 ///   grey-level model misses (speckle that does not follow the tissue under strain: the
 ///   envelope decorrelates by ~20 % per load step of the built-in compression at 9 MHz even
 ///   with no scatterer renewed, measured), which no residual statistic sees because the
-///   parameters absorb it.
+///   parameters absorb it;
+/// - the placement, when it was refined from the unloaded frame: the estimate's sensitivity
+///   to the pose (one Gauss–Newton step per move of the placement) times the refinement's
+///   covariance (`pose`, `femu_identify::idic::pose_term`).
 #[allow(clippy::too_many_arguments)]
 fn estimates(
     free: &[FreeParameter],
@@ -293,6 +328,7 @@ fn estimates(
     jackknife: &[f64],
     mesh: Option<&MeshCorrection>,
     scale_change: Option<&[f64]>,
+    pose: Option<&PoseTerm>,
 ) -> Vec<ImageEstimate> {
     free.iter()
         .enumerate()
@@ -302,9 +338,11 @@ fn estimates(
             let s = mesh.map(|m| m.bias[k]);
             let mesh_sd = mesh.map(|m| m.sd[k]);
             let c = scale_change.map(|c| c[k]);
+            let pose_sd = pose.map(|p| p.sd[k]);
             let sd = sd_stat
                 .hypot(mesh_sd.unwrap_or(0.0))
-                .hypot(c.unwrap_or(0.0));
+                .hypot(c.unwrap_or(0.0))
+                .hypot(pose_sd.unwrap_or(0.0));
             let ci = [
                 (t * (-1.96 * sd).exp()).max(f.lower),
                 (t * (1.96 * sd).exp()).min(f.upper),
@@ -339,6 +377,7 @@ fn estimates(
                 discretization_sd: mesh_sd,
                 uncorrected: mesh.filter(|m| m.corrected).map(|m| m.uncorrected[k]),
                 scale_change: c,
+                pose_sd,
                 relative_sd: sd,
                 ci95: if seen { ci } else { [f.lower, f.upper] },
                 at_bound,
@@ -617,7 +656,15 @@ pub fn identify_images(
     let mesh =
         identified.discretization(inputs, seq, route, &settings.fine, &mut notes, progress)?;
     let discretization_s = t1.elapsed().as_secs_f64();
-    let parameters = identified.estimates(&reference, reference_known, mesh.as_ref());
+    let t2 = Instant::now();
+    let pose_term = identified.pose_term(route, &mut notes, progress);
+    let pose_s = t2.elapsed().as_secs_f64();
+    let parameters = identified.estimates(
+        &reference,
+        reference_known,
+        mesh.as_ref(),
+        pose_term.as_ref(),
+    );
     notes.extend(parameters.iter().filter_map(|p| p.note.clone()));
     let maps = problem.residual_maps();
     let before = rest_residual(&problem);
@@ -630,6 +677,7 @@ pub fn identify_images(
         elements: last.mesh.elements.len(),
         refined_elements: mesh.as_ref().and_then(|m| m.elements.first().copied()),
         mesh_correction: mesh,
+        pose_term,
         source: seq.source.clone(),
         load_fractions: seq.load_fractions.clone(),
         image_px: (seq.frames[0].width, seq.frames[0].height),
@@ -649,6 +697,7 @@ pub fn identify_images(
         forward_solves: outcome.forward_solves,
         identification_s,
         discretization_s,
+        pose_s,
         solve_s: problem.timings().0,
         image_s: problem.timings().1,
         wall_time_s: t0.elapsed().as_secs_f64(),
@@ -718,6 +767,7 @@ impl Identified<'_> {
         reference: &[f64],
         reference_known: bool,
         mesh: Option<&MeshCorrection>,
+        pose: Option<&PoseTerm>,
     ) -> Vec<ImageEstimate> {
         let outcome = &*self.outcome;
         estimates(
@@ -729,7 +779,47 @@ impl Identified<'_> {
             &outcome.jackknife_sd,
             mesh,
             scale_change(outcome).as_deref(),
+            pose,
         )
+    }
+
+    /// The pose term of the intervals (`femu_identify::idic::pose_term`) when the placement
+    /// was refined (`route.placement`), at the estimate the problem was last evaluated at; a
+    /// given placement is taken as exact (a note). A pose term that fails is a note.
+    fn pose_term(
+        &self,
+        route: &ImageRouteOptions,
+        notes: &mut Vec<String>,
+        progress: &dyn Progress,
+    ) -> Option<PoseTerm> {
+        let u = match route.placement {
+            PlacementKnown::Exact => return None,
+            PlacementKnown::Given => {
+                notes.push(
+                    "the frames' placement is the one given, taken as exact: the intervals leave its uncertainty out ([measurement] pose = \"refined\" estimates it from the unloaded frame and widens them by it)".into(),
+                );
+                return None;
+            }
+            PlacementKnown::Refined(u) => u,
+        };
+        let moving = moving_parameters(self.free, self.outcome);
+        match femu_identify::idic::pose_term::pose_term(self.problem, &u, &moving) {
+            Ok(t) => {
+                progress.note(&format!(
+                    "  pose term: the placement moved by one sd along each of its {} principal directions, {} of {} pixels left the mesh at most",
+                    t.steps.len(),
+                    t.pixels_outside,
+                    t.pixels
+                ));
+                Some(t)
+            }
+            Err(e) => {
+                notes.push(format!(
+                    "the pose term failed ({e}): the intervals leave the placement's uncertainty out"
+                ));
+                None
+            }
+        }
     }
 
     /// The discretization term of the intervals as `route` asks: none (with a note saying
@@ -827,12 +917,12 @@ fn scale_summaries(outcome: &idic::IdicOutcome, free: &[FreeParameter]) -> Vec<S
 /// The estimates of `summary` as a table for the user, and where they were written.
 fn print_estimates(summary: &ImageIdentificationSummary, out: &Path, progress: &dyn Progress) {
     progress.note(&format!(
-        "{:<36} {:>12} {:>12} {:>10} {:>9} {:>9}",
-        "parameter", "reference", "identified", "error", "sd", "mesh bias"
+        "{:<36} {:>12} {:>12} {:>10} {:>9} {:>9} {:>9}",
+        "parameter", "reference", "identified", "error", "sd", "mesh bias", "pose sd"
     ));
     for p in &summary.parameters {
         progress.note(&format!(
-            "{:<36} {:>12} {:>12.5e} {:>10} {:>8.2}% {:>8}{}",
+            "{:<36} {:>12} {:>12.5e} {:>10} {:>8.2}% {:>9} {:>9}{}",
             p.name,
             p.reference.map_or("-".into(), |v| format!("{v:.5e}")),
             p.identified,
@@ -841,15 +931,22 @@ fn print_estimates(summary: &ImageIdentificationSummary, out: &Path, progress: &
             100.0 * p.relative_sd,
             p.discretization_bias
                 .map_or("-".into(), |s| format!("{:.2}%", 100.0 * s)),
+            p.pose_sd
+                .map_or("-".into(), |s| format!("{:.2}%", 100.0 * s)),
             if p.seen { "" } else { "  (not seen)" }
         ));
     }
     progress.note(&format!(
-        "wrote {} ({:.1} s: identification {:.1} s, discretization check {:.1} s)",
+        "wrote {} ({:.1} s: identification {:.1} s, discretization check {:.1} s{})",
         out.display(),
         summary.wall_time_s,
         summary.identification_s,
-        summary.discretization_s
+        summary.discretization_s,
+        if summary.pose_term.is_some() {
+            format!(", pose term {:.1} s", summary.pose_s)
+        } else {
+            String::new()
+        }
     ));
 }
 
@@ -891,13 +988,13 @@ fn write_parameters_csv(path: &Path, params: &[ImageEstimate]) -> Result<()> {
     );
     writeln!(
         w,
-        "name,reference,identified,relative_error,sd_statistical,sd_independent,discretization_bias,scale_change,relative_sd,ci95_low,ci95_high,seen"
+        "name,reference,identified,relative_error,sd_statistical,sd_independent,discretization_bias,scale_change,pose_sd,relative_sd,ci95_low,ci95_high,seen"
     )?;
     let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6e}"));
     for p in params {
         writeln!(
             w,
-            "{},{},{:.9e},{},{:.6e},{:.6e},{},{},{:.6e},{:.9e},{:.9e},{}",
+            "{},{},{:.9e},{},{:.6e},{:.6e},{},{},{},{:.6e},{:.9e},{:.9e},{}",
             p.name,
             opt(p.reference),
             p.identified,
@@ -906,6 +1003,7 @@ fn write_parameters_csv(path: &Path, params: &[ImageEstimate]) -> Result<()> {
             p.sd_independent,
             opt(p.discretization_bias),
             opt(p.scale_change),
+            opt(p.pose_sd),
             p.relative_sd,
             p.ci95[0],
             p.ci95[1],
