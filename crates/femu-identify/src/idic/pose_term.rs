@@ -90,13 +90,16 @@ pub fn moved_frame(frame: &ImageFrame, pivot_px: [f64; 2], p: [f64; 3]) -> Image
     }
 }
 
+/// A pixel displacement (px) per load step and pixel, `[step][pixel]`.
+pub type StepPixels = Vec<Vec<[f64; 2]>>;
+
 /// The change (1) of every load step's pixel displacements (px, `[step][pixel]`) if the
 /// problem's images were placed by `moved` instead, at the steps' last solved states; and how
 /// many pixels `moved` puts outside the mesh (their change is zero).
 pub fn pixel_shift(
     problem: &IdicProblem,
     moved: &ImageFrame,
-) -> Result<(Vec<Vec<[f64; 2]>>, usize), FitError> {
+) -> Result<(StepPixels, usize), FitError> {
     let states = problem
         .states()
         .ok_or_else(|| FitError::Solve("the pose term needs a solved problem".into()))?;
