@@ -140,3 +140,105 @@ pub fn pressures_to_dead_loads(deck: &mut Deck3) {
         })
         .collect();
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use femu_mesh::deck::{BoundaryCondition, FacePressure, MaterialDef};
+    use femu_mesh::mesh3d::generate::block;
+
+    fn block_deck(kind: ElementKind3) -> Deck3 {
+        let mesh = block([2.0, 1.0, 1.0], [2, 1, 1], kind);
+        let n = mesh.elements.len();
+        // The faces on x = 2 (outward +x), found by their area vectors.
+        let pressures = mesh
+            .boundary_faces()
+            .into_iter()
+            .filter(|&(e, f)| mesh.face_area_vector(e, f)[0] > 0.0)
+            .map(|(element, face)| FacePressure {
+                element,
+                face,
+                magnitude: 0.25,
+            })
+            .collect();
+        let boundaries = mesh.node_set("X0").unwrap().iter().flat_map(|&node| {
+            (0..3).map(move |dof| BoundaryCondition {
+                node,
+                dof,
+                value: 0.0,
+            })
+        });
+        Deck3 {
+            boundaries: boundaries.collect(),
+            mesh,
+            materials: vec![MaterialDef {
+                name: "M".into(),
+                keyword: "NEO HOOKE".into(),
+                constants: vec![0.5, 0.1],
+                line: None,
+            }],
+            element_material: vec![0; n],
+            element_region: vec![0; n],
+            region_names: vec!["ALL".into()],
+            pressures,
+            ..Default::default()
+        }
+    }
+
+    /// The dead loads of a pressure on the face x = 2 (area 1 mm²) add up to -p along x, for
+    /// every element type (their faces' consistent loads; exact for flat faces up to round-off).
+    #[test]
+    fn dead_loads_add_up_to_the_pressure_force() {
+        for kind in ElementKind3::ALL {
+            let mut deck = block_deck(kind);
+            let body = Body3::from_deck3(&deck).unwrap();
+            assert_eq!(body.pressures.len(), deck.pressures.len());
+            pressures_to_dead_loads(&mut deck);
+            assert!(deck.pressures.is_empty());
+            let mut total = [0.0; 3];
+            for l in &deck.point_loads {
+                total[l.dof] += l.magnitude;
+            }
+            assert!((total[0] + 0.25).abs() < 1e-14, "{kind:?}: {total:?}");
+            assert!(
+                total[1].abs() < 1e-14 && total[2].abs() < 1e-14,
+                "{total:?}"
+            );
+            // At rest the element stresses vanish.
+            let rest = vec![[0.0; 3]; body.nodes.len()];
+            for a in body.element_averages(&rest) {
+                let a = a.unwrap();
+                assert!(a.cauchy_stress.iter().all(|s| s.abs() < 1e-14));
+                assert!((a.volume_ratio - 1.0).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn bad_decks_are_refused() {
+        let mut deck = block_deck(ElementKind3::C3d8);
+        deck.pressures[0].face = 6;
+        assert!(matches!(
+            Body3::from_deck3(&deck),
+            Err(ModelError::BadFace { face: 6, .. })
+        ));
+        let mut deck = block_deck(ElementKind3::C3d4);
+        deck.element_material[1] = 3;
+        assert!(matches!(
+            Body3::from_deck3(&deck),
+            Err(ModelError::NoMaterial { label: 2 })
+        ));
+        let mut deck = block_deck(ElementKind3::C3d8h);
+        deck.boundaries.clear();
+        assert!(matches!(
+            Body3::from_deck3(&deck),
+            Err(ModelError::Unrestrained)
+        ));
+        let mut deck = block_deck(ElementKind3::C3d10);
+        deck.materials[0].constants = vec![-1.0, 0.1];
+        assert!(matches!(
+            Body3::from_deck3(&deck),
+            Err(ModelError::BadMaterial { .. })
+        ));
+    }
+}
