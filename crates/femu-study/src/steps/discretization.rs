@@ -2,7 +2,10 @@
 //! identified parameters evaluated on meshes of the same geometry refined by √2 and 2, the bias
 //! the study's mesh implies (`femu_identify::discretization`), and — with `"refine"` — the
 //! identification continued on the finest of them. The meshes and their solutions are kept with
-//! the study's model for its next identification ([`CheckMeshes`]).
+//! the study's model for its next identification ([`CheckMeshes`]); on the first check a mesh
+//! starts Newton from the solution of the mesh evaluated before it, carried onto its nodes
+//! (on the 25 557-element thigh of `femu demo --full` the finest mesh's solve took about a
+//! quarter of its time from the load increments; bench/perf/profile_full.txt).
 
 use super::joint::{JointFit, TestModels};
 use super::measure::{Prepared, PreparedData};
@@ -135,7 +138,17 @@ pub fn check(
     let mut evaluated = Vec::with_capacity(order.len());
     let mut jacobian = None;
     let mut finest_problem = None;
+    let mut previous: Option<usize> = None;
     for i in order {
+        // A mesh without a solution of its own (the first check on this model) starts Newton
+        // from the solution of the mesh evaluated before it, interpolated onto its nodes.
+        if levels[i].states.is_empty() {
+            if let Some(p) = previous {
+                let states = transferred_states(&levels[p], &levels[i].models);
+                levels[i].states = states;
+            }
+        }
+        previous = Some(i);
         let level = &mut levels[i];
         let mut problem = level_problem(level, &fields, models, fit, prepared)?;
         let (residual, j) = problem
@@ -207,6 +220,139 @@ fn level_problem(
     JointProblem::new(fit.free.clone(), blocks).map_err(|e| crate::input!("{e}"))
 }
 
+/// The solutions of `from` (one per test) carried onto `to`, the same tests on another mesh of
+/// the same geometry: a start for Newton on `to` near its solution, so that it converges at the
+/// full load in a few iterations instead of following the load increments from zero. Each node
+/// of `to` takes the displacement interpolated at its reference position in `from`'s mesh (the
+/// element's shape functions), or a node outside `from`'s outline (its polygon differs near the
+/// skin) that of the nearest node of `from`; the rigid bodies' travels are copied. `None` for a
+/// test `from` has no solution of.
+fn transferred_states(from: &CachedLevel, to: &[Model]) -> Vec<Option<Vec<f64>>> {
+    to.iter()
+        .enumerate()
+        .map(|(b, target)| {
+            let source = from.models.get(b)?;
+            let state = from.states.get(b)?.as_ref()?;
+            transferred_state(source, state, target)
+        })
+        .collect()
+}
+
+/// One test's solution `state` of `from` carried onto `to` (see [`transferred_states`]).
+fn transferred_state(from: &Model, state: &[f64], to: &Model) -> Option<Vec<f64>> {
+    if state.len() != from.state_len() || from.contacts.len() != to.contacts.len() {
+        return None;
+    }
+    let mesh = &from.mesh;
+    let locator = PointLocator::new(mesh);
+    // The elements around each node of `from`, for the nodes outside its outline.
+    let mut around = vec![Vec::new(); mesh.nodes.len()];
+    for (e, el) in mesh.elements.iter().enumerate() {
+        for &n in el.nodes() {
+            around[n].push(e);
+        }
+    }
+    let mut out = Vec::with_capacity(to.state_len());
+    for &x in &to.mesh.nodes {
+        let value = match locator.locate(x) {
+            Some(loc) => [loc.interpolate(state, 2, 0), loc.interpolate(state, 2, 1)],
+            None => outside_value(mesh, &around, state, x)?,
+        };
+        out.extend_from_slice(&value);
+    }
+    out.extend_from_slice(&state[2 * mesh.nodes.len()..]);
+    Some(out)
+}
+
+/// The displacement at `x`, a point just outside `mesh` (a finer polygon of the same curved
+/// outline lies outside the coarser one's chords): the bilinear field of the element of the
+/// nearest node whose natural coordinates at `x` are least outside the element, extended there
+/// (the nearest node's own value for an element that is not a quad).
+fn outside_value(
+    mesh: &femu_mesh::Mesh,
+    around: &[Vec<usize>],
+    state: &[f64],
+    x: [f64; 2],
+) -> Option<[f64; 2]> {
+    let distance = |n: &[f64; 2]| (n[0] - x[0]).powi(2) + (n[1] - x[1]).powi(2);
+    let nearest = (0..mesh.nodes.len())
+        .min_by(|&a, &b| distance(&mesh.nodes[a]).total_cmp(&distance(&mesh.nodes[b])))?;
+    let best = around[nearest]
+        .iter()
+        .filter(|&&e| mesh.elements[e].nodes().len() == 4)
+        .filter_map(|&e| {
+            let nodes = mesh.elements[e].nodes();
+            let corners: Vec<[f64; 2]> = nodes.iter().map(|&n| mesh.nodes[n]).collect();
+            let xi = natural_coordinates(&corners, x)?;
+            Some((xi[0].abs().max(xi[1].abs()), e, xi))
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    Some(match best {
+        // Within twice the element: an extension of its field, not a guess far away.
+        Some((reach, e, xi)) if reach < 2.0 => {
+            let w = bilinear(xi);
+            let nodes = mesh.elements[e].nodes();
+            let mut v = [0.0; 2];
+            for (a, &n) in nodes.iter().enumerate() {
+                v[0] += w[a] * state[2 * n];
+                v[1] += w[a] * state[2 * n + 1];
+            }
+            v
+        }
+        _ => [state[2 * nearest], state[2 * nearest + 1]],
+    })
+}
+
+/// The bilinear shape functions of a quad (corners at ξ, η = ∓1 counter-clockwise from
+/// (-1, -1)) at `xi`.
+fn bilinear(xi: [f64; 2]) -> [f64; 4] {
+    let [s, t] = xi;
+    [
+        0.25 * (1.0 - s) * (1.0 - t),
+        0.25 * (1.0 + s) * (1.0 - t),
+        0.25 * (1.0 + s) * (1.0 + t),
+        0.25 * (1.0 - s) * (1.0 + t),
+    ]
+}
+
+/// The natural coordinates of `x` in the bilinear map of the quad `corners`, also outside it
+/// (Newton from the centre; `None` if it does not converge).
+fn natural_coordinates(corners: &[[f64; 2]], x: [f64; 2]) -> Option<[f64; 2]> {
+    let mut xi = [0.0f64; 2];
+    let size = corners
+        .iter()
+        .map(|c| (c[0] - corners[0][0]).hypot(c[1] - corners[0][1]))
+        .fold(0.0, f64::max);
+    for _ in 0..20 {
+        let w = bilinear(xi);
+        let [s, t] = xi;
+        // d N_a / d(s, t) for the corners in order.
+        let ds = [-(1.0 - t), 1.0 - t, 1.0 + t, -(1.0 + t)].map(|v| 0.25 * v);
+        let dt = [-(1.0 - s), -(1.0 + s), 1.0 + s, 1.0 - s].map(|v| 0.25 * v);
+        let (mut f, mut j) = ([-x[0], -x[1]], [[0.0; 2]; 2]);
+        for a in 0..4 {
+            for c in 0..2 {
+                f[c] += w[a] * corners[a][c];
+                j[c][0] += ds[a] * corners[a][c];
+                j[c][1] += dt[a] * corners[a][c];
+            }
+        }
+        if f[0].hypot(f[1]) <= 1e-12 * size {
+            return Some(xi);
+        }
+        let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+        if !(det.abs() > 0.0) {
+            return None;
+        }
+        xi[0] -= (j[1][1] * f[0] - j[0][1] * f[1]) / det;
+        xi[1] -= (-j[1][0] * f[0] + j[0][0] * f[1]) / det;
+        if !(xi[0].is_finite() && xi[1].is_finite()) || xi[0].abs().max(xi[1].abs()) > 10.0 {
+            return None;
+        }
+    }
+    None
+}
+
 /// The points of `field` inside every mesh of `models` (a point near the skin can fall outside
 /// one polygonal outline and inside another).
 fn common_points(field: &MeasuredField, models: &[&Model]) -> MeasuredField {
@@ -238,4 +384,49 @@ pub fn refine(
         .collect();
     levenberg_marquardt(finest, &start, &LmOptions::default())
         .context("identifying again on the refined mesh")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use femu_mesh::ElementKind;
+
+    /// A linear displacement field on one mesh of the thigh is carried exactly onto another
+    /// mesh of it (the bilinear shape functions reproduce linear fields), at the nodes inside
+    /// the first mesh's outline and at those just outside it alike.
+    #[test]
+    fn a_linear_field_is_carried_onto_another_mesh() {
+        let (coarse, _) = crate::model::thigh_model(2500, ElementKind::Cpe4h).unwrap();
+        let (fine, _) = crate::model::thigh_model(6000, ElementKind::Cpe4h).unwrap();
+        let field = |x: [f64; 2]| [0.01 * x[0] - 0.02 * x[1] + 0.3, 0.005 * x[0] + 0.1];
+        let state: Vec<f64> = coarse.mesh.nodes.iter().flat_map(|&x| field(x)).collect();
+        let carried = transferred_state(&coarse, &state, &fine).unwrap();
+        assert_eq!(carried.len(), fine.state_len());
+        let locator = PointLocator::new(&coarse.mesh);
+        let (mut inside, mut outside) = (0, 0);
+        for (n, &x) in fine.mesh.nodes.iter().enumerate() {
+            let expected = field(x);
+            let got = [carried[2 * n], carried[2 * n + 1]];
+            // A bilinear map reproduces a linear field inside its element and beyond it: exact
+            // but for rounding and the inverse map's Newton tolerance (1e-12 of the element).
+            let tolerance = 1e-8;
+            if locator.locate(x).is_some() {
+                inside += 1;
+            } else {
+                outside += 1;
+            }
+            for c in 0..2 {
+                assert!(
+                    (got[c] - expected[c]).abs() < tolerance,
+                    "node {n} at {x:?}: {got:?} against {expected:?}"
+                );
+            }
+        }
+        assert!(
+            inside > 10 * outside && outside > 0,
+            "{inside} nodes inside, {outside} outside"
+        );
+        // A state of another length is not carried.
+        assert!(transferred_state(&coarse, &state[1..], &fine).is_none());
+    }
 }
