@@ -175,6 +175,36 @@ impl BSpline {
         let dy = weights_derivative(ty);
         let w = self.width;
         let (mut v, mut gx, mut gy) = (0.0, 0.0, 0.0);
+        if ix >= 1 && iy >= 1 && (ix as usize) + 2 < w && (iy as usize) + 2 < self.height {
+            // Inside: the 4 x 4 coefficients without the mirror's index arithmetic (the same
+            // products summed in the same order as below, so the same bits).
+            let base = (iy as usize - 1) * w + ix as usize - 1;
+            for j in 0..4 {
+                let r = &self.coef[base + j * w..base + j * w + 4];
+                let (mut s, mut sd) = (0.0, 0.0);
+                for i in 0..4 {
+                    s += wx[i] * r[i];
+                    sd += dx[i] * r[i];
+                }
+                v += wy[j] * s;
+                gx += wy[j] * sd;
+                gy += dy[j] * s;
+            }
+            return (v, gx, gy);
+        }
+        self.eval_grad_mirrored(x, y)
+    }
+
+    /// [`BSpline::eval_grad`] with every index through the mirror extension (any position).
+    fn eval_grad_mirrored(&self, x: f64, y: f64) -> (f64, f64, f64) {
+        let (ix, tx) = split(x);
+        let (iy, ty) = split(y);
+        let wx = weights(tx);
+        let wy = weights(ty);
+        let dx = weights_derivative(tx);
+        let dy = weights_derivative(ty);
+        let w = self.width;
+        let (mut v, mut gx, mut gy) = (0.0, 0.0, 0.0);
         for j in 0..4 {
             let row = mirror(iy - 1 + j as isize, self.height) * w;
             let (mut s, mut sd) = (0.0, 0.0);
@@ -298,6 +328,23 @@ mod tests {
             let (v, gx, gy) = s.eval_grad(x, y);
             assert!((v - (2.5 * x - 1.5 * y)).abs() < 1e-9, "{v}");
             assert!((gx - 2.5).abs() < 1e-9 && (gy + 1.5).abs() < 1e-9);
+        }
+    }
+
+    /// Inside the image the direct indexing gives the same bits as the mirrored one (the same
+    /// products in the same order), up to the last positions that have all 4 x 4 neighbours;
+    /// near and beyond the borders both paths are the mirrored one.
+    #[test]
+    fn inside_path_equals_the_mirrored_one() {
+        let (w, h) = (23, 17);
+        let s = BSpline::new(&test_image(w, h), w, h);
+        for k in 0..400 {
+            let x = -2.0 + 26.0 * ((k * 37 % 400) as f64 + 0.123) / 400.0;
+            let y = -2.0 + 20.0 * ((k * 91 % 400) as f64 + 0.377) / 400.0;
+            assert_eq!(s.eval_grad(x, y), s.eval_grad_mirrored(x, y), "({x}, {y})");
+        }
+        for &(x, y) in &[(1.0, 1.0), (19.999, 13.999), (20.0, 14.0), (0.999, 5.0)] {
+            assert_eq!(s.eval_grad(x, y), s.eval_grad_mirrored(x, y), "({x}, {y})");
         }
     }
 

@@ -56,6 +56,12 @@ pub trait LeastSquares {
     ) -> Result<(Vec<f64>, Option<Columns>), FitError>;
     /// Forward solves and Jacobian evaluations so far.
     fn counts(&self) -> (usize, usize);
+    /// Hands back Jacobian columns the caller no longer needs, for a later [`Self::evaluate`]
+    /// to fill instead of allocating (a problem with large columns keeps them; the default
+    /// drops them).
+    fn recycle(&mut self, columns: Columns) {
+        drop(columns);
+    }
     /// The forward states of the last evaluation, one per forward model (`None` before its
     /// first solve), to start another problem on the same meshes from them
     /// ([`Problem::with_warm_start`]); empty for a problem without forward models.
@@ -110,16 +116,23 @@ impl<P: LeastSquares + ?Sized> LeastSquares for Subset<'_, P> {
         let full = self.full(phi);
         let (r, j) = self.inner.evaluate(&full, jacobian)?;
         let j = j.map(|mut cols| {
-            self.keep
+            let kept = self
+                .keep
                 .iter()
                 .map(|&k| std::mem::take(&mut cols[k]))
-                .collect()
+                .collect();
+            self.inner.recycle(cols);
+            kept
         });
         Ok((r, j))
     }
 
     fn counts(&self) -> (usize, usize) {
         self.inner.counts()
+    }
+
+    fn recycle(&mut self, columns: Columns) {
+        self.inner.recycle(columns);
     }
 }
 
@@ -819,7 +832,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                     let decrease = (cost - ct) / cost.max(f64::MIN_POSITIVE);
                     phi = trial;
                     r = rt;
-                    j = jt.expect("asked");
+                    problem.recycle(std::mem::replace(&mut j, jt.expect("asked")));
                     cost = ct;
                     lambda = (lambda / 3.0).max(1e-12);
                     if decrease < opts.cost_tolerance || cost == 0.0 {
@@ -855,10 +868,12 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                                 if better {
                                     phi = ext;
                                     r = re;
-                                    j = je.expect("asked");
+                                    problem.recycle(std::mem::replace(&mut j, je.expect("asked")));
                                     cost = ce;
                                     // The next extrapolation needs two fresh steps.
                                     have_previous = false;
+                                } else if let Some(je) = je {
+                                    problem.recycle(je);
                                 }
                             }
                             Err(FitError::Solve(why)) => history.push(LmStep {
@@ -873,6 +888,9 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
                         }
                     }
                 } else {
+                    if let Some(jt) = jt {
+                        problem.recycle(jt);
+                    }
                     lambda *= 4.0;
                 }
             }

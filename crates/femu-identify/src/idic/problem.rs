@@ -41,7 +41,7 @@ use femu_mech::{Model, SolverOptions, StaticSolver};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 /// Most free parameters (directions) a Jacobian evaluation handles: 32 (five tissues of a
 /// three-parameter law, tied or not, is 15).
@@ -139,12 +139,18 @@ struct RefinedStep {
     sensitivity: Vec<Vec<Option<[f64; 2]>>>,
 }
 
-/// Grey levels and gradients of one frame pair at the pixels, for the current parameters.
-#[derive(Debug, Clone, Default)]
-struct PairSamples {
-    /// `[F, ∂F/∂x, ∂F/∂y, G, ∂G/∂x, ∂G/∂y]` per pixel.
-    values: Vec<[f64; 6]>,
-    fits: Vec<BandFit>,
+/// Buffers of the Jacobian evaluation, kept from one evaluation to the next (their sizes
+/// depend only on the pixels, the pairs and the number of directions): the fresh pages of a
+/// new allocation of this size cost more to clear than the arithmetic that fills them.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Per frame `i ≥ 1`, `∂d_i/∂t_j` at each pixel, row-major (`p * n_dir + j`).
+    directions: Vec<Vec<[f64; 2]>>,
+    /// `v_pj = ∇F·∂d_a − s ∇G·∂d_b` and `∇G·∂d_b` of one pair, row-major.
+    rows: Vec<f64>,
+    dgs: Vec<f64>,
+    /// Jacobian columns handed back by the optimizer ([`LeastSquares::recycle`]).
+    columns: Vec<Vec<f64>>,
 }
 
 /// `dir(i, p, out)`: the pixel displacement derivatives of frame `i` at pixel `p`, one per
@@ -158,9 +164,14 @@ pub struct IdicProblem {
     members: Vec<Parameter>,
     frame: ImageFrame,
     pixels: PixelSet,
+    /// The pixels of each brightness band, in order.
+    band_pixels: Vec<Vec<usize>>,
     /// Frame 0 is the reference; frame `i` was taken at step `i` (`models[i − 1]`).
     images: Vec<GreyImage>,
     splines: Vec<BSpline>,
+    /// `[g, ∂g/∂x, ∂g/∂y]` of each frame's interpolant at its displaced pixels `x_p + d_i`
+    /// (frame 0, which never moves, sampled once per scale).
+    frame_samples: Vec<Vec<[f64; 3]>>,
     scale_px: f64,
     options: IdicOptions,
     /// `√w` per (pair, band).
@@ -175,7 +186,9 @@ pub struct IdicProblem {
     /// A displacement held fixed and added to each step's model displacement (px, per step
     /// and pixel): the discretization correction (see [`IdicProblem::set_correction`]).
     correction: Option<Vec<Vec<[f64; 2]>>>,
-    samples: Vec<PairSamples>,
+    /// The brightness fit of each (pair, band) at the last evaluation.
+    fits: Vec<Vec<BandFit>>,
+    scratch: Mutex<Scratch>,
     stop: Option<Arc<AtomicBool>>,
     forward_solves: usize,
     jacobians: usize,
@@ -288,10 +301,17 @@ impl IdicProblem {
                 .flat_map(|gap| (gap..n).map(move |b| (b - gap, b)))
                 .collect(),
         };
+        let mut band_pixels = vec![Vec::new(); pixels.bands];
+        for (p, &band) in pixels.band.iter().enumerate() {
+            band_pixels[band].push(p);
+        }
         let mut p = IdicProblem {
+            band_pixels,
             sqrt_w: vec![1.0; pairs.len() * pixels.bands],
             active: vec![1.0; pixels.len()],
-            samples: vec![PairSamples::default(); pairs.len()],
+            fits: vec![Vec::new(); pairs.len()],
+            frame_samples: vec![vec![[0.0; 3]; pixels.len()]; images.len()],
+            scratch: Mutex::new(Scratch::default()),
             displacement: vec![vec![[0.0; 2]; pixels.len()]; images.len()],
             correction: None,
             splines: Vec::new(),
@@ -341,6 +361,7 @@ impl IdicProblem {
                 BSpline::new(&b.data, b.width, b.height)
             })
             .collect();
+        self.sample_frame(0);
         let f: Vec<f64> = self
             .pixels
             .px
@@ -406,7 +427,7 @@ impl IdicProblem {
             *a = if inside { 1.0 } else { 0.0 };
         }
         // The brightness fits of the evaluation above counted every pixel: redo them.
-        self.sample_pairs();
+        self.fit_brightness();
         Ok(self.active.iter().filter(|a| **a > 0.0).count())
     }
 
@@ -463,9 +484,9 @@ impl IdicProblem {
 
     /// The contrast and offset of each (pair, band) at the last evaluation.
     pub fn brightness(&self) -> Vec<Vec<(f64, f64)>> {
-        self.samples
+        self.fits
             .iter()
-            .map(|s| s.fits.iter().map(|f| (f.contrast, f.offset)).collect())
+            .map(|fits| fits.iter().map(|f| (f.contrast, f.offset)).collect())
             .collect()
     }
 
@@ -577,35 +598,47 @@ impl IdicProblem {
         }
     }
 
-    /// Samples the frames of every pair at the displaced pixels and fits the brightness.
+    /// Samples frame `i`'s interpolant at its displaced pixels `x_p + d_i` (`d_0 = 0`).
+    fn sample_frame(&mut self, i: usize) {
+        let (spline, d, px) = (&self.splines[i], &self.displacement[i], &self.pixels.px);
+        self.frame_samples[i]
+            .par_iter_mut()
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(p, out)| {
+                let (g, gx, gy) =
+                    spline.eval_grad(px[p][0] as f64 + d[p][0], px[p][1] as f64 + d[p][1]);
+                *out = [g, gx, gy];
+            });
+    }
+
+    /// Samples every loaded frame at its displaced pixels (each frame once, whatever the
+    /// pairs it is in) and fits the brightness of every pair.
     fn sample_pairs(&mut self) {
+        for i in 1..self.images.len() {
+            self.sample_frame(i);
+        }
+        self.fit_brightness();
+    }
+
+    /// The brightness fit of every (pair, band) from the frames' samples, over the active
+    /// pixels.
+    fn fit_brightness(&mut self) {
         let nb = self.pixels.bands;
         for (k, &(a, b)) in self.pairs.iter().enumerate() {
-            let (sa, sb) = (&self.splines[a], &self.splines[b]);
-            let (da, db) = (&self.displacement[a], &self.displacement[b]);
-            let px = &self.pixels.px;
-            let values: Vec<[f64; 6]> = (0..px.len())
-                .into_par_iter()
-                .map(|p| {
-                    let x = [px[p][0] as f64, px[p][1] as f64];
-                    let (f, fx, fy) = sa.eval_grad(x[0] + da[p][0], x[1] + da[p][1]);
-                    let (g, gx, gy) = sb.eval_grad(x[0] + db[p][0], x[1] + db[p][1]);
-                    [f, fx, fy, g, gx, gy]
-                })
-                .collect();
+            let (fa, fb) = (&self.frame_samples[a], &self.frame_samples[b]);
             let mut sums = vec![BandSums::default(); nb];
-            for ((v, &band), &a) in values.iter().zip(&self.pixels.band).zip(&self.active) {
-                if a > 0.0 {
-                    sums[band].add(v[0], v[3]);
+            for (((f, g), &band), &active) in
+                fa.iter().zip(fb).zip(&self.pixels.band).zip(&self.active)
+            {
+                if active > 0.0 {
+                    sums[band].add(f[0], g[0]);
                 }
             }
-            self.samples[k] = PairSamples {
-                fits: sums
-                    .iter()
-                    .map(|s| s.fit(self.options.brightness))
-                    .collect(),
-                values,
-            };
+            self.fits[k] = sums
+                .iter()
+                .map(|s| s.fit(self.options.brightness))
+                .collect();
         }
     }
 
@@ -614,16 +647,21 @@ impl IdicProblem {
         let n = self.pixels.len();
         let nb = self.pixels.bands;
         let mut r = vec![0.0; n * self.pairs.len()];
-        for (k, s) in self.samples.iter().enumerate() {
+        for (k, &(a, b)) in self.pairs.iter().enumerate() {
+            let (fa, fb, fits) = (
+                &self.frame_samples[a],
+                &self.frame_samples[b],
+                &self.fits[k],
+            );
             r[k * n..(k + 1) * n]
                 .par_iter_mut()
                 .enumerate()
+                .with_min_len(1024)
                 .for_each(|(p, out)| {
                     let band = self.pixels.band[p];
-                    let v = &s.values[p];
                     *out = self.active[p]
                         * self.sqrt_w[k * nb + band]
-                        * s.fits[band].residual(v[0], v[3]);
+                        * fits[band].residual(fa[p][0], fb[p][0]);
                 });
         }
         r
@@ -632,7 +670,9 @@ impl IdicProblem {
     /// Derivatives of the weighted residuals along `n_dir` directions of the pixel
     /// displacements: `dir(i, p, out)` writes `∂d_i/∂t_j` at pixel `p` of frame `i ≥ 1` for
     /// every direction `j` (frame 0 never moves). Returns one column per direction, pair-major,
-    /// with the projection term of the brightness fit (module [`super::brightness`]).
+    /// with the projection term of the brightness fit (module [`super::brightness`]). Each
+    /// frame's directions are computed once (a frame is in several pairs), and the buffers are
+    /// those of the last call ([`Scratch`]).
     pub(crate) fn directional(&self, n_dir: usize, dir: &PixelDirections) -> Columns {
         debug_assert!(
             n_dir <= MAX_DIRECTIONS,
@@ -640,61 +680,95 @@ impl IdicProblem {
         );
         let n = self.pixels.len();
         let nb = self.pixels.bands;
-        let mut cols = vec![vec![0.0; n * self.pairs.len()]; n_dir];
+        let len = n * self.pairs.len();
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let Scratch {
+            directions,
+            rows,
+            dgs,
+            columns,
+        } = &mut *guard;
+        directions.resize_with(self.images.len() - 1, Vec::new);
+        for (i, d) in directions.iter_mut().enumerate() {
+            // Every entry is written below: the old contents need no clearing.
+            d.resize(n * n_dir, [0.0; 2]);
+            d.par_chunks_mut(n_dir)
+                .enumerate()
+                .with_min_len(256)
+                .for_each(|(p, out)| dir(i + 1, p, out));
+        }
+        // Every entry of every column is written by the last loop below.
+        let mut cols: Columns = (0..n_dir)
+            .map(|_| {
+                let mut c = columns.pop().unwrap_or_default();
+                c.resize(len, 0.0);
+                c
+            })
+            .collect();
+        rows.resize(n * n_dir, 0.0);
+        dgs.resize(n * n_dir, 0.0);
+        // Frame 0 never moves: its directions are zero (multiplied out as the others are,
+        // so that the sums are those of any frame).
+        let zero = vec![[0.0; 2]; n_dir];
         for (k, &(a, b)) in self.pairs.iter().enumerate() {
-            let s = &self.samples[k];
+            let (fa, fb, fits) = (
+                &self.frame_samples[a],
+                &self.frame_samples[b],
+                &self.fits[k],
+            );
+            let dir_a = (a > 0).then(|| &directions[a - 1]);
+            let dir_b = &directions[b - 1];
             // v_pj = ∇F·∂d_a − s ∇G·∂d_b and ∇G·∂d_b, row-major.
-            let mut rows = vec![0.0; n * n_dir];
-            let mut dgs = vec![0.0; n * n_dir];
             rows.par_chunks_mut(n_dir)
                 .zip(dgs.par_chunks_mut(n_dir))
                 .enumerate()
+                .with_min_len(256)
                 .for_each(|(p, (rv, dv))| {
-                    let mut da = [[0.0; 2]; MAX_DIRECTIONS];
-                    let mut db = [[0.0; 2]; MAX_DIRECTIONS];
-                    if a > 0 {
-                        dir(a, p, &mut da[..n_dir]);
-                    }
-                    dir(b, p, &mut db[..n_dir]);
-                    let v = s.values[p];
-                    let c = s.fits[self.pixels.band[p]].contrast;
+                    let da = dir_a.map_or(&zero[..], |d| &d[p * n_dir..(p + 1) * n_dir]);
+                    let db = &dir_b[p * n_dir..(p + 1) * n_dir];
+                    let (f, g) = (&fa[p], &fb[p]);
+                    let c = fits[self.pixels.band[p]].contrast;
                     for j in 0..n_dir {
-                        let dg = v[4] * db[j][0] + v[5] * db[j][1];
-                        rv[j] = v[1] * da[j][0] + v[2] * da[j][1] - c * dg;
+                        let dg = g[1] * db[j][0] + g[2] * db[j][1];
+                        rv[j] = f[1] * da[j][0] + f[2] * da[j][1] - c * dg;
                         dv[j] = dg;
                     }
                 });
-            // Band sums Σ G v, Σ v, Σ δG r per direction.
-            let mut sums = vec![[0.0; 3]; nb * n_dir];
-            for p in 0..n {
-                if self.active[p] == 0.0 {
-                    continue;
-                }
-                let band = self.pixels.band[p];
-                let v = &s.values[p];
-                let r = s.fits[band].residual(v[0], v[3]);
-                for j in 0..n_dir {
-                    let e = &mut sums[band * n_dir + j];
-                    let vj = rows[p * n_dir + j];
-                    e[0] += v[3] * vj;
-                    e[1] += vj;
-                    e[2] += dgs[p * n_dir + j] * r;
-                }
-            }
-            let q: Vec<[f64; 2]> = (0..nb * n_dir)
-                .map(|bj| {
-                    let e = sums[bj];
-                    s.fits[bj / n_dir].correction(e[0], e[1], e[2])
+            // Band sums Σ G v, Σ v, Σ δG r per direction, each band's pixels in order (the
+            // bands in parallel), and the projection term's coefficients of each.
+            let (rows, dgs) = (&*rows, &*dgs);
+            let q: Vec<[f64; 2]> = self
+                .band_pixels
+                .par_iter()
+                .enumerate()
+                .flat_map_iter(|(band, members)| {
+                    let mut sums = vec![[0.0; 3]; n_dir];
+                    for &p in members {
+                        if self.active[p] == 0.0 {
+                            continue;
+                        }
+                        let g = fb[p][0];
+                        let r = fits[band].residual(fa[p][0], g);
+                        for (j, e) in sums.iter_mut().enumerate() {
+                            let vj = rows[p * n_dir + j];
+                            e[0] += g * vj;
+                            e[1] += vj;
+                            e[2] += dgs[p * n_dir + j] * r;
+                        }
+                    }
+                    sums.into_iter()
+                        .map(move |e| fits[band].correction(e[0], e[1], e[2]))
                 })
                 .collect();
             for (j, col) in cols.iter_mut().enumerate() {
                 col[k * n..(k + 1) * n]
                     .par_iter_mut()
                     .enumerate()
+                    .with_min_len(1024)
                     .for_each(|(p, out)| {
                         let band = self.pixels.band[p];
                         let qj = q[band * n_dir + j];
-                        let g = s.values[p][3];
+                        let g = fb[p][0];
                         *out = self.active[p]
                             * self.sqrt_w[k * nb + band]
                             * (rows[p * n_dir + j] - (g * qj[0] + qj[1]));
@@ -916,16 +990,17 @@ impl IdicProblem {
     /// of the pixel set), `width x height` each.
     pub fn residual_maps(&self) -> Vec<Vec<f64>> {
         let (w, h) = (self.pixels.width, self.pixels.height);
-        self.samples
+        self.pairs
             .iter()
-            .map(|s| {
+            .zip(&self.fits)
+            .map(|(&(a, b), fits)| {
+                let (fa, fb) = (&self.frame_samples[a], &self.frame_samples[b]);
                 let mut m = vec![f64::NAN; w * h];
                 for (p, px) in self.pixels.px.iter().enumerate() {
                     if self.active[p] == 0.0 {
                         continue;
                     }
-                    let v = &s.values[p];
-                    m[px[1] * w + px[0]] = s.fits[self.pixels.band[p]].residual(v[0], v[3]);
+                    m[px[1] * w + px[0]] = fits[self.pixels.band[p]].residual(fa[p][0], fb[p][0]);
                 }
                 m
             })
@@ -959,5 +1034,21 @@ impl LeastSquares for IdicProblem {
 
     fn counts(&self) -> (usize, usize) {
         (self.forward_solves, self.jacobians)
+    }
+
+    /// Keeps the columns for the next Jacobian evaluation: at most two Jacobians' worth (the
+    /// optimizer holds the accepted one while it evaluates a trial).
+    fn recycle(&mut self, columns: Columns) {
+        let keep = 2 * self.free.len();
+        let pool = &mut self
+            .scratch
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .columns;
+        for c in columns {
+            if pool.len() < keep && c.capacity() > 0 {
+                pool.push(c);
+            }
+        }
     }
 }
