@@ -33,6 +33,12 @@
 //! segment to the next (finite sliding): on segment `k` from reference arc `S_k` of reference
 //! length `L⁰_k`, `ξ̄ = (s̄ - S_k) / L⁰_k`.
 //!
+//! By default ([`Interface::smooth`]) the master surface is smoothed: the quantities above are
+//! taken on a C1 cubic Hermite curve through the master nodes ([`smooth`]; Padmanabhan &
+//! Laursen, Finite Elem. Anal. Des. 37, 2001), so that a slave node's normal and force are
+//! continuous when it passes from one segment to the next, and a pairing depends on ten dofs
+//! ([`PairGap`]): the slave node, the segment's nodes and the master nodes on either side.
+//!
 //! Each slave node is paired with one of its candidate segments (the master segments within a
 //! search radius of it in the reference configuration): the closest at the start of a solve,
 //! kept through an increment's Newton iterations, moved to the closest when the node's
@@ -41,6 +47,8 @@
 //! node with every node of its candidates, so that switching segments needs no new pattern.
 
 use std::collections::BTreeMap;
+
+pub mod smooth;
 
 /// The kind of an interface.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -109,6 +117,12 @@ pub struct Interface {
     pub candidates: Vec<Vec<usize>>,
     /// Mean reference length of the master segments (mm).
     pub element_size: f64,
+    /// Per master segment: the master node before its first node and after its second along
+    /// the chain (`usize::MAX` at a chain's end).
+    pub neighbours: Vec<[usize; 2]>,
+    /// Whether the master surface is smoothed ([`smooth`]: a C1 Hermite curve through the
+    /// master nodes, on by default) rather than the straight segments.
+    pub smooth: bool,
     /// Allowed penetration at convergence as a fraction of `element_size` (an upper bound, as
     /// for the rigid contact; the Uzawa updates also converge the multipliers to the residual
     /// tolerance).
@@ -213,12 +227,14 @@ impl Interface {
             penalty: Penalty::Automatic { factor: 1e1 },
             slaves,
             tributary,
-            segments,
             arc_start,
             arc_length,
             candidates,
             element_size: total / master.len() as f64,
             penetration_tolerance: 1e-3,
+            neighbours: chain_neighbours(&segments),
+            smooth: true,
+            segments,
         })
     }
 
@@ -230,8 +246,62 @@ impl Interface {
         }
     }
 
+    /// The nodes a pairing with segment `s` depends on: `[a, b, p, n]`, the segment's nodes
+    /// and (on a smoothed surface) the master nodes before and after it (`usize::MAX`: none).
+    pub fn segment_nodes(&self, s: usize) -> [usize; 4] {
+        let [a, b] = self.segments[s];
+        let [p, n] = if self.smooth {
+            self.neighbours[s]
+        } else {
+            [usize::MAX; 2]
+        };
+        [a, b, p, n]
+    }
+
+    /// The gap of slave `k` on segment `s` at the positions `position(node)`.
+    pub fn pair_gap(&self, k: usize, s: usize, position: impl Fn(usize) -> [f64; 2]) -> PairGap {
+        let [a, b, p, n] = self.segment_nodes(s);
+        let xs = position(self.slaves[k]);
+        let (xa, xb) = (position(a), position(b));
+        let at = |m: usize| (m != usize::MAX).then(|| position(m));
+        let (xp, xn) = (at(p), at(n));
+        if self.smooth {
+            if let Some((xi, _)) = smooth::project(xs, xa, xb, xp, xn) {
+                let x = [xs, xa, xb, xp.unwrap_or([0.0; 2]), xn.unwrap_or([0.0; 2])];
+                let (g, xi, len) = smooth::gap(x, xp.is_some(), xn.is_some(), xi);
+                return PairGap {
+                    g: g.v,
+                    xi: xi.v,
+                    dg: g.g,
+                    d2g: g.h,
+                    slip: Slip::Smooth(Box::new([xi, len])),
+                };
+            }
+        }
+        PairGap::straight(SegmentGap::new(xs, xa, xb))
+    }
+
+    /// The convective coordinate of slave `k`'s closest point on segment `s` and its distance
+    /// (of the straight segment, clamped to it, when that point is beyond the ends).
+    fn projection(&self, k: usize, s: usize, position: &impl Fn(usize) -> [f64; 2]) -> (f64, f64) {
+        let [a, b, p, n] = self.segment_nodes(s);
+        let xs = position(self.slaves[k]);
+        let (xa, xb) = (position(a), position(b));
+        let at = |m: usize| (m != usize::MAX).then(|| position(m));
+        let straight = SegmentGap::new(xs, xa, xb).xi;
+        let smooth = self
+            .smooth
+            .then(|| smooth::project(xs, xa, xb, at(p), at(n)))
+            .flatten();
+        match smooth {
+            Some((xi, d)) if (0.0..=1.0).contains(&xi) => (xi, d),
+            Some((xi, _)) => (xi, segment_distance(xs, xa, xb)),
+            None => (straight, segment_distance(xs, xa, xb)),
+        }
+    }
+
     /// Node groups that the interface couples in the tangent: each slave node with the nodes
-    /// of its candidate segments (the slave node first).
+    /// of its candidate segments and their neighbours (the slave node first).
     pub fn coupled_nodes(&self) -> Vec<Vec<usize>> {
         self.slaves
             .iter()
@@ -239,8 +309,8 @@ impl Interface {
             .map(|(&n, cands)| {
                 let mut group = vec![n];
                 for &k in cands {
-                    for m in self.segments[k] {
-                        if !group.contains(&m) {
+                    for m in self.segment_nodes(k) {
+                        if m != usize::MAX && !group.contains(&m) {
                             group.push(m);
                         }
                     }
@@ -259,27 +329,25 @@ impl Interface {
         &self,
         k: usize,
         position: impl Fn(usize) -> [f64; 2],
-    ) -> Option<(usize, SegmentGap)> {
-        let xs = position(self.slaves[k]);
-        let mut best: Option<(f64, usize, SegmentGap)> = None;
-        let mut nearest: Option<(f64, usize, SegmentGap)> = None;
+    ) -> Option<(usize, PairGap)> {
+        let mut best: Option<(f64, usize)> = None;
+        let mut nearest: Option<(f64, usize, f64)> = None;
         for &s in &self.candidates[k] {
-            let [a, b] = self.segments[s];
-            let (xa, xb) = (position(a), position(b));
-            let gap = SegmentGap::new(xs, xa, xb);
-            let d = segment_distance(xs, xa, xb);
+            let (xi, d) = self.projection(k, s, &position);
             if nearest.as_ref().is_none_or(|(bd, _, _)| d < *bd) {
-                nearest = Some((d, s, gap));
+                nearest = Some((d, s, xi));
             }
-            if !(-1e-3..=1.0 + 1e-3).contains(&gap.xi) {
+            if !(-1e-3..=1.0 + 1e-3).contains(&xi) {
                 continue;
             }
-            if best.as_ref().is_none_or(|(bd, _, _)| d < *bd) {
-                best = Some((d, s, gap));
+            if best.as_ref().is_none_or(|(bd, _)| d < *bd) {
+                best = Some((d, s));
             }
         }
-        best.or(nearest.filter(|(_, _, g)| (-0.5..=1.5).contains(&g.xi)))
-            .map(|(_, s, g)| (s, g))
+        let s = best.map(|(_, s)| s).or(nearest
+            .filter(|(_, _, xi)| (-0.5..=1.5).contains(xi))
+            .map(|(_, s, _)| s))?;
+        Some((s, self.pair_gap(k, s, position)))
     }
 
     /// The gap of slave `k` on the segment `preferred` (its pairing, kept through the Newton
@@ -295,10 +363,9 @@ impl Interface {
         k: usize,
         position: impl Fn(usize) -> [f64; 2],
         preferred: Option<usize>,
-    ) -> Option<(usize, SegmentGap)> {
+    ) -> Option<(usize, PairGap)> {
         if let Some(s) = preferred {
-            let [a, b] = self.segments[s];
-            let gap = SegmentGap::new(position(self.slaves[k]), position(a), position(b));
+            let gap = self.pair_gap(k, s, &position);
             if (-0.5..=1.5).contains(&gap.xi) {
                 return Some((s, gap));
             }
@@ -314,6 +381,87 @@ impl Interface {
     /// The convective coordinate on segment `s` of the reference arc coordinate `arc`.
     pub fn xi_of_arc(&self, s: usize, arc: f64) -> f64 {
         (arc - self.arc_start[s]) / self.arc_length[s]
+    }
+}
+
+/// Per segment, the node before its first node and after its second along its chain
+/// (`usize::MAX` at a chain's end).
+fn chain_neighbours(segments: &[[usize; 2]]) -> Vec<[usize; 2]> {
+    let mut by_first = BTreeMap::new();
+    let mut by_second = BTreeMap::new();
+    for s in segments {
+        by_first.insert(s[0], s[1]);
+        by_second.insert(s[1], s[0]);
+    }
+    segments
+        .iter()
+        .map(|s| {
+            [
+                by_second.get(&s[0]).copied().unwrap_or(usize::MAX),
+                by_first.get(&s[1]).copied().unwrap_or(usize::MAX),
+            ]
+        })
+        .collect()
+}
+
+/// The gap of a slave node paired with a master segment, with its derivatives over the ten
+/// dofs `(x_s, x_a, x_b, x_p, x_n)` (slave node, segment, the master nodes before and after
+/// it; the last two are zero on straight segments and at a chain's end).
+#[derive(Debug, Clone)]
+pub struct PairGap {
+    /// Normal gap `g_N` (negative: penetration).
+    pub g: f64,
+    /// Convective coordinate of the closest point on the segment.
+    pub xi: f64,
+    pub dg: [f64; smooth::N],
+    pub d2g: [[f64; smooth::N]; smooth::N],
+    slip: Slip,
+}
+
+#[derive(Debug, Clone)]
+enum Slip {
+    Straight(Box<SegmentGap>),
+    /// `ξ` and the chord length `L` with their derivatives.
+    Smooth(Box<[smooth::Dual; 2]>),
+}
+
+impl PairGap {
+    fn straight(gap: SegmentGap) -> Self {
+        let mut dg = [0.0; smooth::N];
+        let mut d2g = [[0.0; smooth::N]; smooth::N];
+        for i in 0..6 {
+            dg[i] = gap.dg[i];
+            d2g[i][..6].copy_from_slice(&gap.d2g[i]);
+        }
+        PairGap {
+            g: gap.g,
+            xi: gap.xi,
+            dg,
+            d2g,
+            slip: Slip::Straight(Box::new(gap)),
+        }
+    }
+
+    /// The tangential slip `g_T = (ξ - ξ̄) L` from the stick point `xi_bar`, `L` the segment's
+    /// chord, and its derivatives ([`SegmentGap::slip`] on a straight segment).
+    pub fn slip(&self, xi_bar: f64) -> (f64, [f64; smooth::N], [[f64; smooth::N]; smooth::N]) {
+        match &self.slip {
+            Slip::Straight(gap) => {
+                let (gt, d, h) = gap.slip(xi_bar);
+                let mut dg = [0.0; smooth::N];
+                let mut d2g = [[0.0; smooth::N]; smooth::N];
+                for i in 0..6 {
+                    dg[i] = d[i];
+                    d2g[i][..6].copy_from_slice(&h[i]);
+                }
+                (gt, dg, d2g)
+            }
+            Slip::Smooth(xl) => {
+                let [xi, len] = **xl;
+                let gt = (xi - smooth::Dual::constant(xi_bar)) * len;
+                (gt.v, gt.g, gt.h)
+            }
+        }
     }
 }
 

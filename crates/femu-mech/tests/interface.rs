@@ -398,8 +398,9 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
 /// less than the largest displacement. (Under contention the solve still stalls at a quarter
 /// of the load: see the guide's sliding-interfaces page.)
 #[test]
-fn thigh_with_a_sliding_quadriceps_under_compression_and_indentation() {
+fn thigh_with_a_sliding_quadriceps_under_the_seed_tests() {
     for (name, loading) in [
+        ("contention", Loading::seed_contention()),
         ("compression", Loading::seed_compression()),
         ("indentation", Loading::anterior_indentation(0.1)),
     ] {

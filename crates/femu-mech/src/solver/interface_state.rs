@@ -4,7 +4,8 @@
 //! multipliers and the stick points' update at each converged increment.
 
 use super::assembly::{DofMap, System, NONE};
-use crate::interface::{Interface, InterfaceKind, Penalty, SegmentGap, SlaveState};
+use crate::interface::smooth::N;
+use crate::interface::{Interface, InterfaceKind, PairGap, Penalty, SlaveState};
 use crate::model::Model;
 use femu_sparse::CscPattern;
 use std::collections::HashMap;
@@ -48,12 +49,12 @@ pub(crate) struct InterfaceState {
     pub active: (usize, u64),
 }
 
-/// The residual and tangent of one slave node on its segment at `u`: the dofs `(x_s, x_a,
-/// x_b)` and the contributions, or `None` when the node is not in contact.
+/// The residual and tangent of one slave node on its segment at `u`: the dofs `(x_s, x_a, x_b,
+/// x_p, x_n)` (`NONE` for a missing neighbour) and the contributions.
 struct SlaveTerms {
-    dofs: [usize; 6],
-    force: [f64; 6],
-    stiffness: [[f64; 6]; 6],
+    dofs: [usize; N],
+    force: [f64; N],
+    stiffness: [[f64; N]; N],
     state: SlaveState,
     /// Whether the node is in contact (its terms count).
     active: bool,
@@ -68,7 +69,7 @@ fn pairing(
     st: &Slaves,
     k: usize,
     u: &[f64],
-) -> Option<(usize, SegmentGap)> {
+) -> Option<(usize, PairGap)> {
     let preferred = (st.segment[k] != usize::MAX).then_some(st.segment[k]);
     iface.closest_preferring(k, |n| model.current_position(n, u), preferred)
 }
@@ -77,9 +78,9 @@ fn pairing(
 fn slave_terms(model: &Model, iface: &Interface, st: &Slaves, k: usize, u: &[f64]) -> SlaveTerms {
     let node = iface.slaves[k];
     let mut out = SlaveTerms {
-        dofs: [NONE; 6],
-        force: [0.0; 6],
-        stiffness: [[0.0; 6]; 6],
+        dofs: [NONE; N],
+        force: [0.0; N],
+        stiffness: [[0.0; N]; N],
         state: SlaveState {
             node,
             ..Default::default()
@@ -90,8 +91,15 @@ fn slave_terms(model: &Model, iface: &Interface, st: &Slaves, k: usize, u: &[f64
     let Some((s, gap)) = pairing(model, iface, st, k, u) else {
         return out;
     };
-    let [a, b] = iface.segments[s];
-    out.dofs = [2 * node, 2 * node + 1, 2 * a, 2 * a + 1, 2 * b, 2 * b + 1];
+    for (i, m) in std::iter::once(node)
+        .chain(iface.segment_nodes(s))
+        .enumerate()
+    {
+        if m != usize::MAX {
+            out.dofs[2 * i] = 2 * m;
+            out.dofs[2 * i + 1] = 2 * m + 1;
+        }
+    }
     out.state.segment = Some(s);
     out.xi = gap.xi;
     out.state.gap = gap.g;
@@ -104,9 +112,9 @@ fn slave_terms(model: &Model, iface: &Interface, st: &Slaves, k: usize, u: &[f64
     out.active = true;
     let n_force = trial.max(0.0);
     out.state.normal_force = n_force;
-    for i in 0..6 {
+    for i in 0..N {
         out.force[i] = -n_force * gap.dg[i];
-        for j in 0..6 {
+        for j in 0..N {
             out.stiffness[i][j] = eps * gap.dg[i] * gap.dg[j] - n_force * gap.d2g[i][j];
         }
     }
@@ -125,7 +133,7 @@ fn friction(
     st: &Slaves,
     k: usize,
     s: usize,
-    gap: &SegmentGap,
+    gap: &PairGap,
     n_force: f64,
     out: &mut SlaveTerms,
 ) {
@@ -135,9 +143,9 @@ fn friction(
     let (gt, dgt, d2gt) = gap.slip(xi_bar);
     let trial_t = eps_t * gt;
     if trial_t.abs() <= mu * n_force {
-        for i in 0..6 {
+        for i in 0..N {
             out.force[i] += trial_t * dgt[i];
-            for j in 0..6 {
+            for j in 0..N {
                 out.stiffness[i][j] += eps_t * (dgt[i] * dgt[j] + gt * d2gt[i][j]);
             }
         }
@@ -149,9 +157,9 @@ fn friction(
         let sign = gt.signum();
         let t = mu * n_force * sign;
         // N = λ̂ - ε g_N while in contact: ∂N = -ε ∂g_N.
-        for i in 0..6 {
+        for i in 0..N {
             out.force[i] += t * dgt[i];
-            for j in 0..6 {
+            for j in 0..N {
                 out.stiffness[i][j] += -mu * sign * eps * dgt[i] * gap.dg[j] + t * d2gt[i][j];
             }
         }
@@ -253,7 +261,7 @@ impl InterfaceState {
                 st.eps_t[k] = eps_t;
                 st.multipliers[k] = 0.0;
                 let closest = iface.closest(k, |m| model.current_position(m, &zero));
-                st.segment[k] = closest.map_or(usize::MAX, |(s, _)| s);
+                st.segment[k] = closest.as_ref().map_or(usize::MAX, |(s, _)| *s);
                 st.stick[k] = match closest {
                     Some((s, g)) if g.g <= 1e-9 * iface.element_size => iface.arc(s, g.xi),
                     _ => f64::NAN,
@@ -276,18 +284,20 @@ impl InterfaceState {
                 }
                 self.active.0 += 1;
                 self.active.1 = self.active.1.wrapping_mul(31).wrapping_add(k as u64 + 1);
-                for i in 0..6 {
-                    system.residual[t.dofs[i]] += t.force[i];
+                for i in 0..N {
+                    if t.dofs[i] != NONE {
+                        system.residual[t.dofs[i]] += t.force[i];
+                    }
                 }
                 if !with_tangent {
                     continue;
                 }
-                let eqs = t.dofs.map(|d| self.eq[d]);
-                for i in 0..6 {
+                let eqs = t.dofs.map(|d| if d == NONE { NONE } else { self.eq[d] });
+                for i in 0..N {
                     if eqs[i] == NONE {
                         continue;
                     }
-                    for j in 0..6 {
+                    for j in 0..N {
                         if eqs[j] != NONE {
                             system.values[self.positions[&(eqs[i], eqs[j])]] += t.stiffness[i][j];
                         }
@@ -306,14 +316,17 @@ impl InterfaceState {
     pub fn augment(&mut self, model: &Model, u: &mut [f64], force_tolerance: f64) -> bool {
         let mut updated = false;
         for (iface, st) in model.interfaces.iter().zip(&mut self.slaves) {
-            let gaps: Vec<Option<SegmentGap>> = (0..iface.slaves.len())
+            let gaps: Vec<Option<PairGap>> = (0..iface.slaves.len())
                 .map(|k| pairing(model, iface, st, k, u).map(|(_, g)| g))
                 .collect();
             // Re-pairing first: the nodes whose projection left their segment take their
             // closest one, and Newton converges again with it before any multiplier update.
             let mut repaired = false;
             for (k, gap) in gaps.iter().enumerate() {
-                if gap.is_some_and(|g| (-1e-3..=1.0 + 1e-3).contains(&g.xi)) {
+                if gap
+                    .as_ref()
+                    .is_some_and(|g| (-1e-3..=1.0 + 1e-3).contains(&g.xi))
+                {
                     continue;
                 }
                 if let Some((s, g)) = iface.closest(k, |n| model.current_position(n, u)) {
@@ -447,7 +460,14 @@ impl InterfaceState {
                 };
                 let t = slave_terms(model, iface, st, k, u);
                 if t.active && t.state.normal_force > 0.0 {
-                    out.push(t.dofs.iter().copied().zip(gap.dg).collect());
+                    out.push(
+                        t.dofs
+                            .iter()
+                            .copied()
+                            .zip(gap.dg)
+                            .filter(|&(d, _)| d != NONE)
+                            .collect(),
+                    );
                 }
             }
         }
