@@ -202,6 +202,27 @@ pub fn quality_summary(m: &Measured, criteria: &TrustCriteria) -> QualitySummary
     }
 }
 
+/// The pair `f → g` correlated as `spec` says; when the whole image (no ROI, no mask) does not
+/// correlate, the pair is tried again as a B-mode pair
+/// ([`crate::sequence::correlate_bmode_pair`]: the tissue mask, three pyramid levels, the ZNCC
+/// trust judged against the pair's median), whose ZNCC threshold is then returned. The first
+/// error is kept when the second try fails too.
+pub fn measure_pair(
+    spec: &CorrelationSpec,
+    f: &GreyImage,
+    g: &GreyImage,
+) -> Result<(Measured, Choice, Option<f64>), DicError> {
+    match spec.measure(f, g) {
+        Ok((m, c)) => Ok((m, c, None)),
+        Err(e) if matches!(spec.roi, RoiSpec::Whole) => {
+            crate::sequence::correlate_bmode_pair(f, g, spec)
+                .map(|(m, c, z)| (m, c, Some(z)))
+                .map_err(|_| e)
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// Runs `femu dic`: writes the output folder and returns the report. A correlation that ran
 /// with given options but did not converge is written and reported (`result.converged`
 /// false); the caller decides how to exit.
@@ -239,7 +260,7 @@ pub fn run_dic_on(
         x_left: job.x_left,
         y_up: job.y_up,
     };
-    let (m, choice) = job.correlation.measure(f, g)?;
+    let (m, choice, bmode) = measure_pair(&job.correlation, f, g)?;
     femu_mesh::atomic::create_dir_all(&job.out).map_err(|e| DicError::Write {
         path: job.out.clone(),
         message: e.to_string(),
@@ -297,7 +318,17 @@ pub fn run_dic_on(
         crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some())?;
         outputs.extend(crate::figures::MAPS);
     }
-    let quality = quality_summary(&m, &job.correlation.trust);
+    let criteria = TrustCriteria {
+        min_zncc: bmode.unwrap_or(job.correlation.trust.min_zncc),
+        ..job.correlation.trust
+    };
+    let quality = quality_summary(&m, &criteria);
+    if let Some(z) = bmode {
+        warnings.push(format!(
+            "the whole image did not correlate: correlated as a B-mode pair, over the tissue the reference frame shows, with {} pyramid levels and elements trusted from a ZNCC of {z:.2} (the pair's own level)",
+            job.correlation.options.pyramid_levels.unwrap_or(crate::sequence::SEQUENCE_LEVELS)
+        ));
+    }
     let untrusted = m.trust.len() - quality.trusted_elements;
     if untrusted > 0 {
         warnings.push(format!(

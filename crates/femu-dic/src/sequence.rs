@@ -197,6 +197,71 @@ fn pair_rois(spec: &CorrelationSpec, f: &GreyImage, g: &GreyImage) -> Result<Vec
     }
 }
 
+/// A pair of frames correlated without a previous increment to start from: the automatic
+/// ladder over the first region of `rois` on which it succeeds, its rungs judged with the
+/// lowest ZNCC threshold ([`ZNCC_FLOOR`]), the trust of the result then decided by the pair's
+/// own criteria ([`pair_criteria`]).
+fn correlate_first(
+    f: &GreyImage,
+    g: &GreyImage,
+    rois: &[Roi],
+    spec: &CorrelationSpec,
+) -> Result<(Measured, Choice), DicError> {
+    let floor = TrustCriteria {
+        min_zncc: spec.trust.min_zncc.min(ZNCC_FLOOR),
+        ..spec.trust
+    };
+    let mut result = Err(DicError::Roi("no region".into()));
+    for roi in rois {
+        result = correlate_ladder(
+            f,
+            g,
+            roi,
+            &spec.options,
+            spec.element,
+            spec.regularization,
+            &floor,
+            false,
+        );
+        if result.is_ok() {
+            break;
+        }
+    }
+    let (m, c) = result?;
+    Ok((measured(m.res, spec)?, c))
+}
+
+/// One pair of B-mode frames correlated as a sequence's first increment is: over the tissue
+/// the reference frame shows ([`tissue_mask`], unless `spec` gives a region), with
+/// [`SEQUENCE_LEVELS`] pyramid levels unless `spec` gives them, and the ZNCC trust judged
+/// against the pair's own median ([`ZNCC_RELATIVE`]). `femu dic` falls back to it when a pair
+/// does not correlate over the whole image: B-mode frames under a compression decorrelate as a
+/// whole and move by more than two pyramid levels can follow. Returns the field and the
+/// choice, and the ZNCC threshold the trust used.
+pub fn correlate_bmode_pair(
+    f: &GreyImage,
+    g: &GreyImage,
+    spec: &CorrelationSpec,
+) -> Result<(Measured, Choice, f64), DicError> {
+    let mut spec = spec.clone();
+    if spec.options.pyramid_levels.is_none() {
+        spec.options.pyramid_levels = Some(SEQUENCE_LEVELS);
+    }
+    let rois = pair_rois(&spec, f, g)?;
+    let (m, c) = correlate_first(f, g, &rois, &spec)?;
+    if !m.res.converged {
+        return Err(DicError::option(
+            "convergence",
+            format!(
+                "not converged in {} iterations (last increment {:.2e} px)",
+                m.res.iterations, m.res.last_increment_px
+            ),
+        ));
+    }
+    let min_zncc = pair_criteria(&m.res, &spec).min_zncc;
+    Ok((m, c, min_zncc))
+}
+
 /// Correlates `frames[k − 1] → frames[k]` for every `k` and composes the increments along the
 /// material points of `frames[0]` on a grid `grid_step_px` apart (default: the element size).
 /// `on_increment(k, n)` is called after each increment (progress). An increment that does not
@@ -259,31 +324,8 @@ pub fn correlate_sequence(
         let (m, choice, warm_start) = match warm {
             Some((m, c)) => (m, c, true),
             None => {
-                // The ladder judges its rungs with the lowest threshold; the pair's own
-                // criteria then decide the trust.
-                let floor = TrustCriteria {
-                    min_zncc: spec.trust.min_zncc.min(ZNCC_FLOOR),
-                    ..spec.trust
-                };
-                // The first region whose ladder succeeds.
-                let mut result = Err(DicError::Roi("no region".into()));
-                for roi in &rois {
-                    result = correlate_ladder(
-                        f,
-                        g,
-                        roi,
-                        &spec.options,
-                        spec.element,
-                        spec.regularization,
-                        &floor,
-                        false,
-                    );
-                    if result.is_ok() {
-                        break;
-                    }
-                }
-                let (m, c) = result.map_err(pair)?;
-                (measured(m.res, &spec)?, c, false)
+                let (m, c) = correlate_first(f, g, &rois, &spec).map_err(pair)?;
+                (m, c, false)
             }
         };
         if !m.res.converged {
