@@ -390,13 +390,14 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
     assert!(law < 1e-12);
 }
 
-/// The built-in thigh (about 1 500 quads) under the seed's compression (rigid plate) and
-/// indentation tests, the quadriceps free to slide on the hamstrings (a frictionless
+/// The built-in thigh (about 1 500 quads) under the seed's contention, compression (rigid
+/// plate) and indentation tests, the quadriceps free to slide on the hamstrings (a frictionless
 /// QUADRICEPS–ISCHIO interface, the nodes split along it, its ends tied), against the tied
 /// thigh: the solve converges, the surfaces do not interpenetrate beyond the penetration limit,
 /// the muscles slide on one another, and the displacement field differs from the tied one by
-/// less than the largest displacement. (Under contention the solve still stalls at a quarter
-/// of the load: see the guide's sliding-interfaces page.)
+/// less than the largest displacement; under contention (the skin's follower pressure) too,
+/// which the smoothed master surface makes converge (with straight segments it stalled at a
+/// quarter of the load).
 #[test]
 fn thigh_with_a_sliding_quadriceps_under_the_seed_tests() {
     for (name, loading) in [
