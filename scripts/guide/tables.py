@@ -4,7 +4,8 @@
     python3 scripts/guide/tables.py demo RUN_DIR            # `femu demo` / `femu run` folder
     python3 scripts/guide/tables.py convergence RUN_DIR     # `femu convergence` folder
     python3 scripts/guide/tables.py bench RUN_DIR           # `femu bench` folder
-    python3 scripts/guide/tables.py page DEMO CONV [BENCH] > docs/guide/src/measured/runs.md
+    python3 scripts/guide/tables.py page DEMO CONV [BENCH]  # the runs page from run folders
+    python3 scripts/guide/tables.py runs RESULTS > docs/guide/src/measured/runs.md  # from measure.sh's kept files
     python3 scripts/guide/tables.py verification RESULTS    # values the tests recorded
     python3 scripts/guide/tables.py render TEMPLATE         # a page of scripts/guide/templates/
     python3 scripts/guide/tables.py check                   # the generated pages up to date?
@@ -173,6 +174,14 @@ def page(demo_dir, conv_dir, bench_dir=None):
     if bench_dir:
         parts.append("\n## `femu bench`: femu against CalculiX\n\n" + bench(bench_dir))
     return "".join(parts)
+
+
+def runs(results):
+    """The page of measure.sh's runs from the files it keeps in `results` (demo/,
+    convergence/ and, when CalculiX was installed, bench/)."""
+    d = ROOT / results
+    bench_dir = d / "bench"
+    return page(d / "demo", d / "convergence", bench_dir if bench_dir.exists() else None)
 
 
 def number(v):
@@ -377,6 +386,7 @@ GENERATED = {
     "docs/guide/src/measured/dic.md": lambda: render("dic.md"),
     "docs/guide/src/measured/idic.md": lambda: render("idic.md"),
     "docs/guide/src/measured/contact.md": lambda: render("contact.md"),
+    "docs/guide/src/measured/runs.md": lambda: runs("bench/runs/results"),
 }
 
 
@@ -407,7 +417,7 @@ def main(argv):
         return 2
     kind, args = argv[1], argv[2:]
     fn = {"demo": demo, "convergence": convergence, "bench": bench, "page": page,
-          "verification": verification, "check": check, "render": render}.get(kind)
+          "verification": verification, "check": check, "render": render, "runs": runs}.get(kind)
     if fn is None:
         print(f"unknown table {kind!r}", file=sys.stderr)
         return 2
