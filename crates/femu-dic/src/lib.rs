@@ -42,6 +42,7 @@ pub mod selected;
 pub mod sequence;
 pub mod solver;
 pub mod sparse;
+pub mod spec;
 
 pub use error::DicError;
 pub use image::{GreyImage, PixelSize};

@@ -613,6 +613,18 @@ pub fn mean_std(u: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
     (m, [s[0].sqrt(), s[1].sqrt()])
 }
 
+/// Writes a serializable value as pretty JSON.
+pub fn write_json<T: serde::Serialize>(path: &Path, value: &T) -> Result<(), DicError> {
+    let text = serde_json::to_string_pretty(value).map_err(|e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    femu_mesh::atomic::write(path, text).map_err(|e| DicError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

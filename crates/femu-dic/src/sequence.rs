@@ -20,13 +20,13 @@
 //! coupling gel, the dark band above the skin and acoustic shadows left out).
 
 use crate::auto::{correlate_ladder, Choice, Measured};
-use crate::command::{CorrelationSpec, RoiSpec};
 use crate::error::DicError;
 use crate::image::GreyImage;
 use crate::mesh::Roi;
 use crate::output::{GridPoint, ModelFrame};
 use crate::quality::{self, Trust, TrustCriteria};
 use crate::solver::{correlate_from, DicOptions, DicResult};
+use crate::spec::{CorrelationSpec, RoiSpec};
 
 /// Pyramid levels of a sequence's correlations when none are given: B-mode increments of a
 /// compression move the tissue by 10–30 px, which three levels bring within the coarsest
@@ -712,7 +712,7 @@ pub fn run_sequence(
         warnings,
         wall_time_s: t0.elapsed().as_secs_f64(),
     };
-    crate::command::write_json(&job.out.join("summary.json"), &report)?;
+    crate::output::write_json(&job.out.join("summary.json"), &report)?;
     Ok(report)
 }
 
