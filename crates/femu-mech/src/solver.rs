@@ -31,6 +31,7 @@ pub(crate) mod newton;
 pub(crate) mod report;
 pub(crate) mod system;
 
+pub use active_set::eigen3 as symmetric_eigen3;
 pub use assembly::AssemblyError;
 pub use contact_state::ActiveConstraint;
 pub use linearization::Linearization;

@@ -198,49 +198,13 @@ pub fn pose_term(
     })
 }
 
-/// The eigenvalues (descending) and unit eigenvectors of a symmetric 3 x 3 matrix, by cyclic
-/// Jacobi rotations (Golub & Van Loan, Matrix Computations, §8.5).
+/// The eigenvalues (descending) and unit eigenvectors of a symmetric 3 x 3 matrix: the
+/// mechanics' cyclic Jacobi ([`femu_mech::solver::symmetric_eigen3`]), ordered.
 pub fn symmetric_eigen3(m: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
-    let mut a = m;
-    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-    for _ in 0..50 {
-        let off = a[0][1].powi(2) + a[0][2].powi(2) + a[1][2].powi(2);
-        let scale = a[0][0].powi(2) + a[1][1].powi(2) + a[2][2].powi(2);
-        if off <= 1e-30 * scale || off == 0.0 {
-            break;
-        }
-        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
-            if a[p][q] == 0.0 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let s = t * c;
-            // A ← Jᵀ A J, V ← V J with J the rotation in the (p, q) plane.
-            for row in a.iter_mut() {
-                let (x, y) = (row[p], row[q]);
-                row[p] = c * x - s * y;
-                row[q] = s * x + c * y;
-            }
-            for k in 0..3 {
-                let (x, y) = (a[p][k], a[q][k]);
-                a[p][k] = c * x - s * y;
-                a[q][k] = s * x + c * y;
-            }
-            for row in v.iter_mut() {
-                let (x, y) = (row[p], row[q]);
-                row[p] = c * x - s * y;
-                row[q] = s * x + c * y;
-            }
-        }
-    }
+    let (values, vectors) = femu_mech::solver::symmetric_eigen3(m);
     let mut order = [0, 1, 2];
-    order.sort_by(|&i, &j| a[j][j].total_cmp(&a[i][i]));
-    let values = order.map(|i| a[i][i]);
-    let vectors = order.map(|i| [v[0][i], v[1][i], v[2][i]]);
-    (values, vectors)
+    order.sort_by(|&i, &j| values[j].total_cmp(&values[i]));
+    (order.map(|i| values[i]), order.map(|i| vectors[i]))
 }
 
 #[cfg(test)]

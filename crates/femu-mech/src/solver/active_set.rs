@@ -127,8 +127,10 @@ struct Term {
     w: f64,
 }
 
-/// Eigenvalues and orthonormal eigenvectors of a symmetric 3 x 3 matrix (cyclic Jacobi).
-fn eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
+/// Eigenvalues and orthonormal eigenvectors (`vectors[k]` belongs to `values[k]`, in no particular
+/// order) of a symmetric 3 x 3 matrix, by cyclic Jacobi rotations (Golub & Van Loan, Matrix
+/// Computations, §8.5).
+pub fn eigen3(mut a: [[f64; 3]; 3]) -> ([f64; 3], [[f64; 3]; 3]) {
     let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
     for _ in 0..30 {
         let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
