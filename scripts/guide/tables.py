@@ -201,6 +201,8 @@ def verification_table(results, name, prov, targets):
     crate, test = name.split("-", 2)[0] + "-" + name.split("-", 2)[1], name.split("-", 2)[2]
     target = targets.get((crate, test))
     command = f"cargo test --release -p {crate} --test {test}"
+    # A target measured on its own (`verify.sh --only`) carries its own date, machine, commit.
+    prov = {**prov, **{k: target[k] for k in ("date", "machine", "commit") if target and k in target}}
     head = (
         f"*Measured {prov.get('date', 'on an unrecorded date')} on "
         f"{prov.get('machine', 'an unrecorded machine')}, commit {prov.get('commit', 'unrecorded')}; "
@@ -241,12 +243,30 @@ def verification(results):
             targets[(t["crate"], t["test"])] = t
     page = (TEMPLATES / "verification.md").read_text()
     total = sum(t.get("test_seconds") or t["seconds"] for t in targets.values())
-    summary = (
-        f"*All the tables: measured {prov.get('date', '?')} on {prov.get('machine', '?')}, commit "
-        f"{prov.get('commit', '?')}, {prov.get('build', '?')}, load average {prov.get('load', '?')} "
-        f"at the start; {len(targets)} test targets, {total / 60:.0f} min; "
-        f"command `bash scripts/guide/verify.sh`.*"
-    )
+    # The runs of verify.sh the tables come from: one for a full rerun, more when targets were
+    # measured again on their own (`--only`), each with its date, commit and load.
+    runs = {}
+    for t in targets.values():
+        key = tuple(t.get(k, prov.get(k, "?")) for k in ("date", "machine", "commit", "load"))
+        runs.setdefault(key, []).append(t)
+    if len(runs) <= 1:
+        date, machine, commit, load = next(iter(runs), tuple(prov.get(k, "?") for k in ("date", "machine", "commit", "load")))
+        summary = (
+            f"*All the tables: measured {date} on {machine}, commit {commit}, "
+            f"{prov.get('build', '?')}, load average {load} at the start; {len(targets)} test "
+            f"targets, {total / 60:.0f} min; command `bash scripts/guide/verify.sh`.*"
+        )
+    else:
+        parts = [
+            f"{date} on {machine}, commit {commit}, load average {load} at the start: {len(ts)} "
+            f"target{'s' if len(ts) > 1 else ''}, {sum(t.get('test_seconds') or t['seconds'] for t in ts) / 60:.0f} min"
+            for (date, machine, commit, load), ts in sorted(runs.items())
+        ]
+        summary = (
+            f"*The tables were measured in {len(runs)} runs ({prov.get('build', '?')}; each "
+            f"table gives its own date and commit): " + "; ".join(parts) + ". Command `bash "
+            f"scripts/guide/verify.sh` (`--only CRATE:TEST,...` for some targets).*"
+        )
     page = page.replace("{{summary}}", summary)
     return re.sub(
         r"\{\{table ([\w-]+)\}\}",

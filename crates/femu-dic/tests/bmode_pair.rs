@@ -12,6 +12,9 @@ use femu_dic::quality::{Trust, TrustCriteria};
 use femu_dic::{DicOptions, GreyImage};
 use std::path::PathBuf;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 fn data(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/data/pymust_pair")
@@ -51,6 +54,12 @@ fn a_pymust_pair_converges_with_the_defaults() {
     let (m, _choice, bmode) = measure_pair(&spec, &f, &g).expect("the pair correlates");
     assert!(m.res.converged);
     let z = bmode.expect("correlated as a B-mode pair (the whole image does not correlate)");
+    measure::record(
+        "ZNCC trust threshold of the B-mode pair",
+        z,
+        "in [0.2, 0.5)",
+        "",
+    );
     assert!((0.2..0.5).contains(&z), "ZNCC threshold {z}");
     let mesh = &m.res.mesh;
     let (mut n, mut s2, mut mean_e, mut total) = (0usize, [0.0f64; 2], [0.0f64; 2], 0usize);
@@ -70,6 +79,12 @@ fn a_pymust_pair_converges_with_the_defaults() {
         }
         n += 1;
     }
+    measure::record(
+        &format!("truth points trusted, of {total} inside the mesh"),
+        n as f64,
+        &format!("> 400 and > {}", total * 8 / 10),
+        "",
+    );
     assert!(
         n > 400 && n * 10 > total * 8,
         "{n} of {total} truth points trusted"
@@ -80,6 +95,20 @@ fn a_pymust_pair_converges_with_the_defaults() {
         "{n} points: RMS error ({:.3}, {:.3}) px, mean ({:+.3}, {:+.3}) px",
         rms[0], rms[1], mean[0], mean[1]
     );
+    measure::record(
+        "lateral RMS error at the trusted truth points",
+        rms[0],
+        "< 0.5",
+        "px",
+    );
+    measure::record(
+        "axial RMS error at the trusted truth points",
+        rms[1],
+        "< 0.2",
+        "px",
+    );
+    measure::record("|lateral mean error|", mean[0].abs(), "< 0.1", "px");
+    measure::record("|axial mean error|", mean[1].abs(), "< 0.1", "px");
     assert!(rms[0] < 0.5 && rms[1] < 0.2, "RMS error {rms:?} px");
     assert!(
         mean[0].abs() < 0.1 && mean[1].abs() < 0.1,

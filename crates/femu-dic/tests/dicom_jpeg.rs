@@ -33,6 +33,9 @@ use femu_dic::lab::Speckle;
 use femu_dic::{DicError, GreyImage};
 use jpeg_encoder::{ColorType, Encoder, SamplingFactor};
 use std::path::PathBuf;
+
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 use zune_jpeg::zune_core::colorspace::ColorSpace;
 use zune_jpeg::zune_core::options::DecoderOptions;
 
@@ -329,6 +332,28 @@ fn check(name: &str, frames: usize, frame: usize, colour: bool) {
          vs original max {emax:.2} rms {erms:.3} mean {emean:+.3} (rms bound {bound:.2})"
     );
     let decoder_tolerance = if colour { 1.5 } else { 1.0 };
+    let label = format!(
+        "{} JPEG baseline, frame {frame} of {frames}",
+        if colour { "YBR_FULL_422" } else { "8-bit grey" }
+    );
+    measure::record(
+        &format!("{label}: largest difference from zune-jpeg's decoding"),
+        dmax,
+        &format!("≤ {decoder_tolerance}"),
+        "grey levels",
+    );
+    measure::record(
+        &format!("{label}: RMS difference from the original pixels"),
+        erms,
+        &format!("≤ {bound:.2} (from the quantization table)"),
+        "grey levels",
+    );
+    measure::record(
+        &format!("{label}: mean difference from the original pixels"),
+        emean,
+        "|·| < 0.5",
+        "grey levels",
+    );
     assert!(
         dmax <= decoder_tolerance + 1e-9,
         "{name}: {dmax} grey levels from zune-jpeg's decoding"

@@ -11,6 +11,9 @@ use femu_dic::quality::TrustCriteria;
 use femu_dic::sequence::correlate_sequence;
 use femu_dic::{DicOptions, GreyImage};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// The field at load fraction `t`: a downward motion of 60 px at the top shrinking with depth
 /// (a compression of 10 %) and a lateral spread of 4 % (px).
 fn field(t: f64) -> impl Fn(f64, f64) -> [f64; 2] + Sync {
@@ -55,6 +58,15 @@ fn a_sequence_composes_large_motion() {
         let truth = field(1.0);
         let pts = seq.field(4, &ModelFrame::default());
         let trusted: Vec<_> = pts.iter().filter(|p| p.w > 0.0).collect();
+        measure::record(
+            &format!(
+                "noise {noise} grey levels: composed points trusted, of {}",
+                pts.len()
+            ),
+            trusted.len() as f64,
+            &format!("> {} (half), of more than 100", pts.len() / 2),
+            "",
+        );
         assert!(
             trusted.len() > pts.len() / 2 && pts.len() > 100,
             "{} of {} points trusted",
@@ -68,6 +80,14 @@ fn a_sequence_composes_large_motion() {
             sq[1] += (p.u_px[1] - t[1]).powi(2);
         }
         let rms = sq.map(|s| (s / trusted.len() as f64).sqrt());
+        for (k, axis) in ["lateral", "axial"].iter().enumerate() {
+            measure::record(
+                &format!("noise {noise} grey levels: {axis} RMS error of the composed 0 → 4 field (60 px of motion)"),
+                rms[k],
+                &format!("< {tol}"),
+                "px",
+            );
+        }
         assert!(
             rms[0] < tol && rms[1] < tol,
             "noise {noise}: RMS {rms:?} px"
@@ -75,6 +95,12 @@ fn a_sequence_composes_large_motion() {
         // The composed standard deviations grow with the number of increments.
         let sd1: f64 = seq.field(1, &ModelFrame::default())[0].s_mm[1];
         let sd4: f64 = pts[0].s_mm[1];
+        measure::record(
+            &format!("noise {noise} grey levels: composed axial sd to frame 4 / to frame 1"),
+            sd4 / sd1,
+            "> 1",
+            "",
+        );
         assert!(sd4 > sd1, "sd to frame 1 {sd1}, to frame 4 {sd4}");
     }
 }

@@ -15,6 +15,9 @@ use femu_dic::quality::{Trust, TrustCriteria};
 use femu_dic::{DicOptions, GreyImage, Rect};
 use std::path::PathBuf;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 fn frame(n: u32) -> Option<GreyImage> {
     let d = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("../../../shared/data/ultrasound/logiq-e9-gastrocnemius");
@@ -73,6 +76,16 @@ fn every_consecutive_pair_converges_with_the_defaults() {
             100.0 * trusted,
             c.attempts.len()
         );
+        let pair = format!("{:03} → {:03}", 48 + 2 * k, 50 + 2 * k);
+        measure::record(
+            &format!(
+                "pair {pair} ({} px elements, {} iterations, converged): elements trusted",
+                c.element_size_px, m.res.iterations
+            ),
+            trusted,
+            "≥ 0.5, converged",
+            "",
+        );
         assert!(m.res.converged, "pair {k}");
         assert!(trusted >= 0.5, "pair {k}: {trusted}");
     }
@@ -110,6 +123,33 @@ fn frames_048_052_agree_with_the_composition_through_050() {
     // Measured (all points): composition RMS (1.28, 0.13) px for a mean motion of 8.2 px (main
     // at the start of the session, 64 px regularization: (1.76, 0.24) px); forward-backward
     // RMS (0.09, 0.01) px. Bounds with margin over these numbers.
+    measure::record(
+        "composition check, points compared",
+        comp[0].points as f64,
+        "> 600",
+        "",
+    );
+    for (name, st, bound) in [
+        (
+            "048 → 052 against 048 → 050 → 052",
+            &comp,
+            ["< 1.5", "< 0.2"],
+        ),
+        (
+            "forward-backward 048 → 050 → 048",
+            &fb,
+            ["< 0.15", "< 0.05"],
+        ),
+    ] {
+        for (a, axis) in ["lateral", "axial"].iter().enumerate() {
+            measure::record(
+                &format!("{name}: {axis} RMS difference, all points"),
+                st[0].rms_px[a],
+                bound[a],
+                "px",
+            );
+        }
+    }
     assert!(comp[0].points > 600);
     assert!(
         comp[0].rms_px[0] < 1.5 && comp[0].rms_px[1] < 0.2,

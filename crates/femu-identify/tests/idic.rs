@@ -9,6 +9,8 @@
 //! - The parameters under the window recovered from the images, with intervals that hold them.
 
 mod common;
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 
 use femu_dic::lab::{self, Speckle};
 use femu_dic::GreyImage;
@@ -214,6 +216,14 @@ fn jacobian_matches_finite_differences() {
                 .zip(rp.iter().zip(&rm))
                 .map(|(a, (p, m))| (a - (p - m) / (2.0 * h)).abs())
                 .fold(0.0f64, f64::max);
+            measure::record(
+                &format!(
+                    "{pairing:?} pairing, scale {scale} px, local normalization {local:?}, parameter {k}: Jacobian column against central differences, largest error / largest entry"
+                ),
+                worst / scale_col,
+                "< 1e-5",
+                "",
+            );
             assert!(
                 scale_col > 0.0,
                 "{pairing:?}: parameter {k} has a zero column"
@@ -273,6 +283,15 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
             100.0 * shift[k]
         );
         let total = sd.hypot(shift[k]);
+        measure::record(
+            &format!(
+                "{}: |ln error| (sandwich sd {:.3}, discretization shift {:+.3}) / (1.96 sd with the shift)",
+                f.name, sd, shift[k]
+            ),
+            e.abs() / (1.96 * total),
+            "≤ 1",
+            "",
+        );
         assert!(
             e.abs() <= 1.96 * total,
             "{}: ln error {e:.4}, sd {total:.4}",
@@ -290,6 +309,7 @@ fn parameters_under_the_window_come_back_from_speckle_images() {
         }
     }
     let quad = (out.theta[2] / reference[2] - 1.0).abs();
+    measure::record("C10_QUADRICEPS: |relative error|", quad, "< 0.05", "");
     assert!(quad < 0.05, "C10_QUADRICEPS {quad}");
 }
 

@@ -6,6 +6,8 @@
 //! the re-identified shifts.
 
 mod common;
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 
 use femu_dic::lab::{self, Speckle};
 use femu_dic::GreyImage;
@@ -192,6 +194,24 @@ fn pose_sensitivity_matches_re_identification() {
                 "pose component {c}, {}: re-identified {:+.5}, predicted {:+.5}",
                 names[j], actual, predicted
             );
+            let component = [
+                "lateral shift 0.25 px",
+                "axial shift 0.25 px",
+                "rotation 0.5°",
+            ][c];
+            let quantity = format!(
+                "{component}, {}: |predicted - re-identified| change of ln θ (re-identified {actual:+.4})",
+                names[j]
+            );
+            let bound = if actual.abs() > 5e-3 {
+                format!(
+                    "< {:.2e} (0.25 x re-identified + 2e-3)",
+                    0.25 * actual.abs() + 2e-3
+                )
+            } else {
+                "not asserted (change below 5e-3)".to_string()
+            };
+            measure::record(&quantity, (predicted - actual).abs(), &bound, "");
             if actual.abs() > 5e-3 {
                 assert!(
                     (predicted - actual).abs() < 0.25 * actual.abs() + 2e-3,
@@ -203,6 +223,15 @@ fn pose_sensitivity_matches_re_identification() {
     }
     for j in 0..4 {
         eprintln!("{}: pose sd {:.5}", names[j], term.sd[j]);
+        measure::record(
+            &format!(
+                "{}: standard deviation of ln θ from the placement",
+                names[j]
+            ),
+            term.sd[j],
+            "> 0, finite",
+            "",
+        );
         assert!(term.sd[j] > 0.0 && term.sd[j].is_finite());
     }
 }

@@ -10,6 +10,8 @@
 //!   intervals.
 
 mod common;
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 
 use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_identify::fit::{levenberg_marquardt, FreeParameter, LeastSquares, LmOptions, Problem};
@@ -153,6 +155,12 @@ fn whitened_cost_is_the_generalized_misfit() {
     let y = a.partial_piv_lu().solve(&b);
     let quad: f64 = (0..m).map(|i| d[i] * y[(i, 0)]).sum();
     let norm: f64 = r.iter().map(|v| v * v).sum();
+    measure::record(
+        "whitened residual norm against dᵀ C⁻¹ d by dense LU, relative difference",
+        (norm - quad).abs() / quad,
+        "< 1e-8",
+        "",
+    );
     assert!((norm - quad).abs() < 1e-8 * quad, "{norm} vs {quad}");
 }
 
@@ -227,6 +235,24 @@ fn covariance_and_huber_beat_one_sigma_on_correlated_noise_with_outliers() {
             100.0 * p,
             100.0 * w
         );
+        measure::record(
+            &format!(
+                "{}: RMS relative error over 12 draws, plain least squares with one σ",
+                free[k].name
+            ),
+            p,
+            "not asserted",
+            "",
+        );
+        measure::record(
+            &format!(
+                "{}: RMS relative error, full covariance and Huber loss / plain one's",
+                free[k].name
+            ),
+            w / p,
+            "< 0.7",
+            "",
+        );
         assert!(
             w < 0.7 * p,
             "{}: weighted {w:.4} vs plain {p:.4}",
@@ -234,6 +260,17 @@ fn covariance_and_huber_beat_one_sigma_on_correlated_noise_with_outliers() {
         );
     }
     eprintln!("within 3 sd: {within:?} of {draws}");
+    for (f, n) in free.iter().zip(within) {
+        measure::record(
+            &format!(
+                "{}: weighted fits within 3 of their predicted sd, of 12 draws",
+                f.name
+            ),
+            n as f64,
+            "≥ 11",
+            "",
+        );
+    }
     assert!(
         within.iter().all(|&n| n + 1 >= draws as usize),
         "{within:?}"

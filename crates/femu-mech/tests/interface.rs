@@ -12,6 +12,9 @@ use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// Two blocks of width `w`, the lower `[0, w] x [0, 1]` of `nx_low x 2` quads (element set
 /// `LOW`, surface `LOW_TOP`, node sets `LOW_BOTTOM`, `LOW_LEFT`, `LOW_ALL`), the upper `[0, w] x
 /// [1, 2]` of `nx_high x 2` quads (`HIGH`, surfaces `HIGH_BOTTOM`, `HIGH_TOP`, node sets
@@ -183,6 +186,16 @@ fn interface_tangent_matches_finite_differences_of_the_residual() {
         // Central differences of step 1e-7 on forces of order 1e-2 (entries of order 1):
         // truncation ~h² ‖R'''‖ and round-off ~1e-16 ‖R‖ / h ≈ 1e-10; 1e-6 relative leaves room
         // and still catches any missing term (the smallest, N ∂²g, is ~1e-3 of the largest).
+        let label = match kind {
+            InterfaceKind::Frictionless => "frictionless".to_string(),
+            InterfaceKind::Friction { mu } => format!("Coulomb μ = {mu}"),
+        };
+        measure::record(
+            &format!("{label}, slide {slide} mm ({in_contact} in contact, {slipping} slipping): interface tangent against finite differences, largest error / largest entry"),
+            err / kmax,
+            "< 1e-6",
+            "",
+        );
         assert!(
             err < 1e-6 * kmax,
             "{kind:?}: error {err:.3e}, largest entry {kmax:.3e}"
@@ -257,6 +270,12 @@ fn frictionless_residual_is_the_gradient_of_the_contact_energy() {
     );
     // Central differences of a C¹ piecewise-quadratic energy of order 1e-4 with h = 1e-7:
     // round-off ~1e-16 · 1e-4 / 1e-7 = 1e-13 absolute, far below 1e-7 of forces ~1e-2.
+    measure::record(
+        "frictionless residual against differences of the contact energy, largest error / largest entry",
+        err / scale,
+        "< 1e-7",
+        "",
+    );
     assert!(scale > 1e-3);
     assert!(err < 1e-7 * scale, "error {err:.3e} of {scale:.3e}");
 }
@@ -309,12 +328,24 @@ fn uniform_pressure_crosses_the_interface() {
     );
     // The solver's residual tolerance (1e-8 relative) and the Uzawa updates' penetration
     // limit (the gap at which ε g is the force tolerance) bound the error near 1e-8.
+    measure::record(
+        "contact patch test, matching 4/4 elements: displacement error / largest displacement",
+        matching,
+        "< 1e-6",
+        "",
+    );
     assert!(matching < 1e-6, "{matching:.3e}");
     for (low, high) in [(5, 3), (3, 5), (7, 4)] {
         let (e, pen) = patch_error(low, high, p);
         println!("non-matching {low}/{high}: displacement error {e:.2e} of max |u|, penetration {pen:.2e} mm");
         // Measured (see the guide's sliding-interfaces page): a few percent at most on these
         // coarse meshes, the point-load error of the single-pass node-to-segment element.
+        measure::record(
+            &format!("contact patch test, non-matching {low}/{high} elements: displacement error / largest displacement"),
+            e,
+            "< 5e-2",
+            "",
+        );
         assert!(e < 5e-2, "{low}/{high}: {e:.3e}");
     }
 }
@@ -371,6 +402,18 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
         n / (p * w),
         t.abs() / (mu * p * w)
     );
+    measure::record(
+        "block on block, shear 5e-3 mm (sticks): |ΣT| / (μ p w)",
+        t.abs() / (mu * p * w),
+        "in (0.05, 0.5), no node slipping",
+        "",
+    );
+    measure::record(
+        "block on block, shear 5e-3 mm: |ΣN / (p w) - 1|",
+        (n / (p * w) - 1.0).abs(),
+        "< 1e-6",
+        "",
+    );
     assert!((n / (p * w) - 1.0).abs() < 1e-6);
     assert!(t.abs() < 0.5 * mu * p * w);
     assert!(t.abs() > 0.05 * mu * p * w);
@@ -378,6 +421,24 @@ fn block_on_block_sticks_below_mu_p_and_slides_at_mu_p() {
     // Slide: 0.2 mm.
     let (n, t, slipping, count, law) = run(0.2, mu, d);
     println!("s = 0.2: ΣN/(p w) = {:.8}, |ΣT|/(μ p w) = {:.8}, {slipping} of {count} slipping, largest ||T| - μN| = {law:.2e}", n / (p * w), t.abs() / (mu * p * w));
+    measure::record(
+        "block on block, shear 0.2 mm (slides): |ΣN / (p w) - 1|",
+        (n / (p * w) - 1.0).abs(),
+        "< 1e-6",
+        "",
+    );
+    measure::record(
+        "block on block, shear 0.2 mm: ||ΣT| / (μ p w) - 1|",
+        (t.abs() / (mu * p * w) - 1.0).abs(),
+        "< 1e-6, every node slipping",
+        "",
+    );
+    measure::record(
+        "block on block, shear 0.2 mm: largest ||T| - μN| at a slave node",
+        law,
+        "< 1e-12",
+        "N/mm",
+    );
     assert_eq!(slipping, count);
     // The normal forces balance the pressure (flat master, vertical reactions) and the
     // tangential traction is μ p: both to the residual tolerance (1e-8 of the load).
@@ -482,6 +543,26 @@ fn sliding_thigh(name: &str, loading: &femu_mech::loading::Loading) {
     for (arc, slip, force, gap) in along {
         println!("  arc {arc:8.3} mm  slip {slip:+.4} mm  N {force:.3e} N/mm  gap {gap:+.2e} mm");
     }
+    measure::record(
+        &format!("{name}, sliding quadriceps: largest penetration / element size"),
+        pen / iface.element_size,
+        "≤ 1e-3",
+        "",
+    );
+    measure::record(
+        &format!("{name}, sliding quadriceps: largest slip / tied largest displacement"),
+        max_slip / umax,
+        "> 1e-3",
+        "",
+    );
+    measure::record(
+        &format!(
+            "{name}, sliding quadriceps: largest |u_sliding - u_tied| / tied largest displacement"
+        ),
+        du / umax,
+        "in (0, 1)",
+        "",
+    );
     assert!(
         pen <= 1e-3 * iface.element_size,
         "{name}: penetration {pen:.3e}"
@@ -565,6 +646,12 @@ fn material_sensitivities_with_a_sliding_interface() {
         worst = worst.max(err);
     }
     println!("worst {worst:.2e}");
+    measure::record(
+        "thigh with a sliding quadriceps, compression: material sensitivities against central differences, worst relative difference",
+        worst,
+        "< 1e-5",
+        "",
+    );
     // As the rigid contact's check (tests/sensitivity.rs): central differences with a 5e-4
     // step are accurate to ~1e-7 here, the converged states to ~1e-9 after division by it.
     assert!(worst < 1e-5, "{worst:.3e}");

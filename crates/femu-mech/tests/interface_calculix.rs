@@ -16,6 +16,9 @@ use femu_mesh::inp::{read_ccx_dat_displacements, write_inp};
 use femu_mesh::{Deck, ElementKind};
 use std::process::Command;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 fn ccx_installed() -> bool {
     let found = Command::new("ccx").arg("-v").output().is_ok();
     if !found {
@@ -215,6 +218,30 @@ fn frictionless_blocks_match_ccx() {
             .0
         })
         .collect();
+    for (i, (k, ratio)) in [1.0, 10.0, 100.0, 1000.0].iter().zip(&ratios).enumerate() {
+        let bound = match i {
+            2 => "< 1e-4",
+            3 => "< 1e-5",
+            _ => "not asserted",
+        };
+        measure::record(
+            &format!("frictionless blocks, penalty k = {k} MPa/mm: largest difference from ccx / largest displacement"),
+            *ratio,
+            bound,
+            "",
+        );
+    }
+    for (w, k) in ratios.windows(2).zip([1.0, 10.0, 100.0]) {
+        measure::record(
+            &format!(
+                "frictionless blocks: difference at k = {k} over that at k = {}",
+                10.0 * k
+            ),
+            w[0] / w[1],
+            "in [5, 20)",
+            "",
+        );
+    }
     assert!(ratios[2] < 1e-4, "{ratios:?}");
     // With femu's smoothed master surface the difference is geometric and does not fall with
     // the penalty (8.4e-3 at k = 1000): the lower block's top kinks under the upper block's
@@ -229,6 +256,12 @@ fn frictionless_blocks_match_ccx() {
         0.1,
         false,
         true,
+    );
+    measure::record(
+        "frictionless blocks, k = 1000 MPa/mm, femu's smoothed master surface: largest difference from ccx's straight faces / largest displacement",
+        smoothed,
+        "in [1e-3, 2e-2)",
+        "",
     );
     assert!((1e-3..2e-2).contains(&smoothed), "{smoothed:.3e}");
     assert!(ratios[3] < 1e-5, "{ratios:?}");
@@ -285,6 +318,35 @@ fn frictional_blocks_match_ccx() {
         false,
     );
     let (slip, _) = compare("friction_slip", 0.3, 100.0, 10.0, 0.05, 0.3, false, false);
+    for (quantity, value, bound) in [
+        (
+            "Coulomb μ = 0.3, shear 0.1 mm (stick and slip), k = 100 MPa/mm",
+            mixed,
+            "< 1e-4",
+        ),
+        (
+            "Coulomb μ = 0.3, shear 0.1 mm (stick and slip), k = 1000 MPa/mm",
+            mixed_stiff,
+            "< 1e-4",
+        ),
+        (
+            "Coulomb μ = 0.3, shear 0.3 mm (all slipping), lower block rigid",
+            slip_rigid,
+            "< 5e-4",
+        ),
+        (
+            "Coulomb μ = 0.3, shear 0.3 mm (all slipping)",
+            slip,
+            "< 1e-3",
+        ),
+    ] {
+        measure::record(
+            &format!("{quantity}: largest difference from ccx / largest displacement"),
+            value,
+            bound,
+            "",
+        );
+    }
     assert!(slip_rigid < 5e-4, "{slip_rigid:.3e}");
     assert!(slip < 1e-3, "{slip:.3e}");
 }

@@ -14,6 +14,17 @@ use femu_mech::solid3d::{self, Geometry3, Kind3, MAX_DOFS_3D};
 use rand::{Rng, SeedableRng};
 use std::collections::HashMap;
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
+/// The largest value of each label (first-seen order), for the guide's recorded values.
+fn keep_worst(acc: &mut Vec<(String, f64)>, label: String, value: f64) {
+    match acc.iter_mut().find(|(l, _)| *l == label) {
+        Some((_, w)) => *w = w.max(value),
+        None => acc.push((label, value)),
+    }
+}
+
 /// Energy, force and dense tangent of one element.
 fn evaluate<M: Hyperelastic + ?Sized>(
     geo: &Geometry3,
@@ -118,6 +129,7 @@ const FD_TOLERANCE: f64 = 1e-6;
 #[test]
 fn tangent_is_the_derivative_of_the_force() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(31);
+    let mut recorded = Vec::new();
     for law in registered_laws() {
         for kind in Kind3::ALL {
             let geo = Geometry3::new(kind, &reference_element(kind)).unwrap();
@@ -140,6 +152,7 @@ fn tangent_is_the_derivative_of_the_force() {
                 }
                 let name = law.spec().name;
                 println!("{name} {kind:?}: tangent vs FD {worst:.1e}");
+                keep_worst(&mut recorded, format!("{kind:?}"), worst);
                 assert!(
                     worst < FD_TOLERANCE,
                     "{name} {kind:?}: tangent vs FD {worst:e}"
@@ -153,12 +166,21 @@ fn tangent_is_the_derivative_of_the_force() {
             }
         }
     }
+    for (kind, worst) in recorded {
+        measure::record(
+            &format!("{kind} tangent against finite differences of the force, worst over the laws, / largest entry"),
+            worst,
+            "< 1e-6",
+            "",
+        );
+    }
 }
 
 /// The force is the derivative of the energy, for every element type and law.
 #[test]
 fn force_is_the_derivative_of_the_energy() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(32);
+    let mut recorded = Vec::new();
     for law in registered_laws() {
         for kind in Kind3::ALL {
             let geo = Geometry3::new(kind, &reference_element(kind)).unwrap();
@@ -187,7 +209,16 @@ fn force_is_the_derivative_of_the_energy() {
                 "{} {kind:?}: force vs FD of the energy {worst:.1e}",
                 law.spec().name
             );
+            keep_worst(&mut recorded, format!("{kind:?}"), worst);
         }
+    }
+    for (kind, worst) in recorded {
+        measure::record(
+            &format!("{kind} force against finite differences of the energy, worst over the laws, / largest entry"),
+            worst,
+            "< 1e-6",
+            "",
+        );
     }
 }
 
@@ -196,6 +227,7 @@ fn force_is_the_derivative_of_the_energy() {
 #[test]
 fn parameter_forces_are_the_derivative_of_the_force() {
     fn check<L: MaterialLaw>(rng: &mut impl Rng) {
+        let mut recorded = Vec::new();
         let typical: Vec<f64> = L::SPEC.parameters.iter().map(|p| p.typical).collect();
         let law = L::with_parameters(&typical);
         for kind in Kind3::ALL {
@@ -223,6 +255,7 @@ fn parameter_forces_are_the_derivative_of_the_force() {
                     .map(|r| ((fp[r] - fm[r]) / (2.0 * h) - got[r]).abs() / scale)
                     .fold(0.0, f64::max);
                 println!("{} {kind:?} parameter {k}: vs FD {worst:.1e}", L::SPEC.name);
+                keep_worst(&mut recorded, String::new(), worst);
                 for r in 0..nd {
                     let fd = (fp[r] - fm[r]) / (2.0 * h);
                     assert!(
@@ -234,6 +267,12 @@ fn parameter_forces_are_the_derivative_of_the_force() {
                 }
             }
         }
+        measure::record(
+            &format!("{} parameter forces against finite differences of the force, worst over the parameters and element types, / largest entry", L::SPEC.name),
+            recorded[0].1,
+            "< 1e-6",
+            "",
+        );
     }
     let mut rng = rand::rngs::StdRng::seed_from_u64(33);
     check::<NeoHookean>(&mut rng);
@@ -547,6 +586,7 @@ fn patch_tests_reproduce_affine_deformations() {
         std::array::from_fn(|i| (0..3).map(|j| fa[3 * i + j] * x[j]).sum::<f64>() - x[i] + 0.1)
     };
     let mut rng = rand::rngs::StdRng::seed_from_u64(35);
+    let mut recorded = Vec::new();
     for law in registered_laws() {
         for kind in Kind3::ALL {
             let mesh = match kind {
@@ -602,6 +642,25 @@ fn patch_tests_reproduce_affine_deformations() {
                 "{name} {kind:?} patch ({} elements, {n_free} free dofs): |u - u_affine| \
                  {worst_u:.1e} mm, stress {worst_s:.1e}",
                 mesh.elements.len()
+            );
+            keep_worst(&mut recorded, format!("{kind:?}"), worst_u);
+            keep_worst(&mut recorded, format!("{kind:?} stress"), worst_s);
+        }
+    }
+    for (label, worst) in recorded {
+        if let Some(kind) = label.strip_suffix(" stress") {
+            measure::record(
+                &format!("{kind} patch test, worst over the laws: element stress against the affine one / largest component"),
+                worst,
+                "< 1e-10",
+                "",
+            );
+        } else {
+            measure::record(
+                &format!("{label} patch test, worst over the laws: largest nodal error"),
+                worst,
+                "< 1e-10",
+                "mm",
             );
         }
     }
@@ -661,6 +720,7 @@ fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
     let l = 2.0;
     let lambda = 1.3;
     for kind in Kind3::ALL {
+        let (mut worst_mu, mut worst_s11) = (0.0f64, 0.0f64);
         for loaded in [1, 2] {
             let mesh = match kind {
                 Kind3::C3d8 | Kind3::C3d8h => hex_mesh(2, l, kind, 0.15, 11),
@@ -712,6 +772,8 @@ fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
                 (got_mu - mu).abs(),
                 (s11 - sigma[0]).abs() / sigma[0].abs()
             );
+            worst_mu = worst_mu.max((got_mu - mu).abs());
+            worst_s11 = worst_s11.max((s11 - sigma[0]).abs() / sigma[0].abs());
             assert!(
                 (s11 - sigma[0]).abs() < 1e-9 * sigma[0].abs(),
                 "{kind:?} {loaded}: σ11 {s11} vs {}",
@@ -755,6 +817,24 @@ fn homogeneous_deformations_match_the_closed_form_neo_hookean_stress() {
             }
         }
         println!("{kind:?} simple shear: stress {worst_shear:.1e} of σ12");
+        measure::record(
+            &format!("{kind:?} uniaxial and equibiaxial stretch 1.3: free stretch against the closed form, largest error"),
+            worst_mu,
+            "< 1e-10",
+            "",
+        );
+        measure::record(
+            &format!("{kind:?} uniaxial and equibiaxial stretch 1.3: σ11 against the closed form, relative error"),
+            worst_s11,
+            "< 1e-9",
+            "",
+        );
+        measure::record(
+            &format!("{kind:?} simple shear γ = 0.4: element stress against the closed form / σ12"),
+            worst_shear,
+            "< 1e-12",
+            "",
+        );
     }
 }
 
@@ -861,6 +941,18 @@ fn sparse_newton_solves_a_block_in_uniaxial_tension() {
         );
         // The Newton tolerance (1e-10 of the forces) over the tangent stiffness: stretches to
         // about 1e-10.
+        measure::record(
+            &format!("{kind:?} block, uniaxial dead load 3e-3 MPa, sparse Newton: stretches λ and μ against the closed form, largest error"),
+            (got[0] - lambda).abs().max((got[1] - mu).abs()),
+            "< 1e-8",
+            "",
+        );
+        measure::record(
+            &format!("{kind:?} block, uniaxial dead load: most Newton iterations in an increment"),
+            solution.iterations.iter().copied().max().unwrap_or(0) as f64,
+            "≤ 8",
+            "",
+        );
         assert!(
             (got[0] - lambda).abs() < 1e-8,
             "{kind:?}: λ {} vs {lambda}",
@@ -891,6 +983,12 @@ fn sparse_newton_solves_a_block_in_uniaxial_tension() {
     println!(
         "C3d10 prescribed stretch: P11 {nominal} (closed form {t}), iterations {:?}",
         solution.iterations
+    );
+    measure::record(
+        "C3d10 block, prescribed stretch: nominal stress P11 against the closed form, relative error",
+        (nominal - t).abs() / t,
+        "< 1e-8",
+        "",
     );
     assert!((nominal - t).abs() < 1e-8 * t, "P11 {nominal} vs {t}");
 }
@@ -1105,6 +1203,20 @@ fn pressurized_thick_walled_sphere_matches_the_radial_solution() {
     // error by about 4; C3D8 locks at this compressibility (ν ≈ 0.48: 3.9e-1, 1.3e-1, 6.2e-2),
     // converging, more slowly on coarse meshes.
     let (full, hybrid) = (&all[0], &all[1]);
+    for (kind, errors, bound) in [
+        ("C3d8", full, ["> 2 x the 6 x 6 mesh's", "> the C3d8h one"]),
+        ("C3d8h", hybrid, ["> 3 x the 6 x 6 mesh's", "< 1e-2"]),
+    ] {
+        for (m, (error, bound)) in errors.iter().zip(bound).enumerate() {
+            let n = [3, 6][m];
+            measure::record(
+                &format!("{kind} sphere under inner follower pressure, {n} x {n} patches: inner radius against the radial solution / its displacement"),
+                *error,
+                bound,
+                "",
+            );
+        }
+    }
     assert!(
         hybrid[1] < 1e-2 && hybrid[0] > 3.0 * hybrid[1],
         "C3D8H: {hybrid:?}"
@@ -1175,6 +1287,12 @@ fn sensitivities_of_a_3d_solution_match_finite_differences() {
                 }
             }
             println!("{name} parameter {k}: du/dθ vs FD {worst:.1e} (max |du/dθ| {scale:.2e})");
+            measure::record(
+                &format!("{name} ({}), parameter {}: du/dθ against finite differences of the solve / largest entry", law.spec().name, law.spec().parameters[k].name),
+                worst,
+                "< 1e-6",
+                "",
+            );
             // Truncation (h/θ)² = 1e-8; the solves' residual tolerance (1e-12 of the forces)
             // over h/θ: 1e-8 of the sensitivity.
             assert!(
@@ -1289,6 +1407,12 @@ fn follower_pressure_compresses_a_block_as_the_closed_form() {
             got[0], got[1], solution.iterations
         );
         // The Newton tolerance (1e-10 of the forces) over the stiffness: about 1e-10.
+        measure::record(
+            &format!("{kind:?} block, follower pressure 1e-3 MPa: stretches λ and μ against the closed form, largest error"),
+            (got[0] - lambda).abs().max((got[1] - mu).abs()),
+            "< 1e-8",
+            "",
+        );
         assert!(
             (got[0] - lambda).abs() < 1e-8,
             "{kind:?}: λ {} vs {lambda}",
@@ -1439,6 +1563,12 @@ fn calculix_agrees_on_3d_blocks() {
             println!(
                 "{} {kind:?}: max |u_femu - u_ccx| / max |u_ccx| = {worst:.1e} (max |u| {scale:.3} mm)",
                 law.spec().name
+            );
+            measure::record(
+                &format!("{} {kind:?} block under dead loads: largest difference from ccx / largest displacement", law.spec().name),
+                worst,
+                "< 1e-6",
+                "",
             );
             assert!(worst < 1e-6, "{} {kind:?}: {worst:e}", law.spec().name);
             let _ = std::fs::remove_dir_all(&dir);
