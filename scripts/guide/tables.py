@@ -244,28 +244,36 @@ def verification(results):
     page = (TEMPLATES / "verification.md").read_text()
     total = sum(t.get("test_seconds") or t["seconds"] for t in targets.values())
     # The runs of verify.sh the tables come from: one for a full rerun, more when targets were
-    # measured again on their own (`--only`), each with its date, commit and load.
+    # measured again on their own (`--only`): grouped by machine and commit, each with the dates
+    # and load averages at which its targets started.
     runs = {}
     for t in targets.values():
-        key = tuple(t.get(k, prov.get(k, "?")) for k in ("date", "machine", "commit", "load"))
-        runs.setdefault(key, []).append(t)
+        runs.setdefault((t.get("machine", prov.get("machine", "?")), t.get("commit", prov.get("commit", "?"))), []).append(t)
     if len(runs) <= 1:
-        date, machine, commit, load = next(iter(runs), tuple(prov.get(k, "?") for k in ("date", "machine", "commit", "load")))
         summary = (
-            f"*All the tables: measured {date} on {machine}, commit {commit}, "
-            f"{prov.get('build', '?')}, load average {load} at the start; {len(targets)} test "
-            f"targets, {total / 60:.0f} min; command `bash scripts/guide/verify.sh`.*"
+            f"*All the tables: measured {prov.get('date', '?')} on {prov.get('machine', '?')}, commit "
+            f"{prov.get('commit', '?')}, {prov.get('build', '?')}, load average {prov.get('load', '?')} "
+            f"at the start; {len(targets)} test targets, {total / 60:.0f} min; "
+            f"command `bash scripts/guide/verify.sh`.*"
         )
     else:
-        parts = [
-            f"{date} on {machine}, commit {commit}, load average {load} at the start: {len(ts)} "
-            f"target{'s' if len(ts) > 1 else ''}, {sum(t.get('test_seconds') or t['seconds'] for t in ts) / 60:.0f} min"
-            for (date, machine, commit, load), ts in sorted(runs.items())
-        ]
+        def span(values):
+            values = sorted(set(values))
+            return values[0] if len(values) == 1 else f"{values[0]} to {values[-1]}"
+
+        parts = []
+        for (machine, commit), ts in sorted(runs.items(), key=lambda kv: min(t.get("date", prov.get("date", "")) for t in kv[1])):
+            dates = span([t.get("date", prov.get("date", "?")) for t in ts])
+            loads = span([float(t.get("load", prov.get("load", "nan"))) for t in ts])
+            minutes = sum(t.get("test_seconds") or t["seconds"] for t in ts) / 60
+            parts.append(
+                f"{len(ts)} target{'s' if len(ts) > 1 else ''} measured {dates} on {machine}, commit "
+                f"{commit}, load average {loads} at their start, {minutes:.0f} min"
+            )
         summary = (
-            f"*The tables were measured in {len(runs)} runs ({prov.get('build', '?')}; each "
-            f"table gives its own date and commit): " + "; ".join(parts) + ". Command `bash "
-            f"scripts/guide/verify.sh` (`--only CRATE:TEST,...` for some targets).*"
+            f"*The tables come from {len(runs)} runs of `bash scripts/guide/verify.sh` "
+            f"({prov.get('build', '?')}, each table with its own date and commit): "
+            + "; ".join(parts) + ".*"
         )
     page = page.replace("{{summary}}", summary)
     return re.sub(
