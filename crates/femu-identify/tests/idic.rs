@@ -218,7 +218,8 @@ fn jacobian_matches_finite_differences() {
                 .fold(0.0f64, f64::max);
             measure::record(
                 &format!(
-                    "{pairing:?} pairing, scale {scale} px, local normalization {local:?}, parameter {k}: Jacobian column against central differences, largest error / largest entry"
+                    "{pairing:?} pairing, smoothing {scale} px, local normalization {}, parameter {k}: Jacobian column against central differences, largest error / largest entry",
+                    local.map_or("off".to_string(), |l| format!("{l} px"))
                 ),
                 worst / scale_col,
                 "< 1e-5",
