@@ -397,11 +397,63 @@ def contact(results):
     return "\n".join(out) + "\n"
 
 
+def recorded_rows(name, key):
+    """The rows of bench/verification/results/NAME.jsonl whose quantity holds KEY (underscores
+    for spaces); an error naming the file and key when none does."""
+    path = ROOT / "bench" / "verification" / "results" / f"{name}.jsonl"
+    text = key.replace("_", " ")
+    rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    rows = [r for r in rows if text in r["quantity"]]
+    if not rows:
+        raise SystemExit(f"{path}: no recorded quantity holds {text!r}")
+    return rows
+
+
+def recorded_format(v, fmt):
+    return f"{100 * v:.0f}" if fmt == "pct" else f"{v:{fmt}}"
+
+
+def recorded(name, key, fmt=".2f"):
+    """One value a verification test recorded (`verify.sh`), for a sentence of a page:
+    `{{recorded NAME KEY [FORMAT]}}`, KEY a part of the quantity (underscores for spaces), which
+    must name one quantity; FORMAT a Python format spec or `pct` (x 100, no decimals)."""
+    rows = recorded_rows(name, key)
+    if len(rows) != 1:
+        raise SystemExit(f"{name}.jsonl: {len(rows)} recorded quantities hold {key.replace('_', ' ')!r}, not one")
+    return recorded_format(rows[0]["value"], fmt)
+
+
+def recorded_span(name, key, fmt=".2f"):
+    """The smallest and largest of the values whose quantity holds KEY: `low–high`."""
+    values = [r["value"] for r in recorded_rows(name, key)]
+    low, high = recorded_format(min(values), fmt), recorded_format(max(values), fmt)
+    return low if low == high else f"{low}–{high}"
+
+
+def recorded_provenance(*names):
+    """When, where and at which commit the verification targets NAME... were measured (their
+    entries in bench/verification/results/targets.json, else its provenance.json)."""
+    d = ROOT / "bench" / "verification" / "results"
+    prov = json.loads((d / "provenance.json").read_text())
+    targets = {f"{t['crate']}-{t['test']}": t for t in json.loads((d / "targets.json").read_text())}
+    seen = []
+    for n in names:
+        t = targets.get(n)
+        if t is None:
+            raise SystemExit(f"{d / 'targets.json'}: no target {n}")
+        what = (t.get("date", prov.get("date", "?")), t.get("machine", prov.get("machine", "?")),
+                t.get("commit", prov.get("commit", "?")))
+        if what not in seen:
+            seen.append(what)
+    return "; ".join(f"measured {date} on {machine}, commit {commit}" for date, machine, commit in seen)
+
+
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
     funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
-             "contact": contact}
+             "contact": contact, "recorded": recorded, "recorded_span": recorded_span,
+             "recorded_provenance": recorded_provenance}
     page = (TEMPLATES / template).read_text()
     return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
                   lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
