@@ -200,7 +200,7 @@ def verification_table(results, name, prov, targets):
     path = pathlib.Path(results) / f"{name}.jsonl"
     crate, test = name.split("-", 2)[0] + "-" + name.split("-", 2)[1], name.split("-", 2)[2]
     target = targets.get((crate, test))
-    command = f"cargo test --release -p {crate} --test {test}"
+    command = f"cargo test --release -p {crate} " + ("--lib" if test == "lib" else f"--test {test}")
     # A target measured on its own (`verify.sh --only`) carries its own date, machine, commit.
     prov = {**prov, **{k: target[k] for k in ("date", "machine", "commit") if target and k in target}}
     head = (
@@ -217,10 +217,14 @@ def verification_table(results, name, prov, targets):
         return head + "\nNothing recorded: the tests skipped (see above for what they need).\n"
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     source = ROOT / "crates" / crate / "tests" / f"{test}.rs"
-    text = source.read_text() if source.exists() else ""
+    if test == "lib":
+        # Unit tests: in the order of the crate's sources, file by file.
+        text = "".join(f.read_text() for f in sorted((ROOT / "crates" / crate / "src").rglob("*.rs")))
+    else:
+        text = source.read_text() if source.exists() else ""
 
     def where(r):
-        i = text.find(f"fn {r['test']}(")
+        i = text.find(f"fn {r['test'].split('::')[-1]}(")
         return i if i >= 0 else len(text)
 
     rows = sorted(enumerate(rows), key=lambda ir: (where(ir[1]), ir[0]))

@@ -5,8 +5,8 @@
 #   bash scripts/guide/verify.sh [OUT_DIR]                        # every target: the full rerun
 #   bash scripts/guide/verify.sh --only CRATE:TEST[,CRATE:TEST...] [OUT_DIR]
 #
-# Each test target below runs as `cargo test --release -p CRATE --test TEST` with
-# FEMU_MEASURE_DIR set: the tests append one JSON line per measured quantity (test, quantity,
+# Each test target below runs as `cargo test --release -p CRATE --test TEST` (TEST `lib`: the
+# crate's unit tests, `cargo test --release -p CRATE --lib`) with FEMU_MEASURE_DIR set: the tests append one JSON line per measured quantity (test, quantity,
 # value, the bound they assert, unit) to CRATE-TEST.jsonl (scripts/guide/measure.rs), which
 # lands in OUT_DIR (default bench/verification/results). Beside them: provenance.json (machine
 # and build; scripts/guide/provenance.sh) and targets.json (each target's date, commit, machine
@@ -33,7 +33,8 @@ all=(
     femu-dic:dicom_jpeg
     femu-identify:identification femu-identify:joint femu-identify:calculix
     femu-identify:discretization femu-identify:weighted femu-identify:idic
-    femu-identify:pose_term
+    femu-identify:pose_term femu-identify:lib
+    femu-mesh:locate
     femu-convergence:convergence
 )
 only=""
@@ -58,9 +59,12 @@ else
 fi
 . scripts/guide/provenance.sh
 
+# The cargo arguments of a target: its test binary, or the library's unit tests.
+selector() { if [ "${1#*:}" = lib ]; then echo "--lib"; else echo "--test ${1#*:}"; fi; }
+
 # Build the test binaries first, so that the times below are the tests' own.
 build=()
-for t in "${targets[@]}"; do build+=(-p "${t%%:*}" --test "${t#*:}"); done
+for t in "${targets[@]}"; do build+=(-p "${t%%:*}" $(selector "$t")); done
 cargo test --release --no-run "${build[@]}"
 
 command -v ccx >/dev/null 2>&1 || echo "warning: no ccx: the CalculiX comparisons skip and record nothing"
@@ -75,8 +79,12 @@ for t in "${targets[@]}"; do
     write_provenance "$scratch/started.json" "-"
     start=$(date +%s%N)
     status=0
-    FEMU_MEASURE_DIR="$scratch/results" cargo test --release -q -p "$crate" --test "$name" \
+    # shellcheck disable=SC2046
+    FEMU_MEASURE_DIR="$scratch/results" cargo test --release -q -p "$crate" $(selector "$t") \
         >"$scratch/logs/$crate-$name.log" 2>&1 || status=$?
+    # Unit tests record under the library's crate name (measure.rs): the target's name instead.
+    lib_file="$scratch/results/$crate-${crate//-/_}.jsonl"
+    if [ "$name" = lib ] && [ -f "$lib_file" ]; then mv "$lib_file" "$scratch/results/$crate-lib.jsonl"; fi
     ds=$((($(date +%s%N) - start) / 100000000))
     seconds=$((ds / 10)).$((ds % 10))
     # The tests' own time, as libtest reports it ("finished in 1.23s"); the wall time above also

@@ -4,6 +4,9 @@
 use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::{ElementKind, PointInterpolation};
 
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
+
 /// A 4 x 3 mm rectangle of 8 x 6 quads with every interior node moved by up to 30 % of the
 /// spacing (a fixed pseudo-random pattern): the quads are general, not parallelograms.
 fn distorted(kind: ElementKind) -> GeneratedMesh {
@@ -70,6 +73,16 @@ fn linear_field_is_interpolated_exactly_and_outside_points_are_masked() {
                 worst = worst.max((v[0] - e[0]).abs()).max((v[1] - e[1]).abs());
             }
         }
+        measure::record(
+            &format!(
+                "{kind:?} on a distorted mesh, linear field: largest interpolation error ({} of {} points inside, the rest masked)",
+                ip.inside(),
+                pts.len()
+            ),
+            worst,
+            "< 1e-12",
+            "mm",
+        );
         assert!(worst < 1e-12, "{kind:?}: largest error {worst:.3e}");
         // The projection operator gives the same values, and its rows sum to 1.
         let mut proj = vec![0.0; 2 * pts.len()];
