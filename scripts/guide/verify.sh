@@ -100,12 +100,12 @@ print(json.dumps({"crate": crate, "test": test, "date": p["date"], "machine": p[
                   "test_seconds": float(test_seconds) if test_seconds else None,
                   "status": int(status)}, ensure_ascii=False))
 PY
-    echo "$crate --test $name: exit $status, $seconds s"
+    echo "$crate $(selector "$t"): exit $status, $seconds s"
     if [ "$status" -ne 0 ]; then
         tail -40 "$scratch/logs/$crate-$name.log"
         mkdir -p /tmp/femu-verify-logs
         cp "$scratch/logs/$crate-$name.log" /tmp/femu-verify-logs/
-        echo "verify: $crate --test $name failed (log: /tmp/femu-verify-logs/$crate-$name.log);" \
+        echo "verify: $crate $(selector "$t") failed (log: /tmp/femu-verify-logs/$crate-$name.log);" \
             "$out and the page are left as they were"
         exit 1
     fi

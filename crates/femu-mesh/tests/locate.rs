@@ -75,7 +75,8 @@ fn linear_field_is_interpolated_exactly_and_outside_points_are_masked() {
         }
         measure::record(
             &format!(
-                "{kind:?} on a distorted mesh, linear field: largest interpolation error ({} of {} points inside, the rest masked)",
+                "{} on a distorted mesh, linear field: largest interpolation error ({} of {} points inside, the rest masked)",
+                kind.deck_name(),
                 ip.inside(),
                 pts.len()
             ),
