@@ -269,14 +269,15 @@ def verification(results):
         for (machine, commit), ts in sorted(runs.items(), key=lambda kv: min(t.get("date", prov.get("date", "")) for t in kv[1])):
             dates = span([t.get("date", prov.get("date", "?")) for t in ts])
             loads = span([float(t.get("load", prov.get("load", "nan"))) for t in ts])
-            minutes = sum(t.get("test_seconds") or t["seconds"] for t in ts) / 60
+            seconds = sum(t.get("test_seconds") or t["seconds"] for t in ts)
+            took = f"{seconds:.0f} s" if seconds < 90 else f"{seconds / 60:.0f} min"
             parts.append(
                 f"{len(ts)} target{'s' if len(ts) > 1 else ''} measured {dates} on {machine}, commit "
-                f"{commit}, load average {loads} at their start, {minutes:.0f} min"
+                f"{commit}, load average {loads} at their start, {took}"
             )
         summary = (
-            f"*The tables come from {len(runs)} runs of `bash scripts/guide/verify.sh` "
-            f"({prov.get('build', '?')}, each table with its own date and commit): "
+            f"*The tables come from {len(runs)} runs of `bash scripts/guide/verify.sh`, "
+            f"{prov.get('build', '?')}; each table gives its own date and commit: "
             + "; ".join(parts) + ".*"
         )
     page = page.replace("{{summary}}", summary)
