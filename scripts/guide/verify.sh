@@ -19,8 +19,9 @@
 #
 # The tests record into a scratch directory first: a target that fails stops the script and
 # OUT_DIR and the page are left as they were. Then `scripts/guide/tables.py verification` writes
-# the page (and, from bench/verification/results, the DIC page, which quotes some values). On two cores (load average 2.5) the full rerun took 2 minutes of release build from
-# a warm target directory (a quarter of an hour from a cold one) and 4 minutes of tests.
+# the page (and, from bench/verification/results, the DIC page, which quotes some values). On
+# two cores (load average 2.5) the full rerun took 2 minutes of release build from a warm target
+# directory (a quarter of an hour from a cold one) and 4 minutes of tests.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 all=(
