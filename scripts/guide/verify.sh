@@ -6,9 +6,9 @@
 #   bash scripts/guide/verify.sh --only CRATE:TEST[,CRATE:TEST...] [OUT_DIR]
 #
 # Each test target below runs as `cargo test --release -p CRATE --test TEST` (TEST `lib`: the
-# crate's unit tests, `cargo test --release -p CRATE --lib`) with FEMU_MEASURE_DIR set: the tests append one JSON line per measured quantity (test, quantity,
-# value, the bound they assert, unit) to CRATE-TEST.jsonl (scripts/guide/measure.rs), which
-# lands in OUT_DIR (default bench/verification/results). Beside them: provenance.json (machine
+# crate's unit tests, `cargo test --release -p CRATE --lib`) with FEMU_MEASURE_DIR set: the
+# tests append one JSON line per measured quantity (test, quantity, value, the bound they
+# assert, unit) to CRATE-TEST.jsonl (scripts/guide/measure.rs), which lands in OUT_DIR (default bench/verification/results). Beside them: provenance.json (machine
 # and build; scripts/guide/provenance.sh) and targets.json (each target's date, commit, machine
 # and load average when it started, its wall time, its tests' own time and exit status).
 #
