@@ -113,10 +113,12 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_value = "contention,compression")]
         tests: Vec<String>,
     },
-    /// Solve an Abaqus/CalculiX deck (.inp), or a Gmsh mesh (.msh) with a study file naming its
+    /// Solve an Abaqus/CalculiX deck (.inp; plane-strain CPE4/CPE4H/CPE3 or 3D
+    /// C3D8/C3D8H/C3D4/C3D10 elements), or a Gmsh mesh (.msh) with a study file naming its
     /// materials and loads.
     Solve {
-        /// The deck (.inp) or Gmsh mesh (.msh 4.1).
+        /// The deck (.inp) or Gmsh mesh (.msh 4.1). A deck whose elements are C3D* is solved in
+        /// 3D (displacements.csv gains z and uz).
         input: PathBuf,
         /// Study file (TOML) for a .msh input: materials per physical surface, fixed curves,
         /// pressures (the guide: docs/guide, "A deck from another mesher").

@@ -1,5 +1,5 @@
-//! `femu mesh thigh` and `femu mesh labels`: build a thigh model (the built-in parametric thigh
-//! or a segmented label image), check its quality and write the output folder (see
+//! `femu mesh thigh`, `femu mesh labels` and `femu mesh thigh3d`: build a thigh model (the
+//! built-in parametric thigh, a segmented label image, or the thigh swept into a 3D deck), check its quality and write the output folder (see
 //! `femu_study::steps::model`). Thin glue: arguments here, everything else in femu-study and
 //! femu-geometry.
 
@@ -8,6 +8,7 @@ use crate::QuadElement;
 use anyhow::{Context, Result};
 use clap::Subcommand;
 use femu_geometry::ThighParams;
+use femu_study::progress::Progress;
 use femu_study::steps::model::{self, LabelMeshRequest, ThighMeshRequest};
 use std::path::{Path, PathBuf};
 
@@ -73,6 +74,56 @@ pub enum MeshCommand {
         #[arg(long, default_value = "out/mesh")]
         out: PathBuf,
     },
+    /// The built-in thigh swept along the femur axis into a 3D deck of hexahedra (C3D8H or
+    /// C3D8), with a taper, the femur fixed and a pressure on the probe's footprint:
+    /// `thigh3d.inp` (for `femu solve` and CalculiX), `mesh.vtu`, `summary.json`.
+    Thigh3d {
+        /// Element size of the cross-section (mm).
+        #[arg(long, default_value_t = 4.5)]
+        size: f64,
+        /// Length along the femur axis (mm).
+        #[arg(long, default_value_t = 120.0)]
+        length: f64,
+        /// Layer thickness under the probe (mm); layers grow by --growth towards the ends.
+        #[arg(long, default_value_t = 5.0)]
+        layer: f64,
+        /// Growth of the layers' thickness per layer away from the probe.
+        #[arg(long, default_value_t = 1.6)]
+        growth: f64,
+        /// Scale of the section at the far end relative to the near end (1: no taper).
+        #[arg(long, default_value_t = 1.0)]
+        end_scale: f64,
+        /// Element formulation.
+        #[arg(long, value_enum, default_value = "c3d8h")]
+        element: HexElement,
+        /// Direction of the probe from the section's centre (degrees; 90 = anterior).
+        #[arg(long, default_value_t = 90.0)]
+        probe_angle: f64,
+        /// Probe footprint width across the thigh (mm).
+        #[arg(long, default_value_t = 10.0)]
+        probe_width: f64,
+        /// Probe footprint length along the thigh (mm).
+        #[arg(long, default_value_t = 40.0)]
+        probe_length: f64,
+        /// Pressure on the footprint (kPa; 2.67 kPa = 20 mmHg).
+        #[arg(long, default_value_t = 2.67)]
+        pressure: f64,
+        /// Hold both ends along the axis (a slab in plane strain) instead of leaving them free.
+        #[arg(long)]
+        plane_strain_ends: bool,
+        /// Output folder (created if absent).
+        #[arg(long, default_value = "out/mesh3d")]
+        out: PathBuf,
+    },
+}
+
+/// Hexahedron formulations of `femu mesh thigh3d`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum HexElement {
+    /// Trilinear hexahedron with a constant pressure (mean dilatation), for near-incompressible tissue.
+    C3d8h,
+    /// Plain trilinear hexahedron.
+    C3d8,
 }
 
 /// Runs `femu mesh ...`.
@@ -131,6 +182,49 @@ pub fn run(cmd: MeshCommand, quiet: bool) -> Result<()> {
                 element: element.into(),
             };
             Ok(model::mesh_labels(&req, &out, &progress)?)
+        }
+        MeshCommand::Thigh3d {
+            size,
+            length,
+            layer,
+            growth,
+            end_scale,
+            element,
+            probe_angle,
+            probe_width,
+            probe_length,
+            pressure,
+            plane_strain_ends,
+            out,
+        } => {
+            let req = femu_study::steps::solve3::Thigh3Request {
+                size_mm: size,
+                length_mm: length,
+                layer_mm: layer,
+                growth,
+                end_scale,
+                kind: match element {
+                    HexElement::C3d8h => femu_mesh::ElementKind3::C3d8h,
+                    HexElement::C3d8 => femu_mesh::ElementKind3::C3d8,
+                },
+                probe_angle_deg: probe_angle,
+                probe_width_mm: probe_width,
+                probe_length_mm: probe_length,
+                pressure_kpa: pressure,
+                plane_strain_ends,
+            };
+            let s = femu_study::steps::solve3::mesh_thigh3d(&req, &out)?;
+            progress.note(&format!(
+                "{}: {} nodes, {} {} elements ({} layers of {} quads), {} loaded faces",
+                s.deck,
+                s.nodes,
+                s.elements,
+                s.element_type,
+                s.layers,
+                s.section_quads,
+                s.probe_faces
+            ));
+            Ok(())
         }
     }
 }

@@ -119,6 +119,32 @@ pub fn parse_inp3(text: &str, file_name: &str) -> Result<Deck3> {
     p.finish3()
 }
 
+/// The dimension of a deck's elements: 3 when its first `*ELEMENT` keyword has a `TYPE=C3D…`,
+/// 2 otherwise (plane-strain `CPE…` types, or no element at all: the plane-strain reader then
+/// names what is missing). Only the keyword lines are looked at; [`parse_inp`] or
+/// [`parse_inp3`] reads the deck itself, and refuses a deck mixing the two.
+pub fn deck_dimension(text: &str) -> usize {
+    for line in text.lines() {
+        let line = line.trim_start();
+        if !line.starts_with('*') || line.starts_with("**") {
+            continue;
+        }
+        let upper: String = line
+            .chars()
+            .filter(|c| !c.is_whitespace())
+            .collect::<String>()
+            .to_ascii_uppercase();
+        if upper.starts_with("*ELEMENT,") || upper == "*ELEMENT" {
+            let is_3d = upper.split(',').any(|p| {
+                p.strip_prefix("TYPE=")
+                    .is_some_and(|t| t.starts_with("C3D"))
+            });
+            return if is_3d { 3 } else { 2 };
+        }
+    }
+    2
+}
+
 // ---------------------------------------------------------------------------------------------
 // Lexing: keyword blocks with their parameters and (continuation-joined) data records.
 

@@ -52,6 +52,8 @@ pub enum Error {
     #[error(transparent)]
     Solve(#[from] femu_mech::SolveError),
     #[error(transparent)]
+    Solve3(#[from] femu_mech::solid3d::Solve3Error),
+    #[error(transparent)]
     Model(#[from] femu_mech::ModelError),
     #[error(transparent)]
     Material(#[from] femu_mech::material::MaterialError),
@@ -155,7 +157,10 @@ impl Error {
             | Error::Measured(_)
             | Error::Ultrasound(_)
             | Error::Json(_) => ErrorKind::Input,
-            Error::Solve(_) | Error::Sensitivity(_) | Error::Convergence(_) => ErrorKind::Solve,
+            Error::Solve3(femu_mech::solid3d::Solve3Error::BadElement { .. }) => ErrorKind::Input,
+            Error::Solve(_) | Error::Solve3(_) | Error::Sensitivity(_) | Error::Convergence(_) => {
+                ErrorKind::Solve
+            }
             Error::Dic(_) => ErrorKind::Dic,
             Error::Fit(_)
             | Error::Campaign(_)

@@ -598,3 +598,17 @@ fn ccx_dat_parsing() {
         "x.dat:3: cannot read '1 a b c' as 'node ux uy uz'"
     );
 }
+
+#[test]
+fn deck_dimension_reads_the_first_element_type() {
+    assert_eq!(deck_dimension(GOOD), 2);
+    assert_eq!(
+        deck_dimension(
+            "** c\n*NODE\n1,0,0,0\n*Element , Type = c3d8h, elset=A\n1,1,2,3,4,5,6,7,8\n"
+        ),
+        3
+    );
+    assert_eq!(deck_dimension("*ELEMENT, ELSET=A, TYPE=C3D10\n"), 3);
+    assert_eq!(deck_dimension("*ELEMENTOUTPUT\n*ELEMENT, TYPE=CPE4\n"), 2);
+    assert_eq!(deck_dimension("*NODE\n1,0,0\n"), 2);
+}

@@ -11,7 +11,8 @@
 //! | step | function | folder |
 //! |---|---|---|
 //! | model | [`model::write_study_model`], [`model::mesh_thigh`], [`model::mesh_labels`] | `model/` |
-//! | forward | [`solve::solve_model`], [`solve::solve_file`], [`solve::forward`] | `forward/TEST/` |
+//! | forward | [`solve::solve_model`], [`solve::solve_file`] (a 3D deck: [`solve3::solve_deck3`]), [`solve::forward`] | `forward/TEST/` |
+//! | 3D thigh deck | [`solve3::mesh_thigh3d`] | `femu mesh thigh3d --out` |
 //! | sensitivity | [`sensitivity::run`] | `sensitivity/` |
 //! | measurement | [`identify::synth`], [`measure::prepare`], [`ultrasound::sim`], [`frames::measure`] | `measurement/` |
 //! | identification | [`identify::identify`], [`identify::identify_on`], [`images::identify_images`], [`frames::identify_frames`] | `identify/GROUPING/` |
@@ -31,4 +32,5 @@ pub mod run;
 pub mod sensitivity;
 pub mod sequence;
 pub mod solve;
+pub mod solve3;
 pub mod ultrasound;

@@ -408,7 +408,13 @@ pub fn solve_file(
                     "--study is for .msh inputs; a deck carries its own materials and loads"
                 );
             }
-            let deck = femu_mesh::read_inp(input)?;
+            let text =
+                std::fs::read_to_string(input).with_context(|| format!("cannot read {name}"))?;
+            if femu_mesh::inp::deck_dimension(&text) == 3 {
+                super::solve3::solve_deck3(input, out, progress)?;
+                return Ok(());
+            }
+            let deck = femu_mesh::inp::parse_inp(&text, &name)?;
             Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?
         }
         "msh" => {
