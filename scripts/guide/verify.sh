@@ -35,7 +35,7 @@ all=(
     femu-identify:identification femu-identify:joint femu-identify:calculix
     femu-identify:discretization femu-identify:weighted femu-identify:idic
     femu-identify:pose_term femu-identify:lib
-    femu-mesh:locate
+    femu-mesh:locate femu-cli:sensitivity_cmd femu-cli:run_cmd
     femu-convergence:convergence
 )
 only=""

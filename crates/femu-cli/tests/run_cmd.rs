@@ -7,6 +7,8 @@ use std::process::{Command, Output};
 
 mod common;
 use common::{femu, json, scratch, Scratch};
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 
 /// A small thigh (400 quads), contention and compression, a 24 x 24 grid, two starts.
 const TINY: &str = r#"
@@ -77,6 +79,12 @@ fn a_tiny_study_runs_end_to_end() {
     let comp = &s["forward"]["compression-anterior"];
     assert_eq!(comp["status"], "converged");
     let f = comp["rigid_bodies"][0]["force_n_per_mm"].as_f64().unwrap();
+    measure::record(
+        "400-element study, compression: plate force against the prescribed 0.1 N/mm, difference",
+        (f - 0.1).abs(),
+        "< 1e-8",
+        "N/mm",
+    );
     assert!((f - 0.1).abs() < 1e-8, "plate force {f}");
     // The seed's finding (§3.2): compression is the most sensitive test for C10, contention
     // for D.
@@ -94,6 +102,15 @@ fn a_tiny_study_runs_end_to_end() {
         for p in params {
             let e = p["relative_error"].as_f64().unwrap();
             let sd = p["relative_sd"].as_f64().unwrap();
+            measure::record(
+                &format!(
+                    "400-element study, {grouping} identification, {}: relative error (predicted sd {sd:.2e})",
+                    p["name"].as_str().unwrap_or("?")
+                ),
+                e,
+                &format!("≤ {:.2e} (4 sd + 1e-4)", 4.0 * sd + 1e-4),
+                "",
+            );
             assert!(
                 e <= 4.0 * sd + 1e-4,
                 "{grouping} {}: error {e}, sd {sd}",
@@ -360,6 +377,12 @@ fn femu_run_identifies_from_simulated_ultrasound_images() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let s = json(&out.join("summary.json"));
     let rms = s["measurement"]["dic_error"]["rms_mm"][1].as_f64().unwrap();
+    measure::record(
+        "simulated B-mode images, 2 000 elements: DIC's RMS error of u_y against the FE field",
+        rms,
+        "< 0.2",
+        "mm",
+    );
     assert!(rms < 0.2, "DIC uy error {rms} mm");
     let quad = s["images"]["grouped"]["parameters"]
         .as_array()
@@ -370,6 +393,12 @@ fn femu_run_identifies_from_simulated_ultrasound_images() {
         .clone();
     for route in ["idic", "dic", "weighted"] {
         let e = quad[format!("{route}_error")].as_f64().unwrap();
+        measure::record(
+            &format!("simulated B-mode images: C10_QUADRICEPS relative error by {route}"),
+            e,
+            "|·| < 0.03",
+            "",
+        );
         assert!(e.abs() < 0.03, "C10_QUADRICEPS error by {route}: {e}");
     }
     let (t, ci) = (quad["reference"].as_f64().unwrap(), &quad["idic_ci95"]);

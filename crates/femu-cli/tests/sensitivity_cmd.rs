@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 
 mod common;
 use common::{femu, scratch};
+#[path = "../../../scripts/guide/measure.rs"]
+mod measure;
 
 fn write_study(dir: &Path, text: &str) -> PathBuf {
     let p = dir.join("study.toml");
@@ -54,6 +56,16 @@ fn seed_finding_and_fd_check() {
             .unwrap()
         {
             let d = pair[1].as_f64().unwrap();
+            measure::record(
+                &format!(
+                    "{}, {}: direct sensitivity against `--fd-check`, largest relative difference",
+                    t["test"].as_str().unwrap_or("?"),
+                    pair[0].as_str().unwrap_or("?")
+                ),
+                d,
+                "< 1e-5",
+                "",
+            );
             assert!(d < 1e-5, "{}: {pair}", t["test"]);
         }
     }
