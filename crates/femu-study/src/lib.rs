@@ -22,6 +22,7 @@ pub mod commands;
 pub mod error;
 pub(crate) mod figures;
 pub mod html;
+pub mod interfaces;
 pub mod json;
 pub mod model;
 pub mod output;
