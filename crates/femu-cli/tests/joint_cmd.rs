@@ -155,7 +155,7 @@ fn a_joint_study_runs_with_a_result_per_measurement() {
 
 /// A deck at 0.004 MPa: `femu run`'s contention runs at 0.004 MPa (as `femu solve` runs the deck
 /// itself: the same displacements), not at the default 20 mmHg; a study setting 20 mmHg stops
-/// with both values; an identification on the deck says its discretization error is unknown.
+/// with both values; an identification on the deck checks its mesh on the deck's elements split once and twice.
 #[test]
 fn a_decks_pressure_is_kept() {
     let dir = scratch("deck");
@@ -220,11 +220,25 @@ fn a_decks_pressure_is_kept() {
     // Both converge to 1e-8 of the load; 20 mmHg instead would differ by a third.
     assert!(dmax < 1e-6 * umax, "{dmax} of {umax}");
     let s = json(&out.join("identify/grouped/summary.json"));
-    assert_eq!(s["discretization"]["status"], "unknown");
-    assert!(s["discretization"]["message"]
+    // The deck's check on its elements split once and twice (virtual data from the deck's own
+    // mesh: nothing to widen), saying what it leaves out.
+    let check = &s["discretization"];
+    assert!(
+        ["negligible", "reported"].contains(&check["status"].as_str().unwrap()),
+        "{check}"
+    );
+    let elements = check["elements"].as_u64().unwrap();
+    let levels: Vec<u64> = check["levels"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|l| l["elements"].as_u64().unwrap())
+        .collect();
+    assert_eq!(levels, [4 * elements, 16 * elements], "{check}");
+    assert!(check["message"]
         .as_str()
         .unwrap()
-        .contains("cannot refine a deck"));
+        .contains("splitting its elements"));
     let conflict = write(
         &dir,
         "conflict.toml",

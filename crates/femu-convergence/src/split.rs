@@ -1,11 +1,12 @@
 //! A deck refined by splitting its elements: the refined meshes of a deck (an Abaqus/CalculiX
-//! input from another mesher), whose geometry femu cannot mesh again. The identification's
-//! discretization check does not use them yet: the split meshes converge to the solution on
-//! the deck's own (smoothed) geometry, but on cross-mesh cases of the built-in thigh under
-//! contention C10 differs by some 40 % between that geometry and the traced one meshed again,
-//! whose outlines are 0.03 mm apart on average; a check on the splits alone then estimates a
-//! third to a half of a coarse deck's shift (`femu-identify/examples/deck_check.rs` measures
-//! both).
+//! input from another mesher), whose geometry femu cannot mesh again; the study's
+//! discretization check of a deck uses them. The split meshes converge to the solution on the
+//! deck's own (smoothed) geometry, not on the geometry between its nodes, which the deck does
+//! not record: on cross-mesh cases of the built-in thigh under contention C10 differs by some
+//! 40 % between that geometry and the traced one meshed again (the contention field is nearly
+//! hydrostatic, the C10 carry about 1.4 % of it, and the coarse deck cuts the thin sartorius'
+//! tips, 2 % of its area), so a check on the splits alone estimates a third to a half of a
+//! coarse deck's shift there (`femu-identify/examples/deck_check.rs` measures both).
 //!
 //! Each quadrilateral becomes four (new nodes at its edges' midpoints and at its centre), each
 //! triangle four (at its edges' midpoints): the element size halves. Splitting along straight

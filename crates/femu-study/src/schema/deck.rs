@@ -13,7 +13,22 @@ pub(crate) fn read_deck(
     specs: &[MaterialSpec],
     path: &Path,
 ) -> Result<(MechSpec, Vec<(usize, usize)>)> {
-    let mut spec = MechSpec::from_deck(femu_mesh::read_inp(path)?)?;
+    read_deck_split(specs, path, 0)
+}
+
+/// [`read_deck`] with every element split `times` times in four (`femu_convergence::split`:
+/// the element size halved each time, the outline and interfaces on smooth curves).
+pub(crate) fn read_deck_split(
+    specs: &[MaterialSpec],
+    path: &Path,
+    times: usize,
+) -> Result<(MechSpec, Vec<(usize, usize)>)> {
+    let mut deck = femu_mesh::read_inp(path)?;
+    if times > 0 {
+        deck = femu_convergence::split_deck_times(&deck, times)
+            .map_err(|e| crate::input!("{}: {e}", path.display()))?;
+    }
+    let mut spec = MechSpec::from_deck(deck)?;
     if spec.pressures.is_empty() {
         bail!(
             "{}: the deck has no *DLOAD: its pressure faces define the skin the tests load (write a contention deck, e.g. with femu mesh)",

@@ -37,7 +37,7 @@ pub mod ultrasound;
 
 pub use boundary::MeshBoundary;
 pub use convergence::ConvergenceSpec;
-pub(crate) use deck::read_deck;
+pub(crate) use deck::{read_deck, read_deck_split};
 pub use design::DesignSpec;
 pub use error::StudyError;
 pub use femu_identify::campaign::Optimizer;

@@ -1,5 +1,6 @@
 //! The discretization check of an identification (`[identification] discretization`): the
-//! identified parameters evaluated on meshes of the same geometry refined by √2 and 2, the bias
+//! identified parameters evaluated on meshes of the same geometry refined by √2 and 2 (a deck:
+//! its elements split once and twice, [`DECK_RATIOS`]), the bias
 //! the study's mesh implies (`femu_identify::discretization`), and — with `"refine"` — the
 //! identification continued on the finest of them. The meshes and their solutions are kept with
 //! the study's model for its next identification ([`CheckMeshes`]); on the first check a mesh
@@ -30,7 +31,15 @@ use femu_mesh::locate::PointLocator;
 /// doubled.
 pub const RATIOS: [f64; 2] = [std::f64::consts::SQRT_2, 2.0];
 
-/// The model `built` of `spec` refined by `ratio` (see [`build_refined`]); `None` for a deck.
+/// The refinement ratios of a deck's check: its elements split in four once and twice (4 and 16
+/// times the elements; a split cannot refine by √2).
+pub const DECK_RATIOS: [f64; 2] = [2.0, 4.0];
+
+/// What the check of a deck covers, added to its message.
+pub const DECK_NOTE: &str = "the deck refined by splitting its elements (outline and interfaces on smooth curves through its nodes): this measures the error of its mesh on that geometry, not the geometry between its nodes, which the deck does not record (under contention the C10 are sensitive to it: compare with a finer deck of the same segmentation)";
+
+/// The model `built` of `spec` refined by `ratio` (see [`build_refined`]); `None` when it
+/// cannot be (a deck and a ratio that is not a power of two).
 pub fn refined(spec: &ModelSpec, built: &StudyModel, ratio: f64) -> Result<Option<StudyModel>> {
     build_refined(spec, built, ratio)
 }
@@ -80,7 +89,11 @@ fn check_levels(
         models: models.full.clone(),
         states: own.map(|l| l.states).unwrap_or_default(),
     }];
-    for ratio in RATIOS {
+    let ratios = match inputs.model.geometry {
+        Geometry::Deck(_) => DECK_RATIOS,
+        _ => RATIOS,
+    };
+    for ratio in ratios {
         if let Some(level) = take(ratio) {
             levels.push(level);
             continue;
@@ -111,15 +124,6 @@ pub fn check(
     sd: &[f64],
     progress: &dyn Progress,
 ) -> Result<Checked> {
-    if matches!(inputs.model.geometry, Geometry::Deck(_)) {
-        return Ok(Checked {
-            check: DiscretizationCheck::unknown(
-                models.elements(),
-                "femu cannot refine a deck; mesh the same geometry with about four times the elements, identify again from the same data and compare the parameters (or describe the geometry with [thigh] or [labels], which femu refines itself)",
-            ),
-            finest: None,
-        });
-    }
     let task = progress.task("discretization check on refined meshes", None);
     let mut levels = check_levels(inputs, built, models)?;
     let fields: Vec<MeasuredField> = (0..models.tests.len())
@@ -168,9 +172,12 @@ pub fn check(
     }
     let jacobian =
         jacobian.context("the finest mesh of the discretization check gave no Jacobian")?;
-    let check =
+    let mut check =
         discretization::assess(sd, &evaluated, &jacobian, data_from_model(inputs, prepared))
             .context("the discretization check")?;
+    if matches!(inputs.model.geometry, Geometry::Deck(_)) {
+        check.message = format!("{} ({DECK_NOTE})", check.message);
+    }
     // Kept for the next check on this model; the model's own mesh by its state alone.
     levels[0].models.clear();
     *built.check_meshes.lock().unwrap_or_else(|e| e.into_inner()) = CheckMeshes { levels };
