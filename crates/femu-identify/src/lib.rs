@@ -10,6 +10,8 @@
 //! - [`idic`]: integrated DIC, the parameters from the grey levels of an image sequence.
 //! - [`misfit_intervals`]: intervals on a measured field widened by the Birge ratio or the
 //!   block jackknife, whichever is larger.
+//! - [`variance_components`]: the error variance of groups of residuals (component, depth
+//!   band, lateral edge) estimated from a fit (Helmert, iterated), weights and intervals from it.
 //! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
 //! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
 //!   the free parameters, stacked into one problem; each measurement's share of the information.
@@ -33,4 +35,5 @@ pub mod idic;
 pub mod joint;
 pub mod measured;
 pub mod misfit_intervals;
+pub mod variance_components;
 pub mod weighted;
