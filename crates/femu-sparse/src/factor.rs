@@ -28,6 +28,9 @@ pub enum Factorization {
     /// LDLᵀ of the two halves of a bisected mesh at once ([`crate::split::SplitLdlt`]).
     SplitLdlt,
     Lu,
+    /// An unsymmetric matrix solved by iterative refinement on the LDLᵀ of its symmetric part
+    /// (see [`crate::SparseSolver::refine_on_symmetric_part`]).
+    LdltOfSymmetricPart,
 }
 
 /// A sparse direct factorization on one pattern: the symbolic analysis is made once (by the

@@ -479,9 +479,12 @@ mod tests {
         }
     }
 
+    /// A change to a good request, and the option its error must name.
+    type BadCase = (fn(&mut Thigh3Request), &'static str);
+
     #[test]
     fn bad_requests_name_their_option() {
-        let cases: [(fn(&mut Thigh3Request), &str); 5] = [
+        let cases: [BadCase; 5] = [
             (|r| r.size_mm = 0.0, "--size"),
             (|r| r.probe_length_mm = 80.0, "--probe-length"),
             (|r| r.layer_mm = 8.0, "--layer"),
