@@ -167,7 +167,7 @@ fn solve_a_deck_and_report_bad_decks() {
     assert!(rx < 0.0, "reaction {rx}");
 
     for (name, broken, expect) in [
-        ("type", DECK.replace("TYPE=CPE4,", "TYPE=C3D8,"), ":10:"),
+        ("type", DECK.replace("TYPE=CPE4,", "TYPE=S4R,"), ":10:"),
         (
             "number",
             DECK.replace("1.75e-3, 18.0", "1.75e-3, abc"),

@@ -408,13 +408,15 @@ pub fn solve_file(
                     "--study is for .msh inputs; a deck carries its own materials and loads"
                 );
             }
-            let text =
-                std::fs::read_to_string(input).with_context(|| format!("cannot read {name}"))?;
-            if femu_mesh::inp::deck_dimension(&text) == 3 {
+            // A deck of 3D elements goes to the 3D solve; anything else (text that is not
+            // UTF-8 included) to the plane-strain reader, whose errors name what is wrong.
+            let bytes = std::fs::read(input).with_context(|| format!("cannot read {name}"))?;
+            if femu_mesh::inp::deck_dimension(&String::from_utf8_lossy(&bytes)) == 3 {
                 super::solve3::solve_deck3(input, out, progress)?;
                 return Ok(());
             }
-            let deck = femu_mesh::inp::parse_inp(&text, &name)?;
+            drop(bytes);
+            let deck = femu_mesh::read_inp(input)?;
             Model::from_deck(deck).with_context(|| format!("invalid model in {name}"))?
         }
         "msh" => {
