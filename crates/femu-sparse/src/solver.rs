@@ -308,7 +308,7 @@ impl SparseSolver {
             .iter_mut()
             .zip(&r.residual)
             .for_each(|(v, res)| *v = res / beta);
-        let mut h = vec![[0.0f64; REFINEMENT_KRYLOV + 1]; m];
+        let mut h = [[0.0f64; REFINEMENT_KRYLOV + 1]; REFINEMENT_KRYLOV];
         let (mut cs, mut sn) = ([0.0f64; REFINEMENT_KRYLOV], [0.0f64; REFINEMENT_KRYLOV]);
         let mut g = [0.0f64; REFINEMENT_KRYLOV + 1];
         g[0] = beta;
