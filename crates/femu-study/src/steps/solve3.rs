@@ -18,6 +18,7 @@ use femu_geometry::{parametric_thigh, table1_materials, ThighParams};
 use femu_mech::output::peak_memory_mb;
 use femu_mech::solid3d::{self, Body3, Options3, Solution3, Solve3Error};
 use femu_mech::SolveError;
+use femu_mesh::decimal::push_f64;
 use femu_mesh::vtu::{write_vtu3, VtuField, VtuIntField};
 use femu_mesh::{Deck3, ElementKind, ElementKind3};
 use serde::{Deserialize, Serialize};
@@ -175,16 +176,18 @@ fn write_solved3(
     {
         let path = out.join("displacements.csv");
         let mut w = create_file(&path)?;
-        let mut line = String::with_capacity(160);
+        let mut line = Vec::with_capacity(192);
+        let mut ryu = ryu::Buffer::new();
         writeln!(w, "node,x,y,z,ux,uy,uz")?;
         for (n, x) in mesh.nodes.iter().enumerate() {
             line.clear();
-            line.push_str(&mesh.node_labels[n].to_string());
-            for v in x.iter().chain(u[n].iter()) {
-                line.push(',');
-                line.push_str(&format!("{v:.12e}"));
+            line.extend_from_slice(mesh.node_labels[n].to_string().as_bytes());
+            for &v in x.iter().chain(u[n].iter()) {
+                line.push(b',');
+                push_f64(&mut line, v, &mut ryu);
             }
-            writeln!(w, "{line}")?;
+            line.push(b'\n');
+            w.write_all(&line)?;
         }
         w.commit()
             .with_context(|| format!("writing {}", path.display()))?;
