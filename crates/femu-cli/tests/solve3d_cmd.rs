@@ -94,7 +94,7 @@ fn a_plane_strain_slab_solved_from_the_command_line_moves_alike_at_every_level()
         }
     }
     // Plane strain holds exactly in the continuum and in the discretization (each level's
-    // nodes see the same element rows); what is left is the Newton tolerance (1e-10 on forces)
+    // nodes see the same element rows); what is left is the Newton tolerance (1e-10 on forces);
     // the CSV holds every digit.
     assert!(
         worst < 1e-7 * max_u,
