@@ -770,6 +770,9 @@ fn image_sections(html: &mut Html, dir: &Path) -> Option<BTreeMap<String, images
     let groupings: Vec<&str> = ["ungrouped", "grouped"]
         .into_iter()
         .filter(|g| images::is_image_route(&dir.join("identify").join(g)))
+        .filter(|g| {
+            !frames::is_frames_route(&dir.join("identify").join(g), &dir.join("measurement"))
+        })
         .collect();
     if groupings.is_empty() {
         return None;

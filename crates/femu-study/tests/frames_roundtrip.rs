@@ -142,6 +142,29 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
         "no DIC of the sequence: {:?}",
         recorded.record.notes
     );
+    // The composed field's covariance, mapped to the model frame as the field is: its
+    // diagonal is each point's sx², sy² (measured.csv, 7 digits), the frame's axes being the
+    // model's here (up to sign).
+    let cov = recorded
+        .covariance
+        .as_ref()
+        .expect("the composed field's covariance (a small grid)");
+    let (field, _) = recorded.measured.as_ref().unwrap();
+    assert_eq!(cov.points, field.points.len());
+    assert!(measured.join("measured_covariance.mtx").is_file());
+    let m2 = 2 * cov.points;
+    for (i, p) in field.points.iter().enumerate() {
+        for c in 0..2 {
+            if p.weight[c] > 0.0 {
+                let var = cov.values[(2 * i + c) * m2 + 2 * i + c];
+                let sd2 = 1.0 / p.weight[c];
+                assert!(
+                    (var - sd2).abs() <= 1e-5 * sd2,
+                    "point {i}, component {c}: covariance {var:e} against sd² {sd2:e}"
+                );
+            }
+        }
+    }
     let fr_seq = recorded.sequence();
     // Without the pose keys the frames are placed by [probe] on the model's skin: the same
     // placement as the simulator's (its mesh is the model's here, render_refine = 1), to
@@ -274,6 +297,22 @@ fn recorded_frames_give_the_simulated_experiments_inputs_and_parameters() {
         "C10_FAT: pose sd {:?}, statistical {}",
         fat.pose_sd,
         fat.sd_statistical
+    );
+    // DIC -> weighted FEMU beside the integrated DIC, for comparison (the report's column),
+    // weighted by the composed field's covariance. (On this small window its 8 points in the
+    // tissue determine none of the parameters well, by either DIC -> FEMU route: only that the
+    // route ran on the same points is asserted here.)
+    let summary = |d: &str| -> femu_study::steps::identify::IdentificationSummary {
+        femu_study::output::read_json(&base.join("frames-pose-idic").join(d).join("summary.json"))
+            .unwrap()
+    };
+    let (plain, weighted) = (summary("dic"), summary("dic-weighted"));
+    assert_eq!(weighted.parameters.len(), pose_id.parameters.len());
+    assert_eq!(weighted.points_in_tissue, plain.points_in_tissue);
+    assert!(
+        weighted.measured.ends_with("weighted by its covariance"),
+        "{}",
+        weighted.measured
     );
     let header = std::fs::read_to_string(base.join("frames-pose-idic/parameters.csv")).unwrap();
     assert!(header.lines().next().unwrap().contains(",pose_sd,"));

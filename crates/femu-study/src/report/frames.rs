@@ -23,6 +23,8 @@ pub fn section(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path) 
         return;
     };
     let dic: Option<IdentificationSummary> = html.read(&dir.join("dic").join("summary.json"));
+    let weighted: Option<IdentificationSummary> =
+        html.read(&dir.join("dic-weighted").join("summary.json"));
     let f = &record.frames;
     html.h3(&format!("{grouping}: integrated DIC from recorded frames"));
     html.p(&format!(
@@ -75,6 +77,12 @@ pub fn section(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path) 
                 dic.as_ref()
                     .and_then(|d| d.parameters.get(k))
                     .map_or("-".into(), |q| g(q.identified)),
+                weighted
+                    .as_ref()
+                    .and_then(|d| d.parameters.get(k))
+                    .map_or("-".into(), |q| {
+                        format!("{} [{}, {}]", g(q.identified), g(q.ci95[0]), g(q.ci95[1]))
+                    }),
             ]
         })
         .collect();
@@ -84,6 +92,7 @@ pub fn section(html: &mut Html, grouping: &str, dir: &Path, measurement: &Path) 
             "I-DIC [95 % interval]",
             "relative sd",
             "DIC → FEMU (the start)",
+            "DIC → weighted FEMU [95 % interval] (for comparison)",
         ],
         &rows,
     );

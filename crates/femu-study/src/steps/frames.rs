@@ -35,6 +35,7 @@ use femu_dic::GreyImage;
 use femu_identify::idic::pose_term::PlacementUncertainty;
 use femu_identify::idic::ImageFrame;
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::weighted::FieldCovariance;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -192,6 +193,9 @@ pub struct RecordedFrames {
     /// The composed DIC field (model frame, mm) as written, and its file; `None` when the DIC
     /// of the sequence failed.
     pub measured: Option<(MeasuredField, PathBuf)>,
+    /// The composed field's full covariance (model frame, mm², as `measured_covariance.mtx`
+    /// holds it), when the field has at most [`femu_dic::output::MAX_COVARIANCE_POINTS`] points.
+    pub covariance: Option<FieldCovariance>,
 }
 
 impl RecordedFrames {
@@ -283,8 +287,10 @@ pub fn measure(
         force,
         placement_from
     ));
-    let (dic, measured) = match sequence_dic(&frames, &placement, out, progress) {
-        Ok((d, field)) => (Some(d), Some((field, out.join("measured.csv")))),
+    let (dic, measured, covariance) = match sequence_dic(&frames, &placement, out, progress) {
+        Ok((d, field, covariance)) => {
+            (Some(d), Some((field, out.join("measured.csv"))), covariance)
+        }
         Err(e) if e.is_interrupted() => return Err(e),
         Err(e) => {
             let note = format!(
@@ -293,7 +299,7 @@ pub fn measure(
             );
             progress.warn(&note);
             notes.push(note);
-            (None, None)
+            (None, None, None)
         }
     };
     let record = FramesRecord {
@@ -312,6 +318,7 @@ pub fn measure(
         record,
         frames,
         measured,
+        covariance,
     })
 }
 
@@ -457,13 +464,15 @@ fn force_log_figure(
 }
 
 /// The DIC of the sequence (frame to frame, composed to the first: `femu dic F0 F1 ...` with
-/// its defaults), written as `measured.csv` in the model frame and `sequence.csv`.
+/// its defaults), written as `measured.csv` in the model frame and `sequence.csv`, and the
+/// composed field's covariance as `measured_covariance.mtx` (up to
+/// [`femu_dic::output::MAX_COVARIANCE_POINTS`] points, as `femu dic` writes it).
 fn sequence_dic(
     frames: &[GreyImage],
     placement: &ImageFrame,
     out: &Path,
     progress: &dyn Progress,
-) -> Result<(SequenceDic, MeasuredField)> {
+) -> Result<(SequenceDic, MeasuredField, Option<FieldCovariance>)> {
     use femu_dic::command::{CorrelationSpec, RoiSpec};
     let t0 = std::time::Instant::now();
     let spec = CorrelationSpec {
@@ -489,11 +498,23 @@ fn sequence_dic(
             ));
             let field = plain_chain(frames)
                 .with_context(|| format!("after the automatic DIC failed ({why})"))?;
-            return finish_start(field, placement, out, Vec::new(), t0, progress);
+            let (d, field) = finish_start(field, placement, out, Vec::new(), t0, progress)?;
+            return Ok((d, field, None));
         }
     };
     let last = frames.len() - 1;
     let px = seq.field(last, &femu_dic::output::ModelFrame::default());
+    // In pixels² (the default frame: 1 mm per px, image axes), mapped below as the field is.
+    let covariance_px = (px.len() <= femu_dic::output::MAX_COVARIANCE_POINTS)
+        .then(|| {
+            seq.covariance(
+                last,
+                &seq.reaching(last),
+                &femu_dic::output::ModelFrame::default(),
+            )
+        })
+        .transpose()
+        .context("the covariance of the sequence's composed field")?;
     let field = MeasuredField {
         points: px
             .iter()
@@ -543,7 +564,50 @@ fn sequence_dic(
     }
     femu_mesh::atomic::write(out.join("sequence.csv"), csv)
         .with_context(|| format!("cannot write {}", out.join("sequence.csv").display()))?;
-    finish_start(field, placement, out, increments, t0, progress)
+    let (d, field) = finish_start(field, placement, out, increments, t0, progress)?;
+    let covariance = match covariance_px {
+        Some(values) => Some(write_covariance(
+            FieldCovariance::new(px.len(), values)?,
+            placement,
+            out,
+        )?),
+        None => {
+            progress.note(&format!(
+                "the composed field has {} points: its full covariance is formed up to {}; DIC -> weighted FEMU weighs it by its points' variances and the error its residuals show",
+                px.len(),
+                femu_dic::output::MAX_COVARIANCE_POINTS
+            ));
+            None
+        }
+    };
+    Ok((d, field, covariance))
+}
+
+/// The composed field's covariance `px2` (pixels², image axes) mapped to the model frame as the
+/// field is (`u = s (u_x e_x + u_y e_y)`: `C = T C_px Tᵀ` per point pair), written as
+/// `measured_covariance.mtx` beside `measured.csv` (which weighted FEMU reads with it), and
+/// returned as the file holds it.
+fn write_covariance(
+    px2: FieldCovariance,
+    placement: &ImageFrame,
+    out: &Path,
+) -> Result<FieldCovariance> {
+    let (s, ex, ey) = (placement.mm_per_px, placement.x_axis, placement.y_axis);
+    let model = px2.mapped([[s * ex[0], s * ey[0]], [s * ex[1], s * ey[1]]]);
+    let path = out.join("measured_covariance.mtx");
+    model
+        .write_mtx(
+            &path,
+            &[
+                format!(
+                    "femu {}: covariance of measured.csv's components (ux, uy per point, in its order), mm^2, model frame",
+                    env!("CARGO_PKG_VERSION")
+                ),
+                "the DIC increments' covariances summed along each point's path (femu_dic::sequence)".into(),
+            ],
+        )
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    FieldCovariance::read_mtx(&path).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// The composed field in pixels `field` mapped to the model, written as `measured.csv`;
@@ -691,13 +755,13 @@ pub fn identify_frames(
     idic_spec.test = m.test;
     let mut starts = Vec::new();
     if let Some((measured, path)) = &recorded.measured {
-        let (field, _) = measured.weighted_points();
+        let (field, kept) = measured.weighted_points();
         let prepared = Prepared {
             name: m.name.clone(),
             label: m.label(inputs.tests),
             test: m.test,
             data: PreparedData::Measured(Measured::plain(
-                field,
+                field.clone(),
                 format!("DIC of the recorded frames ({})", path.display()),
             )),
             travel: None,
@@ -716,6 +780,47 @@ pub fn identify_frames(
         starts.push(a.parameters.iter().map(|p| p.identified).collect());
         // The optimum is the start (as for simulated images): no Latin-hypercube starts.
         idic_spec.starts = 0;
+        // DIC -> weighted FEMU beside it, for comparison (not a start of the integrated DIC):
+        // the composed field weighted by its covariance (or, without one, its points'
+        // variances) plus the error its residuals show, Huber's loss; as for simulated images.
+        let weighted = Prepared {
+            name: m.name.clone(),
+            label: m.label(inputs.tests),
+            test: m.test,
+            data: PreparedData::Measured(Measured {
+                field,
+                source: format!(
+                    "DIC of the recorded frames ({}), weighted by its {}",
+                    path.display(),
+                    if recorded.covariance.is_some() {
+                        "covariance"
+                    } else {
+                        "points' variances"
+                    }
+                ),
+                reference_known: false,
+                // The rows of the points that weigh something, as the field keeps them.
+                covariance: recorded.covariance.as_ref().map(|c| c.sub(&kept)),
+                weighting: crate::schema::Weighting::Estimated,
+                simulated: None,
+            }),
+            travel: None,
+        };
+        // The identification's own starts (the integrated DIC's were set to the optimum above).
+        let mut huber = inputs.identification.clone();
+        huber.test = m.test;
+        huber.loss = femu_identify::weighted::Loss::Huber {
+            k: femu_identify::weighted::HUBER_K,
+        };
+        progress.note("DIC -> FEMU on the sequence's DIC, weighted by its covariance, Huber's loss (for comparison):");
+        super::identify::identify_on(
+            &inputs.with(&huber),
+            grouped,
+            built,
+            &[weighted],
+            &out.join("dic-weighted"),
+            progress,
+        )?;
     }
     let mut route = ImageRouteOptions::for_identification(inputs.identification);
     route.placement = match &recorded.record.pose {
