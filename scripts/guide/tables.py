@@ -453,12 +453,167 @@ def recorded_provenance(*names):
     return "; ".join(f"measured {date} on {machine}, commit {commit}" for date, machine, commit in seen)
 
 
+def dic_real_rows(results, name):
+    """The checks.csv and pairs.csv of one configuration of bench/dic_real/run.sh."""
+    d = ROOT / results / name
+    if not d.is_dir():
+        raise SystemExit(f"{ROOT / results}: no configuration {name!r} (bench/dic_real/run.sh)")
+    return list(csv.DictReader(open(d / "checks.csv"))), list(csv.DictReader(open(d / "pairs.csv")))
+
+
+def dic_real_find(checks, check, frames, region, points):
+    """The row of CHECK over FRAMES (None: pooled over the sequence) in REGION over POINTS."""
+    for r in checks:
+        pooled = r["frames"].endswith("instance(s)")
+        if (r["check"], r["region"], r["points_set"]) == (check, region, points) and (
+                pooled if frames is None else r["frames"] == frames):
+            return r
+    raise SystemExit(f"dic_real: no {check} {frames} {region} ({points} points) in checks.csv")
+
+
+DIC_REAL_COMPOSITION = "gastroc_jumping_048>gastroc_jumping_050>gastroc_jumping_052"
+
+
+def dic_real_rms(results, name, check, region, points="trusted", what="rms_", scale="1"):
+    """`(x, y)` px as configuration NAME of bench/dic_real/run.sh measured it: the RMS (WHAT
+    `rms_`) or the predicted sd (`predicted_sd_`) of CHECK in REGION over POINTS (all or
+    trusted), times SCALE. CHECK: `forward-backward` or `composition`, pooled over the sequence,
+    or `composition@NNN`, the composition from frame NNN two frames on against the one through
+    the frame between (`composition@048`: 048→052 against 048→050→052)."""
+    checks, _ = dic_real_rows(results, name)
+    if "@" in check:
+        check, first = check.split("@")
+        n = int(first)
+        frames = ">".join(f"gastroc_jumping_{k:03d}" for k in (n, n + 2, n + 4))
+    else:
+        frames = None
+    r = dic_real_find(checks, check, frames, region, points)
+    k = float(scale)
+    if what == "predicted_sd_":
+        x, y = float(r["predicted_sd_x_px"]), float(r["predicted_sd_y_px"])
+    else:
+        x, y = float(r["rms_dx_px"]), float(r["rms_dy_px"])
+    return f"({k * x:.2f}, {k * y:.2f})"
+
+
+def dic_real(results):
+    """The real-frame table of bench/dic_real/run.sh: per configuration (ROI, options), the
+    consecutive pairs that converged, the elements trusted, the forward–backward RMS pooled over
+    the sequence and the composition 048→052 against 048→050→052, over the trusted points."""
+    d = ROOT / results
+    configs = list(csv.DictReader(open(d / "configs.csv")))
+    out = [provenance(d).strip(), ""]
+    out.append("| configuration | ROI | frames | options | consecutive pairs converged (elements trusted; iterations) "
+               "| forward–backward, pooled, trusted points (px) | composition 048→052, all points (px) "
+               "| composition 048→052, trusted points: all (px) | superficial | middle | deep | wall (s) |")
+    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for c in configs:
+        opts = f"`{c['options']}`" if c["options"] else "defaults"
+        if c.get("error"):
+            out.append(f"| {c['name']} | {c['roi']} | {c['frames']} | {opts} | did not converge: "
+                       f"{c['error']} | | | | | | | {float(c['wall_s']):.0f} |")
+            continue
+        checks, pairs = dic_real_rows(results, c["name"])
+        # The frames in order (their names end in the frame number), and the pairs that go
+        # from one frame to the next.
+        frames = sorted({p["reference"] for p in pairs} | {p["deformed"] for p in pairs})
+        consecutive = [p for p in pairs if p["deformed"] in frames[1:]
+                       and frames.index(p["deformed"]) == frames.index(p["reference"]) + 1]
+        conv = [p for p in consecutive if p["converged"] == "true"]
+        trusted = [100 * float(p["trusted_fraction"]) for p in conv]
+        span = f"{min(trusted):.0f}–{max(trusted):.0f} %" if trusted else "–"
+        its = [int(p["iterations"]) for p in conv]
+        its = f"{min(its)}–{max(its)}" if its else "–"
+
+        def rms(check, region, points):
+            frames = None if check == "forward-backward" else DIC_REAL_COMPOSITION
+            r = dic_real_find(checks, check, frames, region, points)
+            return f"({float(r['rms_dx_px']):.2f}, {float(r['rms_dy_px']):.2f})"
+
+        out.append(
+            f"| {c['name']} | {c['roi']} | {c['frames']} | {opts} "
+            f"| {len(conv)} of {len(consecutive)} ({span}; {its}) | {rms('forward-backward', 'all', 'trusted')} "
+            f"| {rms('composition', 'all', 'all')} | {rms('composition', 'all', 'trusted')} "
+            f"| {rms('composition', 'superficial', 'trusted')} | {rms('composition', 'middle', 'trusted')} "
+            f"| {rms('composition', 'deep', 'trusted')} | {float(c['wall_s']):.0f} |"
+        )
+    return "\n".join(out) + "\n"
+
+
+def fields_above(run_dir, renderer, bound):
+    """How many realizations of RENDERER in a campaign's fields.csv (bench/independent_us/
+    campaign.py) have a lateral RMS error of the composed field above BOUND px:
+    `N of M (largest X px)`."""
+    rows = [r for r in csv.DictReader(open(ROOT / run_dir / "fields.csv"))
+            if r["renderer"] == renderer and r["rms_ux_px"]]
+    if not rows:
+        raise SystemExit(f"{ROOT / run_dir / 'fields.csv'}: no fields of renderer {renderer!r}")
+    ux = [float(r["rms_ux_px"]) for r in rows]
+    return f"{sum(x > float(bound) for x in ux)} of {len(ux)} (largest {max(ux):.2f} px)"
+
+
+def campaign_error(run_dir, route, parameter, what="mean"):
+    """One parameter of one route of a campaign's campaign.csv: WHAT `mean` (mean |error|, %, two
+    significant digits) or `covered` (`N of M` 95 % intervals holding the truth)."""
+    rows = [r for r in csv.DictReader(open(ROOT / run_dir / "campaign.csv"))
+            if r["route"] == route and r["parameter"] == parameter]
+    if not rows:
+        raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no rows of route {route!r}, parameter {parameter!r}")
+    if what == "covered":
+        return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
+    return f"{sum(abs(float(r['error_pct'])) for r in rows) / len(rows):.2g}"
+
+
+def idic_own(run_dir):
+    """The integrated-DIC campaign on femu's own sequences (bench/us_campaigns/
+    final_defaults.sh, the idic_campaign example's campaign.csv): per parameter under the probe
+    and route (integrated DIC, weighted FEMU, plain DIC → FEMU), mean / largest |error| and the
+    95 % intervals that hold the truth; then the times per realization (campaign_*.json)."""
+    d = ROOT / run_dir
+    rows = list(csv.DictReader(open(d / "campaign.csv")))
+    routes = [("idic", "integrated DIC"), ("weighted", "weighted FEMU"), ("dic", "plain DIC → FEMU")]
+    yes = lambda v: v.strip().lower() in ("true", "1")
+    out = [provenance(d).strip(), ""]
+    out.append("| parameter | " + " | ".join(f"{name}: mean / max \\|error\\|, intervals holding the truth"
+                                               for _, name in routes) + " |")
+    out.append("|---|" + "---|" * len(routes))
+    totals = {k: [0, 0] for k, _ in routes}
+    for par in UNDER_PROBE:
+        rr = [r for r in rows if r["parameter"] == par]
+        if not rr:
+            raise SystemExit(f"{d / 'campaign.csv'}: no rows of {par}")
+        cells = []
+        for k, _ in routes:
+            e = [100 * abs(float(r[f"{k}_error"])) for r in rr]
+            held = sum(yes(r[f"{k}_covered"]) for r in rr)
+            totals[k][0] += held
+            totals[k][1] += len(rr)
+            cells.append(f"{sum(e) / len(e):.3g} / {max(e):.3g} %, {held} of {len(rr)}")
+        out.append(f"| {par} | " + " | ".join(cells) + " |")
+    out.append("| all four | " + " | ".join(f"{h} of {n} intervals" for h, n in totals.values()) + " |")
+    seeds = sorted({int(r["seed"]) for r in rows})
+    times = []
+    for j in sorted(d.glob("campaign_*.json")):
+        times += json.loads(j.read_text()).get("times", [])
+    line = f"\nSeeds {seeds[0]}–{seeds[-1]}, {len(seeds)} realizations"
+    if times and all("idic_total" in t and "dic_route" in t for t in times):
+        it = [t["idic_total"] for t in times]
+        dt = [t["dic_route"] for t in times]
+        line += (f"; integrated DIC {min(it):.0f}–{max(it):.0f} s per realization (its discretization "
+                 f"check included), the DIC → FEMU route {min(dt):.1f}–{max(dt):.1f} s")
+    out.append(line + ".")
+    return "\n".join(out) + "\n"
+
+
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
     funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
              "contact": contact, "recorded": recorded, "recorded_span": recorded_span,
-             "recorded_provenance": recorded_provenance}
+             "recorded_provenance": recorded_provenance,
+             "dic_real": dic_real, "dic_real_rms": dic_real_rms,
+             "fields_above": fields_above, "campaign_error": campaign_error,
+             "idic_own": idic_own}
     page = (TEMPLATES / template).read_text()
     return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
                   lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
