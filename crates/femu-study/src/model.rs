@@ -232,7 +232,11 @@ fn mesh_label_array(
 /// The model of a meshed thigh with the study's materials, femur fixed, no load.
 fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
     let regions = materials(&spec.materials, &thigh.regions)?;
-    let (model, skin) = thigh_as_model(&thigh, regions)?;
+    let (model, skin) = if spec.interfaces.is_empty() {
+        thigh_as_model(&thigh, regions)?
+    } else {
+        crate::interfaces::model_with_interfaces(&thigh, regions, &spec.interfaces)?
+    };
     Ok(StudyModel {
         model,
         skin,
@@ -386,6 +390,7 @@ mod tests {
             resolution: Resolution::Default,
             element: crate::schema::QuadElement::Cpe4h,
             materials: Vec::new(),
+            interfaces: Vec::new(),
         };
         let built = build(&spec).unwrap();
         let area = |m: &Model| -> f64 {

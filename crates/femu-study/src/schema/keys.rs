@@ -1082,6 +1082,61 @@ force_n_per_mm = 0.1
         ],
     },
     TableSpec {
+        name: "interface",
+        array: true,
+        doc: "A sliding interface between two regions of a meshed thigh (built-in or label \
+              image; not a deck): `tied` keeps the shared nodes, `frictionless` and `friction` \
+              split the nodes of the regions' common boundary (its ends stay tied) and add a \
+              node-to-segment contact, the first region slave, the second master.",
+        banner: "Sliding interfaces between regions (none by default: the regions share their nodes).",
+        header: Header::Commented,
+        header_comment: "",
+        tight: false,
+        items: &[
+            Item::Key(
+                key(
+                    "between",
+                    Ty::Texts,
+                    "",
+                    Allowed::Rule("two regions of the model that touch"),
+                    Def::Text("required"),
+                    "the two regions, slave first",
+                )
+                .set("[\"QUADRICEPS\", \"ISCHIO\"]", "two regions of the thigh"),
+            ),
+            Item::Key(
+                key(
+                    "kind",
+                    Ty::Text,
+                    "",
+                    Allowed::Words {
+                        what: "interface kind",
+                        words: &["tied", "frictionless", "friction"],
+                    },
+                    Def::Text("required"),
+                    "shared nodes, normal contact only, or Coulomb friction",
+                )
+                .set("\"frictionless\"", "tied, frictionless or friction"),
+            ),
+            Item::Key(
+                key(
+                    "mu",
+                    Ty::Real,
+                    "",
+                    Allowed::Real {
+                        min: 0.0,
+                        min_open: false,
+                        max: f64::INFINITY,
+                        max_open: false,
+                    },
+                    Def::Text("required for kind = \"friction\", else absent"),
+                    "the Coulomb friction coefficient",
+                )
+                .example("0.2", "kind = \"friction\" only"),
+            ),
+        ],
+    },
+    TableSpec {
         name: "grid",
         array: false,
         doc: "The DIC grid of the virtual measurement (seed §2.4.1).",

@@ -78,6 +78,8 @@ pub struct ModelSpec {
     pub element: QuadElement,
     /// The study's `[materials]` over the geometry's defaults (Table 1, or a deck's own).
     pub materials: Vec<MaterialSpec>,
+    /// `[[interface]]`: the sliding interfaces between regions (none: the mesh as meshed).
+    pub interfaces: Vec<crate::interfaces::InterfaceSpec>,
 }
 
 /// A checked study.
@@ -214,6 +216,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         _ => femu_mech::material::law("neo-hookean").ok(),
     };
     let materials = materials::parse(&file.materials, default_law, &lines)?;
+    let interfaces = parse_interface_tables(file.interface, &geometry, &lines)?;
     let mut tests = loading_tests::parse(file.test.as_deref(), &lines)?;
     if let Geometry::Deck(deck) = &geometry {
         deck_loads::apply(deck, &mut tests, file.test.as_deref(), &lines)?;
@@ -262,6 +265,7 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
             resolution,
             element,
             materials,
+            interfaces,
         },
         tests,
         measurement,
@@ -285,6 +289,36 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
         study.convergence_study()?;
     }
     Ok(study)
+}
+
+/// The `[[interface]]` tables (see [`crate::interfaces::parse_interfaces`]); a sliding one on
+/// a deck is an error (a deck's regions are not split).
+fn parse_interface_tables(
+    value: Option<toml::Value>,
+    geometry: &Geometry,
+    lines: &KeyLines,
+) -> Result<Vec<crate::interfaces::InterfaceSpec>, StudyError> {
+    let Some(value) = value else {
+        return Ok(Vec::new());
+    };
+    let line = lines
+        .first_line_of("interface")
+        .map(|l| format!(" (line {l})"))
+        .unwrap_or_default();
+    let mut doc = toml::Table::new();
+    doc.insert("interface".into(), value);
+    let specs = crate::interfaces::parse_interfaces(&toml::Value::Table(doc))
+        .map_err(|e| StudyError::Study(format!("{e}{line}")))?;
+    if matches!(geometry, Geometry::Deck(_))
+        && specs
+            .iter()
+            .any(|s| s.law != crate::interfaces::InterfaceLaw::Tied)
+    {
+        return Err(StudyError::Study(format!(
+            "[[interface]]{line}: a sliding interface needs a meshed thigh ([thigh] or [labels]); a [model] deck's regions are not split"
+        )));
+    }
+    Ok(specs)
 }
 
 impl Study {
