@@ -124,7 +124,7 @@ fn plane_strain_solves_keep_their_bits() {
             Fingerprint {
                 state: 0x0326_eef6_6e75_7252,
                 iterations: 17,
-                sensitivities: 0xd2e4_58dd_358b_f00d,
+                sensitivities: 0xc1e4_94f4_25b9_2c1e,
             },
         ),
         (
@@ -133,7 +133,7 @@ fn plane_strain_solves_keep_their_bits() {
             Fingerprint {
                 state: 0xbf0e_8857_d835_1757,
                 iterations: 23,
-                sensitivities: 0x81ca_4780_d656_22ab,
+                sensitivities: 0xda99_38a6_7a07_597c,
             },
         ),
         (
@@ -142,7 +142,7 @@ fn plane_strain_solves_keep_their_bits() {
             Fingerprint {
                 state: 0x3ec0_ab6b_b1fa_2f8b,
                 iterations: 8,
-                sensitivities: 0x2c58_637c_7556_1293,
+                sensitivities: 0x4b18_591f_9ba4_0749,
             },
         ),
         (
