@@ -92,7 +92,7 @@ pub fn parse_interfaces(doc: &toml::Value) -> Result<Vec<InterfaceSpec>> {
             ("tied" | "frictionless", Some(_)) => {
                 bail!("{at}: mu is only for kind = \"friction\", not {kind}")
             }
-            _ => bail!("{at}: kind must be tied, frictionless or friction, got {kind:?}"),
+            _ => bail!("{at}: kind must be one of tied, frictionless, friction; got {kind:?}"),
         };
         specs.push(InterfaceSpec { between, law });
     }

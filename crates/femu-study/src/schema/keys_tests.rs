@@ -99,10 +99,11 @@ fn every_accepted_key_is_declared_and_back() {
         ("design", fields::<raw::DesignEntry>()),
     ];
     // Every table but [materials.REGION] and [[test]], whose keys are a law's and a kind's
-    // (declared in their registries), is read into one of these structs.
+    // (declared in their registries), and [[interface]], read by `crate::interfaces` (its keys'
+    // ranges and words are checked against its parser below), is read into one of these structs.
     let covered: BTreeSet<&str> = structs.iter().map(|s| s.0).collect();
     let dynamic: BTreeSet<&str> = tables.difference(&covered).copied().collect();
-    assert_eq!(dynamic, BTreeSet::from(["materials", "test"]));
+    assert_eq!(dynamic, BTreeSet::from(["interface", "materials", "test"]));
     for (table, accepted) in &structs {
         assert!(!accepted.is_empty(), "no fields recorded for [{table}]");
         let refused: BTreeSet<&str> = REFUSED
@@ -147,6 +148,10 @@ fn context(table: &str, key: &str) -> &'static str {
             "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\nunits = \"px\"\n"
         }
         ("fixed", _) => "[[fixed]]\ncurve = \"femur\"\n",
+        ("interface", "mu") => {
+            "[[interface]]\nbetween = [\"QUADRICEPS\", \"ISCHIO\"]\nkind = \"friction\"\n"
+        }
+        ("interface", _) => "[[interface]]\nbetween = [\"QUADRICEPS\", \"ISCHIO\"]\n",
         ("convergence", _) => "[convergence]\n",
         _ => "",
     }
