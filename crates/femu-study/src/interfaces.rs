@@ -102,7 +102,8 @@ pub fn parse_interfaces(doc: &toml::Value) -> Result<Vec<InterfaceSpec>> {
 /// The model of `thigh` with `regions`' materials and the femur (node set `FEMUR`) fixed, its
 /// mesh split along each sliding interface of `specs` and the interfaces added (search radius
 /// twice the element size), and its skin faces (surface `SKIN`). Errors name the interface's
-/// regions: a region the thigh does not have, two regions without a common edge.
+/// regions: a region the thigh does not have, two regions without a common edge. Without a
+/// sliding interface (none, or only tied ones) it is the meshed thigh's model as meshed.
 pub fn model_with_interfaces(
     thigh: &ThighModel,
     regions: Vec<NamedMaterial>,

@@ -4,6 +4,7 @@
 
 use crate::bail;
 use crate::error::{Context, Result};
+use crate::interfaces::model_with_interfaces;
 use crate::schema::{read_deck, read_deck_split};
 use crate::schema::{
     Geometry, LabelsSpec, MaterialSpec, ModelSpec, Resolution, Study, StudyError, DEFAULT_ELEMENTS,
@@ -11,7 +12,7 @@ use crate::schema::{
 };
 use femu_geometry::{MeshOptions, ThighModel};
 use femu_mech::loading::apply_loading;
-use femu_mech::model::{ModelSpec as MechSpec, NamedMaterial};
+use femu_mech::model::NamedMaterial;
 use femu_mech::Model;
 use femu_mesh::{Deck, ElementKind, FacePressure};
 use std::path::Path;
@@ -109,26 +110,6 @@ pub fn materials(specs: &[MaterialSpec], regions: &[String]) -> Result<Vec<Named
             })
         })
         .collect()
-}
-
-/// A meshed thigh as a model: `regions`' materials, the femur (node set `FEMUR`) fixed, no
-/// load, and its skin faces (surface `SKIN`).
-fn thigh_as_model(
-    thigh: &ThighModel,
-    regions: Vec<NamedMaterial>,
-) -> Result<(Model, Vec<(usize, usize)>)> {
-    let spec = MechSpec::with_regions(
-        thigh.mesh.mesh.clone(),
-        thigh.mesh.surfaces.clone(),
-        regions,
-        "FEMUR",
-    )?;
-    let model = Model::new(spec)?;
-    let skin = model.surface("SKIN").unwrap_or_default().to_vec();
-    if skin.is_empty() {
-        bail!("the model has no skin surface");
-    }
-    Ok((model, skin))
 }
 
 /// The contention deck of a model (written for Abaqus/CalculiX): its own content with a
@@ -232,11 +213,7 @@ fn mesh_label_array(
 /// The model of a meshed thigh with the study's materials, femur fixed, no load.
 fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<StudyModel> {
     let regions = materials(&spec.materials, &thigh.regions)?;
-    let (model, skin) = if spec.interfaces.is_empty() {
-        thigh_as_model(&thigh, regions)?
-    } else {
-        crate::interfaces::model_with_interfaces(&thigh, regions, &spec.interfaces)?
-    };
+    let (model, skin) = model_with_interfaces(&thigh, regions, &spec.interfaces)?;
     Ok(StudyModel {
         model,
         skin,
@@ -366,7 +343,7 @@ pub fn thigh_model(elements: usize, kind: ElementKind) -> Result<(Model, Vec<(us
     }
     let thigh = femu_geometry::parametric_thigh(&params, kind)?;
     let regions = materials(&[], &thigh.regions)?;
-    thigh_as_model(&thigh, regions)
+    model_with_interfaces(&thigh, regions, &[])
 }
 
 #[cfg(test)]

@@ -756,16 +756,14 @@ pub fn identify_frames(
     let mut starts = Vec::new();
     if let Some((measured, path)) = &recorded.measured {
         let (field, kept) = measured.weighted_points();
-        let prepared = Prepared {
+        let prepared = |data: Measured| Prepared {
             name: m.name.clone(),
             label: m.label(inputs.tests),
             test: m.test,
-            data: PreparedData::Measured(Measured::plain(
-                field.clone(),
-                format!("DIC of the recorded frames ({})", path.display()),
-            )),
+            data: PreparedData::Measured(data),
             travel: None,
         };
+        let source = format!("DIC of the recorded frames ({})", path.display());
         let mut squared = idic_spec.clone();
         squared.loss = femu_identify::weighted::Loss::Squared;
         progress.note("DIC -> FEMU on the sequence's DIC (the start of the integrated DIC):");
@@ -773,7 +771,7 @@ pub fn identify_frames(
             &inputs.with(&squared),
             grouped,
             built,
-            &[prepared],
+            &[prepared(Measured::plain(field.clone(), source.clone()))],
             &out.join("dic"),
             progress,
         )?;
@@ -783,29 +781,22 @@ pub fn identify_frames(
         // DIC -> weighted FEMU beside it, for comparison (not a start of the integrated DIC):
         // the composed field weighted by its covariance (or, without one, its points'
         // variances) plus the error its residuals show, Huber's loss; as for simulated images.
-        let weighted = Prepared {
-            name: m.name.clone(),
-            label: m.label(inputs.tests),
-            test: m.test,
-            data: PreparedData::Measured(Measured {
-                field,
-                source: format!(
-                    "DIC of the recorded frames ({}), weighted by its {}",
-                    path.display(),
-                    if recorded.covariance.is_some() {
-                        "covariance"
-                    } else {
-                        "points' variances"
-                    }
-                ),
-                reference_known: false,
-                // The rows of the points that weigh something, as the field keeps them.
-                covariance: recorded.covariance.as_ref().map(|c| c.sub(&kept)),
-                weighting: crate::schema::Weighting::Estimated,
-                simulated: None,
-            }),
-            travel: None,
-        };
+        let weighted = prepared(Measured {
+            field,
+            source: format!(
+                "{source}, weighted by its {}",
+                if recorded.covariance.is_some() {
+                    "covariance"
+                } else {
+                    "points' variances"
+                }
+            ),
+            reference_known: false,
+            // The rows of the points that weigh something, as the field keeps them.
+            covariance: recorded.covariance.as_ref().map(|c| c.sub(&kept)),
+            weighting: crate::schema::Weighting::Estimated,
+            simulated: None,
+        });
         // The identification's own starts (the integrated DIC's were set to the optimum above).
         let mut huber = inputs.identification.clone();
         huber.test = m.test;

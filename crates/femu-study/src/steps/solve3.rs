@@ -181,7 +181,7 @@ fn write_solved3(
         writeln!(w, "node,x,y,z,ux,uy,uz")?;
         for (n, x) in mesh.nodes.iter().enumerate() {
             line.clear();
-            line.extend_from_slice(mesh.node_labels[n].to_string().as_bytes());
+            write!(line, "{}", mesh.node_labels[n])?;
             for &v in x.iter().chain(u[n].iter()) {
                 line.push(b',');
                 push_f64(&mut line, v, &mut ryu);
