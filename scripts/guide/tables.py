@@ -564,6 +564,20 @@ def campaign_error(run_dir, route, parameter, what="mean"):
     return f"{sum(abs(float(r['error_pct'])) for r in rows) / len(rows):.2g}"
 
 
+def lk_composition(run_dir, radius, smoothing, what="rms"):
+    """scikit-image's Lucas-Kanade composition check on the real frames (bench/dic_lk/run.sh's
+    lk_composition.csv): for RADIUS and SMOOTHING (px), WHAT `rms` (the composition's RMS
+    difference, lateral and axial, `(X, Y)` px) or `provenance`."""
+    d = ROOT / run_dir
+    if what == "provenance":
+        return provenance(d).strip()
+    rows = [r for r in csv.DictReader(open(d / "lk_composition.csv"))
+            if r["radius_px"] == radius and r["smoothing_px"] == smoothing]
+    if not rows:
+        raise SystemExit(f"{d / 'lk_composition.csv'}: no row of radius {radius}, smoothing {smoothing}")
+    return f"({float(rows[0]['rms_x_px']):.2f}, {float(rows[0]['rms_y_px']):.2f})"
+
+
 def idic_own(run_dir):
     """The integrated-DIC campaign on femu's own sequences (bench/us_campaigns/
     final_defaults.sh, the idic_campaign example's campaign.csv): per parameter under the probe
@@ -613,7 +627,7 @@ def render(template):
              "recorded_provenance": recorded_provenance,
              "dic_real": dic_real, "dic_real_rms": dic_real_rms,
              "fields_above": fields_above, "campaign_error": campaign_error,
-             "idic_own": idic_own}
+             "idic_own": idic_own, "lk_composition": lk_composition}
     page = (TEMPLATES / template).read_text()
     return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
                   lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
