@@ -52,7 +52,7 @@ pub struct CorrelationArgs {
     pub brightness: BrightnessArg,
     /// Tikhonov (Laplacian) regularization length: pixels, `off`, or `auto` (the default for
     /// dic and dic-check: the first of off, 4, 8, 16 elements that converges with half of the
-    /// elements trusted, from 8 elements when the texture is line-like; dic-noise: off).
+    /// elements trusted, from 4 elements without the unregularized rung when the texture is line-like; dic-noise: off).
     #[arg(long, default_value = "auto")]
     pub regularization: String,
     /// Pyramid levels above full resolution (default: automatic, up to 2).

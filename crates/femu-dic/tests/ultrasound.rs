@@ -56,7 +56,7 @@ fn checked(m: &Measured) -> CheckedField<'_> {
 }
 
 /// Issue 31: with the defaults, 0 of the 5 consecutive pairs converged; now all do (measured:
-/// 16 px elements, 128 px regularization, 7-64 iterations, 76-96 % of the elements trusted).
+/// 16 px elements, the regularization the ladder chose, 76-96 % of the elements trusted).
 #[test]
 fn every_consecutive_pair_converges_with_the_defaults() {
     let frames: Vec<GreyImage> = match [48, 50, 52, 54, 56, 58].iter().map(|&n| frame(n)).collect()
@@ -120,9 +120,13 @@ fn frames_048_052_agree_with_the_composition_through_050() {
             );
         }
     }
-    // Measured (all points): composition RMS (1.28, 0.13) px for a mean motion of 8.2 px (main
-    // at the start of the session, 64 px regularization: (1.76, 0.24) px); forward-backward
-    // RMS (0.09, 0.01) px. Bounds with margin over these numbers.
+    // Measured (all points): composition RMS (1.57, 0.20) px for a mean motion of 8.2 px, most
+    // of it below the deep aponeurosis where the soleus slides (deep band 2.43 px lateral);
+    // forward-backward RMS (0.13, 0.04) px. The line-like texture's first rung is 64 px: a
+    // 128 px regularization is more self-consistent here ((1.28, 0.13) px) but less accurate on
+    // simulated sequences whose true field is known (its lateral error twice as large,
+    // bench/independent_us), and this check measures consistency, not accuracy. Bounds with
+    // margin over the 64 px numbers.
     measure::record(
         "composition check, points compared",
         comp[0].points as f64,
@@ -133,7 +137,7 @@ fn frames_048_052_agree_with_the_composition_through_050() {
         (
             "048 → 052 against 048 → 050 → 052",
             &comp,
-            ["< 1.5", "< 0.2"],
+            ["< 1.7", "< 0.25"],
         ),
         (
             "forward-backward 048 → 050 → 048",
@@ -152,7 +156,7 @@ fn frames_048_052_agree_with_the_composition_through_050() {
     }
     assert!(comp[0].points > 600);
     assert!(
-        comp[0].rms_px[0] < 1.5 && comp[0].rms_px[1] < 0.2,
+        comp[0].rms_px[0] < 1.7 && comp[0].rms_px[1] < 0.25,
         "{:?}",
         comp[0]
     );
