@@ -15,8 +15,14 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 out=${1:-bench/us_campaigns/results/idic_own_final}
-cargo build --release -q -p femu-study --example idic_campaign
-bin=${CARGO_TARGET_DIR:-target}/release/examples/idic_campaign
+# IDIC_CAMPAIGN=BIN runs that build of the example instead (e.g. one built together with other
+# packages, whose features cargo unifies differently: building it alone would compile again).
+if [ -n "${IDIC_CAMPAIGN:-}" ]; then
+    bin=$IDIC_CAMPAIGN
+else
+    cargo build --release -q -p femu-study --example idic_campaign
+    bin=${CARGO_TARGET_DIR:-target}/release/examples/idic_campaign
+fi
 . scripts/guide/provenance.sh
 scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT

@@ -619,6 +619,149 @@ def idic_own(run_dir):
     return "\n".join(out) + "\n"
 
 
+def sensitivity_cost(run_dir):
+    """The sensitivities' cost against the forward solve (bench/identify_perf/run.py's
+    sensitivity.csv, femu-mech's sensitivity_cost example): per run and test, the best forward
+    solve and the best sensitivities, the ratio of the bests and the median of the per-repeat
+    ratios; then where the sensitivities' time goes and whether the 30 % goal is met."""
+    d = ROOT / run_dir
+    rows = list(csv.DictReader(open(d / "sensitivity.csv")))
+    if not rows:
+        raise SystemExit(f"{d / 'sensitivity.csv'}: no rows")
+    out = [provenance(d).strip(), ""]
+    out.append("| test | run | repeats | best forward solve (s) | best sensitivities (s) | ratio of the bests "
+               "| median ratio |")
+    out.append("|---|---|---|---|---|---|---|")
+    ratios = {}
+    for test in dict.fromkeys(r["test"] for r in rows):
+        for run in dict.fromkeys(r["run"] for r in rows):
+            rr = [r for r in rows if r["test"] == test and r["run"] == run]
+            solve = min(float(r["solve_s"]) for r in rr)
+            sens = min(float(r["sensitivities_s"]) for r in rr)
+            per = sorted(float(r["sensitivities_s"]) / float(r["solve_s"]) for r in rr)
+            ratios.setdefault(test, []).append(sens / solve)
+            out.append(f"| {test} | {run} | {len(rr)} | {solve:.3f} | {sens:.3f} | {100 * sens / solve:.1f} % "
+                       f"| {100 * per[len(per) // 2]:.1f} % |")
+    parts = [("rhs_s", "rate forces and right-hand sides"), ("factorization_s", "refactorization"),
+             ("triangular_s", "triangular solves"), ("residuals_s", "residuals")]
+    span = lambda v: f"{min(v):.3f}" if f"{min(v):.3f}" == f"{max(v):.3f}" else f"{min(v):.3f}–{max(v):.3f}"
+    out.append("\nWhere the sensitivities' time goes (every repeat of every run):\n")
+    for test in dict.fromkeys(r["test"] for r in rows):
+        rr = [r for r in rows if r["test"] == test]
+        out.append(f"- {test}: " + ", ".join(f"{name} {span([float(r[k]) for r in rr])} s" for k, name in parts)
+                   + ";")
+    out[-1] = out[-1][:-1] + ".\n"
+    c = ratios.get("contention", [])
+    if c:
+        met = sum(x <= 0.30 for x in c)
+        out.append(f"The goal, sensitivities at most 30 % of the forward solve in contention, is "
+                   + ("met" if met == len(c) else "not met" if met == 0 else "met in some runs only")
+                   + f": {met} of {len(c)} runs on the ratio of the bests.")
+    return "\n".join(out) + "\n"
+
+
+def identify_summaries(run_dir):
+    found = sorted((ROOT / run_dir).rglob("summary.json"))
+    if not found:
+        raise SystemExit(f"{ROOT / run_dir}: no summary.json")
+    return [(f.parent.relative_to(ROOT / run_dir), json.loads(f.read_text())) for f in found]
+
+
+def identify_virtual(run_dir):
+    """`femu identify --elements N --repeat R --starts S` (bench/identify_perf/run.py's
+    identify_3000/): per parameter, the mean and largest Eq. 4 error over the noise
+    realizations, the sd the Jacobian predicts against the spread of the identified values, and
+    the 95 % intervals holding the truth; the forward solves per start and the wall time."""
+    d = ROOT / run_dir
+    out = [provenance(d).strip()]
+    for sub, s in identify_summaries(run_dir):
+        fp = {f["name"]: f for f in s["free_parameters"]}
+        out.append("")
+        label = f"{s['test']}, {s['elements']} elements"
+        out.append(f"{'Grouped' if s['grouped'] else 'Ungrouped'} ({label}, σ = {s['noise_sigma_mm']:.3g} mm, "
+                   f"{s['points_in_tissue']} points in the tissue, {s['repeats']} noise realizations, "
+                   f"{s['starts_per_repeat']} starts each):\n")
+        out.append("| parameter | mean \\|Eq. 4 error\\| | largest | sd predicted (Jacobian) | sd of the identified values "
+                   "| predicted / observed | 95 % intervals holding the truth |")
+        out.append("|---|---|---|---|---|---|---|")
+        for e in s["parameters"]:
+            mean, mx = e.get("mean_relative_error"), e.get("max_relative_error")
+            obs = e.get("sd_identified_relative")
+            cov = e.get("coverage95")
+            n = s["repeats"]
+            ratio = f"{e['relative_sd'] / obs:.2f}" if obs else "–"
+            out.append(
+                f"| {e['name']} | {'–' if mean is None else f'{100 * mean:.2g} %'} "
+                f"| {'–' if mx is None else f'{100 * mx:.2g} %'} | {100 * e['relative_sd']:.2g} % "
+                f"| {'–' if obs is None else f'{100 * obs:.2g} %'} | {ratio} "
+                f"| {'–' if cov is None else f'{round(cov * n)} of {n}'} |")
+        fs = s["forward_solves_per_start"]
+        out.append(f"\n{min(fs)}–{max(fs)} forward solves per start; {s['wall_time_s']:.0f} s in all.")
+    return "\n".join(out) + "\n"
+
+
+def _theta(s):
+    return {e["name"]: e["identified"] for e in s["parameters"]}
+
+
+def identify_levels(single_dir, multi_dir):
+    """Single-level against multilevel identification at the paper scale (bench/identify_perf/
+    run.py's paper_single/ and paper_multi/): forward solves, wall time, and how far apart the
+    two optima are."""
+    (_, a), = identify_summaries(single_dir)
+    (_, b), = identify_summaries(multi_dir)
+    ta, tb = _theta(a), _theta(b)
+    dtheta = max(abs(tb[k] - ta[k]) / abs(ta[k]) for k in ta)
+    dcost = abs(b["best_cost"] - a["best_cost"]) / abs(a["best_cost"])
+    fa, fb = a["forward_solves_per_start"], b["forward_solves_per_start"]
+    rf = b.get("refinement_forward_solves") or []
+    out = [provenance(ROOT / single_dir).strip(), ""]
+    out.append("| identification | elements of the starts | forward solves per start | refinement on the full mesh "
+               "| wall time |")
+    out.append("|---|---|---|---|---|")
+    out.append(f"| single level | {a['elements']} | {min(fa)}–{max(fa)} ({len(fa)} starts) | – "
+               f"| {a['wall_time_s']:.0f} s |")
+    out.append(f"| multilevel | {b.get('coarse_elements')} | {min(fb)}–{max(fb)} ({len(fb)} starts) "
+               f"| {', '.join(map(str, rf)) or '–'} forward solves on {b['elements']} | {b['wall_time_s']:.0f} s |")
+    out.append(f"\nMultilevel {a['wall_time_s'] / b['wall_time_s']:.1f}x faster; the two optima: parameters within "
+               f"{dtheta:.1g} relative, cost within {dcost:.1g} relative. "
+               f"The multilevel run's provenance: {provenance(ROOT / multi_dir).strip()}")
+    return "\n".join(out) + "\n"
+
+
+def identify_fd(lm_dir, fd_dir):
+    """One start of Levenberg-Marquardt (exact sensitivities) against BFGS on central finite
+    differences (bench/identify_perf/run.py's fd_lm/ and fd_bfgs/), on the same data: each
+    start's line of the run's log (cost, iterations, forward solves, time), and the error a run
+    stopped with, if any."""
+    pat = re.compile(r"repeat (\d+), start (\d+): cost ([-+.\deE]+), (\d+) iterations, (\d+) forward solves, "
+                     r"([\d.]+) s")
+    runs = []
+    for d in (lm_dir, fd_dir):
+        log = (ROOT / d / "log.txt").read_text()
+        head = log.splitlines()[0]
+        starts = [m.groups() for m in map(pat.search, log.splitlines()) if m]
+        if len(starts) != 1:
+            raise SystemExit(f"{ROOT / d / 'log.txt'}: {len(starts)} start lines, one expected")
+        errors = [line for line in log.splitlines() if line.startswith("error:")]
+        runs.append((head, starts[0], errors))
+    out = [provenance(ROOT / lm_dir).strip(), ""]
+    out.append("| optimizer | iterations | forward solves | time of the start | cost at the end |")
+    out.append("|---|---|---|---|---|")
+    for name, (_, (_, _, cost, its, solves, secs), _) in zip(
+            ("Levenberg–Marquardt, exact sensitivities (`lm`)",
+             "BFGS on central finite differences (`bfgs-fd`)"), runs):
+        out.append(f"| {name} | {its} | {solves} | {float(secs):.1f} s | {cost} |")
+    (head, a, _), (_, b, errors) = runs
+    out.append(f"\n{head.split(': ', 1)[1]}: {float(b[5]) / float(a[5]):.0f}x in time, "
+               f"{int(b[4]) / int(a[4]):.0f}x in forward solves"
+               + ("; the same cost as printed." if a[2] == b[2] else "."))
+    if errors:
+        out.append(f"The BFGS run then stopped at the intervals (`{errors[-1]}`), before its summary: "
+                   "its optimum's parameters were not written, only the cost above.")
+    out.append(f"The BFGS run's provenance: {provenance(ROOT / fd_dir).strip()}")
+    return "\n".join(out) + "\n"
+
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
@@ -627,7 +770,9 @@ def render(template):
              "recorded_provenance": recorded_provenance,
              "dic_real": dic_real, "dic_real_rms": dic_real_rms,
              "fields_above": fields_above, "campaign_error": campaign_error,
-             "idic_own": idic_own, "lk_composition": lk_composition}
+             "idic_own": idic_own, "lk_composition": lk_composition,
+             "sensitivity_cost": sensitivity_cost, "identify_virtual": identify_virtual,
+             "identify_levels": identify_levels, "identify_fd": identify_fd}
     page = (TEMPLATES / template).read_text()
     return re.sub(r"\{\{(\w+)((?: [^ }]+)*)\}\}",
                   lambda m: funcs[m.group(1)](*m.group(2).split()).rstrip("\n"), page)
