@@ -697,6 +697,17 @@ def identify_virtual(run_dir):
                 f"| {'–' if cov is None else f'{round(cov * n)} of {n}'} |")
         fs = s["forward_solves_per_start"]
         out.append(f"\n{min(fs)}–{max(fs)} forward solves per start; {s['wall_time_s']:.0f} s in all.")
+        means = [(e["name"], e.get("mean_relative_error")) for e in s["parameters"]]
+        over = [n for n, m in means if m is not None and m >= (0.03 if n.startswith("C10") else 0.07)]
+        ratios = [e["relative_sd"] / e["sd_identified_relative"] for e in s["parameters"]
+                  if e.get("sd_identified_relative")]
+        held = [round(e["coverage95"] * s["repeats"]) for e in s["parameters"] if e.get("coverage95") is not None]
+        out.append("The seed's goal, a mean |error| below 3 % for C10 and below 7 % for D: "
+                   + ("met by every parameter" if not over else "not met by " + ", ".join(over)) + "."
+                   + (f" The sd the Jacobian predicts is {min(ratios):.2f}–{max(ratios):.2f} times the spread of "
+                      f"the identified values over the realizations" if ratios else "")
+                   + (f"; the 95 % intervals hold the truth in {sum(held)} of {len(held) * s['repeats']} cases "
+                      f"({100 * sum(held) / (len(held) * s['repeats']):.0f} %)." if held else "."))
     return "\n".join(out) + "\n"
 
 
