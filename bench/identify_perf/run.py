@@ -2,7 +2,7 @@
 """The sensitivity and identification figures of the guide's performance page, measured:
 
     python3 bench/identify_perf/run.py --femu target/release/femu \
-        --sensitivity-cost target/release/examples/sensitivity_cost [--only sensitivity,identify,paper,fd]
+        --sensitivity-cost target/release/examples/sensitivity_cost [--only sensitivity,identify,fd,paper]
 
 - sensitivity: femu-mech's `sensitivity_cost` example (built-in thigh, 25 000 target elements,
   CPE4H, contention and compression interleaved, 3 repeats per run), run 3 times; its lines
@@ -20,7 +20,8 @@ The discretization check is off in paper and fd (they time the optimizers, not t
 The results go to bench/identify_perf/results/ (or --out), each part's folder with its own
 provenance.json (scripts/guide/provenance.sh); `scripts/guide/tables.py render
 performance.md` makes the page's tables of them. Heavy runs one at a time; run it niced on a
-shared machine. About 15 minutes on two cores, most of it the single-level paper-scale run.
+shared machine. About 10 minutes on two cores under a load of 10 (the 20 noise realizations
+and the finite-difference BFGS about 2 minutes each).
 """
 
 import argparse
