@@ -139,6 +139,31 @@ pub fn write_regions_png(
                 }))
                 .map_err(|e| err(e.to_string()))?;
         }
+        // Sliding interfaces (surfaces `INTERFACE_*`, where the mesh is split): a white line
+        // on a dark one, over the edges.
+        let interfaces: Vec<&Vec<(usize, usize)>> = model
+            .mesh
+            .surfaces
+            .iter()
+            .filter(|(name, _)| name.starts_with("INTERFACE_"))
+            .map(|(_, faces)| faces)
+            .collect();
+        for (colour, width) in [(RGBColor(20, 20, 20), 5), (WHITE, 2)] {
+            for faces in &interfaces {
+                chart
+                    .draw_series(faces.iter().map(|&(e, f)| {
+                        let [a, b] = m.elements[e].face_nodes(f);
+                        PathElement::new(
+                            vec![
+                                (m.nodes[a][0], m.nodes[a][1]),
+                                (m.nodes[b][0], m.nodes[b][1]),
+                            ],
+                            colour.stroke_width(width),
+                        )
+                    }))
+                    .map_err(|e| err(e.to_string()))?;
+            }
+        }
         // Legend: a swatch and the name of each region, its element count and area.
         let areas = model.region_areas();
         let font = ("sans-serif", 14).into_font();
@@ -188,8 +213,29 @@ pub fn write_regions_png(
             ))
             .map_err(|e| err(e.to_string()))?;
         legend_area
-            .draw(&Text::new("skin", (32, y), font))
+            .draw(&Text::new("skin", (32, y), font.clone()))
             .map_err(|e| err(e.to_string()))?;
+        if !interfaces.is_empty() {
+            y += 24;
+            for (colour, width) in [(RGBColor(20, 20, 20), 5), (WHITE, 2)] {
+                legend_area
+                    .draw(&PathElement::new(
+                        vec![(8, y + 7), (26, y + 7)],
+                        colour.stroke_width(width),
+                    ))
+                    .map_err(|e| err(e.to_string()))?;
+            }
+            legend_area
+                .draw(&Text::new("sliding interface", (32, y), font.clone()))
+                .map_err(|e| err(e.to_string()))?;
+            legend_area
+                .draw(&Text::new(
+                    "(nodes split)",
+                    (32, y + 15),
+                    ("sans-serif", 11).into_font(),
+                ))
+                .map_err(|e| err(e.to_string()))?;
+        }
         root.present().map_err(|e| err(e.to_string()))?;
     }
     let img = image::RgbImage::from_raw(w, h, buf)

@@ -101,7 +101,8 @@ pub fn parse_interfaces(doc: &toml::Value) -> Result<Vec<InterfaceSpec>> {
 
 /// The model of `thigh` with `regions`' materials and the femur (node set `FEMUR`) fixed, its
 /// mesh split along each sliding interface of `specs` and the interfaces added (search radius
-/// twice the element size), and its skin faces (surface `SKIN`). Errors name the interface's
+/// twice the element size, each side also a surface `INTERFACE_A_B_SLAVE` / `_MASTER`), and its
+/// skin faces (surface `SKIN`). Errors name the interface's
 /// regions: a region the thigh does not have, two regions without a common edge. Without a
 /// sliding interface (none, or only tied ones) it is the meshed thigh's model as meshed.
 pub fn model_with_interfaces(
@@ -132,7 +133,14 @@ pub fn model_with_interfaces(
             )),
             e => crate::error::Error::Input(format!("[[interface]] between = [{a}, {b}]: {e}")),
         })?;
-        splits.push((spec.name(), split, kind));
+        // The two sides as surfaces of the model (`INTERFACE_A_B_SLAVE`, `..._MASTER`): the
+        // model folder draws them, a deck written from the model names them.
+        let name = spec.name();
+        mesh.surfaces
+            .insert(format!("INTERFACE_{name}_SLAVE"), split.a.faces.clone());
+        mesh.surfaces
+            .insert(format!("INTERFACE_{name}_MASTER"), split.b.faces.clone());
+        splits.push((name, split, kind));
     }
     let spec = MechSpec::with_regions(mesh.mesh, mesh.surfaces, regions, "FEMUR")?;
     let mut model = Model::new(spec)?;

@@ -279,6 +279,24 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
 pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
     use femu_mech::build::{curve_faces, deck_from_msh, MshSetup, RegionMaterial};
     let name = mesh.display().to_string();
+    // A Gmsh mesh is taken as meshed: its physical surfaces share their nodes (tied).
+    if let Some(i) = study
+        .model
+        .interfaces
+        .iter()
+        .find(|i| i.law != crate::interfaces::InterfaceLaw::Tied)
+    {
+        let [a, b] = &i.between;
+        return Err(study
+            .key_error(
+                "interface",
+                "kind",
+                format!(
+                    "between = [{a}, {b}]: a Gmsh mesh is not split along sliding interfaces (its physical surfaces stay tied); remove the table or give kind = \"tied\", or run the study on the built-in thigh or a label image"
+                ),
+            )
+            .into());
+    }
     let mut regions = Vec::new();
     for m in &study.model.materials {
         let law = m.build().map_err(|e| {

@@ -3,8 +3,10 @@
 //! - `mesh.inp` — the contention deck (the materials, femur fixed, 20 mmHg on the skin,
 //!   element sets per region, node sets `FEMUR` and `SKIN`, surfaces `SKIN` and `FEMUR`),
 //!   runnable by CalculiX and `femu solve` as is;
-//! - `mesh.vtu` — the mesh for ParaView (cell fields `region`, `scaled_jacobian`);
-//! - `regions.png` — a picture of the regions with a legend and axes in mm;
+//! - `mesh.vtu` — the mesh for ParaView (cell fields `region`, `scaled_jacobian`); for a study
+//!   with a sliding `[[interface]]`, the mesh split along it (its nodes duplicated), as solved;
+//! - `regions.png` — a picture of the regions with a legend and axes in mm (and the sliding
+//!   interfaces, where the mesh is split);
 //! - `quality.csv`, `quality.json` — scaled Jacobian, aspect ratio and angles per region;
 //! - `summary.json` — inputs, counts, areas (meshed vs source), warnings, timings;
 //!
@@ -115,6 +117,7 @@ pub fn mesh_thigh(req: &ThighMeshRequest, out: &Path, progress: &dyn Progress) -
             command: "mesh thigh",
             out,
             mesh_s,
+            split: None,
         },
         progress,
     )
@@ -170,6 +173,7 @@ pub fn mesh_labels(req: &LabelMeshRequest, out: &Path, progress: &dyn Progress) 
             command: "mesh labels",
             out,
             mesh_s,
+            split: None,
         },
         progress,
     )
@@ -185,6 +189,10 @@ pub struct ModelFolder<'a> {
     pub out: &'a Path,
     /// Seconds spent meshing.
     pub mesh_s: f64,
+    /// The thigh split along the study's sliding interfaces (the model as solved): drawn and
+    /// written to `mesh.vtu` instead of the meshed one; `mesh.inp` stays the meshed thigh's
+    /// deck (a deck without the contact would leave the split sides free).
+    pub split: Option<&'a ThighModel>,
 }
 
 /// Writes the folder of a meshed thigh (see the module documentation).
@@ -204,8 +212,9 @@ pub fn write_model_folder(
     let quality = quality_report(&model.mesh.mesh, &model.regions)?;
     let deck = contention_deck(model, materials, CONTENTION_MPA)?;
     write_inp_with_surfaces(&deck, &model.mesh.surfaces, &out.join("mesh.inp"))?;
-    write_regions_vtu(model, &out.join("mesh.vtu"))?;
-    let title = format!(
+    let view = f.split.unwrap_or(model);
+    write_regions_vtu(view, &out.join("mesh.vtu"))?;
+    let mut title = format!(
         "{}: {} {} quads, h = {:.2} mm",
         if f.command == "mesh thigh" {
             "parametric thigh"
@@ -216,7 +225,11 @@ pub fn write_model_folder(
         f.kind.deck_name(),
         model.element_size_mm
     );
-    write_regions_png(model, &out.join("regions.png"), 1000, &title)?;
+    if let Some(split) = f.split {
+        let extra = split.mesh.mesh.nodes.len() - model.mesh.mesh.nodes.len();
+        title.push_str(&format!(", split: {extra} nodes duplicated"));
+    }
+    write_regions_png(view, &out.join("regions.png"), 1000, &title)?;
     write_text(&out.join("quality.csv"), &quality.to_csv())?;
     write_json(&out.join("quality.json"), &quality)?;
     let write_s = t1.elapsed().as_secs_f64();
@@ -325,6 +338,13 @@ pub fn write_study_model(
     };
     let materials: Vec<femu_mesh::MaterialDef> =
         built.model.materials.iter().map(|m| m.to_def()).collect();
+    // A sliding interface split the model's mesh: the folder shows it as solved.
+    let split = (!built.model.interfaces.is_empty()).then(|| {
+        let mut t = thigh.clone();
+        t.mesh.mesh = built.model.mesh.clone();
+        t.mesh.surfaces = built.model.surfaces.clone();
+        t
+    });
     let (input, command) = match geometry {
         Geometry::Labels(l) => (
             serde_json::json!({"model": "label image", "image": l.image, "map": l.map}),
@@ -344,6 +364,7 @@ pub fn write_study_model(
             command,
             out: dir,
             mesh_s,
+            split: split.as_ref(),
         },
         progress,
     )
