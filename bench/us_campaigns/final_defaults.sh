@@ -9,7 +9,7 @@
 # alternating; seeds 36-40 at 11 then 9 MHz; 4 000 elements, 4 load steps, the images rendered
 # from a mesh twice finer), one realization at a time, and keeps the two campaign.csv files
 # joined as OUT_DIR/campaign.csv (default bench/us_campaigns/results/idic_own_final), each run's
-# campaign.json, and provenance.json (scripts/guide/provenance.sh). Then
+# campaign.json, what the runs printed (campaign.log), and provenance.json (scripts/guide/provenance.sh). Then
 # `scripts/guide/tables.py render idic.md` writes the page. About a minute per realization on
 # two cores.
 set -euo pipefail
@@ -28,9 +28,9 @@ scratch=$(mktemp -d)
 trap 'rm -rf "$scratch"' EXIT
 write_provenance "$scratch/provenance.json" \
     "bash bench/us_campaigns/final_defaults.sh  # idic_campaign --realizations 5 --first-seed 31 --frequencies 9,11, then --first-seed 36 --frequencies 11,9"
-"$bin" --realizations 5 --first-seed 31 --frequencies 9,11 --out "$scratch/a"
-"$bin" --realizations 5 --first-seed 36 --frequencies 11,9 --out "$scratch/b"
 mkdir -p "$scratch/keep"
+"$bin" --realizations 5 --first-seed 31 --frequencies 9,11 --out "$scratch/a" 2>&1 | tee "$scratch/keep/campaign.log"
+"$bin" --realizations 5 --first-seed 36 --frequencies 11,9 --out "$scratch/b" 2>&1 | tee -a "$scratch/keep/campaign.log"
 { cat "$scratch/a/campaign.csv"; tail -n +2 "$scratch/b/campaign.csv"; } >"$scratch/keep/campaign.csv"
 cp "$scratch/a/campaign.json" "$scratch/keep/campaign_31_35.json"
 cp "$scratch/b/campaign.json" "$scratch/keep/campaign_36_40.json"
