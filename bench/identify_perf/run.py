@@ -175,6 +175,10 @@ def main():
         sys.exit(f"--only: unknown part(s) {', '.join(sorted(unknown))}")
     out = a.out.resolve()
     femu = a.femu.resolve()
+    if only & {"identify", "fd", "paper"} and not femu.is_file():
+        sys.exit(f"--femu {a.femu}: no such file (a release build of femu)")
+    if "sensitivity" in only and a.sensitivity_cost and not a.sensitivity_cost.is_file():
+        sys.exit(f"--sensitivity-cost {a.sensitivity_cost}: no such file (femu-mech's sensitivity_cost example)")
     if "sensitivity" in only:
         if not a.sensitivity_cost:
             sys.exit("--only sensitivity needs --sensitivity-cost EXAMPLE_BINARY")
