@@ -125,6 +125,7 @@ def main():
     ap.add_argument("--own", action="store_true", help="also femu's own frames, same seeds")
     ap.add_argument("--elements", type=int, default=4000)
     ap.add_argument("--out", default="out/indep_campaign")
+    ap.add_argument("--dic-args", default="", help="further options of `femu dic` (one string, e.g. \"--regularization 32\")")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     log = os.path.join(a.out, "run.log")
@@ -143,7 +144,7 @@ def main():
                 continue
             dic = os.path.join(d, "dic")
             try:
-                t_dic = run([a.femu, "dic", *frames, "--pixel-size", str(PX), "--out", dic, "-q"], log)
+                t_dic = run([a.femu, "dic", *frames, "--pixel-size", str(PX), *a.dic_args.split(), "--out", dic, "-q"], log)
             except RuntimeError as e:
                 print(f"{renderer} seed {s}: femu dic failed: {e}", file=sys.stderr)
                 fields.append({"renderer": renderer, "seed": s, "dic": "failed"})

@@ -11,9 +11,10 @@ The study is the acceptance campaign's: 4 000 CPE4H elements, compression anteri
 D of ischio, sartorius and gracilis grouped, five starts, every other default. The truth is
 Table 1; it is used only to score the estimates, never by the run.
 
-Writes `idic_campaign.csv` (one row per seed and parameter: truth, estimate, relative error,
-95 % interval, covered, seen, time) and `summary.csv` (per parameter under the probe: mean and
-largest |error|, coverage), and prints the summary. Seeds already in the output folder are read
+Writes `idic_campaign.csv` (one row per seed, route and parameter: truth, estimate, relative
+error, 95 % interval, covered, seen, time; the routes are the integrated DIC and, for comparison,
+DIC -> FEMU on the run's composed field, plain and weighted) and `summary.csv` (per route and
+parameter under the probe: mean and largest |error|, coverage), and prints the summary. Seeds already in the output folder are read
 back, not run again (`--again` runs them again).
 """
 import argparse
@@ -52,6 +53,21 @@ def study_text(d, manifest, elements):
         '[identification]\ntest = "compression"\ngrouped = true\nstarts = 5\nseed = 1\n'
         "[run]\nforward = false\nsensitivity = false\n"
     )
+
+
+# The routes a frames run identifies by: integrated DIC (identify/grouped), and, for comparison,
+# DIC -> FEMU on the composed field, plain and weighted (identify/grouped/dic, dic-weighted).
+ROUTES = ["integrated", "dic-plain", "dic-weighted"]
+
+
+def routes(params):
+    d = os.path.dirname(params)
+    out = [("integrated", params)]
+    for route, sub in [("dic-plain", "dic"), ("dic-weighted", "dic-weighted")]:
+        path = os.path.join(d, sub, "parameters.csv")
+        if os.path.isfile(path):
+            out.append((route, path))
+    return out
 
 
 def one(femu, indep, seed, out, elements, again):
@@ -95,22 +111,25 @@ def main():
         except RuntimeError as e:
             print(e, flush=True)
             continue
-        for p in csv.DictReader(open(params)):
-            if p["name"] not in TRUTH:
-                continue
-            tv = TRUTH[p["name"]]
-            est = float(p["identified"])
-            lo, hi = float(p["ci95_low"]), float(p["ci95_high"])
-            rows.append({
-                "seed": s, "parameter": p["name"], "truth": tv, "identified": est,
-                "relative_error": est / tv - 1.0, "relative_sd": float(p["relative_sd"]),
-                "ci95_low": lo, "ci95_high": hi, "covered": int(lo <= tv <= hi),
-                "seen": p["seen"], "wall_s": wall,
-            })
-        got = {r["parameter"]: r for r in rows if r["seed"] == s}
-        print(f"seed {s:2d} ({wall:.0f} s): " + ", ".join(
-            f"{k} {100 * r['relative_error']:+.2f} % (sd {100 * r['relative_sd']:.1f} %){'' if r['covered'] else ' MISSED'}"
-            for k, r in got.items()), flush=True)
+        for route, path in routes(params):
+            for p in csv.DictReader(open(path)):
+                if p["name"] not in TRUTH:
+                    continue
+                tv = TRUTH[p["name"]]
+                est = float(p["identified"])
+                lo, hi = float(p["ci95_low"]), float(p["ci95_high"])
+                rows.append({
+                    "seed": s, "route": route, "parameter": p["name"], "truth": tv, "identified": est,
+                    "relative_error": est / tv - 1.0, "relative_sd": float(p["relative_sd"]),
+                    "ci95_low": lo, "ci95_high": hi, "covered": int(lo <= tv <= hi),
+                    "seen": p.get("seen", ""), "wall_s": wall,
+                })
+        for route in ROUTES:
+            got = {r["parameter"]: r for r in rows if r["seed"] == s and r["route"] == route}
+            if got:
+                print(f"seed {s:2d} {route:12} ({wall:.0f} s): " + ", ".join(
+                    f"{k} {100 * r['relative_error']:+.2f} % (sd {100 * r['relative_sd']:.1f} %){'' if r['covered'] else ' MISSED'}"
+                    for k, r in got.items()), flush=True)
     if not rows:
         return
     with open(os.path.join(a.out, "idic_campaign.csv"), "w", newline="") as f:
@@ -118,13 +137,13 @@ def main():
         w.writeheader()
         w.writerows(rows)
     summary = []
-    for p in TRUTH:
-        rs = [r for r in rows if r["parameter"] == p]
+    for route, p in [(route, p) for route in ROUTES for p in TRUTH]:
+        rs = [r for r in rows if r["parameter"] == p and r["route"] == route]
         if not rs:
             continue
         errs = [abs(r["relative_error"]) for r in rs]
         summary.append({
-            "parameter": p, "realizations": len(rs),
+            "route": route, "parameter": p, "realizations": len(rs),
             "mean_abs_error_pct": 100 * sum(errs) / len(errs),
             "max_abs_error_pct": 100 * max(errs),
             "mean_error_pct": 100 * sum(r["relative_error"] for r in rs) / len(rs),
@@ -135,9 +154,9 @@ def main():
         w.writeheader()
         w.writerows(summary)
     walls = sorted({(r["seed"], r["wall_s"]) for r in rows})
-    print("parameter         n  mean|err| %  max|err| %  mean err %  covered")
+    print("route        parameter         n  mean|err| %  max|err| %  mean err %  covered")
     for s in summary:
-        print(f"{s['parameter']:<16} {s['realizations']:2d}  {s['mean_abs_error_pct']:10.2f}  "
+        print(f"{s['route']:<12} {s['parameter']:<16} {s['realizations']:2d}  {s['mean_abs_error_pct']:10.2f}  "
               f"{s['max_abs_error_pct']:10.2f}  {s['mean_error_pct']:+10.2f}  {s['covered']}/{s['realizations']}")
     print(f"time per realization: {min(w for _, w in walls):.0f}-{max(w for _, w in walls):.0f} s")
 
