@@ -120,6 +120,22 @@ pub fn write_regions_png(
                     .map_err(|e| err(e.to_string()))?;
             }
         }
+        // The faces of a surface as line segments.
+        let face_paths = |faces: &[(usize, usize)], style: ShapeStyle| {
+            faces
+                .iter()
+                .map(|&(e, f)| {
+                    let [a, b] = m.elements[e].face_nodes(f);
+                    PathElement::new(
+                        vec![
+                            (m.nodes[a][0], m.nodes[a][1]),
+                            (m.nodes[b][0], m.nodes[b][1]),
+                        ],
+                        style,
+                    )
+                })
+                .collect::<Vec<_>>()
+        };
         for (surface, colour, width) in [("SKIN", BLACK, 2), ("FEMUR", BLACK, 3)] {
             let faces = model
                 .mesh
@@ -127,16 +143,7 @@ pub fn write_regions_png(
                 .get(surface)
                 .map_or(&[][..], Vec::as_slice);
             chart
-                .draw_series(faces.iter().map(|&(e, f)| {
-                    let [a, b] = m.elements[e].face_nodes(f);
-                    PathElement::new(
-                        vec![
-                            (m.nodes[a][0], m.nodes[a][1]),
-                            (m.nodes[b][0], m.nodes[b][1]),
-                        ],
-                        colour.stroke_width(width),
-                    )
-                }))
+                .draw_series(face_paths(faces, colour.stroke_width(width)))
                 .map_err(|e| err(e.to_string()))?;
         }
         // Sliding interfaces (surfaces `INTERFACE_*`, where the mesh is split): a white line
@@ -151,16 +158,7 @@ pub fn write_regions_png(
         for (colour, width) in [(RGBColor(20, 20, 20), 5), (WHITE, 2)] {
             for faces in &interfaces {
                 chart
-                    .draw_series(faces.iter().map(|&(e, f)| {
-                        let [a, b] = m.elements[e].face_nodes(f);
-                        PathElement::new(
-                            vec![
-                                (m.nodes[a][0], m.nodes[a][1]),
-                                (m.nodes[b][0], m.nodes[b][1]),
-                            ],
-                            colour.stroke_width(width),
-                        )
-                    }))
+                    .draw_series(face_paths(faces, colour.stroke_width(width)))
                     .map_err(|e| err(e.to_string()))?;
             }
         }

@@ -1115,13 +1115,13 @@ pub fn bfgs<P: LeastSquares + ?Sized>(
     let (solves0, jac0) = problem.counts();
     let mut phi: Vec<f64> = start.iter().map(|s| s.ln()).collect();
     // Cost and gradient at phi.
-    let eval = |p: &mut P, phi: &[f64]| -> Result<(f64, Vec<f64>, Vec<f64>), FitError> {
+    let eval = |p: &mut P, phi: &[f64]| -> Result<(f64, Vec<f64>), FitError> {
         match gradient {
             Gradient::Exact => {
                 let (r, j) = p.evaluate(phi, true)?;
                 let j = j.expect("asked");
                 let g = j.iter().map(|c| dot(c, &r)).collect();
-                Ok((0.5 * dot(&r, &r), g, r))
+                Ok((0.5 * dot(&r, &r), g))
             }
             Gradient::FiniteDifference(h) => {
                 let (r, _) = p.evaluate(phi, false)?;
@@ -1137,11 +1137,11 @@ pub fn bfgs<P: LeastSquares + ?Sized>(
                     let (rm, _) = p.evaluate(&q, false)?;
                     g[k] = 0.5 * (dot(&rp, &rp) - dot(&rm, &rm)) / (2.0 * dq);
                 }
-                Ok((c0, g, r))
+                Ok((c0, g))
             }
         }
     };
-    let (mut cost, mut g, _) = eval(problem, &phi)?;
+    let (mut cost, mut g) = eval(problem, &phi)?;
     let mut hinv = vec![vec![0.0; n]; n];
     for (i, row) in hinv.iter_mut().enumerate() {
         row[i] = 1.0;
@@ -1172,7 +1172,7 @@ pub fn bfgs<P: LeastSquares + ?Sized>(
                 break;
             }
             match eval(problem, &trial) {
-                Ok((ct, gt, _)) if ct <= cost + 1e-4 * dot(&g, &step) => {
+                Ok((ct, gt)) if ct <= cost + 1e-4 * dot(&g, &step) => {
                     accepted = Some((trial, step, ct, gt));
                     break;
                 }

@@ -15,7 +15,7 @@
 //! `campaign.json` (the summary: errors per parameter, coverage, error ratio, times).
 
 use anyhow::{bail, Context, Result};
-use femu_study::progress::Progress;
+use femu_study::progress::Notes;
 use femu_study::steps::images::{
     identify_image_measurement, identify_images, read_sequence, ImageRouteOptions,
 };
@@ -70,25 +70,6 @@ fn args() -> Result<Args> {
         }
     }
     Ok(a)
-}
-
-/// Prints notes as they come.
-struct Print;
-
-impl Progress for Print {
-    fn note(&self, line: &str) {
-        eprintln!("{line}");
-    }
-    fn task(&self, _: &str, _: Option<usize>) -> Box<dyn femu_study::progress::Task + '_> {
-        Box::new(NoTask)
-    }
-}
-
-struct NoTask;
-
-impl femu_study::progress::Task for NoTask {
-    fn inc(&self, _: usize) {}
-    fn message(&self, _: &str) {}
 }
 
 /// One (parameter, realization) pair.
@@ -206,7 +187,7 @@ fn main() -> Result<()> {
             extra,
             &route(&study)?,
             &a.out,
-            &Print,
+            &Notes,
         )?;
         return Ok(());
     }
@@ -241,7 +222,7 @@ fn main() -> Result<()> {
                 ..SimOptions::default()
             },
             &dir.join("measurement"),
-            &Print,
+            &Notes,
         )?;
         let render_and_dic = t.elapsed().as_secs_f64();
         let t = Instant::now();
@@ -251,7 +232,7 @@ fn main() -> Result<()> {
             true,
             &s,
             &dir.join("identify"),
-            &Print,
+            &Notes,
         )?;
         let all = t.elapsed().as_secs_f64();
         for ((p, q), w) in idic

@@ -21,7 +21,7 @@
 
 use anyhow::{bail, Context, Result};
 use femu_identify::campaign::{self, CampaignOptions};
-use femu_study::progress::Progress;
+use femu_study::progress::Notes;
 use femu_study::steps::identify::identify_on;
 use femu_study::steps::joint::{self, TestModels};
 use femu_study::steps::measure::{self, MeasureInputs};
@@ -59,25 +59,6 @@ fn args() -> Result<Args> {
         }
     }
     Ok(a)
-}
-
-/// Prints notes as they come.
-struct Print;
-
-impl Progress for Print {
-    fn note(&self, line: &str) {
-        eprintln!("{line}");
-    }
-    fn task(&self, _: &str, _: Option<usize>) -> Box<dyn femu_study::progress::Task + '_> {
-        Box::new(NoTask)
-    }
-}
-
-struct NoTask;
-
-impl femu_study::progress::Task for NoTask {
-    fn inc(&self, _: usize) {}
-    fn message(&self, _: &str) {}
 }
 
 /// The study: the built-in thigh, the seed's compression test, the sliding interface, and the
@@ -132,14 +113,14 @@ fn main() -> Result<()> {
 
     // (b) The sliding model, by the study's route.
     let t0 = Instant::now();
-    let prepared = measure::prepare(&MeasureInputs::of(&study), &sliding, &a.out, &Print)?;
+    let prepared = measure::prepare(&MeasureInputs::of(&study), &sliding, &a.out, &Notes)?;
     let summary = identify_on(
         &inputs,
         true,
         &sliding,
         &prepared,
         &a.out.join("sliding"),
-        &Print,
+        &Notes,
     )?;
     let sliding_time = t0.elapsed().as_secs_f64();
 
@@ -147,7 +128,7 @@ fn main() -> Result<()> {
     // field. The data are drawn as in (b) (the same seed, the same points of the grid in the
     // tissue: the two meshes share their outline).
     let t0 = Instant::now();
-    let prepared_tied = measure::prepare(&MeasureInputs::of(&study), &tied, &a.out, &Print)?;
+    let prepared_tied = measure::prepare(&MeasureInputs::of(&study), &tied, &a.out, &Notes)?;
     let data = TestModels::new(&inputs, &sliding, &prepared)?;
     let models = TestModels {
         tests: data.tests.clone(),

@@ -90,3 +90,17 @@ impl Progress for Quiet {
         Box::new(NoTask)
     }
 }
+
+/// Prints each note on standard error as it comes, no progress bars (examples and scripts that
+/// log to a file).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Notes;
+
+impl Progress for Notes {
+    fn note(&self, line: &str) {
+        eprintln!("{line}");
+    }
+    fn task(&self, _: &str, _: Option<usize>) -> Box<dyn Task + '_> {
+        Box::new(NoTask)
+    }
+}
