@@ -105,13 +105,30 @@ def indep_frames(indep, seed):
     return frames, m["measurement"], load_csv(os.path.join(d, f"truth_{len(frames) - 1}.csv"))
 
 
+def truth_at(truth, x):
+    """The true displacement (px) at the points `x` (px), linearly interpolated on the Delaunay
+    triangles of the truth's points; NaN outside them and in a triangle with an edge longer than
+    twice the truth's spacing (where the truth grid has a hole or ends, e.g. at the femur or at
+    the bottom of the frame: a long triangle there interpolates between far points)."""
+    from scipy.spatial import Delaunay, cKDTree
+
+    p = np.c_[truth["x_px"], truth["y_px"]]
+    tri = Delaunay(p)
+    spacing = np.median(cKDTree(p).query(p, k=2)[0][:, 1])
+    s = tri.find_simplex(x)
+    corners = p[tri.simplices[s]]
+    edges = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(1)
+    out = (s < 0) | (edges > 2.0 * spacing)
+    tu = np.stack([griddata(p, truth[k], x) for k in ("ux_px", "uy_px")], 1)
+    tu[out] = np.nan
+    return tu
+
+
 def field_error(field, truth):
     f = load_csv(field)
     x = np.c_[f["x"], f["y"]] / PX
     u = np.c_[f["ux"], f["uy"]] / PX
-    tu = np.stack(
-        [griddata(np.c_[truth["x_px"], truth["y_px"]], truth[k], x) for k in ("ux_px", "uy_px")], 1
-    )
+    tu = truth_at(truth, x)
     ok = np.isfinite(tu).all(1) & (f["w"] > 0)
     e = (u - tu)[ok]
     return np.sqrt((e**2).mean(0)), int(ok.sum())

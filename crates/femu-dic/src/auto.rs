@@ -16,7 +16,8 @@
 //! independent speckle; B-mode speckle is some 25–31 x 4 px on the Logiq E9 frames, so
 //! 16 px). The regularization length is the first rung of the ladder `off, 4h, 8h, 16h` (at
 //! most the ROI's longer side) whose correlation converges with at least half of the elements
-//! trusted; when the median texture ratio is below [`LINE_TEXTURE`] (line-like texture, which
+//! trusted (a rung whose accelerated iterations stall close to convergence is correlated again
+//! with plain steps first, [`STALLED_INCREMENT_PX`]); when the median texture ratio is below [`LINE_TEXTURE`] (line-like texture, which
 //! needs the support of more neighbours: muscle fibres, fascia) the ladder starts at `4h`,
 //! without the unregularized rung. A longer regularization is a bias, not only a smoothing: on
 //! simulated B-mode sequences of a compressed thigh (`bench/independent_us`), `8h` instead of `4h`
@@ -384,6 +385,15 @@ pub fn correlate_ladder(
 /// How many times the iterations of an accelerated rung a plain one gets ([`correlate_ladder`]).
 pub const PLAIN_ITERATION_FACTOR: usize = 3;
 
+/// A rung whose accelerated iterations end without converging but with a last increment below
+/// this (pixels) is correlated again with plain Gauss–Newton steps ([`PLAIN_ITERATION_FACTOR`]
+/// times the iterations) before the ladder moves on. Anderson acceleration can cycle a few
+/// hundredths of a pixel from a fixed point that the plain iteration reaches: on simulated
+/// B-mode sequences of a compressed thigh (`bench/independent_us`) the `4h` rung of the first
+/// pair stalled at 0.008–0.05 px on half of the sequences, the ladder then kept `8h` or `16h`,
+/// and the longer regularization biased the identified compressibility of the muscle.
+pub const STALLED_INCREMENT_PX: f64 = 0.1;
+
 /// One pass of the ladder of [`correlate_ladder`] with `base`'s options; a ladder whose every
 /// rung failed returns [`DicError::Ladder`] with its attempts.
 #[allow(clippy::too_many_arguments)]
@@ -493,7 +503,7 @@ fn ladder(
             } else {
                 crate::solver::correlate_rung(f, g, roi, &opts)
             };
-            let res = match correlated {
+            let mut res = match correlated {
                 Ok(res) => res,
                 Err(e) if is_fatal(&e) => return Err(fatal(e)),
                 Err(e) => {
@@ -502,6 +512,35 @@ fn ladder(
                     continue;
                 }
             };
+            // Accelerated steps that stalled close to the fixed point: the same rung again with
+            // plain steps, before a longer regularization (a bias) or a larger element is tried.
+            let mut opts = opts;
+            if !forced
+                && !res.converged
+                && opts.acceleration_depth > 0
+                && res.last_increment_px < STALLED_INCREMENT_PX
+            {
+                let mut stalled = attempt_of(&res, None, &opts);
+                stalled.note = Some(format!(
+                    "stalled {:.3} px from convergence with Anderson acceleration; the same rung again with plain Gauss-Newton steps",
+                    res.last_increment_px
+                ));
+                attempts.push(stalled);
+                opts = DicOptions {
+                    acceleration_depth: 0,
+                    max_iterations: PLAIN_ITERATION_FACTOR * opts.max_iterations,
+                    ..opts
+                };
+                res = match crate::solver::correlate_rung(f, g, roi, &opts) {
+                    Ok(res) => res,
+                    Err(e) if is_fatal(&e) => return Err(fatal(e)),
+                    Err(e) => {
+                        attempts.push(failed(e));
+                        k += 1;
+                        continue;
+                    }
+                };
+            }
             // A rung that did not converge is rejected whatever its quality: the covariance
             // and the trust (the costliest part of a rung after the iterations) are computed
             // only for a field that may be kept; such a rung's attempt has no trusted fraction

@@ -53,7 +53,8 @@ pub struct DicJob {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct QualitySummary {
     pub trusted_elements: usize,
-    /// Elements per reason (`decorrelated`, `high-residual`, `shadow`, `low-texture`).
+    /// Elements per reason (`outside-image`, `decorrelated`, `high-residual`, `shadow`,
+    /// `low-texture`).
     pub untrusted: Vec<(String, usize)>,
     /// Median and 90th percentile of the nodal standard deviations (px), over the trusted
     /// nodes.
@@ -106,6 +107,7 @@ pub fn quality_summary(m: &Measured, criteria: &TrustCriteria) -> QualitySummary
             .collect()
     };
     let untrusted = [
+        Trust::OutsideImage,
         Trust::Decorrelated,
         Trust::HighResidual,
         Trust::Shadow,

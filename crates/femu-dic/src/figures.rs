@@ -231,12 +231,12 @@ pub fn write_maps(
                 t => t.code() as f64,
             }),
             title: format!(
-                "Not trusted: {untrusted} of {} elements (1 decorrelated, 2 high residual, 3 shadow, 4 low texture)",
+                "Not trusted: {untrusted} of {} elements (1 decorrelated, 2 high residual, 3 shadow, 4 low texture, 5 outside the image)",
                 m.trust.len()
             ),
             label: "reason".into(),
             diverging: false,
-            range: Some((1.0, 4.0)),
+            range: Some((1.0, 5.0)),
         },
     ];
     let crop = crop_of(m, w, h);

@@ -438,7 +438,7 @@ pub fn read_matrix_market(path: &Path) -> Result<(crate::sparse::CscPattern, Vec
 /// texture_small,texture_large` (strain in the model frame, residual RMS and grey-level
 /// standard deviation in grey levels, structure-tensor eigenvalues in grey levels²/px²), and
 /// with a trust mask `trust,w` (the reason, `trusted`, `decorrelated`, `high-residual`,
-/// `shadow`, `low-texture`, and the weight 1/0).
+/// `shadow`, `low-texture`, `outside-image`, and the weight 1/0).
 pub fn write_elements_csv(
     path: &Path,
     res: &DicResult,

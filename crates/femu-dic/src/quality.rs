@@ -295,6 +295,9 @@ impl NodalCovariance {
 #[serde(rename_all = "kebab-case")]
 pub enum Trust {
     Trusted,
+    /// Fewer than [`crate::solver::MIN_INSIDE`] of the element's pixels stay inside the
+    /// deformed image once displaced (the field carries it out of the frame).
+    OutsideImage,
     /// The deformed image does not match the reference (low ZNCC).
     Decorrelated,
     /// Residual above `flag_factor` times the median.
@@ -315,6 +318,7 @@ impl Trust {
             Trust::HighResidual => "high-residual",
             Trust::Shadow => "shadow",
             Trust::LowTexture => "low-texture",
+            Trust::OutsideImage => "outside-image",
         }
     }
 
@@ -326,6 +330,7 @@ impl Trust {
             Trust::HighResidual => 2,
             Trust::Shadow => 3,
             Trust::LowTexture => 4,
+            Trust::OutsideImage => 5,
         }
     }
 }
@@ -367,7 +372,9 @@ pub fn element_trust(res: &DicResult, cov: &NodalCovariance, c: &TrustCriteria) 
     (0..res.mesh.n_elements())
         .map(|e| {
             let t = &res.element_texture[e];
-            if t.zncc < c.min_zncc {
+            if t.inside < crate::solver::MIN_INSIDE {
+                Trust::OutsideImage
+            } else if t.zncc < c.min_zncc {
                 Trust::Decorrelated
             } else if res.flagged[e] {
                 Trust::HighResidual

@@ -211,14 +211,32 @@ pub struct ElementTexture {
     /// Zero-normalized cross-correlation of `f` and the corrected `g̃(x + u)` over the element
     /// (1: identical up to brightness and contrast; near 0: decorrelated speckle).
     pub zncc: f64,
+    /// Fraction of the element's pixels whose warped position `x + u(x)` lies inside the
+    /// deformed image (pixel centres `[0, W − 1] x [0, H − 1]`); the other pixels are left out
+    /// of every sum (residual, brightness, these statistics, the covariance).
+    pub inside: f64,
 }
 
 impl ElementTexture {
-    fn of(f: &[f64], fx: &[f64], fy: &[f64], g: impl Iterator<Item = f64>) -> Self {
-        let n = f.len() as f64;
-        let mean = f.iter().sum::<f64>() / n;
+    /// Over the pixels where the corrected warped value `g` is finite (inside the deformed
+    /// image). Without any such pixel every statistic is 0 (`inside` 0 makes it untrusted).
+    fn of(f: &[f64], fx: &[f64], fy: &[f64], g: &[f64]) -> Self {
+        let kept = || (0..f.len()).filter(|&k| !g[k].is_nan());
+        let count = kept().count();
+        if count == 0 {
+            return ElementTexture {
+                mean: 0.0,
+                std: 0.0,
+                structure: [0.0; 2],
+                zncc: 0.0,
+                inside: 0.0,
+            };
+        }
+        let n = count as f64;
+        let mean = kept().map(|k| f[k]).sum::<f64>() / n;
         let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
-        for (gx, gy) in fx.iter().zip(fy) {
+        for k in kept() {
+            let (gx, gy) = (fx[k], fy[k]);
             sxx += gx * gx;
             syy += gy * gy;
             sxy += gx * gy;
@@ -226,10 +244,10 @@ impl ElementTexture {
         let (sxx, syy, sxy) = (sxx / n, syy / n, sxy / n);
         let half_tr = 0.5 * (sxx + syy);
         let disc = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
-        let gv: Vec<f64> = g.collect();
-        let gm = gv.iter().sum::<f64>() / n;
+        let gm = kept().map(|k| g[k]).sum::<f64>() / n;
         let (mut cfg, mut cff, mut cgg) = (0.0, 0.0, 0.0);
-        for (a, b) in f.iter().zip(&gv) {
+        for k in kept() {
+            let (a, b) = (f[k], g[k]);
             cfg += (a - mean) * (b - gm);
             cff += (a - mean) * (a - mean);
             cgg += (b - gm) * (b - gm);
@@ -243,6 +261,7 @@ impl ElementTexture {
             } else {
                 0.0
             },
+            inside: n / f.len() as f64,
         }
     }
 }
@@ -304,6 +323,9 @@ struct Level {
     gw: Vec<f64>,
     elem_b: Vec<[f64; 8]>,
     elem_g: Vec<[f64; 3]>,
+    /// Per element, the pixels whose warped position leaves the deformed image (their `gw` is
+    /// NaN): their count and their reference sums `Σf`, `Σf²` (left out of the statistics).
+    elem_out: Vec<[f64; 3]>,
     corr: Vec<(f64, f64)>,
     rhs: Vec<f64>,
     work: Vec<f64>,
@@ -462,6 +484,7 @@ impl Level {
             gw: vec![0.0; ne * npx],
             elem_b: vec![[0.0; 8]; ne],
             elem_g: vec![[0.0; 3]; ne],
+            elem_out: vec![[0.0; 3]; ne],
             corr: vec![(1.0, 0.0); ne],
             rhs: vec![0.0; n_eq],
             work: vec![0.0; n_eq],
@@ -482,17 +505,25 @@ impl Level {
     }
 
     /// Evaluates `g(x + u(x))` at every ROI pixel into `gw`, with the sums `Σg`, `Σg²` per
-    /// element.
+    /// element. A pixel whose warped position falls outside the deformed image's pixel centres
+    /// `[0, W − 1] x [0, H − 1]` (the border itself is inside) gets NaN: there the B-spline
+    /// would return its mirror extension, which does not show the reference's content, so the
+    /// pixel is left out of every sum (its count and reference sums go to `elem_out`).
     fn warp(&mut self, g: &BSpline, a: &[f64]) {
         let h = self.mesh.h;
         let npx = h * h;
         let mesh = &self.mesh;
         let ntab = &self.ntab;
+        let f = &self.f;
+        let (xmax, ymax) = (g.width as f64 - 1.0, g.height as f64 - 1.0);
         self.gw
             .par_chunks_mut(npx)
             .zip(self.elem_g.par_iter_mut())
+            .zip(self.elem_out.par_iter_mut())
             .enumerate()
-            .for_each(|(e, (gwe, st))| {
+            .for_each(|(e, ((gwe, st), out))| {
+                let fe = &f[e * npx..(e + 1) * npx];
+                let mut o = [0.0; 3];
                 let c = &mesh.conn[e];
                 let ax = [a[2 * c[0]], a[2 * c[1]], a[2 * c[2]], a[2 * c[3]]];
                 let ay = [
@@ -509,28 +540,51 @@ impl Level {
                         let n = &ntab[k];
                         let ux = n[0] * ax[0] + n[1] * ax[1] + n[2] * ax[2] + n[3] * ax[3];
                         let uy = n[0] * ay[0] + n[1] * ay[1] + n[2] * ay[2] + n[3] * ay[3];
-                        let v = g.eval((px + i) as f64 + ux, (py + j) as f64 + uy);
+                        let (sx, sy) = ((px + i) as f64 + ux, (py + j) as f64 + uy);
+                        if !(sx >= 0.0 && sy >= 0.0 && sx <= xmax && sy <= ymax) {
+                            gwe[k] = f64::NAN;
+                            o[0] += 1.0;
+                            o[1] += fe[k];
+                            o[2] += fe[k] * fe[k];
+                            continue;
+                        }
+                        let v = g.eval(sx, sy);
                         gwe[k] = v;
                         s1 += v;
                         s2 += v * v;
                     }
                 }
                 *st = [s1, s2, 0.0];
+                *out = o;
             });
     }
 
     /// Brightness/contrast `(s, o)` of element `e` such that `s g + o` has the mean and the
     /// standard deviation of `f`.
-    fn correction(&self, mode: Brightness, e: usize, global: [f64; 2]) -> (f64, f64) {
+    /// Both over the pixels inside the deformed image (all of them unless `warp` left some out).
+    fn correction(&self, mode: Brightness, e: usize, global: [f64; 4]) -> (f64, f64) {
         let npx = (self.mesh.h * self.mesh.h) as f64;
         let (fm, fs, gm, gs) = match mode {
             Brightness::None => return (1.0, 0.0),
-            Brightness::Global => (self.f_global[0], self.f_global[1], global[0], global[1]),
+            Brightness::Global => (global[0], global[1], global[2], global[3]),
             Brightness::PerElement => {
                 let [s1, s2, _] = self.elem_g[e];
-                let gm = s1 / npx;
-                let gs = (s2 / npx - gm * gm).max(0.0).sqrt();
-                (self.f_stats[e][0], self.f_stats[e][1], gm, gs)
+                let [no, of1, of2] = self.elem_out[e];
+                let n = npx - no;
+                if n < 1.0 {
+                    return (1.0, 0.0);
+                }
+                let gm = s1 / n;
+                let gs = (s2 / n - gm * gm).max(0.0).sqrt();
+                let [fm, fsd] = self.f_stats[e];
+                if no == 0.0 {
+                    (fm, fsd, gm, gs)
+                } else {
+                    let f1 = fm * npx - of1;
+                    let f2 = (fsd * fsd + fm * fm) * npx - of2;
+                    let m = f1 / n;
+                    (m, (f2 / n - m * m).max(0.0).sqrt(), gm, gs)
+                }
             }
         };
         if gs > 1e-9 * (1.0 + gm.abs()) {
@@ -540,15 +594,33 @@ impl Level {
         }
     }
 
-    /// Global mean and std of the warped image (for [`Brightness::Global`]).
-    fn global_g(&self) -> [f64; 2] {
-        let n = self.gw.len() as f64;
+    /// Number of ROI pixels inside the deformed image (after [`Self::warp`]).
+    fn kept(&self) -> f64 {
+        self.gw.len() as f64 - self.elem_out.iter().map(|o| o[0]).sum::<f64>()
+    }
+
+    /// Global mean and std of the reference and of the warped image over the pixels inside
+    /// the deformed image (for [`Brightness::Global`]): `[f mean, f std, g mean, g std]`.
+    fn global_g(&self) -> [f64; 4] {
+        let n = self.kept().max(1.0);
         let (s1, s2) = self
             .elem_g
             .iter()
             .fold((0.0, 0.0), |acc, v| (acc.0 + v[0], acc.1 + v[1]));
         let m = s1 / n;
-        [m, (s2 / n - m * m).max(0.0).sqrt()]
+        let (no, o1, o2) = self.elem_out.iter().fold((0.0, 0.0, 0.0), |acc, v| {
+            (acc.0 + v[0], acc.1 + v[1], acc.2 + v[2])
+        });
+        let [fm, fsd] = if no == 0.0 {
+            self.f_global
+        } else {
+            let nall = self.gw.len() as f64;
+            let f1 = self.f_global[0] * nall - o1;
+            let f2 = (self.f_global[1].powi(2) + self.f_global[0].powi(2)) * nall - o2;
+            let fm = f1 / n;
+            [fm, (f2 / n - fm * fm).max(0.0).sqrt()]
+        };
+        [fm, fsd, m, (s2 / n - m * m).max(0.0).sqrt()]
     }
 
     /// Residual `r = f − (s g + o)` and the element vectors `b_e = Σ (N ∇f) r` (eq. 2), with
@@ -583,6 +655,10 @@ impl Level {
                 let mut bb = [0.0; 8];
                 let mut r2 = 0.0;
                 for k in 0..npx {
+                    if gwe[k].is_nan() {
+                        // Outside the deformed image: no residual, no gradient term.
+                        continue;
+                    }
                     let r = fe[k] - (s * gwe[k] + o);
                     r2 += r * r;
                     let n = &ntab[k];
@@ -651,10 +727,55 @@ impl Level {
         Ok((max_iter, false, inc))
     }
 
-    /// Residual RMS over the ROI (after [`Self::residual`]).
+    /// After convergence: `M_e` (and `M`) over the pixels inside the deformed image, the
+    /// matrix of the objective actually minimized, for the covariance. The iterations keep the
+    /// full `M` factorized once: it only preconditions the fixed point `b(a) = 0`, which is the
+    /// stationarity of the objective over the pixels inside at `a`. An element with fewer than
+    /// [`MIN_INSIDE`] of its pixels inside keeps its full `M_e` so that `M` stays as regular as
+    /// without the exclusion; the trust mask marks it `outside-image`.
+    fn keep_inside_in_m(&mut self) {
+        let npx = self.mesh.h * self.mesh.h;
+        for e in 0..self.mesh.n_elements() {
+            if self.elem_out[e][0] == 0.0 || !keeps_inside_in_m(&self.elem_out[e], npx) {
+                continue;
+            }
+            let mut me = [0.0f64; 64];
+            for k in 0..npx {
+                if self.gw[e * npx + k].is_nan() {
+                    continue;
+                }
+                let n = &self.ntab[k];
+                let (gx, gy) = (self.fx[e * npx + k], self.fy[e * npx + k]);
+                let mut row = [0.0; 8];
+                for a in 0..4 {
+                    row[2 * a] = n[a] * gx;
+                    row[2 * a + 1] = n[a] * gy;
+                }
+                for i in 0..8 {
+                    for j in 0..8 {
+                        me[i * 8 + j] += row[i] * row[j];
+                    }
+                }
+            }
+            let d = self.dofs[e];
+            for i in 0..8 {
+                for j in 0..8 {
+                    let pos = self
+                        .pattern
+                        .position(d[i], d[j])
+                        .expect("element entry in the pattern");
+                    self.m_values[pos] += me[i * 8 + j] - self.elem_m[e][i * 8 + j];
+                }
+            }
+            self.elem_m[e] = me;
+        }
+    }
+
+    /// Residual RMS over the ROI's pixels inside the deformed image (after
+    /// [`Self::residual`]).
     fn residual_rms(&self) -> f64 {
         let s: f64 = self.elem_g.iter().map(|v| v[2]).sum();
-        (s / self.gw.len() as f64).sqrt()
+        (s / self.kept().max(1.0)).sqrt()
     }
 }
 
@@ -741,10 +862,16 @@ fn noise_matrices(level: &Level, variance: &[f64], rho: &ResidualCorrelation) ->
     (0..level.mesh.n_elements())
         .into_par_iter()
         .map(|e| {
+            let keep_all =
+                level.elem_out[e][0] == 0.0 || !keeps_inside_in_m(&level.elem_out[e], npx);
             let w = |k: usize| {
+                let mut v = [0.0; 8];
+                if !keep_all && level.gw[e * npx + k].is_nan() {
+                    // Left out of the residual: no noise from it either.
+                    return v;
+                }
                 let n = &level.ntab[k];
                 let (gx, gy) = (level.fx[e * npx + k], level.fy[e * npx + k]);
-                let mut v = [0.0; 8];
                 for a in 0..4 {
                     v[2 * a] = n[a] * gx;
                     v[2 * a + 1] = n[a] * gy;
@@ -785,6 +912,15 @@ fn noise_matrices(level: &Level, variance: &[f64], rho: &ResidualCorrelation) ->
             m
         })
         .collect()
+}
+
+/// Smallest fraction of an element's pixels inside the deformed image for its pixels outside
+/// to be left out of `M_e` and of its noise matrix (below it the element is not trusted:
+/// [`crate::quality::Trust::OutsideImage`]).
+pub const MIN_INSIDE: f64 = 0.5;
+
+fn keeps_inside_in_m(out: &[f64; 3], npx: usize) -> bool {
+    1.0 - out[0] / npx as f64 >= MIN_INSIDE
 }
 
 /// Number of automatic pyramid levels: up to 2 while the reduced ROI holds 2 x 2 elements.
@@ -1053,7 +1189,8 @@ fn correlate_with(
     let element_residual: Vec<f64> = level
         .elem_g
         .iter()
-        .map(|v| (v[2] / npx as f64).sqrt())
+        .zip(&level.elem_out)
+        .map(|(v, o)| (v[2] / (npx as f64 - o[0]).max(1.0)).sqrt())
         .collect();
     let mut sorted = element_residual.clone();
     sorted.sort_by(|a, b| a.total_cmp(b));
@@ -1069,12 +1206,8 @@ fn correlate_with(
         .map(|e| {
             let r = e * npx..(e + 1) * npx;
             let (s, o) = level.corr[e];
-            ElementTexture::of(
-                &level.f[r.clone()],
-                &level.fx[r.clone()],
-                &level.fy[r.clone()],
-                level.gw[r].iter().map(|g| s * g + o),
-            )
+            let g: Vec<f64> = level.gw[r.clone()].iter().map(|g| s * g + o).collect();
+            ElementTexture::of(&level.f[r.clone()], &level.fx[r.clone()], &level.fy[r], &g)
         })
         .collect();
     let mut residual_image = vec![f32::NAN; if diagnostics { width * height } else { 0 }];
@@ -1082,6 +1215,7 @@ fn correlate_with(
         let (px, py) = level.mesh.element_origin(e);
         let (s, o) = level.corr[e];
         for k in 0..npx {
+            // NaN (left out) where the warped position leaves the deformed image.
             let r = level.f[e * npx + k] - (s * level.gw[e * npx + k] + o);
             residual_image[(py + k / h) * width + px + k % h] = r as f32;
         }
@@ -1106,6 +1240,10 @@ fn correlate_with(
             (lo.min(v), hi.max(v))
         });
     let residual_rms = level.residual_rms();
+    let mut level = level;
+    if diagnostics {
+        level.keep_inside_in_m();
+    }
     timings.total_s = t0.elapsed().as_secs_f64();
     let system = GaussNewtonSystem {
         reg_values: level
@@ -1376,6 +1514,59 @@ mod tests {
                 assert!(!full.system.elem_m_noise.is_empty());
             }
         }
+    }
+
+    /// Pixels whose warped position leaves the deformed image are left out of the sums. The
+    /// whole image as the ROI and a field that carries the border up to 2.4 px out of the frame
+    /// (the speckle continues beyond it in the deformed image, as a camera's would): the
+    /// unregularized correlation converges and every node, the border's included, stays within
+    /// 0.1 px of the true field. Reading the B-spline's mirror extension there instead pulled
+    /// the border nodes 5 px away (on a 1024 x 1024 pair, by up to 245 px, and the iterations
+    /// did not converge).
+    #[test]
+    fn pixels_warped_outside_the_image_are_left_out() {
+        let s = Speckle::new(128, 128, 1.5, 11);
+        let f = s.reference();
+        let u = lab::affine([0.35, -0.45], [[0.02, 0.01], [-0.015, 0.025]], [64.0, 64.0]);
+        let g = s.deformed(&u);
+        let roi = Roi::Rect(Rect {
+            x: 0,
+            y: 0,
+            w: 128,
+            h: 128,
+        });
+        let o = DicOptions {
+            element_size: 16,
+            acceleration_depth: crate::anderson::DEFAULT_DEPTH,
+            ..Default::default()
+        };
+        let res = correlate(&f, &g, &roi, &o).unwrap();
+        assert!(
+            res.converged,
+            "{} iterations, last increment {} px",
+            res.iterations, res.last_increment_px
+        );
+        let worst = res
+            .mesh
+            .nodes
+            .iter()
+            .zip(&res.displacement)
+            .map(|(p, d)| {
+                let t = u(p[0], p[1]);
+                (d[0] - t[0]).hypot(d[1] - t[1])
+            })
+            .fold(0.0f64, f64::max);
+        assert!(worst < 0.1, "largest nodal error {worst} px");
+        // The border elements whose pixels leave the frame report it: at most 3 of the 16
+        // columns and 2 of the 16 rows of a corner element (|ux| < 2.3 px, |uy| < 1.1 px;
+        // 1 − 13·14/256 = 29 % of its pixels) leave.
+        assert!(res.element_texture.iter().any(|t| t.inside < 1.0));
+        let least = res
+            .element_texture
+            .iter()
+            .map(|t| t.inside)
+            .fold(1.0f64, f64::min);
+        assert!(least >= 0.7, "{least}");
     }
 
     #[test]
