@@ -10,7 +10,8 @@ use super::problem::{IdicError, IdicProblem};
 use super::uncertainty::{block_sandwich, group_jackknife, SandwichCovariance};
 use crate::campaign::StartRecord;
 use crate::fit::{
-    latin_hypercube, levenberg_marquardt, FitError, FitResult, LeastSquares, LmOptions, Subset,
+    latin_hypercube, levenberg_marquardt, FitError, FitResult, FreeParameter, LeastSquares,
+    LmOptions, Subset,
 };
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -214,6 +215,57 @@ pub fn noise_at(
     Ok((covariance, jackknife_sd, groups))
 }
 
+/// The given starts (estimates of other routes, e.g. FEMU on the DIC's field), clamped into the
+/// bounds (read back from files, exp(ln θ) of a bound may land an ulp outside). A value on a
+/// bound (within 1e-3 in `ln θ`) is not an estimate: the route that made it did not hold the
+/// parameter inside its bounds. It is replaced by the geometric mean of the other given starts'
+/// values of that parameter that are inside, or by the centre of the bounds (in `ln θ`) when
+/// none is. On the widest scale the images hardly see some parameters (the compressibilities),
+/// so a start left on a bound stays there: on one simulated sequence a DIC → FEMU start with
+/// D_QUADRICEPS on its lower bound had the lower cost after the widest scale, was kept, and the
+/// estimate ended on the bound with C10_QUADRICEPS outside its interval.
+pub fn given_starts(free: &[FreeParameter], given: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let on_bound = |v: f64, f: &FreeParameter| {
+        (v / f.lower).ln() < BOUND_LN_TOLERANCE || (f.upper / v).ln() < BOUND_LN_TOLERANCE
+    };
+    let clamped: Vec<Vec<f64>> = given
+        .iter()
+        .map(|s| {
+            s.iter()
+                .zip(free)
+                .map(|(v, f)| v.clamp(f.lower, f.upper))
+                .collect()
+        })
+        .collect();
+    clamped
+        .iter()
+        .map(|s| {
+            s.iter()
+                .zip(free)
+                .enumerate()
+                .map(|(k, (&v, f))| {
+                    if !on_bound(v, f) {
+                        return v;
+                    }
+                    let inside: Vec<f64> = clamped
+                        .iter()
+                        .map(|o| o[k])
+                        .filter(|&o| !on_bound(o, f))
+                        .collect();
+                    if inside.is_empty() {
+                        (0.5 * (f.lower.ln() + f.upper.ln())).exp()
+                    } else {
+                        (inside.iter().map(|o| o.ln()).sum::<f64>() / inside.len() as f64).exp()
+                    }
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// A value within this of a bound in `ln θ` is on it ([`given_starts`]).
+const BOUND_LN_TOLERANCE: f64 = 1e-3;
+
 /// Identifies the free parameters of the problems `make` builds (one per start; they must be
 /// identical) from its images (module documentation). Returns the problem of the best start,
 /// evaluated at the optimum (its residual maps and displacements are those of the estimate),
@@ -227,13 +279,7 @@ pub fn identify(
     let first = make()?;
     let free = first.free().to_vec();
     let mut starts = latin_hypercube(&free, settings.starts, settings.seed.wrapping_mul(7919));
-    // Given starts (read back from files, exp(ln θ) of a bound) are clamped into the bounds.
-    starts.extend(settings.extra_starts.iter().map(|s| {
-        s.iter()
-            .zip(&free)
-            .map(|(v, f)| v.clamp(f.lower, f.upper))
-            .collect::<Vec<f64>>()
-    }));
+    starts.extend(given_starts(&free, &settings.extra_starts));
     if starts.is_empty() {
         return Err(IdicRunError::AllStartsFailed(
             "no start: settings.starts is 0 and no start was given".into(),
@@ -341,4 +387,38 @@ pub fn identify(
             wall_time_s: t0.elapsed().as_secs_f64(),
         },
     ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn free(lower: f64, upper: f64) -> FreeParameter {
+        FreeParameter {
+            name: "P".into(),
+            members: Vec::new(),
+            lower,
+            upper,
+        }
+    }
+
+    /// A given start's value on a bound takes the other given starts' values inside the bounds
+    /// (their geometric mean), or the centre of the bounds when none is inside; values inside
+    /// are kept, values an ulp outside are clamped first.
+    #[test]
+    fn a_given_start_on_a_bound_starts_inside() {
+        let f = [free(0.1, 10.0), free(1.0, 100.0)];
+        let given = vec![
+            vec![0.1, 100.0 * (1.0 + 1e-15)],
+            vec![2.0, 100.0],
+            vec![8.0, 50.0],
+        ];
+        let s = given_starts(&f, &given);
+        assert!((s[0][0] - 4.0).abs() < 1e-12, "{:?}", s[0]);
+        assert!((s[0][1] - 50.0).abs() < 1e-12, "{:?}", s[0]);
+        assert!(s[1][0] == 2.0 && (s[1][1] - 50.0).abs() < 1e-12, "{:?}", s[1]);
+        assert_eq!(s[2], vec![8.0, 50.0]);
+        let lone = given_starts(&f, &[vec![10.0, 1.0]]);
+        assert!((lone[0][0] - 1.0).abs() < 1e-12 && (lone[0][1] - 10.0).abs() < 1e-12);
+    }
 }
