@@ -552,13 +552,15 @@ def fields_above(run_dir, renderer, bound):
     return f"{sum(x > float(bound) for x in ux)} of {len(ux)} (largest {max(ux):.2f} px)"
 
 
-def campaign_error(run_dir, route, parameter, what="mean"):
-    """One parameter of one route of a campaign's campaign.csv: WHAT `mean` (mean |error|, %, two
-    significant digits) or `covered` (`N of M` 95 % intervals holding the truth)."""
+def campaign_error(run_dir, renderer, route, parameter, what="mean"):
+    """One parameter of one route on one renderer's frames (`pymust`, `femu`) of a campaign's
+    campaign.csv: WHAT `mean` (mean |error|, %, two significant digits) or `covered` (`N of M`
+    95 % intervals holding the truth)."""
     rows = [r for r in csv.DictReader(open(ROOT / run_dir / "campaign.csv"))
-            if r["route"] == route and r["parameter"] == parameter]
+            if r["renderer"] == renderer and r["route"] == route and r["parameter"] == parameter]
     if not rows:
-        raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no rows of route {route!r}, parameter {parameter!r}")
+        raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no rows of renderer {renderer!r}, route {route!r}, "
+                         f"parameter {parameter!r}")
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
     return f"{sum(abs(float(r['error_pct'])) for r in rows) / len(rows):.2g}"
