@@ -14,6 +14,14 @@ two cores). The current one defaults to target/release/femu of this checkout (bu
 Figures (NAMES for --only in brackets):
 - [dic1024], [dic512]: `femu dic` on a synthetic speckle pair (speckle.py), the whole command's
   wall time over the correlation's own time (summary.json result.timings.total_s); goal <= 2x.
+- [mudic]: `femu dic` (the whole command, default options and outputs) against muDIC on the same
+  speckle pair, 1024 x 1024 and 512 x 512, over the same ROI (the image less two elements at each
+  edge, where muDIC cannot mesh), muDIC with the same 16 px Q4 mesh and the same increment tolerance (crates/femu-dic/bench/mudic_bench.py, run by
+  --mudic-python, a Python with muDIC; the figure is skipped without it): muDIC's time over
+  femu's, goals >= 50x at 1024^2 and >= 10x at 512^2, and both nodal RMS errors against the
+  pair's known affine field. One muDIC run per size (about 45 s at 1024^2), femu --runs times;
+  muDIC's time is its analysis alone (mesh and correlation, in the Python process), femu's the
+  whole command (reading the images, every output).
 - [idic]: integrated DIC of one realization at 4 000 elements: `femu run` of a study with
   [measurement] source = "ultrasound" (compression, probe anterior 40 x 40 mm, grouped, 5
   starts); the identification step's wall time (identify/grouped/summary.json wall_time_s);
@@ -166,6 +174,71 @@ def figure_dic(binaries, runs, work, size):
     ]
 
 
+def figure_mudic(binaries, runs, work, python):
+    """`femu dic` (both binaries) against muDIC on the speckle pairs of figure_dic."""
+    rows = []
+    script = ROOT / "crates/femu-dic/bench/mudic_bench.py"
+    # speckle.py's known field: a translation (0.35, -0.45) px and G about the image centre.
+    g = ["0.002", "0.001", "-0.0015", "0.0025"]
+    for size, goal in ((1024, ">= 50x"), (512, ">= 10x")):
+        pair = work / f"speckle{size}"
+        if not (pair / "def.png").exists():
+            subprocess.run([sys.executable, HERE / "speckle.py", str(size), pair], check=True)
+        c = str(size / 2)
+        # The same ROI for both: muDIC cannot mesh up to the image's edge (its reference
+        # sampling indexes past the last pixel), so both leave a margin of two elements.
+        m, w = 32, size - 64
+        roi = f"{m},{m},{w}x{w}"
+        p = subprocess.run([python, script, pair / "ref.png", pair / "def.png", str(m), str(m), str(w), str(w),
+                            "16", "0.35", "-0.45", *g, c, c], capture_output=True, text=True, timeout=3600)
+        if p.returncode != 0:
+            log(f"  muDIC {size}^2 failed: {p.stderr[-2000:]}")
+            continue
+        mu = json.loads(p.stdout.strip().splitlines()[-1])
+        v = subprocess.run([python, "-c", "import importlib.metadata as m; print(m.version('muDIC'))"],
+                           capture_output=True, text=True)
+        mu["version"] = v.stdout.strip()
+        log(f"  muDIC {size}^2: {mu}")
+
+        def one(label, binary, k):
+            out = work / f"mudic{size}_{label}"
+            shutil.rmtree(out, ignore_errors=True)
+            t = timed([binary, "dic", pair / "ref.png", pair / "def.png", "--roi", roi, "--out", out, "-q"], work, 600)
+            return {"wall": t["wall"], "error": nodal_error(out / "nodes.csv", size)}
+
+        res = interleaved(binaries, runs, one)
+        cell = {}
+        for label, rs in res.items():
+            walls = [r["wall"] for r in rs]
+            errs = [r["error"] for r in rs if r["error"] is not None]
+            cell[label] = (f"{spread([mu['wall_s'] / w for w in walls], '{:.0f}x')}; femu {spread(walls, '{:.2f}')} s, "
+                           f"muDIC {mu['wall_s']:.1f} s; nodal RMS error femu "
+                           f"{(max(errs) if errs else float('nan')):.4f} px, muDIC {mu['rms_error_px']:.4f} px")
+        rows.append((f"`femu dic` {size}x{size} speckle pair, ROI {roi}, against muDIC {mu.get('version', '')}: "
+                     "muDIC time / femu time",
+                     goal, cell))
+    return rows
+
+
+def nodal_error(nodes_csv, size):
+    """RMS over the nodes and the two components of femu dic's nodes.csv of the error against
+    speckle.py's field (as mudic_bench.py reports muDIC's)."""
+    try:
+        lines = [l for l in Path(nodes_csv).read_text().splitlines() if l and not l.startswith("#")]
+    except OSError:
+        return None
+    head = lines[0].split(",")
+    ix = [head.index(k) for k in ("x_px", "y_px", "ux_px", "uy_px")]
+    c = size / 2
+    s = 0.0
+    for line in lines[1:]:
+        x, y, ux, uy = (float(line.split(",")[i]) for i in ix)
+        tx = 0.35 + 0.002 * (x - c) + 0.001 * (y - c)
+        ty = -0.45 - 0.0015 * (x - c) + 0.0025 * (y - c)
+        s += (ux - tx) ** 2 + (uy - ty) ** 2
+    return (s / (2 * (len(lines) - 1))) ** 0.5
+
+
 def figure_idic(binaries, runs, work):
     study_dir = work / "idic"
     study_dir.mkdir(parents=True, exist_ok=True)
@@ -305,7 +378,8 @@ def main() -> None:
     ap.add_argument("--runs", type=int, default=3, help="runs of each binary for the short figures")
     ap.add_argument("--slow-runs", type=int, default=1, help="runs of each binary for idic and demo --full")
     ap.add_argument("--bench-repeat", type=int, default=5, help="femu bench --repeat")
-    ap.add_argument("--only", default="dic1024,dic512,idic,demo,full,bench")
+    ap.add_argument("--only", default="dic1024,dic512,mudic,idic,demo,full,bench")
+    ap.add_argument("--mudic-python", help="a Python with muDIC installed, for the mudic figure")
     ap.add_argument("--work", type=Path, default=Path(tempfile.gettempdir()) / "femu_perf")
     ap.add_argument("--out", type=Path, default=HERE / "results.md")
     ap.add_argument("--results", type=Path, default=HERE / "results",
@@ -335,6 +409,12 @@ def main() -> None:
     if "dic512" in only:
         log("femu dic 512 x 512")
         rows += figure_dic(binaries, a.runs, a.work, 512)
+    if "mudic" in only:
+        if a.mudic_python:
+            log("femu dic against muDIC")
+            rows += figure_mudic(binaries, a.runs, a.work, a.mudic_python)
+        else:
+            log("mudic: skipped (no --mudic-python)")
     if "idic" in only:
         log("integrated DIC, 4 000 elements")
         rows += figure_idic(binaries, a.slow_runs, a.work)
