@@ -416,7 +416,11 @@ mod tests {
         let s = given_starts(&f, &given);
         assert!((s[0][0] - 4.0).abs() < 1e-12, "{:?}", s[0]);
         assert!((s[0][1] - 50.0).abs() < 1e-12, "{:?}", s[0]);
-        assert!(s[1][0] == 2.0 && (s[1][1] - 50.0).abs() < 1e-12, "{:?}", s[1]);
+        assert!(
+            s[1][0] == 2.0 && (s[1][1] - 50.0).abs() < 1e-12,
+            "{:?}",
+            s[1]
+        );
         assert_eq!(s[2], vec![8.0, 50.0]);
         let lone = given_starts(&f, &[vec![10.0, 1.0]]);
         assert!((lone[0][0] - 1.0).abs() < 1e-12 && (lone[0][1] - 10.0).abs() < 1e-12);
