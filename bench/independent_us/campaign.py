@@ -78,6 +78,12 @@ def own_frames(femu, seed, out, log):
         )
     sim = os.path.join(out, "sim")
     run([femu, "us-sim", study, "--out", sim, "-q"], log)
+    return own_frames_in(sim)
+
+
+def own_frames_in(sim):
+    """The frames of a finished `us-sim` run in `sim`, their placement in the model and the true
+    field at the reference pixels."""
     p = json.load(open(os.path.join(sim, "summary.json")))["probe"]
     c, n = np.array(p["centre_mm"]), np.array(p["direction"])
     t = np.array([-n[1], n[0]])

@@ -30,8 +30,6 @@ def main():
     if os.path.exists(path):
         for r in csv.DictReader(open(path)):
             old[(r["renderer"], int(r["seed"]))] = r
-    # The own frames' truth is re-read from us-sim's output in the campaign folder.
-    campaign.run = lambda cmd, log: None
     rows = []
     for name in sorted(os.listdir(a.out)):
         renderer, _, seed = name.partition("_")
@@ -45,7 +43,8 @@ def main():
         if renderer == "pymust":
             _, _, truth = campaign.indep_frames(a.indep, s)
         else:
-            _, _, truth = campaign.own_frames(None, s, d, None)
+            # The own frames' truth, from us-sim's output in the campaign folder.
+            _, _, truth = campaign.own_frames_in(os.path.join(d, "sim"))
         rms, n = campaign.field_error(field, truth)
         rows.append({"renderer": renderer, "seed": s, "dic": "ok", "rms_ux_px": rms[0], "rms_uy_px": rms[1],
                      "points": n, "dic_s": old.get((renderer, s), {}).get("dic_s", "")})

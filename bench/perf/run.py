@@ -55,6 +55,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import speckle  # this folder: the speckle pair and its known field
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
 IDIC_STUDY = """[model]
@@ -178,8 +180,9 @@ def figure_mudic(binaries, runs, work, python):
     """`femu dic` (both binaries) against muDIC on the speckle pairs of figure_dic."""
     rows = []
     script = ROOT / "crates/femu-dic/bench/mudic_bench.py"
-    # speckle.py's known field: a translation (0.35, -0.45) px and G about the image centre.
-    g = ["0.002", "0.001", "-0.0015", "0.0025"]
+    # speckle.py's known field: a translation and a gradient about the image centre.
+    shift = [str(v) for v in speckle.SHIFT]
+    g = [str(v) for row in speckle.GRADIENT for v in row]
     for size, goal in ((1024, ">= 50x"), (512, ">= 10x")):
         pair = work / f"speckle{size}"
         if not (pair / "def.png").exists():
@@ -190,7 +193,7 @@ def figure_mudic(binaries, runs, work, python):
         m, w = 32, size - 64
         roi = f"{m},{m},{w}x{w}"
         p = subprocess.run([python, script, pair / "ref.png", pair / "def.png", str(m), str(m), str(w), str(w),
-                            "16", "0.35", "-0.45", *g, c, c], capture_output=True, text=True, timeout=3600)
+                            "16", *shift, *g, c, c], capture_output=True, text=True, timeout=3600)
         if p.returncode != 0:
             log(f"  muDIC {size}^2 failed: {p.stderr[-2000:]}")
             continue
@@ -229,12 +232,10 @@ def nodal_error(nodes_csv, size):
         return None
     head = lines[0].split(",")
     ix = [head.index(k) for k in ("x_px", "y_px", "ux_px", "uy_px")]
-    c = size / 2
     s = 0.0
     for line in lines[1:]:
         x, y, ux, uy = (float(line.split(",")[i]) for i in ix)
-        tx = 0.35 + 0.002 * (x - c) + 0.001 * (y - c)
-        ty = -0.45 - 0.0015 * (x - c) + 0.0025 * (y - c)
+        tx, ty = speckle.known_field(x, y, size)
         s += (ux - tx) ** 2 + (uy - ty) ** 2
     return (s / (2 * (len(lines) - 1))) ** 0.5
 

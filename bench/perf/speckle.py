@@ -14,6 +14,17 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+# The known field: u(X) = SHIFT + GRADIENT (X - c), c the image centre (px; x = column).
+SHIFT = (0.35, -0.45)
+GRADIENT = ((0.002, 0.001), (-0.0015, 0.0025))
+
+
+def known_field(x: float, y: float, size: int) -> tuple:
+    """The pair's displacement (px) at the reference point (x, y) of a SIZE x SIZE pair."""
+    c = size / 2
+    (g00, g01), (g10, g11) = GRADIENT
+    return (SHIFT[0] + g00 * (x - c) + g01 * (y - c), SHIFT[1] + g10 * (x - c) + g11 * (y - c))
+
 
 def render(size: int, centres: np.ndarray, amplitude: np.ndarray, sigma: float) -> np.ndarray:
     img = np.zeros((size, size))
@@ -41,8 +52,8 @@ def main() -> None:
     centres = rng.uniform(-8, size + 8, (n, 2))
     amplitude = rng.uniform(0.5, 1.0, n)
     c = np.array([size / 2, size / 2])
-    g = np.array([[0.002, 0.001], [-0.0015, 0.0025]])
-    moved = centres + np.array([0.35, -0.45]) + (centres - c) @ g.T
+    g = np.array(GRADIENT)
+    moved = centres + np.array(SHIFT) + (centres - c) @ g.T
     ref = render(size, centres, amplitude, sigma)
     dfm = render(size, moved, amplitude, sigma)
     scale = 230.0 / max(ref.max(), dfm.max())

@@ -498,29 +498,21 @@ fn ladder(
                     DicError::Roi(_) | DicError::SizeMismatch { .. } | DicError::Interrupted(_)
                 )
             };
-            let correlated = if forced {
+            let mut opts = opts;
+            let mut correlated = if forced {
                 correlate(f, g, roi, &opts)
             } else {
                 crate::solver::correlate_rung(f, g, roi, &opts)
             };
-            let mut res = match correlated {
-                Ok(res) => res,
-                Err(e) if is_fatal(&e) => return Err(fatal(e)),
-                Err(e) => {
-                    attempts.push(failed(e));
-                    k += 1;
-                    continue;
-                }
-            };
             // Accelerated steps that stalled close to the fixed point: the same rung again with
             // plain steps, before a longer regularization (a bias) or a larger element is tried.
-            let mut opts = opts;
-            if !forced
-                && !res.converged
-                && opts.acceleration_depth > 0
-                && res.last_increment_px < STALLED_INCREMENT_PX
-            {
-                let mut stalled = attempt_of(&res, None, &opts);
+            if let Some(res) = correlated.as_ref().ok().filter(|res| {
+                !forced
+                    && !res.converged
+                    && opts.acceleration_depth > 0
+                    && res.last_increment_px < STALLED_INCREMENT_PX
+            }) {
+                let mut stalled = attempt_of(res, None, &opts);
                 stalled.note = Some(format!(
                     "stalled {:.3} px from convergence with Anderson acceleration; the same rung again with plain Gauss-Newton steps",
                     res.last_increment_px
@@ -531,16 +523,17 @@ fn ladder(
                     max_iterations: PLAIN_ITERATION_FACTOR * opts.max_iterations,
                     ..opts
                 };
-                res = match crate::solver::correlate_rung(f, g, roi, &opts) {
-                    Ok(res) => res,
-                    Err(e) if is_fatal(&e) => return Err(fatal(e)),
-                    Err(e) => {
-                        attempts.push(failed(e));
-                        k += 1;
-                        continue;
-                    }
-                };
+                correlated = crate::solver::correlate_rung(f, g, roi, &opts);
             }
+            let res = match correlated {
+                Ok(res) => res,
+                Err(e) if is_fatal(&e) => return Err(fatal(e)),
+                Err(e) => {
+                    attempts.push(failed(e));
+                    k += 1;
+                    continue;
+                }
+            };
             // A rung that did not converge is rejected whatever its quality: the covariance
             // and the trust (the costliest part of a rung after the iterations) are computed
             // only for a field that may be kept; such a rung's attempt has no trusted fraction

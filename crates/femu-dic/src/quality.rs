@@ -33,7 +33,7 @@
 //! median (too little texture, or texture along one direction only).
 
 use crate::error::DicError;
-use crate::solver::DicResult;
+use crate::solver::{add_element, DicResult};
 use crate::sparse::Cholesky;
 use rayon::prelude::*;
 
@@ -60,16 +60,8 @@ pub struct NodeSd {
 pub fn noise_weighted_matrix(res: &DicResult, element_variance: &[f64]) -> Vec<f64> {
     let sys = &res.system;
     let mut v = vec![0.0; sys.pattern.nnz()];
-    for ((d, me), s2) in sys.dofs.iter().zip(&sys.elem_m).zip(element_variance) {
-        for i in 0..8 {
-            for j in 0..8 {
-                let pos = sys
-                    .pattern
-                    .position(d[i], d[j])
-                    .expect("element entry in the pattern");
-                v[pos] += s2 * me[i * 8 + j];
-            }
-        }
+    for ((d, me), &s2) in sys.dofs.iter().zip(&sys.elem_m).zip(element_variance) {
+        add_element(&sys.pattern, &mut v, d, me, s2);
     }
     v
 }
@@ -86,15 +78,7 @@ pub fn noise_matrix(res: &DicResult) -> Vec<f64> {
     let sys = &res.system;
     let mut m_sigma = vec![0.0; sys.pattern.nnz()];
     for (d, me) in sys.dofs.iter().zip(&sys.elem_m_noise) {
-        for i in 0..8 {
-            for j in 0..8 {
-                let pos = sys
-                    .pattern
-                    .position(d[i], d[j])
-                    .expect("element entry in the pattern");
-                m_sigma[pos] += me[i * 8 + j];
-            }
-        }
+        add_element(&sys.pattern, &mut m_sigma, d, me, 1.0);
     }
     m_sigma
 }

@@ -374,11 +374,7 @@ impl Level {
                     fye[k] = gy;
                     let n = &ntab[k];
                     // Row vector (N0 fx, N0 fy, N1 fx, ...) and its outer product.
-                    let mut row = [0.0; 8];
-                    for a in 0..4 {
-                        row[2 * a] = n[a] * gx;
-                        row[2 * a + 1] = n[a] * gy;
-                    }
+                    let row = pixel_row(n, gx, gy);
                     for i in 0..8 {
                         for j in 0..=i {
                             me[i * 8 + j] += row[i] * row[j];
@@ -451,14 +447,7 @@ impl Level {
         let pattern = femu_sparse::CscPattern::from_pairs(n_eq, &mut pairs);
         let mut m_values = vec![0.0; pattern.nnz()];
         for (d, me) in dofs.iter().zip(&elem_m) {
-            for i in 0..8 {
-                for j in 0..8 {
-                    let pos = pattern
-                        .position(d[i], d[j])
-                        .expect("element entry in the pattern");
-                    m_values[pos] += me[i * 8 + j];
-                }
-            }
+            add_element(&pattern, &mut m_values, d, me, 1.0);
         }
         let reg = regularizer.and_then(|r| {
             let k_values = r.k_values(&pattern);
@@ -744,29 +733,21 @@ impl Level {
                 if self.gw[e * npx + k].is_nan() {
                     continue;
                 }
-                let n = &self.ntab[k];
-                let (gx, gy) = (self.fx[e * npx + k], self.fy[e * npx + k]);
-                let mut row = [0.0; 8];
-                for a in 0..4 {
-                    row[2 * a] = n[a] * gx;
-                    row[2 * a + 1] = n[a] * gy;
-                }
+                let row = pixel_row(&self.ntab[k], self.fx[e * npx + k], self.fy[e * npx + k]);
                 for i in 0..8 {
                     for j in 0..8 {
                         me[i * 8 + j] += row[i] * row[j];
                     }
                 }
             }
-            let d = self.dofs[e];
-            for i in 0..8 {
-                for j in 0..8 {
-                    let pos = self
-                        .pattern
-                        .position(d[i], d[j])
-                        .expect("element entry in the pattern");
-                    self.m_values[pos] += me[i * 8 + j] - self.elem_m[e][i * 8 + j];
-                }
-            }
+            let change: [f64; 64] = std::array::from_fn(|i| me[i] - self.elem_m[e][i]);
+            add_element(
+                &self.pattern,
+                &mut self.m_values,
+                &self.dofs[e],
+                &change,
+                1.0,
+            );
             self.elem_m[e] = me;
         }
     }
@@ -865,18 +846,11 @@ fn noise_matrices(level: &Level, variance: &[f64], rho: &ResidualCorrelation) ->
             let keep_all =
                 level.elem_out[e][0] == 0.0 || !keeps_inside_in_m(&level.elem_out[e], npx);
             let w = |k: usize| {
-                let mut v = [0.0; 8];
                 if !keep_all && level.gw[e * npx + k].is_nan() {
                     // Left out of the residual: no noise from it either.
-                    return v;
+                    return [0.0; 8];
                 }
-                let n = &level.ntab[k];
-                let (gx, gy) = (level.fx[e * npx + k], level.fy[e * npx + k]);
-                for a in 0..4 {
-                    v[2 * a] = n[a] * gx;
-                    v[2 * a + 1] = n[a] * gy;
-                }
-                v
+                pixel_row(&level.ntab[k], level.fx[e * npx + k], level.fy[e * npx + k])
             };
             let mut m = [0.0f64; 64];
             for k in 0..npx {
@@ -921,6 +895,37 @@ pub const MIN_INSIDE: f64 = 0.5;
 
 fn keeps_inside_in_m(out: &[f64; 3], npx: usize) -> bool {
     1.0 - out[0] / npx as f64 >= MIN_INSIDE
+}
+
+/// The row `(N0 fx, N0 fy, N1 fx, N1 fy, ...)` of one pixel: the shape functions `n` at the
+/// pixel times the reference gradient `(gx, gy)` (eq. 2's `N ∇f`).
+#[inline]
+fn pixel_row(n: &[f64; 4], gx: f64, gy: f64) -> [f64; 8] {
+    let mut row = [0.0; 8];
+    for a in 0..4 {
+        row[2 * a] = n[a] * gx;
+        row[2 * a + 1] = n[a] * gy;
+    }
+    row
+}
+
+/// Adds `factor` times the 8 x 8 element matrix `me` (row-major) at the element's `dofs` into
+/// `values`, stored on `pattern`.
+pub(crate) fn add_element(
+    pattern: &CscPattern,
+    values: &mut [f64],
+    dofs: &[usize; 8],
+    me: &[f64; 64],
+    factor: f64,
+) {
+    for i in 0..8 {
+        for j in 0..8 {
+            let pos = pattern
+                .position(dofs[i], dofs[j])
+                .expect("element entry in the pattern");
+            values[pos] += factor * me[i * 8 + j];
+        }
+    }
 }
 
 /// Number of automatic pyramid levels: up to 2 while the reduced ROI holds 2 x 2 elements.
@@ -1181,7 +1186,7 @@ fn correlate_with(
             carried = Some((level.mesh.clone(), a, l));
         }
     }
-    let (level, a, iterations, converged, last_increment_px) =
+    let (mut level, a, iterations, converged, last_increment_px) =
         finest.expect("level 0 is always built or returns an error");
     // Diagnostics on the finest level.
     let npx = h * h;
@@ -1240,7 +1245,6 @@ fn correlate_with(
             (lo.min(v), hi.max(v))
         });
     let residual_rms = level.residual_rms();
-    let mut level = level;
     if diagnostics {
         level.keep_inside_in_m();
     }
