@@ -160,6 +160,50 @@ fn dic_check_writes_pairs_checks_and_maps() {
     }
     assert!(out.join("composition_f0_f1_f2.png").is_file());
     assert!(out.join("forward-backward_f0_f1_f0.png").is_file());
+    // points.csv holds the points each check's statistics are made of: the RMS of its rows is
+    // the check's RMS over all points in checks.csv (both printed to 5 decimals).
+    let points = std::fs::read_to_string(out.join("points.csv")).unwrap();
+    let checks = std::fs::read_to_string(out.join("checks.csv")).unwrap();
+    for c in sum["checks"].as_array().unwrap() {
+        let (name, frames) = (
+            c["check"].as_str().unwrap(),
+            c["frames"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|f| f.as_str().unwrap())
+                .collect::<Vec<_>>()
+                .join(">"),
+        );
+        let rows: Vec<Vec<f64>> = points
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .filter(|v| v[0] == name && v[1] == frames)
+            .map(|v| v[2..].iter().map(|x| x.parse().unwrap()).collect())
+            .collect();
+        let listed: Vec<f64> = checks
+            .lines()
+            .map(|l| l.split(',').collect::<Vec<_>>())
+            .find(|v| v[0] == name && v[1] == frames && v[2] == "all" && v[3] == "all")
+            .map(|v| v[4..9].iter().map(|x| x.parse().unwrap()).collect())
+            .unwrap();
+        assert_eq!(rows.len() as f64, listed[0], "{name} {frames}");
+        let rms =
+            |k: usize| (rows.iter().map(|r| r[k] * r[k]).sum::<f64>() / rows.len() as f64).sqrt();
+        assert!(
+            (rms(2) - listed[3]).abs() < 1e-4,
+            "{name} {frames}: {} against {}",
+            rms(2),
+            listed[3]
+        );
+        assert!(
+            (rms(3) - listed[4]).abs() < 1e-4,
+            "{name} {frames}: {} against {}",
+            rms(3),
+            listed[4]
+        );
+    }
 }
 
 #[test]

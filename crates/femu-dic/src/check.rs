@@ -10,6 +10,8 @@
 //! Files written into `out`: `pairs.csv` (one row per correlation: options chosen,
 //! convergence, iterations, residual, trusted share, nodal sd), `checks.csv` (one row per check,
 //! region and point set: mean and RMS of the difference and its predicted sd, px),
+//! `points.csv` (one row per point of every check: its position in the reference frame, the
+//! difference, its predicted sd and whether both fields trust it, px),
 //! `<check>_<frames>.png` (the magnitude of the difference over the reference frame; with
 //! figures), `summary.json` ([`CheckReport`]).
 
@@ -312,6 +314,10 @@ pub fn run_check(job: &CheckJob) -> Result<CheckReport, DicError> {
         &job.out.join("checks.csv"),
         checks.iter().map(|c| &c.0).chain(pooled.iter()),
     )?;
+    write_points_csv(
+        &job.out.join("points.csv"),
+        checks.iter().map(|c| (&c.0, c.1.as_slice())),
+    )?;
     if femu_mesh::stop::requested() {
         // Stopped: the pairs and checks finished are in pairs.csv and checks.csv.
         return Err(DicError::Interrupted(femu_mesh::stop::Interrupted));
@@ -389,6 +395,40 @@ fn write_checks_csv<'a>(
                 r.rms_px[1],
                 r.predicted_sd_px[0],
                 r.predicted_sd_px[1]
+            )
+            .map_err(&e)?;
+        }
+    }
+    f.commit().map_err(&e)
+}
+
+/// Every point of every check: where a check fails, not only how much (`points.csv`).
+fn write_points_csv<'a>(
+    path: &Path,
+    checks: impl Iterator<Item = (&'a CheckSummary, &'a [CheckPoint])>,
+) -> Result<(), DicError> {
+    let e = werr(path);
+    let mut f = femu_mesh::atomic::AtomicFile::create(path).map_err(&e)?;
+    writeln!(
+        f,
+        "check,frames,x_px,y_px,dx_px,dy_px,predicted_sd_x_px,predicted_sd_y_px,trusted"
+    )
+    .map_err(&e)?;
+    for (c, pts) in checks {
+        let frames = c.frames.join(">");
+        for p in pts {
+            writeln!(
+                f,
+                "{},{},{:.3},{:.3},{:.5},{:.5},{:.5},{:.5},{}",
+                c.check,
+                frames,
+                p.x[0],
+                p.x[1],
+                p.diff[0],
+                p.diff[1],
+                p.sd[0],
+                p.sd[1],
+                u8::from(p.trusted)
             )
             .map_err(&e)?;
         }
