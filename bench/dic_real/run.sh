@@ -6,7 +6,8 @@
 #   bash bench/dic_real/run.sh FEMU_BIN [DATA_DIR] [OUT_DIR]
 #
 # Each configuration below runs `femu dic-check` on frames 048 to its last frame with its ROI and
-# options (the others at their defaults); its checks.csv and pairs.csv land in OUT_DIR/NAME/
+# options (the others at their defaults); its checks.csv and pairs.csv (and for the whole ROI
+# its points.csv, gzipped) land in OUT_DIR/NAME/
 # (default bench/dic_real/results), beside configs.csv (name, ROI, frames, options, wall time,
 # the correlation that did not converge when one stopped dic-check) and provenance.json
 # (scripts/guide/provenance.sh). Then `scripts/guide/tables.py render dic.md` writes the page.
@@ -62,6 +63,9 @@ for c in "${configs[@]}"; do
     else
         mkdir -p "$scratch/$name"
         cp "$scratch/run/$name/checks.csv" "$scratch/run/$name/pairs.csv" "$scratch/$name/"
+        # Every point of every check for the whole ROI (the correlation of the forward-backward
+        # discrepancy with the composition error on the guide's DIC page), compressed.
+        [ "$name" = whole ] && gzip -9n <"$scratch/run/$name/points.csv" >"$scratch/$name/points.csv.gz"
     fi
     rm -f "$scratch/$name.err"
     echo "$name,\"$roi\",048-$last,$opts,$((ms / 1000)).$(printf %03d $((ms % 1000))),\"${error//\"/}\"" >>"$scratch/configs.csv"

@@ -15,10 +15,14 @@ Variants (each a `femu identify` of the realization's plain study with another f
 - `true-axial`: the true axial component everywhere, the measured lateral one;
 - `true-top`: the true lateral component in the top 11 mm (skin, fat, fascia);
 - `oracle-sd`: the measured field, sx and sy replaced by the RMS of its actual error in 5 mm
-  depth bands (the weighting a perfect error model of that form would give).
+  depth bands (the weighting a perfect error model of that form would give);
+- `lateral-x10`: the measured field, the lateral sd sx ten times larger (the lateral component
+  weighs a hundredth);
+- `axial-only`: the measured field, sx ten thousand times larger (the axial component alone).
 
 Writes `substitution.csv` (seed, variant, parameter, error %, covered) and prints a table of
-mean |error| per variant and parameter. The truth is used to build the variants and to score
+mean |error| per variant and parameter; `lateral_strain.csv` (seed, the fat layer's mean lateral
+strain dux/dx between 3 and 11 mm deep, true and measured, over the trusted points with a truth). The truth is used to build the variants and to score
 them: these are diagnostics, not estimates.
 """
 import argparse
@@ -34,7 +38,8 @@ from scipy.interpolate import griddata
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from campaign import PX, TRUTH, indep_frames, load_csv, seeds  # noqa: E402
 
-VARIANTS = ["measured", "true", "true-lateral", "true-axial", "true-top", "oracle-sd"]
+VARIANTS = ["measured", "true", "true-lateral", "true-axial", "true-top", "oracle-sd", "lateral-x10",
+            "axial-only"]
 
 
 def true_at(field, truth):
@@ -59,6 +64,10 @@ def variant_rows(field, tu, variant):
     elif variant == "true-top":
         top = ok & (field["y"] < 11.0)
         ux[top] = tu[top, 0]
+    elif variant == "lateral-x10":
+        sx = sx * 10.0
+    elif variant == "axial-only":
+        sx = sx * 1e4
     elif variant == "oracle-sd":
         band = np.minimum((field["y"] // 5.0).astype(int), 7)
         e = np.c_[ux, uy] - tu
@@ -72,6 +81,15 @@ def variant_rows(field, tu, variant):
             for i in range(len(ux)) if keep[i]]
 
 
+def lateral_strain(field, tu):
+    """The mean lateral strain dux/dx of the true and of the measured field between 3 and 11 mm
+    deep (skin to fascia; a plane fitted to ux over x and y), on the trusted points with a truth."""
+    m = np.isfinite(tu).all(1) & (field["w"] > 0) & (field["y"] >= 3.0) & (field["y"] < 11.0)
+    a = np.c_[np.ones(m.sum()), field["x"][m] - field["x"][m].mean(), field["y"][m] - field["y"][m].mean()]
+    fit = lambda u: np.linalg.lstsq(a, u, rcond=None)[0][1]
+    return fit(tu[m, 0]), fit(field["ux"][m])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--femu", default="target/release/femu")
@@ -79,9 +97,10 @@ def main():
     ap.add_argument("--indep", default="out/indep")
     ap.add_argument("--seeds", default="1-3")
     ap.add_argument("--out", default="out/substitution")
+    ap.add_argument("--variants", default=",".join(VARIANTS), help="comma-separated, of: " + ", ".join(VARIANTS))
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
-    rows = []
+    rows, strains = [], []
     for s in seeds(a.seeds):
         src = os.path.join(a.campaign, f"pymust_{s:02}")
         path = os.path.join(src, "dic", "field.csv")
@@ -92,8 +111,12 @@ def main():
         field = load_csv(path)
         _, _, truth = indep_frames(a.indep, s)
         tu = true_at(field, truth)
+        true_strain, measured_strain = lateral_strain(field, tu)
+        strains.append({"seed": s, "true": true_strain, "measured": measured_strain})
         study = open(os.path.join(src, "plain.toml")).read()
-        for v in VARIANTS:
+        for v in a.variants.split(","):
+            if v not in VARIANTS:
+                raise SystemExit(f"unknown variant {v!r}; known: {', '.join(VARIANTS)}")
             d = os.path.abspath(os.path.join(a.out, f"pymust_{s:02}", v))
             os.makedirs(d, exist_ok=True)
             fpath = os.path.join(d, "field.csv")
@@ -121,6 +144,11 @@ def main():
             print(f"seed {s} {v:12}: " + ", ".join(
                 f"{x['parameter']} {x['error_pct']:+.1f}%" for x in rows if x["seed"] == s and x["variant"] == v),
                 flush=True)
+    if strains:
+        with open(os.path.join(a.out, "lateral_strain.csv"), "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(strains[0]))
+            w.writeheader()
+            w.writerows(strains)
     if not rows:
         return
     with open(os.path.join(a.out, "substitution.csv"), "w", newline="") as f:

@@ -9,14 +9,13 @@
 //! (`quality::covariance_unregularized`; for muDIC's larger elements an upper bound).
 //!
 //! `cargo run --release -p femu-dic --example compare_mudic -- --python VENV/bin/python [--roi x,y,w,h] [--out DIR]`
-//! (`pip install mudic pillow` in the venv). Skips with a message when the frames are absent.
+//! (`pip install muDIC==0.2.1 pillow` in the venv). Skips with a message when the frames are absent.
 //!
-//! Measured (2026-11-25, muDIC 0.6 with 32 px elements): muDIC without regularization does not
-//! hold on these frames beyond the slow first pair: 048 → 050 agrees to a median |difference|
-//! (0.58, 0.08) px (80 % of the components within 2 combined sd), the later pairs differ by
-//! RMS 60–160 px along x (nodes of muDIC's field running away in low-texture elements). The
-//! second opinion kept as a test is therefore Lucas–Kanade optical flow
-//! (`tests/second_opinion.rs`), which holds on every pair.
+//! `bash bench/dic_real/mudic.sh PYTHON` runs it and keeps `compare.json` with its provenance in
+//! `bench/dic_real/results_mudic/`, from which the guide's DIC page is made: without
+//! regularization muDIC's nodes run away in the low-texture elements beyond the slow first pair,
+//! so the second opinion kept as a test is Lucas–Kanade optical flow (`tests/second_opinion.rs`),
+//! which holds on every pair.
 
 use femu_dic::auto::Setting;
 use femu_dic::command::{CorrelationSpec, RoiSpec};
