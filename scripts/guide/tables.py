@@ -19,6 +19,7 @@ of the binary's sources, load average); without it the table says what is unknow
 import csv
 import difflib
 import json
+import math
 import pathlib
 import re
 import sys
@@ -337,14 +338,20 @@ def dic_campaign(pymust_dir, own_dir):
 
 def idic_campaign(run_dir):
     """Integrated DIC on the pymust sequences (bench/independent_us/idic_campaign.py), from the
-    idic_campaign.csv kept in the repository: per parameter under the probe, mean and largest
-    |error|, mean error, the 95 % intervals that hold the truth and the seeds they miss."""
+    idic_campaign.csv kept in the repository: per parameter under the probe, the integrated
+    route's mean and largest |error|, mean error, the 95 % intervals that hold the truth and the
+    seeds they miss; beside it the DIC → FEMU routes on the same frames (weighted and plain,
+    rows `dic-weighted` and `dic-plain` when the file has them)."""
     d = ROOT / run_dir
-    # The integrated DIC's rows (the file also holds the DIC -> FEMU routes on the same frames).
-    rows = [r for r in csv.DictReader(open(d / "idic_campaign.csv")) if r.get("route", "integrated") == "integrated"]
+    all_rows = list(csv.DictReader(open(d / "idic_campaign.csv")))
+    route = lambda r: r.get("route", "integrated")
+    rows = [r for r in all_rows if route(r) == "integrated"]
+    others = [(k, t) for k, t in (("dic-weighted", "weighted DIC → FEMU"), ("dic-plain", "plain DIC → FEMU"))
+              if any(route(r) == k for r in all_rows)]
     out = [provenance(d).strip(), ""]
-    out.append("| parameter | mean / max \\|error\\| | mean error | 95 % intervals holding the truth |")
-    out.append("|---|---|---|---|")
+    out.append("| parameter | mean / max \\|error\\| | mean error | 95 % intervals holding the truth |"
+               + "".join(f" {t}: mean / max \\|error\\|, intervals |" for _, t in others))
+    out.append("|---|---|---|---|" + "---|" * len(others))
     for par in UNDER_PROBE:
         rr = [r for r in rows if r["parameter"] == par]
         e = [100 * float(r["relative_error"]) for r in rr]
@@ -352,12 +359,18 @@ def idic_campaign(run_dir):
         held = f"{len(rr) - len(missed)} of {len(rr)}" + (
             f" (missed: seed{'s' if len(missed) > 1 else ''} {', '.join(missed)})" if missed else "")
         mean = sum(e) / len(e)
+        cells = []
+        for k, _ in others:
+            ro = [r for r in all_rows if route(r) == k and r["parameter"] == par]
+            eo = [100 * abs(float(r["relative_error"])) for r in ro]
+            cov = sum(r["covered"] == "1" and not on_bound(float(r["relative_error"])) for r in ro)
+            cells.append(f" {sum(eo) / len(eo):.3g} / {max(eo):.3g} %, {cov} of {len(ro)} |")
         out.append(
             f"| {par} | {sum(map(abs, e)) / len(e):.3g} / {max(map(abs, e)):.3g} % | "
-            f"{'+' if mean >= 0 else '−'}{abs(mean):.3g} % | {held} |"
+            f"{'+' if mean >= 0 else '−'}{abs(mean):.3g} % | {held} |" + "".join(cells)
         )
     wall = [float(r["wall_s"]) for r in rows]
-    out.append(f"\n{min(wall):.0f}–{max(wall):.0f} s per realization (`wall_s`), "
+    out.append(f"\n{min(wall):.0f}–{max(wall):.0f} s per realization for the integrated DIC (`wall_s`), "
                f"{len({r['seed'] for r in rows})} realizations.")
     return "\n".join(out) + "\n"
 
@@ -539,6 +552,126 @@ def dic_real(results):
             f"| {rms('composition', 'deep', 'trusted')} | {float(c['wall_s']):.0f} |"
         )
     return "\n".join(out) + "\n"
+
+
+def dic_real_r(results, name, first="048"):
+    """How far the forward–backward check maps the composition error on the real frames: the
+    correlation coefficient of |forward–backward difference| (FIRST → next → FIRST) and
+    |composition difference| (FIRST → two frames on against the path through the frame between)
+    at the same points of configuration NAME (its points.csv.gz): `r = R (N points)`."""
+    import gzip
+    path = ROOT / results / name / "points.csv.gz"
+    if not path.is_file():
+        raise SystemExit(f"{path}: missing (bench/dic_real/run.sh keeps it for the whole ROI)")
+    n = int(first)
+    fr = lambda *k: ">".join(f"gastroc_jumping_{v:03d}" for v in k)
+    fb, co = {}, {}
+    for r in csv.DictReader(gzip.open(path, "rt")):
+        key = (r["x_px"], r["y_px"])
+        mag = math.hypot(float(r["dx_px"]), float(r["dy_px"]))
+        if r["check"] == "forward-backward" and r["frames"] == fr(n, n + 2, n):
+            fb[key] = mag
+        elif r["check"] == "composition" and r["frames"] == fr(n, n + 2, n + 4):
+            co[key] = mag
+    both = [k for k in co if k in fb]
+    if len(both) < 3:
+        raise SystemExit(f"{path}: fewer than 3 points in both checks from frame {first}")
+    a, b = [fb[k] for k in both], [co[k] for k in both]
+    ma, mb = sum(a) / len(a), sum(b) / len(b)
+    cov = sum((x - ma) * (y - mb) for x, y in zip(a, b))
+    r = cov / math.sqrt(sum((x - ma) ** 2 for x in a) * sum((y - mb) ** 2 for y in b))
+    return f"r = {r:+.2f}".replace("+", "").replace("-", "−") + f" over {len(both)} points"
+
+
+def mudic_real(run_dir, what="table", bound="5"):
+    """muDIC against femu-dic on the real frames (bench/dic_real/mudic.sh's compare.json): WHAT
+    `table` (per consecutive pair: nodes compared, RMS and median |difference|, the share within
+    two combined sd, muDIC's time), `apart` (how many pairs differ by an RMS above BOUND px in
+    either component: `N of M`) or `provenance`."""
+    d = ROOT / run_dir
+    if what == "provenance":
+        return provenance(d).strip()
+    pairs = json.load(open(d / "compare.json"))
+    frames = [48, 50, 52, 54, 56, 58]
+    if what == "apart":
+        far = sum(max(p["rms_diff_px"]) > float(bound) for p in pairs)
+        return f"{far} of {len(pairs)}"
+    out = [provenance(d).strip(), ""]
+    out.append("| pair | nodes compared | RMS difference (x, y) px | median \\|difference\\| (x, y) px "
+               "| components within 2 combined sd | muDIC (s) |")
+    out.append("|---|---|---|---|---|---|")
+    for p in pairs:
+        k = p["pair"]
+        rx, ry = p["rms_diff_px"]
+        mx, my = p["median_abs_diff_px"]
+        out.append(f"| {frames[k]:03d}→{frames[k + 1]:03d} | {p['nodes']} | ({rx:.2f}, {ry:.2f}) "
+                   f"| ({mx:.2f}, {my:.2f}) | {100 * p['within_2sd_combined']:.0f} % | {p['mudic_wall_s']:.1f} |")
+    return "\n".join(out) + "\n"
+
+
+def substitution(run_dir, variant, parameter, what="mean"):
+    """bench/independent_us/substitution.py's substitution.csv: for VARIANT (`measured`,
+    `true`, `true-lateral`, ...) and PARAMETER, WHAT `mean` (mean |error| %, two significant
+    digits), `span` (smallest–largest |error| %), `covered` (`N of M` intervals holding the
+    truth), `seeds` (how many realizations) or `provenance`."""
+    d = ROOT / run_dir
+    if what == "provenance":
+        return provenance(d).strip()
+    rows = [r for r in csv.DictReader(open(d / "substitution.csv"))
+            if r["variant"] == variant and r["parameter"] == parameter]
+    if not rows:
+        raise SystemExit(f"{d / 'substitution.csv'}: no rows of {variant} {parameter}")
+    e = [abs(float(r["error_pct"])) for r in rows]
+    if what == "span":
+        return f"{min(e):.2g}–{max(e):.2g}"
+    if what == "covered":
+        return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
+    if what == "seeds":
+        return str(len(rows))
+    return f"{sum(e) / len(e):.2g}"
+
+
+def substitution_table(run_dir):
+    """bench/independent_us/substitution.py's substitution.csv as a table: per variant (in the
+    file's order) and parameter, mean |error| % and the 95 % intervals holding the truth."""
+    d = ROOT / run_dir
+    rows = list(csv.DictReader(open(d / "substitution.csv")))
+    variants = list(dict.fromkeys(r["variant"] for r in rows))
+    params = list(dict.fromkeys(r["parameter"] for r in rows))
+    out = ["| field identified | " + " | ".join(params) + " |", "|---|" + "---|" * len(params)]
+    for v in variants:
+        cells = []
+        for p in params:
+            rr = [r for r in rows if r["variant"] == v and r["parameter"] == p]
+            e = [abs(float(r["error_pct"])) for r in rr]
+            cells.append(f"{sum(e) / len(e):.2g} %, {sum(r['covered'] == '1' for r in rr)} of {len(rr)}")
+        out.append(f"| `{v}` | " + " | ".join(cells) + " |")
+    return "\n".join(out) + "\n"
+
+
+def lateral_strain(run_dir):
+    """bench/independent_us/substitution.py's lateral_strain.csv: in how many realizations the
+    measured mean lateral strain of the fat layer is smaller than the true one, and by how much
+    on average: `N of M realizations, by X % of the true strain on average`."""
+    rows = list(csv.DictReader(open(ROOT / run_dir / "lateral_strain.csv")))
+    rel = [float(r["measured"]) / float(r["true"]) - 1 for r in rows]
+    small = sum(e < 0 for e in rel)
+    return f"{small} of {len(rel)} realizations, by {-100 * sum(rel) / len(rel):.2g} % of the true strain on average"
+
+
+def idic_error(run_dir, parameter, what="mean"):
+    """One parameter of the integrated-DIC campaign on pymust's frames (idic_campaign.csv, the
+    integrated route): WHAT `mean` (mean |error| %, two significant digits), `covered` or `above`
+    (`N of M` realizations above the truth)."""
+    rows = [r for r in csv.DictReader(open(ROOT / run_dir / "idic_campaign.csv"))
+            if r.get("route", "integrated") == "integrated" and r["parameter"] == parameter]
+    if not rows:
+        raise SystemExit(f"{ROOT / run_dir / 'idic_campaign.csv'}: no integrated rows of {parameter}")
+    if what == "covered":
+        return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
+    if what == "above":
+        return f"{sum(float(r['relative_error']) > 0 for r in rows)} of {len(rows)}"
+    return f"{100 * sum(abs(float(r['relative_error'])) for r in rows) / len(rows):.2g}"
 
 
 def fields_above(run_dir, renderer, bound):
@@ -828,6 +961,9 @@ def render(template):
              "dic_real": dic_real, "dic_real_rms": dic_real_rms,
              "fields_above": fields_above, "campaign_error": campaign_error,
              "idic_own": idic_own, "idic_own_misses": idic_own_misses, "lk_composition": lk_composition,
+             "dic_real_r": dic_real_r, "mudic_real": mudic_real, "substitution": substitution,
+             "idic_error": idic_error, "substitution_table": substitution_table,
+             "lateral_strain": lateral_strain,
              "sensitivity_cost": sensitivity_cost, "identify_virtual": identify_virtual,
              "identify_levels": identify_levels, "identify_fd": identify_fd}
     page = (TEMPLATES / template).read_text()
