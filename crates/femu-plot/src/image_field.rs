@@ -108,28 +108,16 @@ pub fn image_field_png(
         draw_title(root, &opts.title, s)?;
         // Image pixels: nearest neighbour, grey blended with the colour where defined, written
         // into one RGB block and copied onto the canvas at once (a pixel at a time through the
-        // drawing area cost several times the colouring itself). The source column of each
-        // picture column once (a non-negative quotient: truncation is the floor).
-        let columns: Vec<usize> = (0..pw)
-            .map(|px| cx + (((px as f64 + 0.5) / scale) as usize).min(cw - 1))
-            .collect();
-        let mut block = Vec::with_capacity(3 * (pw * ph) as usize);
-        for py in 0..ph {
-            let iy = cy + (((py as f64 + 0.5) / scale) as usize).min(ch - 1);
-            for &ix in &columns {
-                let k = iy * img_w + ix;
-                let gv = grey[k].clamp(0.0, 255.0);
-                let v = values[k];
-                let rgb = if v.is_nan() {
-                    [gv as u8; 3]
-                } else {
-                    let RGBColor(r, g, b) = cmap.color(v);
-                    let mix = |c: u8| round_u8(opts.alpha * c as f64 + (1.0 - opts.alpha) * gv);
-                    [mix(r), mix(g), mix(b)]
-                };
-                block.extend_from_slice(&rgb);
-            }
-        }
+        // drawing area cost several times the colouring itself).
+        let pixels = Pixels {
+            grey,
+            values,
+            img_w,
+            crop: (cx, cy, cw, ch),
+            cmap: &cmap,
+            alpha: opts.alpha,
+        };
+        let block = pixels.picture(scale, pw, ph);
         let image = BitMapElement::with_owned_buffer((left as i32, top as i32), (pw, ph), block)
             .ok_or_else(|| "the image block has the wrong size".to_string())?;
         root.draw(&image).map_err(de)?;
@@ -155,6 +143,67 @@ pub fn image_field_png(
         // NaN pixels show the grey image: no "no value" swatch.
         draw_color_bar(root, &cmap, &opts.value_label, false, place, s)
     })
+}
+
+/// The image and its values as [`image_field_png`] shows them.
+struct Pixels<'a> {
+    grey: &'a [f64],
+    values: &'a [f64],
+    img_w: usize,
+    crop: (usize, usize, usize, usize),
+    cmap: &'a ColorMap,
+    alpha: f64,
+}
+
+impl Pixels<'_> {
+    /// The colour of image pixel `(ix, iy)`: its grey level, blended with the value's colour
+    /// where the value is defined.
+    fn rgb(&self, ix: usize, iy: usize) -> [u8; 3] {
+        let k = iy * self.img_w + ix;
+        let gv = self.grey[k].clamp(0.0, 255.0);
+        let v = self.values[k];
+        if v.is_nan() {
+            [gv as u8; 3]
+        } else {
+            let RGBColor(r, g, b) = self.cmap.color(v);
+            let mix = |c: u8| round_u8(self.alpha * c as f64 + (1.0 - self.alpha) * gv);
+            [mix(r), mix(g), mix(b)]
+        }
+    }
+
+    /// The `pw x ph` RGB picture of the crop at `scale` picture pixels per image pixel, nearest
+    /// neighbour: picture pixel `(px, py)` shows image pixel `⌊(p + ½) / scale⌋` of the crop.
+    /// Each image pixel is coloured once: a picture row that shows the same image row as the one
+    /// above is a copy of it, and within a row the columns that show the same image column
+    /// repeat its colour (an enlarged image shows each pixel several times).
+    fn picture(&self, scale: f64, pw: u32, ph: u32) -> Vec<u8> {
+        let (cx, cy, cw, ch) = self.crop;
+        // The source column of each picture column once (a non-negative quotient: truncation
+        // is the floor).
+        let columns: Vec<usize> = (0..pw)
+            .map(|px| cx + (((px as f64 + 0.5) / scale) as usize).min(cw - 1))
+            .collect();
+        let row_bytes = 3 * pw as usize;
+        let mut block = Vec::with_capacity(row_bytes * ph as usize);
+        let mut last_row = usize::MAX;
+        for py in 0..ph {
+            let iy = cy + (((py as f64 + 0.5) / scale) as usize).min(ch - 1);
+            if iy == last_row {
+                block.extend_from_within(block.len() - row_bytes..);
+                continue;
+            }
+            last_row = iy;
+            let (mut last_ix, mut rgb) = (usize::MAX, [0u8; 3]);
+            for &ix in &columns {
+                if ix != last_ix {
+                    last_ix = ix;
+                    rgb = self.rgb(ix, iy);
+                }
+                block.extend_from_slice(&rgb);
+            }
+        }
+        block
+    }
 }
 
 /// The axes of an image drawn with its rows going down (the chart's y runs over −row, labelled
@@ -183,6 +232,51 @@ pub(crate) fn draw_image_axes<DB: DrawingBackend>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The picture colours each shown image pixel once and repeats it: every picture pixel is
+    /// the colour of the image pixel it shows, enlarged (non-integer and integer scales) and
+    /// reduced, crop included.
+    #[test]
+    fn the_picture_shows_each_pixel_of_the_crop() {
+        let (w, h) = (37, 23);
+        let grey: Vec<f64> = (0..w * h).map(|k| ((k * 53) % 256) as f64).collect();
+        let values: Vec<f64> = (0..w * h)
+            .map(|k| {
+                if k % 7 == 0 {
+                    f64::NAN
+                } else {
+                    (k as f64 * 0.37).sin()
+                }
+            })
+            .collect();
+        let cmap = ColorMap::new(-1.0, 1.0, true);
+        let crop = (3, 2, 30, 19);
+        let pixels = Pixels {
+            grey: &grey,
+            values: &values,
+            img_w: w,
+            crop,
+            cmap: &cmap,
+            alpha: 0.75,
+        };
+        for scale in [0.61, 1.0, 1.58, 3.0] {
+            let (pw, ph) = ((scale * 30.0) as u32, (scale * 19.0) as u32);
+            let block = pixels.picture(scale, pw, ph);
+            assert_eq!(block.len(), (3 * pw * ph) as usize);
+            for py in 0..ph as usize {
+                for px in 0..pw as usize {
+                    let ix = crop.0 + (((px as f64 + 0.5) / scale) as usize).min(crop.2 - 1);
+                    let iy = crop.1 + (((py as f64 + 0.5) / scale) as usize).min(crop.3 - 1);
+                    let at = 3 * (py * pw as usize + px);
+                    assert_eq!(
+                        block[at..at + 3],
+                        pixels.rgb(ix, iy),
+                        "scale {scale} ({px}, {py})"
+                    );
+                }
+            }
+        }
+    }
 
     #[test]
     fn writes_a_png_and_rejects_bad_input() {
