@@ -659,6 +659,32 @@ def lateral_strain(run_dir):
     return f"{small} of {len(rel)} realizations, by {-100 * sum(rel) / len(rel):.2g} % of the true strain on average"
 
 
+def profile_share(path, *phase):
+    """The share of CPU samples of PHASE (the start of its name) in a committed profile's
+    "CPU samples by phase" table (bench/perf/profile_*.txt, made by bench/perf/phases.py):
+    `N %` (PHASE may be several words: the directive's arguments are split at spaces)."""
+    phase = " ".join(phase)
+    for line in open(ROOT / path):
+        m = re.match(r"^\s*([\d.]+)%\s+\d+\s+(.*)$", line)
+        if m and m.group(2).startswith(phase):
+            return f"{float(m.group(1)):.0f} %"
+    raise SystemExit(f"{ROOT / path}: no phase {phase!r} in its table of CPU samples by phase")
+
+
+def idic_own_value(run_dir, seed, route, parameter):
+    """One realization's relative error in the integrated-DIC campaign on femu's own sequences
+    (campaign.csv): SEED, ROUTE (`idic`, `dic`, `weighted`) and PARAMETER: `+X %`, with
+    `(interval holds the truth)` or `(interval misses the truth)`."""
+    for r in csv.DictReader(open(ROOT / run_dir / "campaign.csv")):
+        if r["seed"] == seed and r["parameter"] == parameter:
+            # From the estimate and the reference: the file's DIC -> FEMU error columns are
+            # unsigned (the seed's Eq. 4).
+            e = 100 * (float(r[route]) / float(r["reference"]) - 1)
+            held = "holds" if r[f"{route}_covered"].strip().lower() in ("true", "1") else "misses"
+            return f"{'+' if e >= 0 else '−'}{abs(e):.2g} % (its interval {held} the truth)"
+    raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no seed {seed} {parameter}")
+
+
 def idic_error(run_dir, parameter, what="mean"):
     """One parameter of the integrated-DIC campaign on pymust's frames (idic_campaign.csv, the
     integrated route): WHAT `mean` (mean |error| %, two significant digits), `covered` or `above`
@@ -963,7 +989,8 @@ def render(template):
              "idic_own": idic_own, "idic_own_misses": idic_own_misses, "lk_composition": lk_composition,
              "dic_real_r": dic_real_r, "mudic_real": mudic_real, "substitution": substitution,
              "idic_error": idic_error, "substitution_table": substitution_table,
-             "lateral_strain": lateral_strain,
+             "lateral_strain": lateral_strain, "bench": bench,
+             "profile_share": profile_share, "idic_own_value": idic_own_value,
              "sensitivity_cost": sensitivity_cost, "identify_virtual": identify_virtual,
              "identify_levels": identify_levels, "identify_fd": identify_fd}
     page = (TEMPLATES / template).read_text()
