@@ -490,6 +490,7 @@ fn draw_check(
         label: "|difference| (px)".into(),
         diverging: false,
         range: None,
+        categories: Vec::new(),
     };
     figures::draw(out, f, &map, figures::crop_of(ab, w, h))
 }

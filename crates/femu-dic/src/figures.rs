@@ -31,7 +31,19 @@ pub struct Map<'a> {
     pub label: String,
     pub diverging: bool,
     pub range: Option<(f64, f64)>,
+    /// Category names when the values are categories 1, 2, … (a legend instead of a colour
+    /// bar); empty for continuous values.
+    pub categories: Vec<String>,
 }
+
+/// The reasons of the trust map, in the order of [`Trust::code`] (1, 2, …).
+const TRUST_REASONS: [&str; 5] = [
+    "decorrelated",
+    "high residual",
+    "shadow",
+    "low texture",
+    "outside the image",
+];
 
 /// Draws `map` over `f`, cropped to `crop`; the colour range, unless given, from the 1st to the
 /// 99th percentile (a few wild values do not wash out the map).
@@ -72,6 +84,7 @@ pub fn draw(
         diverging: map.diverging,
         range,
         crop: Some(crop),
+        categories: map.categories.clone(),
         ..Default::default()
     };
     let path = out.join(map.name);
@@ -164,6 +177,7 @@ pub fn write_maps(
             label: format!("ux ({unit})"),
             diverging: false,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "uy.png",
@@ -172,6 +186,7 @@ pub fn write_maps(
             label: format!("uy ({unit})"),
             diverging: false,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "exx.png",
@@ -180,6 +195,7 @@ pub fn write_maps(
             label: "exx (-)".into(),
             diverging: true,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "eyy.png",
@@ -188,6 +204,7 @@ pub fn write_maps(
             label: "eyy (-)".into(),
             diverging: true,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "exy.png",
@@ -196,6 +213,7 @@ pub fn write_maps(
             label: "exy (-)".into(),
             diverging: true,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "residual.png",
@@ -204,6 +222,7 @@ pub fn write_maps(
             label: "f - g(x+u) (grey levels)".into(),
             diverging: true,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "sd.png",
@@ -212,6 +231,7 @@ pub fn write_maps(
             label: "sd (px)".into(),
             diverging: false,
             range: None,
+            categories: Vec::new(),
         },
         Map {
             name: "zncc.png",
@@ -223,6 +243,7 @@ pub fn write_maps(
             label: "ZNCC (-)".into(),
             diverging: false,
             range: Some((0.0, 1.0)),
+            categories: Vec::new(),
         },
         Map {
             name: "trust.png",
@@ -231,12 +252,13 @@ pub fn write_maps(
                 t => t.code() as f64,
             }),
             title: format!(
-                "Not trusted: {untrusted} of {} elements (1 decorrelated, 2 high residual, 3 shadow, 4 low texture, 5 outside the image)",
+                "Not trusted: {untrusted} of {} elements, by reason",
                 m.trust.len()
             ),
-            label: "reason".into(),
+            label: "not trusted".into(),
             diverging: false,
-            range: Some((1.0, 5.0)),
+            range: Some((1.0, TRUST_REASONS.len() as f64)),
+            categories: TRUST_REASONS.iter().map(|r| r.to_string()).collect(),
         },
     ];
     let crop = crop_of(m, w, h);

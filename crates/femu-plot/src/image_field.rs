@@ -24,6 +24,10 @@ pub struct ImageField {
     pub alpha: f64,
     /// Part of the image shown, `(x, y, w, h)` pixels; by default the whole image.
     pub crop: Option<(usize, usize, usize, usize)>,
+    /// Categories instead of a continuous range: value `k` (1, 2, …) is category
+    /// `categories[k - 1]`, drawn in its own colour of [`crate::colormap::SERIES`] and named in
+    /// a legend that replaces the colour bar; other values show the grey image.
+    pub categories: Vec<String>,
     pub width: u32,
     pub height: u32,
 }
@@ -37,6 +41,7 @@ impl Default for ImageField {
             range: None,
             alpha: 0.75,
             crop: None,
+            categories: Vec::new(),
             width: crate::DEFAULT_WIDTH,
             height: crate::DEFAULT_HEIGHT,
         }
@@ -92,7 +97,13 @@ pub fn image_field_png(
     let s = Sizes::new(opts.width, opts.height);
     // Layout: image on the left keeping its aspect ratio, colour bar on the right.
     let (yla, xla) = (s.px(90.0), s.px(70.0));
-    let (cb_gap, cb_w, cb_la) = (s.px(30.0), s.px(30.0), s.px(130.0));
+    // Right of the image: the colour bar and its labels, or the categories' legend (a swatch
+    // and a name per line, the longest name setting the width).
+    let longest = opts.categories.iter().map(|c| c.chars().count()).max();
+    let (cb_gap, cb_w) = (s.px(30.0), s.px(30.0));
+    let cb_la = longest.map_or(s.px(130.0), |n| {
+        s.px(24.0 + 11.0 * (n + 3) as f64).max(s.px(130.0))
+    });
     let top = s.title_band() + s.px(10.0);
     let aw = opts
         .width
@@ -116,6 +127,7 @@ pub fn image_field_png(
             crop: (cx, cy, cw, ch),
             cmap: &cmap,
             alpha: opts.alpha,
+            categories: opts.categories.len(),
         };
         let block = pixels.picture(scale, pw, ph);
         let image = BitMapElement::with_owned_buffer((left as i32, top as i32), (pw, ph), block)
@@ -140,9 +152,64 @@ pub fn image_field_png(
             height: ph,
             label_width: cb_la,
         };
-        // NaN pixels show the grey image: no "no value" swatch.
-        draw_color_bar(root, &cmap, &opts.value_label, false, place, s)
+        if opts.categories.is_empty() {
+            // NaN pixels show the grey image: no "no value" swatch.
+            draw_color_bar(root, &cmap, &opts.value_label, false, place, s)
+        } else {
+            draw_category_legend(root, &opts.value_label, &opts.categories, place, s)
+        }
     })
+}
+
+/// The category (0-based) of value `v`: `v` rounded to an integer `1..=n`.
+fn category_of(v: f64, n: usize) -> Option<usize> {
+    let k = v.round();
+    (k >= 1.0 && k <= n as f64).then(|| k as usize - 1)
+}
+
+/// The colour of category `k` (0-based): the qualitative palette, repeated past its end.
+fn category_color(k: usize) -> RGBColor {
+    crate::colormap::SERIES[k % crate::colormap::SERIES.len()]
+}
+
+/// The categories' legend at `place`: under the title `label`, one line per category, a swatch
+/// of its colour and `k name`.
+fn draw_category_legend(
+    root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+    label: &str,
+    categories: &[String],
+    place: ColorBarPlace,
+    s: Sizes,
+) -> Result<(), String> {
+    let x = place.left as i32;
+    let line = s.px(34.0) as i32;
+    let d = s.px(22.0) as i32;
+    root.draw(&Text::new(
+        label.to_string(),
+        (x, place.top as i32),
+        font(s.desc()),
+    ))
+    .map_err(de)?;
+    for (k, name) in categories.iter().enumerate() {
+        let y = place.top as i32 + line * (k as i32 + 1) + s.px(8.0) as i32;
+        root.draw(&Rectangle::new(
+            [(x, y), (x + d, y + d)],
+            category_color(k).filled(),
+        ))
+        .map_err(de)?;
+        root.draw(&Rectangle::new(
+            [(x, y), (x + d, y + d)],
+            BLACK.stroke_width(1),
+        ))
+        .map_err(de)?;
+        root.draw(&Text::new(
+            format!("{} {name}", k + 1),
+            (x + d + s.px(10.0) as i32, y),
+            font(s.tick()),
+        ))
+        .map_err(de)?;
+    }
+    Ok(())
 }
 
 /// The image and its values as [`image_field_png`] shows them.
@@ -153,6 +220,8 @@ struct Pixels<'a> {
     crop: (usize, usize, usize, usize),
     cmap: &'a ColorMap,
     alpha: f64,
+    /// Number of categories (0: continuous values).
+    categories: usize,
 }
 
 impl Pixels<'_> {
@@ -165,7 +234,14 @@ impl Pixels<'_> {
         if v.is_nan() {
             [gv as u8; 3]
         } else {
-            let RGBColor(r, g, b) = self.cmap.color(v);
+            let RGBColor(r, g, b) = if self.categories > 0 {
+                match category_of(v, self.categories) {
+                    Some(k) => category_color(k),
+                    None => return [gv as u8; 3],
+                }
+            } else {
+                self.cmap.color(v)
+            };
             let mix = |c: u8| round_u8(self.alpha * c as f64 + (1.0 - self.alpha) * gv);
             [mix(r), mix(g), mix(b)]
         }
@@ -206,6 +282,12 @@ impl Pixels<'_> {
     }
 }
 
+/// The label of the chart's y value `v` (−row): the row, rounded; `+ 0.0` turns the negative
+/// zero of −0 into 0 (no "-0" tick at the top).
+fn row_label(v: f64) -> String {
+    format!("{}", (-v).round() + 0.0)
+}
+
 /// The axes of an image drawn with its rows going down (the chart's y runs over −row, labelled
 /// positive): no grid, six labels a side.
 pub(crate) fn draw_image_axes<DB: DrawingBackend>(
@@ -223,7 +305,7 @@ pub(crate) fn draw_image_axes<DB: DrawingBackend>(
         .axis_desc_style(font(s.desc()))
         .x_labels(6)
         .y_labels(6)
-        .y_label_formatter(&|v| format!("{}", (-v).round()))
+        .y_label_formatter(&|v| row_label(*v))
         .x_label_formatter(&|v| format!("{}", v.round()))
         .draw()
         .map_err(de)
@@ -258,6 +340,7 @@ mod tests {
             crop,
             cmap: &cmap,
             alpha: 0.75,
+            categories: 0,
         };
         for scale in [0.61, 1.0, 1.58, 3.0] {
             let (pw, ph) = ((scale * 30.0) as u32, (scale * 19.0) as u32);
@@ -276,6 +359,35 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Category values take their own colour (blended over the grey as continuous ones are),
+    /// values that are no category show the grey image, and the top row's tick reads 0.
+    #[test]
+    fn categories_have_their_own_colours() {
+        let grey = vec![100.0; 4];
+        let values = vec![1.0, 4.0, 7.0, f64::NAN];
+        let cmap = ColorMap::new(1.0, 5.0, false);
+        let pixels = Pixels {
+            grey: &grey,
+            values: &values,
+            img_w: 4,
+            crop: (0, 0, 4, 1),
+            cmap: &cmap,
+            alpha: 0.75,
+            categories: 5,
+        };
+        let blend = |c: RGBColor| {
+            let m = |x: u8| round_u8(0.75 * x as f64 + 0.25 * 100.0);
+            [m(c.0), m(c.1), m(c.2)]
+        };
+        assert_eq!(pixels.rgb(0, 0), blend(crate::colormap::SERIES[0]));
+        assert_eq!(pixels.rgb(1, 0), blend(crate::colormap::SERIES[3]));
+        assert_eq!(pixels.rgb(2, 0), [100; 3], "7 is no category of 5");
+        assert_eq!(pixels.rgb(3, 0), [100; 3]);
+        assert_eq!(row_label(-0.0), "0");
+        assert_eq!(row_label(0.0), "0");
+        assert_eq!(row_label(-100.0), "100");
     }
 
     #[test]
