@@ -245,7 +245,9 @@ pub fn run_dic_on(
         outputs.push("field_covariance.mtx");
     }
     if job.figures {
-        crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some())?;
+        // The ZNCC threshold the trust mask used: the pair's own level for a B-mode pair.
+        let min_zncc = bmode.unwrap_or(job.correlation.trust.min_zncc);
+        crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some(), min_zncc)?;
         outputs.extend(crate::figures::MAPS);
     }
     let criteria = TrustCriteria {

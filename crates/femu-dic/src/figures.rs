@@ -134,13 +134,15 @@ pub fn crop_of(m: &Measured, w: usize, h: usize) -> (usize, usize, usize, usize)
     (x0, y0, x1 - x0, y1 - y0)
 }
 
-/// Writes the nine maps of [`MAPS`].
+/// Writes the nine maps of [`MAPS`]; `min_zncc` is the ZNCC below which the trust mask left
+/// elements out (the pair's own level for a B-mode pair), named in the ZNCC map's title.
 pub fn write_maps(
     out: &Path,
     f: &GreyImage,
     m: &Measured,
     frame: &ModelFrame,
     mm: bool,
+    min_zncc: f64,
 ) -> Result<(), DicError> {
     let (w, h) = (f.width, f.height);
     let res = &m.res;
@@ -236,10 +238,7 @@ pub fn write_maps(
         Map {
             name: "zncc.png",
             values: per_pixel(m, w, h, |e, _, _| res.element_texture[e].zncc),
-            title: format!(
-                "Correlation score per element (ZNCC; below {} not trusted)",
-                0.5
-            ),
+            title: format!("Correlation score per element (ZNCC; below {min_zncc:.2} not trusted)"),
             label: "ZNCC (-)".into(),
             diverging: false,
             range: Some((0.0, 1.0)),
