@@ -140,6 +140,11 @@ sensitivity = false
         .and_then(|n| n.parse().ok())
         .unwrap();
     assert!(points > meshed, "mesh.vtu {points} points, meshed {meshed}");
+    // The summary gives both counts: the meshed thigh's and the model's as solved.
+    let solved = json(&out.join("model/summary.json"))["nodes_as_solved"]
+        .as_u64()
+        .unwrap();
+    assert_eq!(solved, points, "nodes_as_solved against mesh.vtu");
     // The same study tied: its picture is the meshed thigh's; the sliding one's draws the
     // interface (and says the split in its title), so the two differ.
     let tied_study = study.replace("kind = \"frictionless\"", "kind = \"tied\"");
@@ -147,6 +152,11 @@ sensitivity = false
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let tied_vtu = std::fs::read_to_string(tied.join("model/mesh.vtu")).unwrap();
     assert!(tied_vtu.contains(&format!("NumberOfPoints=\"{meshed}\"")));
+    assert_eq!(
+        json(&tied.join("model/summary.json"))["nodes_as_solved"].as_u64(),
+        Some(meshed),
+        "tied: nothing split"
+    );
     let png = |d: &PathBuf| std::fs::read(d.join("model/regions.png")).unwrap();
     assert_ne!(png(&out), png(&tied));
 }

@@ -47,7 +47,12 @@ pub struct MeshSummary {
     pub input: serde_json::Value,
     pub element: String,
     pub element_size_mm: f64,
+    /// Nodes of the meshed thigh (`mesh.inp`).
     pub nodes: usize,
+    /// Nodes of the model as solved (`mesh.vtu`): the meshed thigh's, plus the copies a
+    /// sliding interface makes of its nodes; equal to `nodes` without one.
+    #[serde(default)]
+    pub nodes_as_solved: usize,
     pub elements: usize,
     pub regions: BTreeMap<String, RegionSummary>,
     pub femur_hole_area_mm2: f64,
@@ -286,6 +291,7 @@ fn mesh_summary(
         element: f.kind.deck_name().into(),
         element_size_mm: model.element_size_mm,
         nodes: m.nodes.len(),
+        nodes_as_solved: f.split.map_or(m.nodes.len(), |s| s.mesh.mesh.nodes.len()),
         elements: m.elements.len(),
         regions,
         femur_hole_area_mm2: hole,
