@@ -22,6 +22,7 @@ import json
 import math
 import pathlib
 import re
+import statistics
 import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent.parent
@@ -467,6 +468,14 @@ def recorded_provenance(*names):
     return "; ".join(f"measured {date} on {machine}, commit {commit}" for date, machine, commit in seen)
 
 
+def rows_where(path, **equal):
+    """The rows of the CSV file PATH whose columns equal EQUAL (`column=value`), at least one."""
+    rows = [r for r in csv.DictReader(open(path)) if all(r.get(k) == v for k, v in equal.items())]
+    if not rows:
+        raise SystemExit(f"{path}: no rows with " + ", ".join(f"{k} {v!r}" for k, v in equal.items()))
+    return rows
+
+
 def dic_real_rows(results, name):
     """The checks.csv and pairs.csv of one configuration of bench/dic_real/run.sh."""
     d = ROOT / results / name
@@ -576,10 +585,7 @@ def dic_real_r(results, name, first="048"):
     both = [k for k in co if k in fb]
     if len(both) < 3:
         raise SystemExit(f"{path}: fewer than 3 points in both checks from frame {first}")
-    a, b = [fb[k] for k in both], [co[k] for k in both]
-    ma, mb = sum(a) / len(a), sum(b) / len(b)
-    cov = sum((x - ma) * (y - mb) for x, y in zip(a, b))
-    r = cov / math.sqrt(sum((x - ma) ** 2 for x in a) * sum((y - mb) ** 2 for y in b))
+    r = statistics.correlation([fb[k] for k in both], [co[k] for k in both])
     return f"r = {r:+.2f}".replace("+", "").replace("-", "−") + f" over {len(both)} points"
 
 
@@ -617,10 +623,7 @@ def substitution(run_dir, variant, parameter, what="mean"):
     d = ROOT / run_dir
     if what == "provenance":
         return provenance(d).strip()
-    rows = [r for r in csv.DictReader(open(d / "substitution.csv"))
-            if r["variant"] == variant and r["parameter"] == parameter]
-    if not rows:
-        raise SystemExit(f"{d / 'substitution.csv'}: no rows of {variant} {parameter}")
+    rows = rows_where(d / "substitution.csv", variant=variant, parameter=parameter)
     e = [abs(float(r["error_pct"])) for r in rows]
     if what == "span":
         return f"{min(e):.2g}–{max(e):.2g}"
@@ -689,10 +692,7 @@ def idic_error(run_dir, parameter, what="mean"):
     """One parameter of the integrated-DIC campaign on pymust's frames (idic_campaign.csv, the
     integrated route): WHAT `mean` (mean |error| %, two significant digits), `covered` or `above`
     (`N of M` realizations above the truth)."""
-    rows = [r for r in csv.DictReader(open(ROOT / run_dir / "idic_campaign.csv"))
-            if r.get("route", "integrated") == "integrated" and r["parameter"] == parameter]
-    if not rows:
-        raise SystemExit(f"{ROOT / run_dir / 'idic_campaign.csv'}: no integrated rows of {parameter}")
+    rows = rows_where(ROOT / run_dir / "idic_campaign.csv", route="integrated", parameter=parameter)
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
     if what == "above":
@@ -716,11 +716,7 @@ def campaign_error(run_dir, renderer, route, parameter, what="mean"):
     """One parameter of one route on one renderer's frames (`pymust`, `femu`) of a campaign's
     campaign.csv: WHAT `mean` (mean |error|, %, two significant digits) or `covered` (`N of M`
     95 % intervals holding the truth)."""
-    rows = [r for r in csv.DictReader(open(ROOT / run_dir / "campaign.csv"))
-            if r["renderer"] == renderer and r["route"] == route and r["parameter"] == parameter]
-    if not rows:
-        raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no rows of renderer {renderer!r}, route {route!r}, "
-                         f"parameter {parameter!r}")
+    rows = rows_where(ROOT / run_dir / "campaign.csv", renderer=renderer, route=route, parameter=parameter)
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
     return f"{sum(abs(float(r['error_pct'])) for r in rows) / len(rows):.2g}"
@@ -733,10 +729,7 @@ def lk_composition(run_dir, radius, smoothing, what="rms"):
     d = ROOT / run_dir
     if what == "provenance":
         return provenance(d).strip()
-    rows = [r for r in csv.DictReader(open(d / "lk_composition.csv"))
-            if r["radius_px"] == radius and r["smoothing_px"] == smoothing]
-    if not rows:
-        raise SystemExit(f"{d / 'lk_composition.csv'}: no row of radius {radius}, smoothing {smoothing}")
+    rows = rows_where(d / "lk_composition.csv", radius_px=radius, smoothing_px=smoothing)
     return f"({float(rows[0]['rms_x_px']):.2f}, {float(rows[0]['rms_y_px']):.2f})"
 
 

@@ -244,16 +244,22 @@ pub fn run_dic_on(
     if covariance_written {
         outputs.push("field_covariance.mtx");
     }
-    if job.figures {
-        // The ZNCC threshold the trust mask used: the pair's own level for a B-mode pair.
-        let min_zncc = bmode.unwrap_or(job.correlation.trust.min_zncc);
-        crate::figures::write_maps(&job.out, f, &m, &frame, pixel_size.is_some(), min_zncc)?;
-        outputs.extend(crate::figures::MAPS);
-    }
+    // The trust criteria as applied: the pair's own ZNCC level for a B-mode pair.
     let criteria = TrustCriteria {
         min_zncc: bmode.unwrap_or(job.correlation.trust.min_zncc),
         ..job.correlation.trust
     };
+    if job.figures {
+        crate::figures::write_maps(
+            &job.out,
+            f,
+            &m,
+            &frame,
+            pixel_size.is_some(),
+            criteria.min_zncc,
+        )?;
+        outputs.extend(crate::figures::MAPS);
+    }
     let quality = quality_summary(&m, &criteria);
     if let Some(z) = bmode {
         warnings.push(format!(

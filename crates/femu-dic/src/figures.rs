@@ -36,15 +36,6 @@ pub struct Map<'a> {
     pub categories: Vec<String>,
 }
 
-/// The reasons of the trust map, in the order of [`Trust::code`] (1, 2, …).
-const TRUST_REASONS: [&str; 5] = [
-    "decorrelated",
-    "high residual",
-    "shadow",
-    "low texture",
-    "outside the image",
-];
-
 /// Draws `map` over `f`, cropped to `crop`; the colour range, unless given, from the 1st to the
 /// 99th percentile (a few wild values do not wash out the map).
 pub fn draw(
@@ -256,8 +247,11 @@ pub fn write_maps(
             ),
             label: "not trusted".into(),
             diverging: false,
-            range: Some((1.0, TRUST_REASONS.len() as f64)),
-            categories: TRUST_REASONS.iter().map(|r| r.to_string()).collect(),
+            range: Some((1.0, Trust::UNTRUSTED.len() as f64)),
+            categories: Trust::UNTRUSTED
+                .iter()
+                .map(|t| t.reason().to_string())
+                .collect(),
         },
     ];
     let crop = crop_of(m, w, h);

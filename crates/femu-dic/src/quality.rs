@@ -294,6 +294,27 @@ pub enum Trust {
 }
 
 impl Trust {
+    /// The reasons for not trusting an element, in the order of their [`Trust::code`] (1, 2, …).
+    pub const UNTRUSTED: [Trust; 5] = [
+        Trust::Decorrelated,
+        Trust::HighResidual,
+        Trust::Shadow,
+        Trust::LowTexture,
+        Trust::OutsideImage,
+    ];
+
+    /// The reason in words, for the trust map's legend.
+    pub fn reason(self) -> &'static str {
+        match self {
+            Trust::Trusted => "trusted",
+            Trust::Decorrelated => "decorrelated",
+            Trust::HighResidual => "high residual",
+            Trust::Shadow => "shadow",
+            Trust::LowTexture => "low texture",
+            Trust::OutsideImage => "outside the image",
+        }
+    }
+
     /// The name written in `elements.csv`.
     pub fn name(self) -> &'static str {
         match self {
@@ -378,6 +399,14 @@ pub fn element_trust(res: &DicResult, cov: &NodalCovariance, c: &TrustCriteria) 
 
 #[cfg(test)]
 mod tests {
+    /// [`Trust::UNTRUSTED`] lists every reason once, in the order of its code.
+    #[test]
+    fn untrusted_reasons_are_in_code_order() {
+        for (k, t) in Trust::UNTRUSTED.iter().enumerate() {
+            assert_eq!(t.code() as usize, k + 1, "{}", t.name());
+        }
+    }
+
     use super::*;
     use crate::lab::{self, Speckle};
     use crate::{correlate, DicOptions, Rect, Roi};

@@ -72,13 +72,7 @@ pub(crate) fn draw_color_bar(
             (place.top + place.height) as i32 + s.px(18.0) as i32,
         );
         let d = s.px(18.0) as i32;
-        root.draw(&Rectangle::new([(x, y), (x + d, y + d)], MISSING.filled()))
-            .map_err(de)?;
-        root.draw(&Rectangle::new(
-            [(x, y), (x + d, y + d)],
-            BLACK.stroke_width(1),
-        ))
-        .map_err(de)?;
+        draw_swatch(root, (x, y), d, MISSING)?;
         root.draw(&Text::new(
             "no value",
             (x + d + s.px(8.0) as i32, y + d / 2),
@@ -87,6 +81,24 @@ pub(crate) fn draw_color_bar(
         .map_err(de)?;
     }
     Ok(())
+}
+
+/// A legend swatch: a `d x d` square of `color` with a black outline, its top-left corner at
+/// `at` (the "no value" swatch of a colour bar, a category of an image map).
+pub(crate) fn draw_swatch(
+    root: &DrawingArea<BitMapBackend<'_>, Shift>,
+    at: (i32, i32),
+    d: i32,
+    color: RGBColor,
+) -> Result<(), String> {
+    let (x, y) = at;
+    root.draw(&Rectangle::new([(x, y), (x + d, y + d)], color.filled()))
+        .map_err(de)?;
+    root.draw(&Rectangle::new(
+        [(x, y), (x + d, y + d)],
+        BLACK.stroke_width(1),
+    ))
+    .map_err(de)
 }
 
 #[cfg(test)]

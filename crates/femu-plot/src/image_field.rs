@@ -2,7 +2,7 @@
 //! per-pixel value drawn over it in colour where it is defined, and a colour bar. Axes are in
 //! image pixels, y pointing down as in the image.
 
-use crate::colorbar::{draw_color_bar, ColorBarPlace};
+use crate::colorbar::{draw_color_bar, draw_swatch, ColorBarPlace};
 use crate::colormap::{round_u8, ColorMap};
 use crate::text::{draw_title, font, Sizes};
 use crate::{check_range, check_size, de, finite_min_max, widen, Canvas, PlotError};
@@ -192,16 +192,7 @@ fn draw_category_legend(
     .map_err(de)?;
     for (k, name) in categories.iter().enumerate() {
         let y = place.top as i32 + line * (k as i32 + 1) + s.px(8.0) as i32;
-        root.draw(&Rectangle::new(
-            [(x, y), (x + d, y + d)],
-            category_color(k).filled(),
-        ))
-        .map_err(de)?;
-        root.draw(&Rectangle::new(
-            [(x, y), (x + d, y + d)],
-            BLACK.stroke_width(1),
-        ))
-        .map_err(de)?;
+        draw_swatch(root, (x, y), d, category_color(k))?;
         root.draw(&Text::new(
             format!("{} {name}", k + 1),
             (x + d + s.px(10.0) as i32, y),
