@@ -72,6 +72,10 @@ class Settings:
     n_elements: int = 134
     bandwidth_pct: float = 75.0
     rx_fnumber: float = 2.5
+    # Receive apodization across the f-number aperture: "none" (pymust's dasmtx: every
+    # element within depth / (2 f-number) of the pixel with weight 1, a hard edge) or "hann"
+    # (weight cos^2(pi dx f-number / depth), zero at the aperture's edge, as scanners do).
+    rx_apodization: str = "none"
     angles_deg: list = field(default_factory=lambda: [0.0])
     # pymust's own "quick" settings (pfield isQuick): -20 dB spectrum threshold, one segment
     # per element, frequency step x 1.5 (no time aliasing: the period stays 1.33 x the
@@ -552,11 +556,12 @@ class Renderer:
                 t = time.time()
                 p = self.param.copy()
                 p.fnumber = self.s.rx_fnumber
-                self._das[k] = (iq.shape, self.pm.dasmtx(1j * np.array(iq.shape), self.X, self.Z,
-                                                         self.delays[k], p))
+                m = self.pm.dasmtx(1j * np.array(iq.shape), self.X, self.Z, self.delays[k], p)
+                m, gain = apodize(m, iq.shape[0], self.X, self.Z, self.param, self.s)
+                self._das[k] = (iq.shape, m)
                 self.seconds["dasmtx"] += time.time() - t
                 if self.aperture is None:
-                    self.aperture = receive_elements(self._das[k][1], iq.shape[0], self.X.shape)
+                    self.aperture = gain
             shape, m = self._das[k]
             if iq.shape != shape:
                 raise RuntimeError(f"RF of {iq.shape} samples for a DAS matrix of {shape}")
@@ -566,7 +571,30 @@ class Renderer:
         # Aperture growth: the receive aperture (f-number) sums n(x) elements, so the mean
         # speckle intensity of a uniform medium grows as n(x); a scanner's gain compensates it
         # (its TGC sliders are set for a uniform image). Divide by sqrt(n).
-        return img / np.sqrt(np.maximum(self.aperture, 1))
+        return img / np.where(self.aperture > 0, np.sqrt(self.aperture), 1.0)
+
+
+def apodize(m, samples, X, Z, param, s: Settings):
+    """The DAS matrix m with the receive apodization of ``s.rx_apodization`` applied to its
+    entries, and each pixel's sum of squared element weights: the factor by which the mean
+    speckle intensity of a uniform medium grows with the aperture (the element count without
+    apodization), that the image is divided by the square root of."""
+    if s.rx_apodization == "none":
+        return m, receive_elements(m, samples, X.shape)
+    import scipy.sparse as sp
+
+    c = sp.coo_matrix(m)
+    element = c.col // samples
+    xe = (np.arange(param.Nelements) - 0.5 * (param.Nelements - 1)) * param.pitch
+    x, z = X.flatten(order="F"), Z.flatten(order="F")
+    dx = np.abs(xe[element] - x[c.row])
+    half = z[c.row] / (2.0 * s.rx_fnumber)
+    w = np.cos(0.5 * np.pi * np.minimum(dx / np.maximum(half, 1e-12), 1.0)) ** 2
+    out = sp.csr_matrix((c.data * w, (c.row, c.col)), shape=m.shape)
+    # One weight per (pixel, element): the first entry of each pair.
+    pe = np.unique(c.row.astype(np.int64) * param.Nelements + element, return_index=True)[1]
+    gain = np.bincount(c.row[pe], weights=w[pe] ** 2, minlength=m.shape[0])
+    return out, gain.reshape(X.shape, order="F")
 
 
 def receive_elements(m, samples, shape):
@@ -740,6 +768,7 @@ def realization(seed: int, out: Path, s: Settings, fe_cache: Path = None, log=pr
             "transmits": "plane waves, coherent compounding",
             "angles_deg": list(s.angles_deg),
             "rx_fnumber": s.rx_fnumber,
+            "rx_apodization": s.rx_apodization,
             "das_interpolation": "linear (dasmtx default)",
             "options": {"dBThresh": s.db_thresh, "ElementSplitting": s.element_splitting,
                         "FrequencyStep": s.frequency_step},
@@ -795,6 +824,9 @@ def parse_args(argv):
                     help="fraction of the scatterers renewed per load step (default 0)")
     ap.add_argument("--fe-cache", type=Path,
                     help="npz file holding the FE solution (default: fe_cache.npz beside --out)")
+    ap.add_argument("--rx-apodization", choices=["none", "hann"], default="none",
+                    help="receive apodization over the f-number aperture (default none: "
+                         "pymust's dasmtx, a hard-edged aperture)")
     ap.add_argument("--quiet", action="store_true")
     a = ap.parse_args(argv)
     s = small_settings() if a.small else Settings()
@@ -822,6 +854,7 @@ def parse_args(argv):
     if not 0 <= a.decorrelation <= 0.9:
         raise InputError(f"--decorrelation {a.decorrelation}: in [0, 0.9]")
     s.decorrelation = a.decorrelation
+    s.rx_apodization = a.rx_apodization
     seeds = [a.seed]
     if a.seeds:
         try:

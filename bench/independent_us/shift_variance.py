@@ -54,8 +54,9 @@ def gauss_iq(q, a):
     return img
 
 
-def render(out, motions, renderers, pitch, seed):
-    s = rp.Settings(pitch_mm=pitch, kerf_mm=0.1 * pitch, n_elements=int(round(40.2 / pitch)))
+def render(out, motions, renderers, pitch, seed, apodization="none"):
+    s = rp.Settings(pitch_mm=pitch, kerf_mm=0.1 * pitch, n_elements=int(round(40.2 / pitch)),
+                    rx_apodization=apodization)
     rng = np.random.default_rng(seed)
     lo, hi = np.array([-23.0, -3.0]), np.array([23.0, 43.0])
     n = rng.poisson(150 * np.prod(hi - lo))
@@ -120,12 +121,14 @@ def main():
     ap.add_argument("--renderers", default="gauss,pymust")
     ap.add_argument("--pitch", type=float, default=0.3, help="array pitch, mm (aperture 40.2 mm)")
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--rx-apodization", choices=["none", "hann"], default="none",
+                    help="pymust's receive apodization (render_pymust.py --rx-apodization)")
     ap.add_argument("--evaluate-only", action="store_true")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
     motions, renderers = a.motions.split(","), a.renderers.split(",")
     if not a.evaluate_only:
-        render(a.out, motions, renderers, a.pitch, a.seed)
+        render(a.out, motions, renderers, a.pitch, a.seed, a.rx_apodization)
     evaluate(a.femu, a.out, motions, renderers)
 
 
