@@ -662,6 +662,27 @@ def lateral_strain(run_dir):
     return f"{small} of {len(rel)} realizations, by {-100 * sum(rel) / len(rel):.2g} % of the true strain on average"
 
 
+def lateral_speckle(run_dir):
+    """bench/independent_us/lateral_speckle.py's results.csv as a table: per point-spread
+    function and motion, the speckle femu dic measured and the field's lateral and axial
+    error (mean / RMS, px); then the provenance."""
+    d = ROOT / run_dir
+    rows = list(csv.DictReader(open(d / "results.csv")))
+    motion = {"fe": "the thigh's first load step (FE), one increment",
+              "fe2": "the same in two increments, composed", "PSR": "uniform strain (PSR)"}
+    out = ["| PSF FWHM, lateral x axial (mm) | speckle femu dic measured (px) | motion | "
+           "lateral error, mean / RMS (px) | axial error, mean / RMS (px) |",
+           "|---|---|---|---|---|"]
+    for r in rows:
+        if r["dic"] != "ok":
+            out.append(f"| {r['psf_fwhm_mm']} | – | {motion[r['motion']]} | {r['dic']} | |")
+            continue
+        out.append(f"| {r['psf_fwhm_mm']} | {r['speckle_fwhm_px']} | {motion[r['motion']]} | "
+                   f"{float(r['lateral_mean_px']):+.2f} / {float(r['lateral_rms_px']):.2f} | "
+                   f"{float(r['axial_mean_px']):+.2f} / {float(r['axial_rms_px']):.2f} |")
+    return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
+
+
 def profile_share(path, *phase):
     """The share of CPU samples of PHASE (the start of its name) in a committed profile's
     "CPU samples by phase" table (bench/perf/profile_*.txt, made by bench/perf/phases.py):
@@ -688,16 +709,20 @@ def idic_own_value(run_dir, seed, route, parameter):
     raise SystemExit(f"{ROOT / run_dir / 'campaign.csv'}: no seed {seed} {parameter}")
 
 
-def idic_error(run_dir, parameter, what="mean"):
-    """One parameter of the integrated-DIC campaign on pymust's frames (idic_campaign.csv, the
-    integrated route): WHAT `mean` (mean |error| %, two significant digits), `covered` or `above`
-    (`N of M` realizations above the truth)."""
-    rows = rows_where(ROOT / run_dir / "idic_campaign.csv", route="integrated", parameter=parameter)
+def idic_error(run_dir, parameter, what="mean", route="integrated"):
+    """One parameter of the integrated-DIC campaign on pymust's frames (idic_campaign.csv, ROUTE
+    `integrated` unless given, or `dic-plain`, `dic-weighted`): WHAT `mean` (mean |error| %, two
+    significant digits), `covered` or `above` (`N of M` realizations above the truth), or
+    `provenance`."""
+    if what == "provenance":
+        return provenance(ROOT / run_dir).strip()
+    rows = rows_where(ROOT / run_dir / "idic_campaign.csv", route=route, parameter=parameter)
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
     if what == "above":
         return f"{sum(float(r['relative_error']) > 0 for r in rows)} of {len(rows)}"
-    return f"{100 * sum(abs(float(r['relative_error'])) for r in rows) / len(rows):.2g}"
+    mean = 100 * sum(abs(float(r['relative_error'])) for r in rows) / len(rows)
+    return f"{mean:.2g}" if mean < 100 else f"{mean:.0f}"
 
 
 def fields_above(run_dir, renderer, bound):
@@ -715,11 +740,14 @@ def fields_above(run_dir, renderer, bound):
 def campaign_error(run_dir, renderer, route, parameter, what="mean"):
     """One parameter of one route on one renderer's frames (`pymust`, `femu`) of a campaign's
     campaign.csv: WHAT `mean` (mean |error|, %, two significant digits) or `covered` (`N of M`
-    95 % intervals holding the truth)."""
+    95 % intervals holding the truth) or `provenance`."""
+    if what == "provenance":
+        return provenance(ROOT / run_dir).strip()
     rows = rows_where(ROOT / run_dir / "campaign.csv", renderer=renderer, route=route, parameter=parameter)
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
-    return f"{sum(abs(float(r['error_pct'])) for r in rows) / len(rows):.2g}"
+    mean = sum(abs(float(r['error_pct'])) for r in rows) / len(rows)
+    return f"{mean:.2g}" if mean < 100 else f"{mean:.0f}"
 
 
 def lk_composition(run_dir, radius, smoothing, what="rms"):
@@ -982,7 +1010,7 @@ def render(template):
              "idic_own": idic_own, "idic_own_misses": idic_own_misses, "lk_composition": lk_composition,
              "dic_real_r": dic_real_r, "mudic_real": mudic_real, "substitution": substitution,
              "idic_error": idic_error, "substitution_table": substitution_table,
-             "lateral_strain": lateral_strain, "bench": bench,
+             "lateral_strain": lateral_strain, "bench": bench, "lateral_speckle": lateral_speckle,
              "profile_share": profile_share, "idic_own_value": idic_own_value,
              "sensitivity_cost": sensitivity_cost, "identify_virtual": identify_virtual,
              "identify_levels": identify_levels, "identify_fd": identify_fd}
