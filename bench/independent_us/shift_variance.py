@@ -13,7 +13,8 @@ per depth band (columns 60-340 px) and at the lateral edges (the 60 px on each s
 Motions (mm, probe frame: x lateral from the centre, z depth): T, a rigid translation
 (-0.73, +1.06) (the first load step's mean motion); SX, a uniform lateral stretch of 4 %
 (x -> 1.04 x); CZ, a uniform axial compression of 4 % about 20 mm depth; PS, T with a lateral
-stretch of 4.5 % and an axial compression of 4.5 % (`--motions PS`; not among the defaults). `--pitch` changes
+stretch of 4.5 % and an axial compression of 4.5 %; SH, a uniform shear, depth + 0.05 x
+(`--motions PS,SH`; not among the defaults). `--pitch` changes
 the array's pitch at the same aperture (40.2 mm). pymust takes 4-8 min per frame on one core.
 """
 import argparse
@@ -34,6 +35,8 @@ MOTIONS = {
     "CZ": lambda q: np.c_[q[:, 0], q[:, 1] - 0.04 * (q[:, 1] - 20.0)],
     # The thigh's first load step's mean motion and strains at once.
     "PS": lambda q: np.c_[1.045 * q[:, 0] - 0.77, q[:, 1] + 1.06 - 0.045 * (q[:, 1] - 20.0)],
+    # A uniform shear: the axial displacement growing across the window (duy/dx = 0.05).
+    "SH": lambda q: np.c_[q[:, 0], q[:, 1] + 0.05 * q[:, 0]],
 }
 W_PX = H_PX = 400
 PX_PER_MM = 10.0
