@@ -45,8 +45,9 @@ SIGMA_X, SIGMA_Z = 0.54 / 2.3548, 0.155 / 2.3548
 K2 = 2 * 2 * np.pi * 9e6 / 1540e3  # round-trip wavenumber, rad/mm
 
 
-def gauss_iq(q, a):
-    """Shift-invariant IQ image: sum of a * exp(-dx²/2σx² - dz²/2σz² + i k2 dz) over ±8 x ±3 px."""
+def gauss_iq(q, a, alpha=0.0):
+    """Shift-invariant IQ image: sum of a * exp(-dx²/2σx² - dz²/2σz² + i k2 dz + i alpha dx²) over
+    ±8 x ±3 px (alpha, rad/mm², a lateral phase curvature; 0: none)."""
     img = np.zeros((H_PX, W_PX), complex)
     ic = (q[:, 0] + 0.5 * W_PX / PX_PER_MM) * PX_PER_MM - 0.5
     jc = q[:, 1] * PX_PER_MM - 0.5
@@ -56,7 +57,7 @@ def gauss_iq(q, a):
             j = np.round(jc).astype(int) + dj
             ok = (i >= 0) & (i < W_PX) & (j >= 0) & (j < H_PX)
             dx, dz = ((i - ic) / PX_PER_MM)[ok], ((j - jc) / PX_PER_MM)[ok]
-            np.add.at(img, (j[ok], i[ok]), a[ok] * np.exp(-dx**2 / (2 * SIGMA_X**2) - dz**2 / (2 * SIGMA_Z**2) + 1j * K2 * dz))
+            np.add.at(img, (j[ok], i[ok]), a[ok] * np.exp(-dx**2 / (2 * SIGMA_X**2) - dz**2 / (2 * SIGMA_Z**2) + 1j * K2 * dz + 1j * alpha * dx**2))
     return img
 
 

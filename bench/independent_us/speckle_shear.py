@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Does coherent speckle move laterally under a shear? A shift-invariant Gaussian IQ
 point-spread function (shift_variance.py's, 9 MHz carrier, FWHM 0.54 x 0.155 mm) given a
-lateral quadratic phase `alpha dx^2` (a laterally curved wavefront, as away from a focus), on
+lateral quadratic phase `alpha dx^2` (shift_variance.gauss_iq's `alpha`; a laterally curved wavefront, as away from a focus), on
 homogeneous speckle (150 scatterers/mm^2), the scatterers sheared axially (depth + g x, true
 lateral displacement zero), each pair correlated by `femu dic` (defaults, `--pixel-size 0.1`).
 
@@ -27,24 +27,7 @@ sys.path.insert(0, str(HERE))
 import render_pymust as rp  # noqa: E402
 import shift_variance as sv  # noqa: E402
 
-W = H = 400
-PX_PER_MM = 10.0
-
-
-def iq(q, a, alpha):
-    """shift_variance.gauss_iq with the lateral phase alpha dx^2 (rad, dx in mm)."""
-    img = np.zeros((H, W), complex)
-    ic = (q[:, 0] + 0.5 * W / PX_PER_MM) * PX_PER_MM - 0.5
-    jc = q[:, 1] * PX_PER_MM - 0.5
-    for di in range(-8, 9):
-        for dj in range(-3, 4):
-            i = np.round(ic).astype(int) + di
-            j = np.round(jc).astype(int) + dj
-            ok = (i >= 0) & (i < W) & (j >= 0) & (j < H)
-            dx, dz = ((i - ic) / PX_PER_MM)[ok], ((j - jc) / PX_PER_MM)[ok]
-            np.add.at(img, (j[ok], i[ok]), a[ok] * np.exp(
-                -dx**2 / (2 * sv.SIGMA_X**2) - dz**2 / (2 * sv.SIGMA_Z**2) + 1j * sv.K2 * dz + 1j * alpha * dx**2))
-    return img
+PX_PER_MM = sv.PX_PER_MM
 
 
 def main():
@@ -69,7 +52,7 @@ def main():
     for alpha in [float(v) for v in a.alphas.split(",")]:
         d = a.out / f"alpha_{alpha:g}"
         d.mkdir(parents=True, exist_ok=True)
-        env0, env1 = np.abs(iq(q0, amp, alpha)), np.abs(iq(q1, amp, alpha))
+        env0, env1 = np.abs(sv.gauss_iq(q0, amp, alpha)), np.abs(sv.gauss_iq(q1, amp, alpha))
         black = 10 * np.log10(np.mean(env0[20:380, 20:380] ** 2)) - s.dynamic_db * s.muscle_grey / 255
         rp.save_png(d / "ref.png", rp.to_grey(env0, black, s.dynamic_db))
         rp.save_png(d / "def.png", rp.to_grey(env1, black, s.dynamic_db))

@@ -49,6 +49,11 @@ def pct(x):
     return "–" if x is None else f"{100 * x:+.3g} %"
 
 
+def two_digits(v):
+    """A mean |error| in % to two significant digits, written out (234, not 2.3e+02) from 100."""
+    return f"{v:.2g}" if v < 100 else f"{v:.0f}"
+
+
 def demo(run):
     run = pathlib.Path(run)
     s = json.loads((run / "summary.json").read_text())
@@ -722,7 +727,7 @@ def idic_error(run_dir, parameter, what="mean", route="integrated"):
     if what == "above":
         return f"{sum(float(r['relative_error']) > 0 for r in rows)} of {len(rows)}"
     mean = 100 * sum(abs(float(r['relative_error'])) for r in rows) / len(rows)
-    return f"{mean:.2g}" if mean < 100 else f"{mean:.0f}"
+    return two_digits(mean)
 
 
 def fields_above(run_dir, renderer, bound):
@@ -747,7 +752,7 @@ def campaign_error(run_dir, renderer, route, parameter, what="mean"):
     if what == "covered":
         return f"{sum(r['covered'] == '1' for r in rows)} of {len(rows)}"
     mean = sum(abs(float(r['error_pct'])) for r in rows) / len(rows)
-    return f"{mean:.2g}" if mean < 100 else f"{mean:.0f}"
+    return two_digits(mean)
 
 
 def lk_composition(run_dir, radius, smoothing, what="rms"):
