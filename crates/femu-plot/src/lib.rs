@@ -169,14 +169,28 @@ impl Canvas {
     }
 }
 
-/// Writes `img` as a PNG file, whole or not at all ([`femu_mesh::atomic`]).
+/// Writes `img` as a PNG file, whole or not at all ([`femu_mesh::atomic`]): fast deflate, each
+/// row filtered against the row above ("Up"). The figures' rows mostly repeat the row above (a
+/// white margin, an enlarged image's repeated rows, the axes), which Up turns into zeros at a
+/// fraction of the cost of trying every filter on every row; the files are about a quarter
+/// larger than with that adaptive choice.
 pub fn save_png<P, C>(path: &Path, img: &image::ImageBuffer<P, C>) -> Result<(), image::ImageError>
 where
     P: image::PixelWithColorType,
     [P::Subpixel]: image::EncodableLayout,
     C: std::ops::Deref<Target = [P::Subpixel]>,
 {
-    femu_mesh::atomic::write_with(path, |f| img.write_to(f, image::ImageFormat::Png))
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    use image::{EncodableLayout, ImageEncoder};
+    let samples: &[P::Subpixel] = img;
+    femu_mesh::atomic::write_with(path, |f| {
+        PngEncoder::new_with_quality(f, CompressionType::Fast, FilterType::Up).write_image(
+            samples.as_bytes(),
+            img.width(),
+            img.height(),
+            P::COLOR_TYPE,
+        )
+    })
 }
 
 /// Converts any displayable drawing error into the message carried by [`PlotError::Draw`].
