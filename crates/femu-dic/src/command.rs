@@ -24,6 +24,7 @@ use crate::image::{GreyImage, PixelSize};
 use crate::mesh::Rect;
 use crate::output::{self, DicSummary, ModelFrame, Quality};
 use crate::quality::{Trust, TrustCriteria};
+use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -215,22 +216,50 @@ pub fn run_dic_on(
                 .to_string(),
         );
     }
-    write_tables(job, &m, &choice, &frame, pixel_size, &points)?;
-    // The field's full covariance for weighted FEMU (`[measurement] covariance`), when the
-    // grid is small enough to write it densely.
-    let covariance_written = points.len() <= output::MAX_COVARIANCE_POINTS;
-    if covariance_written {
-        let c = output::grid_covariance(&m.res, &points, &frame)?;
-        output::write_dense_symmetric(
-            &job.out.join("field_covariance.mtx"),
-            2 * points.len(),
-            &c,
-            &[
-                "femu dic: covariance of field.csv's components (ux, uy per row, in its order), mm^2 in its frame".into(),
-                "N A^-1 M_sigma A^-1 N^T: the nodal covariance (covariance.mtx) at the grid points".into(),
-            ],
-        )?;
-    }
+    // The trust criteria as applied: the pair's own ZNCC level for a B-mode pair.
+    let criteria = TrustCriteria {
+        min_zncc: bmode.unwrap_or(job.correlation.trust.min_zncc),
+        ..job.correlation.trust
+    };
+    // The tables and matrices beside the maps: the tables are written one after the other, the
+    // maps drawn in parallel; together they keep both cores busy.
+    let (tables, maps) = rayon::join(
+        || -> Result<bool, DicError> {
+            write_tables(job, &m, &choice, &frame, pixel_size, &points)?;
+            // The field's full covariance for weighted FEMU (`[measurement] covariance`), when
+            // the grid is small enough to write it densely.
+            let covariance_written = points.len() <= output::MAX_COVARIANCE_POINTS;
+            if covariance_written {
+                let c = output::grid_covariance(&m.res, &points, &frame)?;
+                output::write_dense_symmetric(
+                    &job.out.join("field_covariance.mtx"),
+                    2 * points.len(),
+                    &c,
+                    &[
+                        "femu dic: covariance of field.csv's components (ux, uy per row, in its order), mm^2 in its frame".into(),
+                        "N A^-1 M_sigma A^-1 N^T: the nodal covariance (covariance.mtx) at the grid points".into(),
+                    ],
+                )?;
+            }
+            Ok(covariance_written)
+        },
+        || {
+            if job.figures {
+                crate::figures::write_maps(
+                    &job.out,
+                    f,
+                    &m,
+                    &frame,
+                    pixel_size.is_some(),
+                    criteria.min_zncc,
+                )
+            } else {
+                Ok(())
+            }
+        },
+    );
+    let covariance_written = tables?;
+    maps?;
     let mut outputs = vec![
         "field.csv",
         "nodes.csv",
@@ -244,20 +273,7 @@ pub fn run_dic_on(
     if covariance_written {
         outputs.push("field_covariance.mtx");
     }
-    // The trust criteria as applied: the pair's own ZNCC level for a B-mode pair.
-    let criteria = TrustCriteria {
-        min_zncc: bmode.unwrap_or(job.correlation.trust.min_zncc),
-        ..job.correlation.trust
-    };
     if job.figures {
-        crate::figures::write_maps(
-            &job.out,
-            f,
-            &m,
-            &frame,
-            pixel_size.is_some(),
-            criteria.min_zncc,
-        )?;
         outputs.extend(crate::figures::MAPS);
     }
     let quality = quality_summary(&m, &criteria);
@@ -372,50 +388,62 @@ fn write_tables(
                 .map_or(f64::NAN, |p| (p.x_px[0] - points[0].x_px[0]).abs())
         ),
     ];
-    output::write_field_csv(&out.join("field.csv"), points, &comments)?;
     let q = Quality {
         cov: &m.cov,
         trust: &m.trust,
     };
-    output::write_nodes_csv(&out.join("nodes.csv"), &m.res, frame, Some(&q))?;
-    output::write_elements_csv(&out.join("elements.csv"), &m.res, frame, Some(&m.trust))?;
     let sys = &m.res.system;
     let eq = "equation 2 (node - 1) + c + 1, c = 0 for ux, 1 for uy, node of nodes.csv";
-    output::write_matrix_market(
-        &out.join("covariance.mtx"),
-        &sys.pattern,
-        &m.cov.values,
-        &[
-            "femu dic: nodal covariance C = A^-1 M_sigma A^-1 (px^2), entries on the pattern of A only".into(),
-            eq.into(),
-        ],
-    )?;
-    output::write_matrix_market(
-        &out.join("hessian.mtx"),
-        &sys.pattern,
-        &sys.a_values(),
-        &[
-            format!(
-                "femu dic: Gauss-Newton matrix A = M + lambda K (grey levels^2/px^2), lambda = {}",
-                sys.lambda.unwrap_or(0.0)
-            ),
-            eq.into(),
-        ],
-    )?;
-    let m_sigma = crate::quality::noise_matrix(&m.res);
-    output::write_matrix_market(
-        &out.join("hessian_noise.mtx"),
-        &sys.pattern,
-        &m_sigma,
-        &[
-            "femu dic: M_sigma, covariance of the Gauss-Newton right-hand side under the residual noise; C = A^-1 M_sigma A^-1".into(),
-            eq.into(),
-        ],
-    )?;
-    output::write_fields(
-        &femu_mesh::VtuWriter,
-        &out.join("result.vtu"),
-        &m.res,
-        frame,
-    )
+    // The files are independent: written in parallel (with the maps, when they are drawn).
+    let writers: [&(dyn Fn() -> Result<(), DicError> + Sync); 7] = [
+        &|| output::write_field_csv(&out.join("field.csv"), points, &comments),
+        &|| output::write_nodes_csv(&out.join("nodes.csv"), &m.res, frame, Some(&q)),
+        &|| output::write_elements_csv(&out.join("elements.csv"), &m.res, frame, Some(&m.trust)),
+        &|| {
+            output::write_matrix_market(
+                &out.join("covariance.mtx"),
+                &sys.pattern,
+                &m.cov.values,
+                &[
+                    "femu dic: nodal covariance C = A^-1 M_sigma A^-1 (px^2), entries on the pattern of A only".into(),
+                    eq.into(),
+                ],
+            )
+        },
+        &|| {
+            output::write_matrix_market(
+                &out.join("hessian.mtx"),
+                &sys.pattern,
+                &sys.a_values(),
+                &[
+                    format!(
+                        "femu dic: Gauss-Newton matrix A = M + lambda K (grey levels^2/px^2), lambda = {}",
+                        sys.lambda.unwrap_or(0.0)
+                    ),
+                    eq.into(),
+                ],
+            )
+        },
+        &|| {
+            let m_sigma = crate::quality::noise_matrix(&m.res);
+            output::write_matrix_market(
+                &out.join("hessian_noise.mtx"),
+                &sys.pattern,
+                &m_sigma,
+                &[
+                    "femu dic: M_sigma, covariance of the Gauss-Newton right-hand side under the residual noise; C = A^-1 M_sigma A^-1".into(),
+                    eq.into(),
+                ],
+            )
+        },
+        &|| {
+            output::write_fields(
+                &femu_mesh::VtuWriter,
+                &out.join("result.vtu"),
+                &m.res,
+                frame,
+            )
+        },
+    ];
+    writers.par_iter().try_for_each(|write| write())
 }

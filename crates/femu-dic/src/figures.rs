@@ -36,8 +36,13 @@ pub struct Map<'a> {
     pub categories: Vec<String>,
 }
 
+/// Pixels the colour range's percentiles are taken over, at most (every k-th of the map's,
+/// a regular sample: a map's values vary over elements of hundreds of pixels).
+const RANGE_SAMPLE: usize = 1 << 17;
+
 /// Draws `map` over `f`, cropped to `crop`; the colour range, unless given, from the 1st to the
-/// 99th percentile (a few wild values do not wash out the map).
+/// 99th percentile (a few wild values do not wash out the map) of a regular sample of at most
+/// [`RANGE_SAMPLE`] of its pixels.
 pub fn draw(
     out: &Path,
     f: &GreyImage,
@@ -45,9 +50,11 @@ pub fn draw(
     crop: (usize, usize, usize, usize),
 ) -> Result<(), DicError> {
     let range = map.range.or_else(|| {
+        let stride = map.values.len().div_ceil(RANGE_SAMPLE).max(1);
         let mut v: Vec<f64> = map
             .values
             .iter()
+            .step_by(stride)
             .copied()
             .filter(|x| x.is_finite())
             .collect();
@@ -87,31 +94,39 @@ pub fn draw(
     })
 }
 
-/// Per pixel of the mesh: `value(element, x, y)`, NaN elsewhere.
+/// Per pixel of the mesh: `value(element, ξ, η)` at the pixel's local coordinates in its
+/// element (`(x − x_e) / h`, `(y − y_e) / h` from the element's top-left pixel), NaN elsewhere.
+/// The bands of elements (one row of elements, `h` rows of pixels) are filled in parallel,
+/// straight into the image.
 fn per_pixel(
     m: &Measured,
     w: usize,
     h: usize,
-    value: impl Fn(usize, usize, usize) -> f64 + Sync,
+    value: impl Fn(usize, f64, f64) -> f64 + Sync,
 ) -> Vec<f64> {
     let mesh = &m.res.mesh;
-    // The elements' blocks in parallel, then copied into the image.
-    let blocks: Vec<Vec<f64>> = (0..mesh.n_elements())
-        .into_par_iter()
-        .map(|e| {
-            let (px, py) = mesh.element_origin(e);
-            (0..mesh.h * mesh.h)
-                .map(|k| value(e, px + k % mesh.h, py + k / mesh.h))
-                .collect()
-        })
-        .collect();
-    let mut v = vec![f64::NAN; w * h];
-    for (e, block) in blocks.iter().enumerate() {
-        let (px, py) = mesh.element_origin(e);
-        for (j, row) in block.chunks_exact(mesh.h).enumerate() {
-            v[(py + j) * w + px..(py + j) * w + px + mesh.h].copy_from_slice(row);
-        }
+    let eh = mesh.h;
+    let mut by_band: Vec<Vec<usize>> = vec![Vec::new(); mesh.ny];
+    for (e, &(_, ey)) in mesh.cells.iter().enumerate() {
+        by_band[ey].push(e);
     }
+    let mut v = vec![f64::NAN; w * h];
+    let first = mesh.y0 * w;
+    let inv_h = 1.0 / eh as f64;
+    v[first..]
+        .par_chunks_mut(eh * w)
+        .zip(by_band.par_iter())
+        .for_each(|(band, elements)| {
+            for &e in elements {
+                let (px, _) = mesh.element_origin(e);
+                for (j, row) in band.chunks_exact_mut(w).enumerate() {
+                    let eta = j as f64 * inv_h;
+                    for (i, out) in row[px..px + eh].iter_mut().enumerate() {
+                        *out = value(e, i as f64 * inv_h, eta);
+                    }
+                }
+            }
+        });
     v
 }
 
@@ -140,26 +155,26 @@ pub fn write_maps(
     let mesh = &res.mesh;
     let unit = if mm { "mm" } else { "px" };
     let disp = |c: usize| {
-        per_pixel(m, w, h, |_, x, y| {
-            mesh.interpolate(&res.displacement, x as f64, y as f64)
-                .map_or(
-                    f64::NAN,
-                    |u| {
-                        if mm {
-                            frame.displacement(u)[c]
-                        } else {
-                            u[c]
-                        }
-                    },
-                )
+        per_pixel(m, w, h, |e, xi, eta| {
+            let n = crate::mesh::DicMesh::shape(xi, eta);
+            let mut u = [0.0; 2];
+            for (a, &node) in mesh.conn[e].iter().enumerate() {
+                u[0] += n[a] * res.displacement[node][0];
+                u[1] += n[a] * res.displacement[node][1];
+            }
+            if mm {
+                frame.displacement(u)[c]
+            } else {
+                u[c]
+            }
         })
     };
     let es = output::element_strains(res, frame);
     let strain = |c: usize| per_pixel(m, w, h, |e, _, _| es[e][c]);
     let blocks = m.cov.element_blocks(res);
-    let sd = per_pixel(m, w, h, |_, x, y| {
-        NodalCovariance::point_sd_with(res, &blocks, x as f64, y as f64)
-            .map_or(f64::NAN, |s| s[0].max(s[1]))
+    let sd = per_pixel(m, w, h, |e, xi, eta| {
+        let s = NodalCovariance::local_sd(&blocks[e], xi, eta);
+        s[0].max(s[1])
     });
     let untrusted = m.trust.iter().filter(|&&t| t != Trust::Trusted).count();
     let maps = [

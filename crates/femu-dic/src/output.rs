@@ -258,6 +258,7 @@ pub fn node_weights(res: &DicResult, trust: &[Trust]) -> Vec<u8> {
 /// Writes the symmetric matrix `values` on `pattern` in the Matrix Market coordinate format
 /// (`real symmetric`: the lower triangle, 1-based indices; equation `2 (node − 1) + c + 1` for
 /// component `c` = 0 (x), 1 (y) of the 1-based `node` of `nodes.csv`), `comments` as `%` lines.
+/// Each value is written in the shortest form that reads back to the same `f64`.
 pub fn write_matrix_market(
     path: &Path,
     pattern: &crate::sparse::CscPattern,
@@ -283,7 +284,7 @@ pub fn write_matrix_market(
         for k in pattern.col_ptr[c]..pattern.col_ptr[c + 1] {
             let r = pattern.row_idx[k];
             if r >= c {
-                writeln!(f, "{} {} {:.15e}", r + 1, c + 1, values[k]).map_err(&e)?;
+                writeln!(f, "{} {} {:e}", r + 1, c + 1, values[k]).map_err(&e)?;
             }
         }
     }

@@ -261,16 +261,23 @@ impl NodalCovariance {
         y: f64,
     ) -> Option<[f64; 2]> {
         let (e, xi, eta) = res.mesh.locate(x, y)?;
+        Some(Self::local_sd(&blocks[e], xi, eta))
+    }
+
+    /// The standard deviations (px) of `(ux, uy)` at the local coordinates `(ξ, η)` of the
+    /// element whose block of [`NodalCovariance::element_blocks`] is `block`.
+    #[inline]
+    pub fn local_sd(block: &[[f64; 16]; 2], xi: f64, eta: f64) -> [f64; 2] {
         let nsh = crate::mesh::DicMesh::shape(xi, eta);
         let mut v = [0.0; 2];
         for comp in 0..2 {
             for a in 0..4 {
                 for b in 0..4 {
-                    v[comp] += nsh[a] * nsh[b] * blocks[e][comp][4 * a + b];
+                    v[comp] += nsh[a] * nsh[b] * block[comp][4 * a + b];
                 }
             }
         }
-        Some([v[0].max(0.0).sqrt(), v[1].max(0.0).sqrt()])
+        [v[0].max(0.0).sqrt(), v[1].max(0.0).sqrt()]
     }
 }
 
