@@ -4,7 +4,8 @@ apodized frames? Subtract it from femu dic's composed fields and identify again.
 
 psf_phase.py gives, per depth, the lateral shift of pymust's speckle under a shear duy/dx = g
 (from the cross-correlation of its measured point-spread function with its sheared self):
-c(z) = shift / g, in mm per unit shear. For each realization of a campaign (campaign.py's
+c(z) = shift / g, in mm per unit shear (or, with --lens, the closed form of psf_phase.py's
+docstring with the focal-plane curvature -k/(2z) and a given lateral resolution). For each realization of a campaign (campaign.py's
 folders: `<campaign>/pymust_NN/dic/` with frame_K/field.csv and the composed field.csv,
 `plain.toml`), this script writes field.csv with
 
@@ -55,20 +56,46 @@ def read_field(path):
 
 
 def shear_of(x, y, uy):
-    """duy/dx at the grid points (x, y) by central differences along the grid's rows (one-sided
-    at the ends; 0 where a neighbour is missing)."""
+    """duy/dx at the grid points (x, y): central differences along the grid's rows, one-sided
+    where a neighbour is missing (the edges, points left out of the field), 0 for a point with
+    neither neighbour. Every point is corrected: near the skin, where the grid has gaps, the
+    shear is largest."""
     mx, my = np.unique(x), np.unique(y)
     grid = np.full((len(my), len(mx)), np.nan)
     iy, ix = np.searchsorted(my, y), np.searchsorted(mx, x)
     grid[iy, ix] = uy
-    return np.nan_to_num(np.gradient(grid, mx, axis=1)[iy, ix])
+    left = np.full_like(grid, np.nan)
+    right = np.full_like(grid, np.nan)
+    left[:, 1:] = (grid[:, 1:] - grid[:, :-1]) / np.diff(mx)
+    right[:, :-1] = left[:, 1:]
+    both = np.isfinite(left) & np.isfinite(right)
+    g = np.where(both, 0.5 * (left + right), np.where(np.isfinite(left), left, right))
+    g = np.nan_to_num(g)
+    # Central differences on an unevenly spaced row: weight by the spacings.
+    gap_l = np.r_[np.nan, np.diff(mx)]
+    gap_r = np.r_[np.diff(mx), np.nan]
+    w = gap_r / (gap_l + gap_r)
+    central = w * left + (1 - w) * right
+    g = np.where(both, central, g)
+    return g[iy, ix]
 
 
-def corrected(path, out, z, c):
+def lens_shift_per_shear(frequency_mhz, resolution_mm, z_mm, sound_speed=1540.0):
+    """c(z) (mm per unit shear) of the closed form with the focal-plane curvature -k/(2z) and a
+    Gaussian lateral amplitude of FWHM resolution_mm (psf_phase.py's docstring)."""
+    k = 2 * np.pi * frequency_mhz * 1e6 / (sound_speed * 1e3)
+    z = np.maximum(np.asarray(z_mm, float), 1e-9)
+    alpha = -k / (2 * z)
+    sigma = resolution_mm / (2 * np.sqrt(2 * np.log(2)))
+    return 2 * k * (-alpha) / (2 * (alpha**2 + 1 / (4 * sigma**4)))
+
+
+def corrected(path, out, c_of):
     comments, header, a = read_field(path)
     f = {h: a[:, i] for i, h in enumerate(header)}
     g = shear_of(f["x"], f["y"], f["uy"])
-    a[:, header.index("ux")] = f["ux"] - np.interp(f["y"], z, c) * g
+    # Depth of a point: its row's centre below the face (the top edge of row 0).
+    a[:, header.index("ux")] = f["ux"] - c_of(f["y"] + 0.5 / PX_PER_MM) * g
     with open(out, "w") as fh:
         fh.write("\n".join(comments) + "\n")
         fh.write("# ux corrected for the lateral speckle shift under shear (shear_correction.py)\n")
@@ -92,14 +119,24 @@ def lateral_error(field_path, truth_path):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--psf", required=True, help="psf_phase.py --json output")
+    ap.add_argument("--psf", help="psf_phase.py --json output: c(z) from pymust's measured PSF")
     ap.add_argument("--campaign", required=True, help="campaign.py --out folder")
     ap.add_argument("--frames", required=True, help="folder of the realizations' seed_NN frames")
     ap.add_argument("--femu", default="target/release/femu")
     ap.add_argument("--out", default="out/shear_correction")
+    ap.add_argument("--lens", metavar="MHZ,FWHM_MM",
+                    help="c(z) from the closed form with the focal-plane curvature instead of --psf "
+                         "(centre frequency, lateral resolution), e.g. 9,0.907")
     a = ap.parse_args()
     os.makedirs(a.out, exist_ok=True)
-    z, c = shift_per_shear(a.psf)
+    if not (a.lens or a.psf):
+        raise SystemExit("give --psf (psf_phase.py --json) or --lens MHZ,FWHM_MM")
+    if a.lens:
+        f_mhz, fwhm = (float(v) for v in a.lens.split(","))
+        c_of = lambda z_mm: lens_shift_per_shear(f_mhz, fwhm, z_mm)  # noqa: E731
+    else:
+        z, c = shift_per_shear(a.psf)
+        c_of = lambda z_mm: np.interp(z_mm, z, c)  # noqa: E731
     campaign = [r for r in csv.DictReader(open(os.path.join(a.campaign, "campaign.csv")))
                 if r["renderer"] == "pymust" and r["route"] == "plain"]
     seeds = sorted({int(r["seed"]) for r in campaign})
@@ -113,7 +150,7 @@ def main():
         for k, field in ((1, os.path.join(src, "dic", "frame_1", "field.csv")),
                          (last, os.path.join(src, "dic", "field.csv"))):
             fixed = os.path.join(dst, f"field_{k}.csv")
-            corrected(field, fixed, z, c)
+            corrected(field, fixed, c_of)
             truth = os.path.join(frames, f"truth_{k}.csv")
             before, after = lateral_error(field, truth), lateral_error(fixed, truth)
             lateral_rows.append({"seed": seed, "frame": k, "rms_before_px": before[0],
