@@ -432,12 +432,14 @@ def main() -> None:
     commit = git("rev-parse", "--short", "HEAD")
     dirty = " (with uncommitted changes)" if git("status", "--porcelain", "--untracked-files=no") else ""
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    # The commit the current binary was built from: this checkout's, or --cur-commit's.
+    cur_commit = commit + dirty if a.cur == ROOT / "target/release/femu" or not a.cur_commit else a.cur_commit
     lines = [
         "# Performance figures",
         "",
         f"- date: {now}",
         f"- machine: {machine()}",
-        f"- current: `{a.cur}` built from commit {commit}{dirty}",
+        f"- current: `{a.cur}` built from commit {cur_commit}",
         f"- previous: `{a.prev}` (commit {a.prev_commit})",
         f"- method: `python3 bench/perf/run.py {' '.join(sys.argv[1:])}`; the two binaries run in turn "
         f"({a.runs} runs each, {a.slow_runs} for the integrated DIC and `demo --full`); "
@@ -453,7 +455,6 @@ def main() -> None:
     a.out.write_text(text)
     log(f"written {a.out}")
     a.results.mkdir(parents=True, exist_ok=True)
-    cur_commit = commit + dirty if a.cur == ROOT / "target/release/femu" or not a.cur_commit else a.cur_commit
     (a.results / "results.json").write_text(json.dumps({
         "previous": {"binary": str(a.prev), "commit": a.prev_commit},
         "current": {"binary": str(a.cur), "commit": cur_commit},
