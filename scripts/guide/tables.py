@@ -688,6 +688,49 @@ def lateral_speckle(run_dir):
     return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
 
 
+def shear_correction(run_dir, what):
+    """bench/independent_us's speckle-shift study (psf_phase.py, shear_correction.py): WHAT is
+    `psf` (per depth, pymust's Hann-apodized PSF's fitted lateral curvature beside -k/2z, the
+    speckle's lateral shift under the shear it predicts and what femu dic measured) or
+    `identification` (per frame set and source of c(z), the composed lateral RMS error and each
+    fat and quadriceps parameter's error range and coverage before and after the correction,
+    then the provenance)."""
+    d = ROOT / run_dir
+    if what == "psf":
+        psf = json.load(open(d / "psf_hann.json"))
+        out = [f"| depth (mm) | lateral curvature fitted / -k/(2z) (rad/mm²) | shift under a shear of {psf['shear']} predicted by the PSF (px) | measured by femu dic (px) |",
+               "|---|---|---|---|"]
+        for r in psf["rows"]:
+            if r["depth_mm"] in (3.0, 5.0, 10.0, 20.0, 30.0, 38.0):
+                out.append(f"| {r['depth_mm']:g} | {r['alpha_fit']:.2f} / {r['alpha_lens']:.2f} | "
+                           f"{r['shift_psf_px']:+.2f} | {r['measured_px']:+.2f} |")
+        return "\n".join(out) + "\n"
+    if what != "identification":
+        raise SystemExit(f"shear_correction: no table {what!r} (psf, identification)")
+    sets = [("hann", "apodized (Hann), pymust's PSF"), ("hann_lens", "apodized (Hann), closed form"),
+            ("default", "default, pymust's PSF"), ("default_lens", "default, closed form")]
+    params = ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"]
+    out = ["| frames, c(z) from | composed lateral RMS (px) | " + " | ".join(params) + " |",
+           "|---|---|" + "---|" * len(params)]
+    for i, (sub, label) in enumerate(sets):
+        rows = list(csv.DictReader(open(d / sub / "parameters.csv")))
+        lat = [r for r in csv.DictReader(open(d / sub / "lateral.csv")) if r["frame"] != "1"]
+        n = len({r["seed"] for r in rows})
+
+        def cell(p, before):
+            r = [x for x in rows if x["parameter"] == p]
+            e = [float(x["error_pct_uncorrected" if before else "error_pct"]) for x in r]
+            c = sum(int(x["covered_uncorrected" if before else "covered"]) for x in r)
+            return f"{round(min(e)):+d} to {round(max(e)):+d} % ({c}/{n})"
+        if i % 2 == 0:
+            rms = sum(float(r["rms_before_px"]) for r in lat) / len(lat)
+            out.append(f"| {label.split(',')[0]}, {n} realizations, uncorrected | {rms:.2f} | "
+                       + " | ".join(cell(p, True) for p in params) + " |")
+        rms = sum(float(r["rms_after_px"]) for r in lat) / len(lat)
+        out.append(f"| {label} | {rms:.2f} | " + " | ".join(cell(p, False) for p in params) + " |")
+    return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
+
+
 def profile_share(path, *phase):
     """The share of CPU samples of PHASE (the start of its name) in a committed profile's
     "CPU samples by phase" table (bench/perf/profile_*.txt, made by bench/perf/phases.py):
@@ -1007,7 +1050,7 @@ def identify_fd(lm_dir, fd_dir):
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
-    funcs = {"dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
+    funcs = {"shear_correction": shear_correction, "dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
              "contact": contact, "recorded": recorded, "recorded_span": recorded_span,
              "recorded_provenance": recorded_provenance,
              "dic_real": dic_real, "dic_real_rms": dic_real_rms,
