@@ -1,5 +1,7 @@
 """Small checks of render_pymust.py (pytest; < 1 min): pymust's speckle follows a known rigid
-shift of the scatterers, and a --small realization writes consistent files.
+shift of the scatterers, a --small realization writes consistent files, the Hann apodization
+widens the speckle; psf_phase.py's point-spread function and the shear shift it predicts, and
+shear_correction.py's differences.
 
     pip install pymust==0.1.9 scipy pillow pytest
     pytest bench/independent_us/test_render_small.py
@@ -126,3 +128,45 @@ def test_hann_apodization_weighs_the_aperture_and_widens_the_speckle():
         n = np.unique(e)
         wn = np.cos(np.pi * np.abs(xe[n] - x[p]) * s.rx_fnumber / z[p]) ** 2
         assert np.isclose(gain.flatten(order="F")[p], np.sum(wn**2), rtol=1e-12)
+
+
+def test_psf_phase_of_a_point_and_the_shear_shift_it_predicts():
+    """psf_phase.py on one point 10 mm deep (Hann apodization): the axial carrier is close to
+    2k (73.4 rad/mm at 9 MHz; pymust's echoes are centred a little lower), the lateral phase
+    curves with the sign and about the size of the focal plane's -k/(2z) (-1.84 rad/mm^2), and
+    the shift the PSF's own cross-correlation predicts under a shear of 0.05 is within 0.4 px
+    of the closed form with the fitted curvature and width (measured at 5-38 mm: within 0.4 px;
+    the README's table)."""
+    import psf_phase as pp
+
+    s = rp.Settings(rx_apodization="hann")
+    x, z, img = pp.point_psf(s, 10.0)
+    i0 = np.unravel_index(np.argmax(np.abs(img)), img.shape)[0]
+    alpha, sigma, _ = pp.lobe_fit(x, img[i0, :])
+    k = 2 * np.pi * s.fc_mhz * 1e6 / rp.SOUND_SPEED / 1e3
+    k2 = pp.carrier(z, img)
+    assert 0.9 * 2 * k < k2 < 1.02 * 2 * k, k2
+    assert -k / (2 * 10.0) * 1.2 < alpha < -k / (2 * 10.0) * 0.6, alpha
+    assert 0.3 < sigma < 0.5, sigma
+    closed = -k2 * 0.05 * alpha / (2 * (alpha**2 + 1 / (4 * sigma**4))) * 10
+    shift = pp.correlation_shift(x, z, img, 0.05) * 10
+    assert shift > 1.0 and abs(shift - closed) < 0.4, (shift, closed)
+
+
+def test_shear_by_differences_along_the_rows():
+    """shear_correction.shear_of: exact on a quadratic field along unevenly spaced rows, with
+    one-sided differences beside a missing point and at the ends."""
+    import shear_correction as sc
+
+    x = np.array([0.0, 1, 2, 3, 5, 0, 1, 2])
+    y = np.array([0.0, 0, 0, 0, 0, 1, 1, 1])
+    uy = 0.05 * x + 0.002 * x**2
+    g = sc.shear_of(x, y, uy)
+    central = 0.05 + 0.004 * x
+    # Central (interior points of row 0, x = 1, 2, 3; row 1, x = 1): exact for a quadratic.
+    for i in (1, 2, 3, 6):
+        assert abs(g[i] - central[i]) < 1e-12, (i, g[i])
+    # One-sided at the ends: the slope of the chord.
+    assert abs(g[0] - (uy[1] - uy[0])) < 1e-12
+    assert abs(g[4] - (uy[4] - uy[3]) / 2) < 1e-12
+    assert abs(g[7] - (uy[7] - uy[6])) < 1e-12
