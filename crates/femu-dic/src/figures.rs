@@ -94,8 +94,10 @@ pub fn draw(
     })
 }
 
-/// Per pixel of the mesh: `value(element, ξ, η)` at the pixel's local coordinates in its
-/// element (`(x − x_e) / h`, `(y − y_e) / h` from the element's top-left pixel), NaN elsewhere.
+/// Per pixel of the mesh: `value(element, ξ, η)` at the pixel's centre in its element's local
+/// coordinates (`(x − x_e + ½) / h`, `(y − y_e + ½) / h` from the element's top-left pixel
+/// `(x_e, y_e)`: the element's nodes lie on pixel edges, as [`pixel_local`] has them), NaN
+/// elsewhere.
 /// The bands of elements (one row of elements, `h` rows of pixels) are filled in parallel,
 /// straight into the image.
 fn per_pixel(
@@ -120,14 +122,22 @@ fn per_pixel(
             for &e in elements {
                 let (px, _) = mesh.element_origin(e);
                 for (j, row) in band.chunks_exact_mut(w).enumerate() {
-                    let eta = j as f64 * inv_h;
                     for (i, out) in row[px..px + eh].iter_mut().enumerate() {
-                        *out = value(e, i as f64 * inv_h, eta);
+                        let (xi, eta) = pixel_local(i, j, inv_h);
+                        *out = value(e, xi, eta);
                     }
                 }
             }
         });
     v
+}
+
+/// The local coordinates `(ξ, η)` of the pixel `(i, j)` of an element (from its top-left pixel)
+/// whose size is `1 / inv_h` pixels: its centre, half a pixel in from the element's edges
+/// (where the nodes lie; [`crate::mesh::DicMesh::locate`]).
+#[inline]
+fn pixel_local(i: usize, j: usize, inv_h: f64) -> (f64, f64) {
+    ((i as f64 + 0.5) * inv_h, (j as f64 + 0.5) * inv_h)
 }
 
 /// The crop of the maps: the mesh with a margin of one element.
@@ -271,4 +281,38 @@ pub fn write_maps(
     ];
     let crop = crop_of(m, w, h);
     maps.par_iter().try_for_each(|map| draw(out, f, map, crop))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{DicMesh, Rect, Roi};
+
+    /// The maps' local coordinates of a pixel are those the mesh locates it at: every pixel of
+    /// every element, 16 px elements away from the image's origin.
+    #[test]
+    fn pixel_local_is_where_the_mesh_locates_the_pixel() {
+        let roi = Roi::Rect(Rect {
+            x: 10,
+            y: 20,
+            w: 70,
+            h: 33,
+        });
+        let mesh = DicMesh::new(&roi, 100, 60, 16).unwrap();
+        let inv_h = 1.0 / mesh.h as f64;
+        for e in 0..mesh.n_elements() {
+            let (px, py) = mesh.element_origin(e);
+            for j in 0..mesh.h {
+                for i in 0..mesh.h {
+                    let (e2, xi, eta) = mesh.locate((px + i) as f64, (py + j) as f64).unwrap();
+                    let (a, b) = pixel_local(i, j, inv_h);
+                    assert_eq!(e2, e);
+                    assert!(
+                        (a - xi).abs() < 1e-12 && (b - eta).abs() < 1e-12,
+                        "{e} ({i}, {j})"
+                    );
+                }
+            }
+        }
+    }
 }
