@@ -44,6 +44,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import render_pymust as rp  # noqa: E402
+import shift_variance as sv  # noqa: E402
 
 FINE_PX_PER_MM = 100.0
 HALF_WIDTH_MM = 4.0
@@ -91,11 +92,19 @@ def lobe_fit(x, row):
     return alpha, sigma, x[i0]
 
 
-def sheared(z, img, g, x):
+def closed_form_shift(k2, alpha, sigma, g):
+    """The speckle's lateral shift (mm) under the shear g for a PSF with the axial carrier k2
+    (rad/mm), the lateral phase curvature alpha (rad/mm^2) and a Gaussian lateral amplitude of
+    standard deviation sigma (mm): beta alpha / (2 (alpha^2 + 1 / (4 sigma^4))), beta = -k2 g
+    (the module docstring; speckle_shear.py checks it with femu dic)."""
+    beta = -k2 * g
+    return beta * alpha / (2 * (alpha**2 + 1 / (4 * sigma**4)))
+
+
+def sheared(z, img, g, x, k2):
     """h(dx, dz + g dx): each column's complex profile read at depth dz + g dx (linear
-    interpolation of the baseband: the carrier k2 dz is taken out and put back)."""
+    interpolation of the baseband: the carrier k2 dz, `carrier`'s, is taken out and put back)."""
     out = np.zeros_like(img)
-    k2 = carrier(z, img)
     base = img * np.exp(-1j * k2 * z)[:, None]
     for j in range(img.shape[1]):
         zz = z + g * x[j]
@@ -114,10 +123,11 @@ def carrier(z, img):
     return np.polyfit(z[m], np.unwrap(np.angle(col[m])), 1, w=a[m])[0]
 
 
-def correlation_shift(x, z, img, g):
+def correlation_shift(x, z, img, g, k2):
     """The lateral shift (mm) at which the PSF's cross-correlation with its sheared self peaks
-    (axial shift free), with a parabolic refinement on the lateral samples."""
-    h2 = sheared(z, img, g, x)
+    (axial shift free), with a parabolic refinement on the lateral samples; k2 the PSF's
+    carrier (`carrier`)."""
+    h2 = sheared(z, img, g, x, k2)
     f1 = np.fft.fft2(img)
     f2 = np.fft.fft2(h2)
     r = np.abs(np.fft.ifft2(np.conj(f1) * f2))
@@ -133,10 +143,7 @@ def correlation_shift(x, z, img, g):
 def measured_bias(path, depth_mm):
     """Mean lateral displacement (px) of a femu dic field.csv (mm) in the 2 mm band around
     depth_mm, columns 60-340 px, trusted points."""
-    lines = [l for l in open(path) if not l.startswith("#")]
-    hdr = lines[0].strip().split(",")
-    a = np.array([[float(v) for v in l.split(",")] for l in lines[1:]])
-    f = {h: a[:, i] for i, h in enumerate(hdr)}
+    f = sv.load_csv(path)
     m = (f["w"] > 0) & (f["x"] > 6.0) & (f["x"] < 34.0) & (np.abs(f["y"] - depth_mm) <= 1.0)
     return (np.mean(f["ux"][m]) * 10.0, int(m.sum())) if m.any() else (np.nan, 0)
 
@@ -161,9 +168,8 @@ def main():
         i0 = np.unravel_index(np.argmax(np.abs(img)), img.shape)[0]
         alpha, sigma, _ = lobe_fit(x, img[i0, :])
         k2 = carrier(zz, img)
-        beta = -k2 * SHEAR
-        closed = beta * alpha / (2 * (alpha**2 + 1 / (4 * sigma**4))) * 10.0
-        corr = correlation_shift(x, zz, img, SHEAR) * 10.0
+        closed = closed_form_shift(k2, alpha, sigma, SHEAR) * 10.0
+        corr = correlation_shift(x, zz, img, SHEAR, k2) * 10.0
         row = {"depth_mm": z, "k2_fit": k2, "alpha_fit": alpha, "alpha_lens": -k / (2 * z),
                "sigma_mm": sigma, "shift_closed_px": closed, "shift_psf_px": corr}
         line = (f"{z:5.1f}  {k2:6.1f}  {alpha:9.2f}  {-k / (2 * z):7.2f}  {sigma:5.3f}   "

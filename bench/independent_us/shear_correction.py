@@ -34,6 +34,8 @@ import subprocess
 import numpy as np
 from scipy.interpolate import griddata
 
+import psf_phase
+
 PX_PER_MM = 10.0
 
 
@@ -68,16 +70,13 @@ def shear_of(x, y, uy):
     right = np.full_like(grid, np.nan)
     left[:, 1:] = (grid[:, 1:] - grid[:, :-1]) / np.diff(mx)
     right[:, :-1] = left[:, 1:]
-    both = np.isfinite(left) & np.isfinite(right)
-    g = np.where(both, 0.5 * (left + right), np.where(np.isfinite(left), left, right))
-    g = np.nan_to_num(g)
-    # Central differences on an unevenly spaced row: weight by the spacings.
+    # Central differences on an unevenly spaced row: the two sides weighted by the spacings.
     gap_l = np.r_[np.nan, np.diff(mx)]
     gap_r = np.r_[np.diff(mx), np.nan]
     w = gap_r / (gap_l + gap_r)
-    central = w * left + (1 - w) * right
-    g = np.where(both, central, g)
-    return g[iy, ix]
+    both = np.isfinite(left) & np.isfinite(right)
+    g = np.where(both, w * left + (1 - w) * right, np.where(np.isfinite(left), left, right))
+    return np.nan_to_num(g)[iy, ix]
 
 
 def lens_shift_per_shear(frequency_mhz, resolution_mm, z_mm, sound_speed=1540.0):
@@ -85,9 +84,8 @@ def lens_shift_per_shear(frequency_mhz, resolution_mm, z_mm, sound_speed=1540.0)
     Gaussian lateral amplitude of FWHM resolution_mm (psf_phase.py's docstring)."""
     k = 2 * np.pi * frequency_mhz * 1e6 / (sound_speed * 1e3)
     z = np.maximum(np.asarray(z_mm, float), 1e-9)
-    alpha = -k / (2 * z)
     sigma = resolution_mm / (2 * np.sqrt(2 * np.log(2)))
-    return 2 * k * (-alpha) / (2 * (alpha**2 + 1 / (4 * sigma**4)))
+    return psf_phase.closed_form_shift(2 * k, -k / (2 * z), sigma, 1.0)
 
 
 def corrected(path, out, c_of):

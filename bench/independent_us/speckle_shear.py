@@ -25,6 +25,7 @@ import numpy as np  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 import render_pymust as rp  # noqa: E402
+import psf_phase  # noqa: E402
 import shift_variance as sv  # noqa: E402
 
 PX_PER_MM = sv.PX_PER_MM
@@ -46,8 +47,7 @@ def main():
     q1 = np.c_[q0[:, 0], q0[:, 1] + a.shear * q0[:, 0]]
     s = rp.Settings()
     # The IQ phase is k2 (depth of the pixel - depth of the scatterer): a scatterer moved by
-    # g x takes the phase -k2 g x.
-    beta = -sv.K2 * a.shear
+    # g x takes the phase -k2 g x (beta = -k2 g in psf_phase.closed_form_shift).
     print("alpha (rad/mm^2)  measured lateral mean (px)  RMS (px)  predicted (px)")
     for alpha in [float(v) for v in a.alphas.split(",")]:
         d = a.out / f"alpha_{alpha:g}"
@@ -65,7 +65,7 @@ def main():
         px = np.c_[f["x"], f["y"]] * PX_PER_MM
         ux = f["ux"] * PX_PER_MM
         w = (f["w"] > 0) & (px[:, 0] > 60) & (px[:, 0] < 340) & (px[:, 1] > 40) & (px[:, 1] < 360)
-        pred = beta * alpha / (2 * (alpha**2 + 1 / (4 * sv.SIGMA_X**4))) * PX_PER_MM
+        pred = psf_phase.closed_form_shift(sv.K2, alpha, sv.SIGMA_X, a.shear) * PX_PER_MM
         print(f"{alpha:+8.1f}  {ux[w].mean():+26.3f}  {np.sqrt((ux[w] ** 2).mean()):8.3f}  {pred:+14.3f}", flush=True)
 
 

@@ -148,8 +148,8 @@ def test_psf_phase_of_a_point_and_the_shear_shift_it_predicts():
     assert 0.9 * 2 * k < k2 < 1.02 * 2 * k, k2
     assert -k / (2 * 10.0) * 1.2 < alpha < -k / (2 * 10.0) * 0.6, alpha
     assert 0.3 < sigma < 0.5, sigma
-    closed = -k2 * 0.05 * alpha / (2 * (alpha**2 + 1 / (4 * sigma**4))) * 10
-    shift = pp.correlation_shift(x, z, img, 0.05) * 10
+    closed = pp.closed_form_shift(k2, alpha, sigma, 0.05) * 10
+    shift = pp.correlation_shift(x, z, img, 0.05, k2) * 10
     assert shift > 1.0 and abs(shift - closed) < 0.4, (shift, closed)
 
 

@@ -166,12 +166,7 @@ pub fn write_maps(
     let unit = if mm { "mm" } else { "px" };
     let disp = |c: usize| {
         per_pixel(m, w, h, |e, xi, eta| {
-            let n = crate::mesh::DicMesh::shape(xi, eta);
-            let mut u = [0.0; 2];
-            for (a, &node) in mesh.conn[e].iter().enumerate() {
-                u[0] += n[a] * res.displacement[node][0];
-                u[1] += n[a] * res.displacement[node][1];
-            }
+            let u = mesh.interpolate_in(&res.displacement, e, xi, eta);
             if mm {
                 frame.displacement(u)[c]
             } else {

@@ -344,6 +344,12 @@ impl DicMesh {
     /// The displacement interpolated at `(x, y)` from nodal values `u` (`[ux, uy]` per node).
     pub fn interpolate(&self, u: &[[f64; 2]], x: f64, y: f64) -> Option<[f64; 2]> {
         let (e, xi, eta) = self.locate(x, y)?;
+        Some(self.interpolate_in(u, e, xi, eta))
+    }
+
+    /// The nodal values `u` interpolated in element `e` at its local coordinates `(ξ, η)`.
+    #[inline]
+    pub fn interpolate_in(&self, u: &[[f64; 2]], e: usize, xi: f64, eta: f64) -> [f64; 2] {
         let n = Self::shape(xi, eta);
         let c = &self.conn[e];
         let mut v = [0.0; 2];
@@ -351,7 +357,7 @@ impl DicMesh {
             v[0] += n[a] * u[c[a]][0];
             v[1] += n[a] * u[c[a]][1];
         }
-        Some(v)
+        v
     }
 
     /// Displacement gradient `[[∂ux/∂x, ∂ux/∂y], [∂uy/∂x, ∂uy/∂y]]` at the centre of element

@@ -435,10 +435,9 @@ mod tests {
 
     /// The integer blend of the tables is within 1.5 levels of `α c + (1 − α) g` in floating
     /// point with `c` the map's (rounded) colour, for every grey level (and grey values between
-    /// levels), values across and beyond the
-    /// range, both maps and several opacities.
+    /// levels), values across and beyond the range, both maps and several opacities.
     #[test]
-    fn the_tables_blend_within_one_level() {
+    fn the_tables_blend_within_a_level_and_a_half() {
         let n = 4001;
         let values: Vec<f64> = (0..n)
             .map(|k| -1.3 + 2.6 * k as f64 / (n - 1) as f64)
