@@ -151,6 +151,44 @@ fn dic_sequence_field_reaches_identify() {
     let iw = dir.join("iw");
     ok(&femu(&["identify", s(&weighted), "--out", s(&iw)]));
 
+    // The speckle's lateral shift under shear in the measurement model, its scale fitted:
+    // read through `[measurement] file` and `--measured` alike, the scale reported. femu's
+    // renderer has a Gaussian point-spread function without the lens phase that makes the
+    // speckle move, so the scale the field supports is small and the estimates stay sane.
+    let speckle = write(
+        &dir,
+        "speckle.toml",
+        &study(
+            "speckle_frequency_mhz = 9.0
+speckle_resolution_mm = 0.9
+",
+        ),
+    );
+    let (is1, is2) = (dir.join("is1"), dir.join("is2"));
+    ok(&femu(&["identify", s(&speckle), "--out", s(&is1)]));
+    ok(&femu(&[
+        "identify",
+        s(&speckle),
+        "--measured",
+        s(&d.join("field.csv")),
+        "--out",
+        s(&is2),
+    ]));
+    assert_eq!(
+        estimates(&is1),
+        estimates(&is2),
+        "speckle keys through --measured"
+    );
+    let shift = &json(&is1.join("summary.json"))["speckle_shift"];
+    let kappa = shift["scale"].as_f64().unwrap();
+    assert!(
+        shift["fitted"].as_bool().unwrap() && kappa.abs() < 0.5,
+        "{shift}"
+    );
+    let q = estimates(&is1);
+    let q = q.iter().find(|e| e.0 == "C10_QUADRICEPS").unwrap();
+    assert!((q.1 / 1.75e-3 - 1.0).abs() < 0.1, "{q:?}");
+
     // A field in pixels (no pixel size given) read in mm: refused, naming the declaration.
     let dpx = dir.join("dic_px");
     ok(&femu(&[

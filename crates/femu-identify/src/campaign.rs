@@ -13,6 +13,7 @@ use crate::fit::{
 };
 use crate::joint::{self, Block, JointProblem, Segments};
 use crate::measured::{MeasuredField, MeasuredPoint};
+use crate::speckle::SpeckleShift;
 use crate::weighted::{FieldCovariance, Loss};
 use femu_mech::sensitivity::all_parameters;
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -299,6 +300,9 @@ pub struct CampaignOptions {
     /// The measured field's full covariance (model frame, mm²; weighted FEMU, module
     /// [`crate::weighted`]), used instead of its per-point weights; measured data only.
     pub covariance: Option<FieldCovariance>,
+    /// The speckle's lateral shift under shear in the measurement model of the measured field
+    /// (module [`crate::speckle`]); measured data only, like `covariance`.
+    pub speckle_shift: Option<SpeckleShift>,
     /// The loss on the (whitened) residuals.
     pub loss: Loss,
     /// Set by the user to stop: the starts stop at their next forward solve and the campaign
@@ -565,8 +569,9 @@ pub fn realized_fields(
 }
 
 /// The FEMU block of `block` on `model` (the block's model or its coarse one) with the data of
-/// one repeat, under the campaign's loss; `covariance` (weighted FEMU) whitens a block of one
-/// measured segment.
+/// one repeat, under the campaign's loss. The `first` field block, when it is one measured
+/// segment (the study's single measured field), takes the options' covariance (weighted FEMU)
+/// and speckle shift.
 fn field_problem(
     block: &FieldBlock,
     data: &Realized,
@@ -574,14 +579,19 @@ fn field_problem(
     free: &[FreeParameter],
     free_model: &Model,
     options: &CampaignOptions,
-    covariance: Option<&FieldCovariance>,
+    first: bool,
 ) -> Result<Block, FitError> {
     let (bfree, map) = joint::block_free(free, free_model, model);
     let mut p = Problem::new(model.clone(), SolverOptions::default(), &data.field, bfree)?
         .with_stop(options.stop.clone())
         .with_loss(options.loss);
-    if let (Some(c), [(_, Data::Measured(_))]) = (covariance, block.segments.as_slice()) {
-        p = p.with_covariance(c)?;
+    if let (true, [(_, Data::Measured(_))]) = (first, block.segments.as_slice()) {
+        if let Some(c) = &options.covariance {
+            p = p.with_covariance(c)?;
+        }
+        if let Some(s) = options.speckle_shift {
+            p = p.with_speckle_shift(s)?;
+        }
     }
     if let Some((t, sigma)) = data.travel {
         p = p.with_travel(t, sigma)?;
@@ -692,9 +702,9 @@ pub fn run_joint(
         let problem = |coarse: bool| -> Result<JointProblem, FitError> {
             let mut stacked = Vec::with_capacity(blocks.len());
             let mut data = realized.iter();
-            // The measured field's covariance belongs to the first field block (the study's
-            // single [measurement]).
-            let mut covariance = options.covariance.as_ref();
+            // The measured field's covariance and speckle shift belong to the first field block
+            // (the study's single [measurement]).
+            let mut first = true;
             for spec in blocks {
                 stacked.push(match spec {
                     BlockSpec::Field(f) => {
@@ -704,8 +714,9 @@ pub fn run_joint(
                             f.model
                         };
                         let d = data.next().expect("one realization per field block");
-                        let c = covariance.take();
-                        field_problem(f, d, model, free, free_model, options, c)?
+                        let p = field_problem(f, d, model, free, free_model, options, first)?;
+                        first = false;
+                        p
                     }
                     BlockSpec::Custom { build, .. } => build(coarse)?,
                 });

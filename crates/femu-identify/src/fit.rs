@@ -15,6 +15,7 @@
 //! failures. [`latin_hypercube`] draws the starts of the seed's multi-start.
 
 use crate::measured::MeasuredField;
+use crate::speckle::{ShiftScale, SpeckleShift};
 use crate::weighted::{FieldCovariance, Loss, Whitening};
 use femu_mech::sensitivity::{DirectSensitivity, Parameter};
 use femu_mech::{Model, SolverOptions, StaticSolver};
@@ -158,6 +159,9 @@ pub struct Problem {
     /// The actuator term: the measured travel of the force-controlled rigid body (mm) and its
     /// standard deviation, one more residual `(T_model - T_measured) / σ_T`.
     travel: Option<(f64, f64)>,
+    /// The speckle's lateral shift under shear in the measurement model
+    /// ([`Problem::with_speckle_shift`]).
+    speckle: Option<SpeckleTerm>,
     warm: Option<Vec<f64>>,
     dstate: Vec<Vec<f64>>,
     /// Set by the user to stop: checked before every forward solve.
@@ -236,6 +240,7 @@ impl Problem {
             masked,
             located,
             travel: None,
+            speckle: None,
             warm: None,
             dstate: Vec::new(),
             stop: None,
@@ -341,12 +346,23 @@ impl Problem {
         }
     }
 
-    /// The model field at the measured points for the last solve.
+    /// The model field at the measured points for the last solve, as the measurement sees it:
+    /// the displacement, plus the speckle's shift under shear at its current scale.
     fn project(&self, u: &[f64], out: &mut Vec<f64>) {
+        let kappa = self.speckle.as_ref().map_or(0.0, |s| s.kappa);
+        self.project_with(u, kappa, out);
+    }
+
+    /// The displacement at the measured points plus `kappa` times the speckle's shift
+    /// ([`SpeckleTerm::shift`]); linear in `u`, so it maps sensitivities too.
+    fn project_with(&self, u: &[f64], kappa: f64, out: &mut Vec<f64>) {
         out.clear();
         for loc in &self.locations {
             out.push(loc.interpolate(u, 2, 0));
             out.push(loc.interpolate(u, 2, 1));
+        }
+        if let (Some(s), true) = (&self.speckle, kappa != 0.0) {
+            s.add_shift(&self.locations, u, kappa, out);
         }
     }
 
@@ -364,12 +380,45 @@ impl Problem {
             .solver
             .solve_with(&self.model, self.warm.as_deref(), &mut |_| {})
             .map_err(FitError::from_solve)?;
+        // The speckle's shift at a fixed scale is part of the projection; a fitted scale is
+        // profiled out (variable projection): the residual's component along the weighted
+        // shift v is removed, r = P⊥ (a), κ = -vᵀa / vᵀv, and the Jacobian columns are
+        // P⊥ (∂a/∂φ + κ ∂v/∂φ) (Kaufman's form), so that the Gauss–Newton covariance of the
+        // parameters is the marginal one with κ free.
+        let (kappa, fitted) = match self.speckle.as_ref().map(|s| s.shift.scale) {
+            None => (0.0, false),
+            Some(ShiftScale::Fixed(k)) => (k, false),
+            Some(ShiftScale::Fitted) => (0.0, true),
+        };
         let mut diff = Vec::with_capacity(self.measured.len());
-        self.project(&sol.u, &mut diff);
+        self.project_with(&sol.u, kappa, &mut diff);
         for (d, m) in diff.iter_mut().zip(&self.measured) {
             *d -= m;
         }
         let mut r = self.weigh(&diff);
+        let mut profile: Option<(Vec<f64>, f64)> = None;
+        let mut kappa = kappa;
+        if fitted {
+            let mut shift = vec![0.0; diff.len()];
+            if let Some(s) = &self.speckle {
+                s.add_shift(&self.locations, &sol.u, 1.0, &mut shift);
+            }
+            let v = self.weigh(&shift);
+            let vv: f64 = v.iter().map(|x| x * x).sum();
+            let rr: f64 = r.iter().map(|x| x * x).sum();
+            // A field without shear (or a shift of no size) says nothing about κ.
+            if vv > 1e-24 * (1.0 + rr) && vv.is_finite() {
+                let vr: f64 = v.iter().zip(&r).map(|(a, b)| a * b).sum();
+                kappa = -vr / vv;
+                for (x, a) in r.iter_mut().zip(&v) {
+                    *x += kappa * a;
+                }
+                profile = Some((v, vv));
+            }
+        }
+        if let Some(s) = self.speckle.as_mut() {
+            s.kappa = kappa;
+        }
         let travel_dof = 2 * self.model.node_count();
         if let Some((t, sigma)) = self.travel {
             r.push((sol.state[travel_dof] - t) / sigma);
@@ -398,7 +447,7 @@ impl Problem {
                 let mut travel = 0.0;
                 for m in &f.members {
                     let theta = m.value(&self.model);
-                    self.project(&self.dstate[k], &mut col);
+                    self.project_with(&self.dstate[k], kappa, &mut col);
                     for (s, c) in sum.iter_mut().zip(&col) {
                         *s += theta * c;
                     }
@@ -408,6 +457,12 @@ impl Problem {
                     k += 1;
                 }
                 let mut c = self.weigh(&sum);
+                if let Some((v, vv)) = &profile {
+                    let along = v.iter().zip(&c).map(|(a, b)| a * b).sum::<f64>() / vv;
+                    for (x, a) in c.iter_mut().zip(v) {
+                        *x -= along * a;
+                    }
+                }
                 if self.travel.is_some() {
                     c.push(travel);
                 }
@@ -463,6 +518,51 @@ impl Problem {
         Ok(self)
     }
 
+    /// Adds the speckle's lateral shift under shear to the measurement model (module
+    /// [`crate::speckle`]): the field at each measured point is `u + κ c(z) g e_lateral`, with
+    /// `g` the model's shear `e_axialᵀ ∇u e_lateral` there and `z` its depth below the face.
+    /// With [`ShiftScale::Fitted`], `κ` is estimated at every evaluation (variable projection;
+    /// [`Problem::speckle_scale`] gives the last).
+    pub fn with_speckle_shift(mut self, shift: SpeckleShift) -> Result<Problem, FitError> {
+        shift.check().map_err(FitError::Speckle)?;
+        let mesh = &self.model.mesh;
+        let coefficients = self
+            .locations
+            .iter()
+            .map(|loc| {
+                let mut x = [0.0; 2];
+                for a in 0..loc.n_nodes {
+                    let node = mesh.nodes[loc.nodes[a]];
+                    x[0] += loc.weights[a] * node[0];
+                    x[1] += loc.weights[a] * node[1];
+                }
+                let c = shift.per_shear(shift.depth(x));
+                let grads = loc.shape_gradients(mesh);
+                let mut q = [0.0; 4];
+                for a in 0..loc.n_nodes {
+                    q[a] = c * (grads[a][0] * shift.lateral[0] + grads[a][1] * shift.lateral[1]);
+                }
+                q
+            })
+            .collect();
+        let kappa = match shift.scale {
+            ShiftScale::Fixed(k) => k,
+            ShiftScale::Fitted => 0.0,
+        };
+        self.speckle = Some(SpeckleTerm {
+            shift,
+            coefficients,
+            kappa,
+        });
+        Ok(self)
+    }
+
+    /// The speckle shift's scale `κ` of the last evaluation (the fixed one before any), if the
+    /// measurement model has the shift.
+    pub fn speckle_scale(&self) -> Option<f64> {
+        self.speckle.as_ref().map(|s| s.kappa)
+    }
+
     /// Minimizes the loss `loss` of the (whitened) residuals instead of their squares (module
     /// [`crate::weighted`]).
     pub fn with_loss(mut self, loss: Loss) -> Problem {
@@ -484,6 +584,32 @@ impl Problem {
         self.project(&sol.u, &mut out);
         self.warm = Some(sol.state);
         Ok(out)
+    }
+}
+
+/// The speckle's shift of a [`Problem`]: per located point, `c(z) ∂N_a/∂x_lateral` of its
+/// element's nodes, and the current scale.
+struct SpeckleTerm {
+    shift: SpeckleShift,
+    coefficients: Vec<[f64; 4]>,
+    kappa: f64,
+}
+
+impl SpeckleTerm {
+    /// Adds `kappa c(z) g e_lateral` at every located point to `out` (`[ux, uy, ...]`), `g` the
+    /// shear of the nodal field `u`.
+    fn add_shift(&self, locations: &[PointLocation], u: &[f64], kappa: f64, out: &mut [f64]) {
+        let [ax, ay] = self.shift.axial;
+        let [lx, ly] = self.shift.lateral;
+        for (i, (loc, q)) in locations.iter().zip(&self.coefficients).enumerate() {
+            let mut cg = 0.0;
+            for a in 0..loc.n_nodes {
+                let n = loc.nodes[a];
+                cg += q[a] * (ax * u[2 * n] + ay * u[2 * n + 1]);
+            }
+            out[2 * i] += kappa * cg * lx;
+            out[2 * i + 1] += kappa * cg * ly;
+        }
     }
 }
 

@@ -39,4 +39,6 @@ pub enum FitError {
     Interrupted,
     #[error("measurement covariance: {0}")]
     Covariance(String),
+    #[error("speckle shift: {0}")]
+    Speckle(String),
 }

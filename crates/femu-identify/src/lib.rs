@@ -12,6 +12,8 @@
 //!   block jackknife, whichever is larger.
 //! - [`variance_components`]: the error variance of groups of residuals (component, depth
 //!   band, lateral edge) estimated from a fit (Helmert, iterated), weights and intervals from it.
+//! - [`speckle`]: the lateral motion of B-mode speckle under shear, a term of the measurement
+//!   model with a fitted scale.
 //! - [`weighted`]: the misfit weighted by a measured field's full covariance, robust loss.
 //! - [`joint`]: several measurements (tests, probe windows, any least-squares block) sharing
 //!   the free parameters, stacked into one problem; each measurement's share of the information.
@@ -35,5 +37,6 @@ pub mod idic;
 pub mod joint;
 pub mod measured;
 pub mod misfit_intervals;
+pub mod speckle;
 pub mod variance_components;
 pub mod weighted;

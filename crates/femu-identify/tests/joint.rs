@@ -191,6 +191,7 @@ fn a_joint_of_one_is_the_single_identification() {
         travel: None,
         stop: None,
         covariance: None,
+        speckle_shift: None,
         loss: Default::default(),
     };
     let c = campaign::run(
@@ -278,6 +279,7 @@ fn noise_free_joint_fit_recovers_every_parameter() {
         travel: None,
         stop: None,
         covariance: None,
+        speckle_shift: None,
         loss: Default::default(),
     };
     let c = campaign::run_joint(&base, &free, &reference, &blocks, &options, &|_| {}).unwrap();
@@ -389,6 +391,7 @@ fn light_monte_carlo_intervals_cover_the_truth() {
         travel: None,
         stop: None,
         covariance: None,
+        speckle_shift: None,
         loss: Default::default(),
     };
     let c = campaign::run_joint(&base, &free, &reference, &blocks, &options, &|_| {}).unwrap();

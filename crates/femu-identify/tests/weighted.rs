@@ -13,30 +13,15 @@ mod common;
 #[path = "../../../scripts/guide/measure.rs"]
 mod measure;
 
-use femu_geometry::{contention_deck, parametric_thigh, table1_materials, ThighParams};
 use femu_identify::fit::{levenberg_marquardt, FreeParameter, LeastSquares, LmOptions, Problem};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
 use femu_identify::weighted::{FieldCovariance, Loss, HUBER_K};
-use femu_mech::loading::{apply_loading, Loading};
 use femu_mech::{Model, SolverOptions};
 use rand::SeedableRng;
 use rand_distr::{Distribution, StandardNormal};
 
 fn thigh() -> Model {
-    let t = parametric_thigh(
-        &ThighParams {
-            target_elements: Some(800),
-            ..Default::default()
-        },
-        femu_mesh::ElementKind::Cpe4h,
-    )
-    .unwrap();
-    let skin = t.mesh.surfaces["SKIN"].clone();
-    let mut deck = contention_deck(&t, &table1_materials(), 0.0).unwrap();
-    deck.pressures.clear();
-    let mut model = Model::from_deck(deck).unwrap();
-    apply_loading(&mut model, &skin, &Loading::seed_compression()).unwrap();
-    model
+    common::compression_thigh(800)
 }
 
 fn free(model: &Model) -> Vec<FreeParameter> {

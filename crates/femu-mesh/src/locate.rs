@@ -44,6 +44,60 @@ impl PointLocation {
             .map(|a| self.weights[a] * values[components * self.nodes[a] + c])
             .sum()
     }
+
+    /// The shape functions' gradients `∂N_a/∂X` (reference configuration, per mm) at the point
+    /// in `mesh` (the mesh it was located in): `∇N = J⁻ᵀ ∂N/∂ξ` with the isoparametric map's
+    /// Jacobian `J = ∂X/∂ξ` of the module drawing; zero beyond `n_nodes`. With
+    /// [`PointLocation::gradient`], the displacement gradient at the point.
+    pub fn shape_gradients(&self, mesh: &Mesh) -> [[f64; 2]; 4] {
+        let (x, n) = mesh.element_coords(self.element);
+        let [xi, eta] = self.xi;
+        let dn: [[f64; 2]; 4] = if n == 3 {
+            [[-1.0, -1.0], [1.0, 0.0], [0.0, 1.0], [0.0, 0.0]]
+        } else {
+            [
+                [-0.25 * (1.0 - eta), -0.25 * (1.0 - xi)],
+                [0.25 * (1.0 - eta), -0.25 * (1.0 + xi)],
+                [0.25 * (1.0 + eta), 0.25 * (1.0 + xi)],
+                [-0.25 * (1.0 + eta), 0.25 * (1.0 - xi)],
+            ]
+        };
+        let mut j = [[0.0; 2]; 2];
+        for a in 0..n {
+            for r in 0..2 {
+                for c in 0..2 {
+                    j[r][c] += x[a][r] * dn[a][c];
+                }
+            }
+        }
+        let det = j[0][0] * j[1][1] - j[0][1] * j[1][0];
+        let mut g = [[0.0; 2]; 4];
+        for a in 0..n {
+            // J⁻ᵀ ∂N_a/∂ξ.
+            g[a][0] = (j[1][1] * dn[a][0] - j[1][0] * dn[a][1]) / det;
+            g[a][1] = (-j[0][1] * dn[a][0] + j[0][0] * dn[a][1]) / det;
+        }
+        g
+    }
+
+    /// The gradient `∂v_c/∂X_d` of a field with `components` values per node at the point, from
+    /// [`PointLocation::shape_gradients`] `grads`.
+    pub fn gradient(
+        &self,
+        values: &[f64],
+        components: usize,
+        grads: &[[f64; 2]; 4],
+    ) -> [[f64; 2]; 2] {
+        let mut out = [[0.0; 2]; 2];
+        for a in 0..self.n_nodes {
+            for c in 0..components.min(2) {
+                let v = values[components * self.nodes[a] + c];
+                out[c][0] += v * grads[a][0];
+                out[c][1] += v * grads[a][1];
+            }
+        }
+        out
+    }
 }
 
 /// Relative tolerance of the inside test (of the element size): points on a shared edge or node
@@ -364,6 +418,72 @@ mod tests {
         );
         for l in ip.locations.iter().flatten() {
             assert!((l.weights.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+        }
+    }
+
+    /// The displacement gradient at a point: exact for an affine field (which both element
+    /// kinds reproduce), and the derivative of the interpolated field by central differences
+    /// (step 1e-6 mm: truncation ~h² of a bilinear field, round-off ~1e-16/h) for a nodal field
+    /// the elements do not reproduce, on distorted quads and on triangles.
+    #[test]
+    fn gradients_match_affine_fields_and_finite_differences() {
+        for kind in [ElementKind::Cpe4, ElementKind::Cpe3] {
+            let quads = generate::rectangle(3.0, 2.0, 3, 2, ElementKind::Cpe4);
+            let mut g = match kind {
+                ElementKind::Cpe3 => generate::split_into_triangles(&quads),
+                _ => quads,
+            };
+            for (k, x) in g.mesh.nodes.iter_mut().enumerate() {
+                let s = (k as f64 * 1.7).sin();
+                if x[0] > 0.0 && x[0] < 3.0 && x[1] > 0.0 && x[1] < 2.0 {
+                    x[0] += 0.2 * s;
+                    x[1] -= 0.15 * s;
+                }
+            }
+            let affine: Vec<f64> = g
+                .mesh
+                .nodes
+                .iter()
+                .flat_map(|x| [0.3 * x[0] - 0.7 * x[1] + 1.0, 1.1 * x[0] + 0.2 * x[1]])
+                .collect();
+            let wavy: Vec<f64> = g
+                .mesh
+                .nodes
+                .iter()
+                .flat_map(|x| [(x[0] * x[1]).sin(), x[0] * x[0] - x[1]])
+                .collect();
+            let locator = PointLocator::new(&g.mesh);
+            for p in [[0.4, 0.3], [1.6, 1.1], [2.55, 1.7], [1.2, 0.45]] {
+                let l = locator.locate(p).unwrap();
+                let grads = l.shape_gradients(&g.mesh);
+                let a = l.gradient(&affine, 2, &grads);
+                let want = [[0.3, -0.7], [1.1, 0.2]];
+                for (r, w) in a.iter().zip(&want) {
+                    assert!(
+                        (r[0] - w[0]).abs() < 1e-12 && (r[1] - w[1]).abs() < 1e-12,
+                        "{kind:?} {p:?}: {a:?}"
+                    );
+                }
+                let d = l.gradient(&wavy, 2, &grads);
+                let h = 1e-6;
+                for dim in 0..2 {
+                    let at = |s: f64| {
+                        let mut q = p;
+                        q[dim] += s;
+                        let m = locate_in_element(&g.mesh, l.element, q).unwrap();
+                        [m.interpolate(&wavy, 2, 0), m.interpolate(&wavy, 2, 1)]
+                    };
+                    let (fp, fm) = (at(h), at(-h));
+                    for c in 0..2 {
+                        let fd = (fp[c] - fm[c]) / (2.0 * h);
+                        assert!(
+                            (d[c][dim] - fd).abs() < 1e-8,
+                            "{kind:?} {p:?} d{c}/dX{dim}: {} vs {fd}",
+                            d[c][dim]
+                        );
+                    }
+                }
+            }
         }
     }
 }

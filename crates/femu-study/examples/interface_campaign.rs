@@ -149,6 +149,7 @@ fn main() -> Result<()> {
         travel: None,
         stop: None,
         covariance: None,
+        speckle_shift: None,
         loss: spec.loss,
     };
     let fit = joint::fit(&inputs, true, &models, &prepared_tied, &options, &|_| {})

@@ -1,4 +1,5 @@
-//! Helpers of the identification tests: the ten free parameters of a model, and CalculiX (a
+//! Helpers of the identification tests: the built-in thigh under the seed's compression, the
+//! free parameters of a model, and CalculiX (a
 //! deck solved by `ccx` through femu's `.inp` writer, dead loads, its nodal displacements read
 //! back; skipped with a message when ccx is absent).
 #![allow(dead_code)] // each test binary uses its own subset
@@ -102,4 +103,29 @@ pub fn named_free(model: &Model, names: &[&str]) -> (Vec<FreeParameter>, Vec<f64
         .collect();
     let reference = free.iter().map(|f| f.members[0].value(model)).collect();
     (free, reference)
+}
+
+/// The built-in thigh (about `elements` CPE4H) with Table 1's materials under the seed's
+/// compression (the plate on the anterior skin, dead loads off).
+pub fn compression_thigh(elements: usize) -> Model {
+    let t = femu_geometry::parametric_thigh(
+        &femu_geometry::ThighParams {
+            target_elements: Some(elements),
+            ..Default::default()
+        },
+        femu_mesh::ElementKind::Cpe4h,
+    )
+    .unwrap();
+    let skin = t.mesh.surfaces["SKIN"].clone();
+    let mut deck =
+        femu_geometry::contention_deck(&t, &femu_geometry::table1_materials(), 0.0).unwrap();
+    deck.pressures.clear();
+    let mut model = Model::from_deck(deck).unwrap();
+    femu_mech::loading::apply_loading(
+        &mut model,
+        &skin,
+        &femu_mech::loading::Loading::seed_compression(),
+    )
+    .unwrap();
+    model
 }

@@ -1350,6 +1350,53 @@ force_n_per_mm = 0.1
             ),
             Item::Key(
                 key(
+                    "speckle_frequency_mhz",
+                    Ty::Real,
+                    "MHz",
+                    POSITIVE,
+                    Def::Text("none: the speckle moves with the tissue"),
+                    "B-mode frames of a measured file: the echo's centre frequency, for the speckle's lateral shift under shear (with speckle_resolution_mm)",
+                )
+                .example("9.0", "the frames' centre frequency: the speckle's shift under shear"),
+            ),
+            Item::Key(
+                key(
+                    "speckle_resolution_mm",
+                    Ty::Real,
+                    "mm",
+                    POSITIVE,
+                    Def::Text("none; required with speckle_frequency_mhz"),
+                    "the frames' lateral resolution: FWHM of the point-spread function across the beam",
+                )
+                .example("0.9", "lateral resolution (FWHM of the point-spread function)"),
+            ),
+            Item::Key(
+                key(
+                    "speckle_sound_speed_m_s",
+                    Ty::Real,
+                    "m/s",
+                    POSITIVE,
+                    Def::Value("1540.0"),
+                    "the speed of sound the frames were beamformed with",
+                )
+                .example("1540.0", "the beamforming's speed of sound"),
+            ),
+            Item::Key(
+                key(
+                    "speckle_shift",
+                    Ty::Text,
+                    "",
+                    Allowed::Words {
+                        what: "speckle shift",
+                        words: &["fitted", "fixed"],
+                    },
+                    Def::Value("\"fitted\""),
+                    "the shift's scale estimated with the parameters (its uncertainty in their intervals), or held at the closed form's",
+                )
+                .example("\"fitted\"", "fitted with the parameters, or fixed (the closed form)"),
+            ),
+            Item::Key(
+                key(
                     "test",
                     Ty::Text,
                     "",

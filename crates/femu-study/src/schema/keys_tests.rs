@@ -136,6 +136,16 @@ fn context(table: &str, key: &str) -> &'static str {
         ("measurement", "units" | "x_axis" | "y_axis" | "origin_mm" | "weighting") => {
             "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\n"
         }
+        ("measurement", "speckle_frequency_mhz") => {
+            "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\nspeckle_resolution_mm = 0.9\n"
+        }
+        ("measurement", "speckle_resolution_mm") => {
+            "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\nspeckle_frequency_mhz = 9.0\n"
+        }
+        ("measurement", "speckle_sound_speed_m_s" | "speckle_shift") => {
+            "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\n\
+             speckle_frequency_mhz = 9.0\nspeckle_resolution_mm = 0.9\n"
+        }
         ("measurement", "force_log_offset_s") => {
             "[measurement]\nsource = \"frames\"\nframes = [\"f0.png\", \"f1.png\"]\n\
              force_log = \"force.csv\"\nframe_times_s = [0.0, 1.0]\npixel_size_mm = 0.1\n"

@@ -34,6 +34,8 @@ pub enum MeasurementSource {
         frame: Frame,
         covariance: Option<PathBuf>,
         weighting: Weighting,
+        /// The speckle's lateral shift under shear in the measurement model (B-mode frames).
+        speckle: Option<Speckle>,
     },
     /// The virtual experiment with images (`femu us-sim`): B-mode images of the unloaded and
     /// loaded thigh under `[probe]` simulated with `[ultrasound]`, correlated by the DIC; the
@@ -58,6 +60,39 @@ pub enum Weighting {
     /// residuals show beyond it, estimated from a first fit (`femu_identify::error_model`); the
     /// default with a covariance.
     Estimated,
+}
+
+/// The imaging of a measured file's B-mode frames (`[measurement] speckle_*`): the speckle's
+/// lateral shift under shear (`femu_identify::speckle`), depth measured along the file's +y
+/// from its y = 0 (the probe face: rows going down, as `femu dic` writes).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Speckle {
+    pub frequency_mhz: f64,
+    pub resolution_mm: f64,
+    pub sound_speed_m_s: f64,
+    /// The shift's scale fitted with the parameters (`speckle_shift = "fitted"`, the default),
+    /// or held at the closed form's (`"fixed"`).
+    pub fitted: bool,
+}
+
+impl Speckle {
+    /// The shift in the model frame of a file placed by `frame`.
+    pub fn in_frame(&self, frame: &Frame) -> femu_identify::speckle::SpeckleShift {
+        use femu_identify::speckle::{ShiftScale, SpeckleShift};
+        SpeckleShift {
+            frequency_mhz: self.frequency_mhz,
+            resolution_mm: self.resolution_mm,
+            sound_speed_m_s: self.sound_speed_m_s,
+            face: frame.origin,
+            lateral: frame.x_axis,
+            axial: frame.y_axis,
+            scale: if self.fitted {
+                ShiftScale::Fitted
+            } else {
+                ShiftScale::Fixed(1.0)
+            },
+        }
+    }
 }
 
 /// The measured travel of the force-controlled plate or indenter (`None` for a virtual
@@ -302,6 +337,14 @@ fn check_source(
             ));
         }
     }
+    if source != "file" {
+        if let Some(key) = speckle_keys(m).first() {
+            return Err(err(
+                key,
+                &format!("is the imaging of a measured field's frames (source = \"file\"; the source is \"{source}\")"),
+            ));
+        }
+    }
     if m.weighting.is_some() && source != "file" {
         return Err(err(
             "weighting",
@@ -384,12 +427,91 @@ fn file_source(
         .ok_or_else(|| err("source", "source = \"file\" needs file"))?;
     let frame = file_frame(m, index, lines)?;
     let weighting = weighting(m, index, lines)?;
+    let speckle = speckle(m, index, lines)?;
     Ok(MeasurementSource::File {
         path: resolve(base, file),
         frame,
         covariance: m.covariance.as_deref().map(|c| resolve(base, c)),
         weighting,
+        speckle,
     })
+}
+
+/// The speckle keys given.
+fn speckle_keys(m: &MeasurementEntry) -> Vec<&'static str> {
+    [
+        ("speckle_frequency_mhz", m.speckle_frequency_mhz.is_some()),
+        ("speckle_resolution_mm", m.speckle_resolution_mm.is_some()),
+        (
+            "speckle_sound_speed_m_s",
+            m.speckle_sound_speed_m_s.is_some(),
+        ),
+        ("speckle_shift", m.speckle_shift.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(k, given)| given.then_some(k))
+    .collect()
+}
+
+/// The imaging of a measured file's frames: none without `speckle_frequency_mhz`, which needs
+/// `speckle_resolution_mm` (and the other way round).
+fn speckle(
+    m: &MeasurementEntry,
+    index: usize,
+    lines: &KeyLines,
+) -> Result<Option<Speckle>, StudyError> {
+    let err = |key: &str, message: &str| lines.err("measurement", index, key, message.into());
+    let (frequency, resolution) = match (m.speckle_frequency_mhz, m.speckle_resolution_mm) {
+        (None, None) => {
+            return match speckle_keys(m).first() {
+                Some(key) => Err(err(
+                    key,
+                    "needs speckle_frequency_mhz and speckle_resolution_mm (the frames' centre frequency and lateral resolution)",
+                )),
+                None => Ok(None),
+            }
+        }
+        (Some(_), None) => {
+            return Err(err(
+                "speckle_frequency_mhz",
+                "needs speckle_resolution_mm too (the lateral resolution: FWHM of the point-spread function, mm)",
+            ))
+        }
+        (None, Some(_)) => {
+            return Err(err(
+                "speckle_resolution_mm",
+                "needs speckle_frequency_mhz too (the centre frequency of the echo, MHz)",
+            ))
+        }
+        (Some(f), Some(r)) => (f, r),
+    };
+    let positive = |key: &str, v: f64| lines.positive("measurement", index, key, v);
+    let fitted = match super::keys::word_or_default(
+        "measurement",
+        "speckle_shift",
+        m.speckle_shift.as_deref(),
+    )
+    .map_err(|e| err("speckle_shift", &e))?
+    {
+        "fitted" => true,
+        "fixed" => false,
+        other => {
+            return Err(err(
+                "speckle_shift",
+                &super::keys::unhandled("measurement", "speckle_shift", other),
+            ))
+        }
+    };
+    Ok(Some(Speckle {
+        frequency_mhz: positive("speckle_frequency_mhz", frequency)?,
+        resolution_mm: positive("speckle_resolution_mm", resolution)?,
+        sound_speed_m_s: positive(
+            "speckle_sound_speed_m_s",
+            m.speckle_sound_speed_m_s
+                .unwrap_or_else(|| super::keys::default("measurement", "speckle_sound_speed_m_s")),
+        )?,
+        fitted,
+    }))
 }
 
 /// The frame of a measured file: its units (mm, or px of `pixel_size_mm`), origin and axes in

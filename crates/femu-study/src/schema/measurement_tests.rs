@@ -265,3 +265,79 @@ fn a_measured_files_weighting_is_read_and_checked() {
     let e = err("[measurement]\nweighting = \"estimated\"\n");
     assert!(e.contains("weighting") && e.contains("virtual"), "{e}");
 }
+
+/// `[measurement] speckle_*`: the frames' imaging read with its defaults (sound speed 1540 m/s,
+/// the scale fitted), placed by the file's frame (depth along its +y from its origin); a
+/// frequency without a resolution (or the other way round), a key on a measurement that is
+/// not a file, a bad value or word: named errors.
+#[test]
+fn a_measured_files_speckle_shift_is_read_and_checked() {
+    let file = "[measurement]\nsource = \"file\"\nfile = \"f.csv\"\norigin_mm = [-20.0, 60.0]\ny_axis = [0.0, -1.0]\n";
+    let speckle = |extra: &str| {
+        let s = parse(&format!("{file}{extra}"), Path::new("/data")).unwrap();
+        match &s.measurements[0].source {
+            MeasurementSource::File { speckle, frame, .. } => (*speckle, *frame),
+            other => panic!("a file, got {other:?}"),
+        }
+    };
+    assert_eq!(speckle("").0, None);
+    let (s, frame) = speckle("speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\n");
+    let s = s.unwrap();
+    assert_eq!(
+        (
+            s.frequency_mhz,
+            s.resolution_mm,
+            s.sound_speed_m_s,
+            s.fitted
+        ),
+        (9.0, 0.9, 1540.0, true)
+    );
+    let shift = s.in_frame(&frame);
+    assert_eq!(shift.face, [-20.0, 60.0]);
+    assert_eq!(shift.depth([-10.0, 52.5]), 7.5);
+    assert_eq!(shift.scale, femu_identify::speckle::ShiftScale::Fitted);
+    let (s, _) = speckle(
+        "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_sound_speed_m_s = 1500\nspeckle_shift = \"fixed\"\n",
+    );
+    let s = s.unwrap();
+    assert_eq!((s.sound_speed_m_s, s.fitted), (1500.0, false));
+    assert_eq!(
+        s.in_frame(&Frame::model()).scale,
+        femu_identify::speckle::ShiftScale::Fixed(1.0)
+    );
+    for (extra, key, says) in [
+        (
+            "speckle_frequency_mhz = 9\n",
+            "speckle_frequency_mhz",
+            "needs speckle_resolution_mm",
+        ),
+        (
+            "speckle_resolution_mm = 0.9\n",
+            "speckle_resolution_mm",
+            "needs speckle_frequency_mhz",
+        ),
+        (
+            "speckle_shift = \"fixed\"\n",
+            "speckle_shift",
+            "needs speckle_frequency_mhz and speckle_resolution_mm",
+        ),
+        (
+            "speckle_frequency_mhz = -9\nspeckle_resolution_mm = 0.9\n",
+            "speckle_frequency_mhz",
+            "positive",
+        ),
+        (
+            "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_shift = \"free\"\n",
+            "speckle_shift",
+            "fitted, fixed",
+        ),
+    ] {
+        let e = err(&format!("{file}{extra}"));
+        assert!(e.contains(key) && e.contains(says), "{extra}: {e}");
+    }
+    let e = err("[measurement]\nsource = \"virtual\"\nspeckle_frequency_mhz = 9\n");
+    assert!(
+        e.contains("speckle_frequency_mhz") && e.contains("source = \"file\""),
+        "{e}"
+    );
+}

@@ -57,7 +57,7 @@ pub use keys::{
 pub use loading_tests::{seed_tests, TestSpec};
 pub use materials::{table1, MaterialSpec};
 pub use measurement::{
-    Frame, GridSpec, MeasurementSource, MeasurementSpec, Travel, Weighting, SEED_SIGMA_MM,
+    Frame, GridSpec, MeasurementSource, MeasurementSpec, Speckle, Travel, Weighting, SEED_SIGMA_MM,
 };
 pub use measurements::{Measurement, Region, WindowSpec};
 pub use ultrasound::{ProbeSection, UltrasoundSection};

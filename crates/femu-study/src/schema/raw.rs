@@ -134,6 +134,13 @@ pub(crate) struct MeasurementEntry {
     pub force_log_units: Option<Vec<String>>,
     /// The frames' pose: as given, or refined from the unloaded frame (`given`, `refined`).
     pub pose: Option<String>,
+    /// The imaging of a measured file's frames, for the speckle's lateral shift under shear
+    /// (`femu_identify::speckle`): centre frequency, lateral resolution, sound speed, and
+    /// whether the shift's scale is fitted or held at the closed form's.
+    pub speckle_frequency_mhz: Option<f64>,
+    pub speckle_resolution_mm: Option<f64>,
+    pub speckle_sound_speed_m_s: Option<f64>,
+    pub speckle_shift: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -795,6 +795,7 @@ pub fn identify_frames(
             // The rows of the points that weigh something, as the field keeps them.
             covariance: recorded.covariance.as_ref().map(|c| c.sub(&kept)),
             weighting: crate::schema::Weighting::Estimated,
+            speckle_shift: None,
             simulated: None,
         });
         // The identification's own starts (the integrated DIC's were set to the optimum above).

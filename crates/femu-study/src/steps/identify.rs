@@ -28,6 +28,7 @@ use femu_identify::error_model::{self, ErrorModel};
 use femu_identify::fit::{FitResult, FreeParameter, Problem};
 use femu_identify::joint::{block_free, information_shares};
 use femu_identify::measured::{MeasuredField, MeasuredPoint};
+use femu_identify::speckle::{ShiftScale, SpeckleShift};
 use femu_identify::weighted::FieldCovariance;
 use femu_mech::{Model, SolverOptions};
 use femu_mesh::locate::PointLocator;
@@ -90,6 +91,22 @@ pub struct IdentificationSummary {
     /// residuals of the first stage (`femu_identify::error_model`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error_model: Option<ErrorModel>,
+    /// The speckle's lateral shift under shear in the measurement model
+    /// (`[measurement] speckle_*`), and its scale at the optimum.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speckle_shift: Option<SpeckleShiftSummary>,
+}
+
+/// The speckle shift of an identification (`femu_identify::speckle`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SpeckleShiftSummary {
+    pub frequency_mhz: f64,
+    pub resolution_mm: f64,
+    pub sound_speed_m_s: f64,
+    /// Whether the scale was fitted with the parameters (or held at 1, the closed form's).
+    pub fitted: bool,
+    /// The scale κ at the optimum (the measured field with its per-point weights).
+    pub scale: f64,
 }
 
 /// One measurement of an identification.
@@ -232,17 +249,23 @@ fn identify_measured(
         Some(p) => {
             // The file replaces the study's measured file and is read in its frame, with its
             // covariance: `--measured` and `[measurement] file` read a file alike.
-            let (frame, covariance, weighting) = match study.measurements.first().map(|m| &m.source)
-            {
-                Some(MeasurementSource::File {
-                    frame,
-                    covariance,
-                    weighting,
-                    ..
-                }) => (*frame, covariance.as_deref(), *weighting),
-                _ => (crate::schema::Frame::model(), None, Weighting::PerPoint),
-            };
-            let measured = measure::read_measured(p, &frame, covariance, weighting)?;
+            let (frame, covariance, weighting, speckle) =
+                match study.measurements.first().map(|m| &m.source) {
+                    Some(MeasurementSource::File {
+                        frame,
+                        covariance,
+                        weighting,
+                        speckle,
+                        ..
+                    }) => (*frame, covariance.as_deref(), *weighting, speckle.as_ref()),
+                    _ => (
+                        crate::schema::Frame::model(),
+                        None,
+                        Weighting::PerPoint,
+                        None,
+                    ),
+                };
+            let measured = measure::read_measured(p, &frame, covariance, weighting, speckle)?;
             measured_prepared(
                 &study.measurements,
                 &study.tests,
@@ -371,6 +394,7 @@ fn fit_or_keep(
         travel: None,
         stop: progress.stop_flag(),
         covariance: None,
+        speckle_shift: None,
         loss: spec.loss,
     };
     let measured = match prepared {
@@ -394,6 +418,7 @@ fn fit_or_keep(
             None
         }
     };
+    options.speckle_shift = measured.and_then(|m| m.speckle_shift);
     let Some((field, base)) = &estimated else {
         let (fit, stopped) = fit_once(inputs, grouped, models, prepared, out, progress, &options)?;
         return Ok((fit, stopped, None));
@@ -726,6 +751,16 @@ pub fn identify_on(
     let measurements = measurement_summaries(prepared, &fit);
     write_parameters_csv(&out.join("parameters.csv"), &parameters)?;
     write_measurements_csv(&out.join("measurements.csv"), &fit.free, &measurements)?;
+    let speckle_shift = femu_mesh::stop::shielded(|| speckle_at_optimum(&models, &fit, prepared))?;
+    if let Some(s) = &speckle_shift {
+        progress.note(&format!(
+            "speckle shift under shear: scale {:.3} of the closed form at {} MHz, lateral resolution {} mm ({})",
+            s.scale,
+            s.frequency_mhz,
+            s.resolution_mm,
+            if s.fitted { "fitted" } else { "fixed" }
+        ));
+    }
     let c = &fit.campaign;
     let best = &c.best[0];
     // What finished is written even after a stop (the field figures need one more solve).
@@ -736,6 +771,7 @@ pub fn identify_on(
             &fit,
             &parameters,
             data.reference_known,
+            speckle_shift.and_then(|s| Some((measured_speckle(prepared)?, s.scale))),
             out,
         )
     })?;
@@ -776,8 +812,57 @@ pub fn identify_on(
         measurements,
         discretization: check,
         error_model,
+        speckle_shift,
     };
     write_summary(summary, out, progress)
+}
+
+/// The speckle shift of the study's single measured field, if it has one.
+fn measured_speckle(prepared: &[Prepared]) -> Option<SpeckleShift> {
+    match prepared {
+        [Prepared {
+            data: PreparedData::Measured(m),
+            ..
+        }] => m.speckle_shift,
+        _ => None,
+    }
+}
+
+/// The speckle shift of the study's single measured field (`[measurement] speckle_*`) with its
+/// scale at the optimum: one evaluation of the field's problem there, with its per-point
+/// weights (the scale a weighted fit profiled can differ a little).
+fn speckle_at_optimum(
+    models: &TestModels,
+    fit: &JointFit,
+    prepared: &[Prepared],
+) -> Result<Option<SpeckleShiftSummary>> {
+    let (
+        Some(shift),
+        [Prepared {
+            data: PreparedData::Measured(m),
+            ..
+        }],
+    ) = (measured_speckle(prepared), prepared)
+    else {
+        return Ok(None);
+    };
+    let field = &m.field;
+    let Some(best) = fit.campaign.best.first() else {
+        return Ok(None);
+    };
+    let model = &models.full[0];
+    let (bfree, map) = block_free(&fit.free, model, model);
+    let phi: Vec<f64> = map.iter().map(|&k| best.theta[k].ln()).collect();
+    let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?
+        .with_speckle_shift(shift)?;
+    femu_identify::fit::LeastSquares::evaluate(&mut p, &phi, false)?;
+    Ok(Some(SpeckleShiftSummary {
+        frequency_mhz: shift.frequency_mhz,
+        resolution_mm: shift.resolution_mm,
+        sound_speed_m_s: shift.sound_speed_m_s,
+        fitted: matches!(shift.scale, ShiftScale::Fitted),
+        scale: p.speckle_scale().unwrap_or(0.0),
+    }))
 }
 
 /// Writes `summary.json` and prints the table; an identification a stop cut short is then the
@@ -923,6 +1008,7 @@ fn write_result_figures(
     fit: &JointFit,
     parameters: &[Estimate],
     reference_known: bool,
+    speckle: Option<(SpeckleShift, f64)>,
     out: &Path,
 ) -> Result<()> {
     let c = &fit.campaign;
@@ -939,15 +1025,14 @@ fn write_result_figures(
                 points: block.first_field.points[seg.points.clone()].to_vec(),
                 comments: Vec::new(),
             };
-            write_field_figures(
-                out,
-                &name,
-                &models.full[b],
-                &models.full[0],
-                &fit.free,
-                &field,
-                &best.theta,
-            )?;
+            let (bfree, map) = block_free(&fit.free, &models.full[0], &models.full[b]);
+            let btheta: Vec<f64> = map.iter().map(|&k| best.theta[k]).collect();
+            // The measured field's speckle shift (the single measurement's block) at its scale.
+            let shift = speckle.filter(|_| b == 0).map(|(s, kappa)| SpeckleShift {
+                scale: ShiftScale::Fixed(kappa),
+                ..s
+            });
+            write_field_figures(out, &name, &models.full[b], bfree, &btheta, &field, shift)?;
         }
     }
     Ok(())
@@ -1210,10 +1295,10 @@ fn write_field_figures(
     out: &Path,
     name: &str,
     model: &Model,
-    free_model: &Model,
-    free: &[FreeParameter],
+    bfree: Vec<FreeParameter>,
+    btheta: &[f64],
     field: &MeasuredField,
-    theta: &[f64],
+    speckle: Option<SpeckleShift>,
 ) -> Result<()> {
     let locator = PointLocator::new(&model.mesh);
     let inside: Vec<&MeasuredPoint> = field
@@ -1224,10 +1309,11 @@ fn write_field_figures(
     if inside.is_empty() {
         return Ok(());
     }
-    let (bfree, map) = block_free(free, free_model, model);
-    let btheta: Vec<f64> = map.iter().map(|&k| theta[k]).collect();
     let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?;
-    let u = p.field_at(&btheta)?;
+    if let Some(s) = speckle {
+        p = p.with_speckle_shift(s)?;
+    }
+    let u = p.field_at(btheta)?;
     // The grid: distinct x and y values.
     let distinct = |k: usize| {
         let mut v: Vec<f64> = inside.iter().map(|p| p.x[k]).collect();
@@ -1268,17 +1354,24 @@ fn write_field_figures(
             images[3 * c + 2][pix] = m[c] - pt.u[c];
         }
     }
-    write_field_panels(out, name, (nx, ny), xs[1] - xs[0], &images)
+    let model_label = if speckle.is_some() {
+        "model (identified, with the speckle shift)"
+    } else {
+        "model (identified)"
+    };
+    write_field_panels(out, name, (nx, ny), xs[1] - xs[0], &images, model_label)
 }
 
-/// The six panels of a field figure (measured, model, difference; ux then uy) on an `nx x ny`
-/// grid `spacing` mm apart, written into `out/panels/` and tiled into `out/name`.
+/// The six panels of a field figure (measured, model as `model_label` says, difference; ux
+/// then uy) on an `nx x ny` grid `spacing` mm apart, written into `out/panels/` and tiled into
+/// `out/name`.
 fn write_field_panels(
     out: &Path,
     name: &str,
     (nx, ny): (usize, usize),
     spacing: f64,
     images: &[Vec<f64>],
+    model_label: &str,
 ) -> Result<()> {
     let grey = vec![255.0; nx * ny];
     let panels_dir = out.join("panels");
@@ -1293,7 +1386,7 @@ fn write_field_panels(
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
                 (a.min(v), b.max(v))
             });
-        for (k, what) in ["measured", "model (identified)", "model - measured"]
+        for (k, what) in ["measured", model_label, "model - measured"]
             .iter()
             .enumerate()
         {

@@ -1143,6 +1143,7 @@ pub fn identify_image_measurement(
                 source.clone()
             },
             reference_known: true,
+            speckle_shift: None,
             weighting: if covariance.is_some() {
                 crate::schema::Weighting::Estimated
             } else {

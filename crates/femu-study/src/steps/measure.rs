@@ -32,6 +32,9 @@ pub struct Measured {
     pub covariance: Option<FieldCovariance>,
     /// How the misfit is weighted (`[measurement] weighting`).
     pub weighting: crate::schema::Weighting,
+    /// The speckle's lateral shift under shear in the measurement model (model frame;
+    /// `[measurement] speckle_*`).
+    pub speckle_shift: Option<femu_identify::speckle::SpeckleShift>,
     /// The simulated experiment the field is the DIC of, when it was simulated here (its
     /// images are identified from by integrated DIC).
     pub simulated: Option<Arc<SimulatedImages>>,
@@ -46,6 +49,7 @@ impl Measured {
             reference_known: false,
             covariance: None,
             weighting: crate::schema::Weighting::PerPoint,
+            speckle_shift: None,
             simulated: None,
         }
     }
@@ -200,11 +204,13 @@ pub fn prepare(
                     frame,
                     covariance,
                     weighting,
+                    speckle,
                 } => PreparedData::Measured(read_measured(
                     path,
                     frame,
                     covariance.as_deref(),
                     *weighting,
+                    speckle.as_ref(),
                 )?),
                 MeasurementSource::Frames(_) => bail!(
                     "measurement {label}: recorded frames are identified from the frames themselves by `femu run` (integrated DIC); to fit a measured field, correlate them with `femu dic F0 F1 ...` and give its field.csv with --measured"
@@ -243,6 +249,7 @@ pub fn read_measured(
     frame: &crate::schema::Frame,
     covariance: Option<&Path>,
     weighting: crate::schema::Weighting,
+    speckle: Option<&crate::schema::Speckle>,
 ) -> Result<Measured> {
     let all = MeasuredField::read(path)?;
     let declared = all
@@ -306,6 +313,7 @@ pub fn read_measured(
         reference_known: false,
         covariance,
         weighting,
+        speckle_shift: speckle.map(|s| s.in_frame(frame)),
         simulated: None,
     })
 }
@@ -369,6 +377,7 @@ fn ultrasound_measurement(
         reference_known: true,
         covariance: None,
         weighting: crate::schema::Weighting::PerPoint,
+        speckle_shift: None,
         simulated: Some(Arc::new(simulated)),
     })
 }
