@@ -4,7 +4,9 @@
 campaign's composed DIC fields of pymust frames, beside the campaign's plain route without it.
 
 For each realization of a campaign (campaign.py's folders: `<campaign>/pymust_NN/plain.toml`
-reading `dic/field.csv`, the truth and the plain route's result in `campaign.csv`), the study
+reading `dic/field.csv`, the truth and the plain route's result in `campaign.csv`; with
+`--renderer femu`, its `femu_NN` realizations of femu's own frames, whose Gaussian
+point-spread function has no lateral phase: the scale should come out near 0), the study
 is run again with the speckle keys added, once per mode (`fitted`: the shift's scale estimated
 with the parameters; `fixed`: the closed form as it is), and this script writes:
 
@@ -57,6 +59,8 @@ def main():
     ap.add_argument("--resolution", type=float, required=True,
                     help="lateral resolution: FWHM of the point-spread function (mm)")
     ap.add_argument("--modes", default=",".join(MODES), help="fitted, fixed or both")
+    ap.add_argument("--renderer", default="pymust",
+                    help="the campaign's realizations to run (pymust, or femu: its own frames)")
     ap.add_argument("--frames", help="folder of the realizations' seed_NN frames (scales.csv)")
     ap.add_argument("--femu", default="target/release/femu")
     ap.add_argument("--out", default="out/speckle_shift_campaign")
@@ -67,11 +71,11 @@ def main():
             raise SystemExit(f"--modes: unknown mode '{m}' ({', '.join(MODES)})")
     os.makedirs(a.out, exist_ok=True)
     campaign = [r for r in csv.DictReader(open(os.path.join(a.campaign, "campaign.csv")))
-                if r["renderer"] == "pymust" and r["route"] == "plain"]
+                if r["renderer"] == a.renderer and r["route"] == "plain"]
     seeds = sorted({int(r["seed"]) for r in campaign})
     rows = []
     for seed in seeds:
-        src = os.path.join(a.campaign, f"pymust_{seed:02d}")
+        src = os.path.join(a.campaign, f"{a.renderer}_{seed:02d}")
         study = open(os.path.join(src, "plain.toml")).read()
         if "[identification]" not in study:
             raise SystemExit(f"{src}/plain.toml has no [identification] table")
@@ -79,7 +83,7 @@ def main():
             keys = (f"speckle_frequency_mhz = {a.frequency}\n"
                     f"speckle_resolution_mm = {a.resolution}\n"
                     f"speckle_shift = \"{mode}\"\n")
-            dst = os.path.join(a.out, f"pymust_{seed:02d}_{mode}")
+            dst = os.path.join(a.out, f"{a.renderer}_{seed:02d}_{mode}")
             toml = dst + ".toml"
             with open(toml, "w") as fh:
                 fh.write(study.replace("[identification]", keys + "[identification]", 1))
@@ -111,7 +115,7 @@ def main():
         for seed in seeds:
             frames = os.path.join(a.frames, f"seed_{seed:02d}")
             last = len(json.load(open(os.path.join(frames, "manifest.json")))["truth"])
-            field = os.path.join(a.campaign, f"pymust_{seed:02d}", "dic", "field.csv")
+            field = os.path.join(a.campaign, f"{a.renderer}_{seed:02d}", "dic", "field.csv")
             row = {"seed": seed, "true_field": true_scale(
                 field, os.path.join(frames, f"truth_{last}.csv"), a.frequency, a.resolution)}
             for mode in modes:

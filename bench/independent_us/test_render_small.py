@@ -170,3 +170,31 @@ def test_shear_by_differences_along_the_rows():
     assert abs(g[0] - (uy[1] - uy[0])) < 1e-12
     assert abs(g[4] - (uy[4] - uy[3]) / 2) < 1e-12
     assert abs(g[7] - (uy[7] - uy[6])) < 1e-12
+
+
+def test_scale_the_true_field_supports(tmp_path):
+    """speckle_shift_campaign.true_scale: a composed field whose lateral error is 0.7 c(z) g of
+    a true field with a shear varying over the image gives back 0.7 (the truth on a 4 px grid,
+    interpolated; the shear linear in x, so central differences are exact)."""
+    import shear_correction as sc
+    import speckle_shift_campaign as ssc
+
+    xs, ys = np.arange(0, 400, 4.0), np.arange(0, 400, 4.0)
+    X, Y = np.meshgrid(xs, ys)
+    ux = 2.0 + 0.01 * X
+    uy = 1e-4 * X**2 + 0.002 * X * Y / 10  # px: shear duy/dx = 2e-4 x + 2e-4 y
+    truth = tmp_path / "truth.csv"
+    np.savetxt(truth, np.c_[X.ravel(), Y.ravel(), ux.ravel(), uy.ravel()], delimiter=",",
+               header="x_px,y_px,ux_px,uy_px", comments="")
+    px, py = np.meshgrid(np.arange(20, 380, 16.0), np.arange(20, 380, 16.0))
+    px, py = px.ravel(), py.ravel()
+    g = 2e-4 * px + 2e-4 * py
+    c = sc.lens_shift_per_shear(9, 0.907, py / 10 + 0.05)
+    field = tmp_path / "field.csv"
+    with open(field, "w") as fh:
+        fh.write("# units: mm\nx,y,ux,uy,sx,sy,w\n")
+        for x, y, gi, ci in zip(px, py, g, c):
+            u = (2.0 + 0.01 * x) / 10 + 0.7 * ci * gi
+            v = (1e-4 * x**2 + 0.002 * x * y / 10) / 10
+            fh.write(f"{x / 10},{y / 10},{u},{v},0.01,0.01,1\n")
+    assert abs(ssc.true_scale(str(field), str(truth), 9, 0.907) - 0.7) < 1e-3

@@ -731,6 +731,41 @@ def shear_correction(run_dir, what):
     return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
 
 
+def speckle_shift(run_dir):
+    """bench/independent_us/speckle_shift_campaign.py's runs (hann/, default/ of RUN_DIR): per
+    frame set and mode (the campaign's plain route without the shift, the scale fitted, the
+    closed form fixed), the range of the fitted scale (and, with scales.csv, of the scale the
+    true fields support) and each fat and quadriceps parameter's error range and 95 % coverage;
+    then the provenance."""
+    d = ROOT / run_dir
+    sets = [("hann", "pymust, apodized (Hann)"), ("default", "pymust, default"),
+            ("femu", "femu's own (Gaussian PSF, no shift)")]
+    params = ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"]
+    out = ["| frames | measurement model | scale κ | " + " | ".join(params) + " |",
+           "|---|---|---|" + "---|" * len(params)]
+    for sub, label in sets:
+        rows = list(csv.DictReader(open(d / sub / "parameters.csv")))
+        n = len({r["seed"] for r in rows})
+
+        def cell(mode, p, before=False):
+            r = [x for x in rows if x["mode"] == mode and x["parameter"] == p]
+            e = [float(x["error_pct_uncorrected" if before else "error_pct"]) for x in r]
+            c = sum(int(x["covered_uncorrected" if before else "covered"]) for x in r)
+            return f"{round(min(e)):+d} to {round(max(e)):+d} % ({c}/{n})"
+        modes = list(dict.fromkeys(r["mode"] for r in rows))
+        out.append(f"| {label}, {n} realizations | without the shift | – | "
+                   + " | ".join(cell(modes[0], p, True) for p in params) + " |")
+        for mode in modes:
+            k = [float(x["scale"]) for x in rows if x["mode"] == mode and x["parameter"] == params[0]]
+            scale = f"{min(k):.2f} to {max(k):.2f}" if mode == "fitted" else f"{k[0]:g}"
+            if mode == "fitted" and (d / sub / "scales.csv").exists():
+                t = [float(x["true_field"]) for x in csv.DictReader(open(d / sub / "scales.csv"))]
+                scale += f" (true fields: {min(t):.2f} to {max(t):.2f})"
+            what = {"fitted": "shift, scale fitted", "fixed": "shift, closed form (scale 1)"}[mode]
+            out.append(f"| | {what} | {scale} | " + " | ".join(cell(mode, p) for p in params) + " |")
+    return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
+
+
 def profile_share(path, *phase):
     """The share of CPU samples of PHASE (the start of its name) in a committed profile's
     "CPU samples by phase" table (bench/perf/profile_*.txt, made by bench/perf/phases.py):
@@ -1050,7 +1085,7 @@ def identify_fd(lm_dir, fd_dir):
 def render(template):
     """A page from scripts/guide/templates/TEMPLATE: every `{{NAME ARG...}}` replaced by the
     table NAME makes of the result files ARG... (paths from the repository's root)."""
-    funcs = {"shear_correction": shear_correction, "dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
+    funcs = {"shear_correction": shear_correction, "speckle_shift": speckle_shift, "dic_campaign": dic_campaign, "idic_campaign": idic_campaign, "performance": performance,
              "contact": contact, "recorded": recorded, "recorded_span": recorded_span,
              "recorded_provenance": recorded_provenance,
              "dic_real": dic_real, "dic_real_rms": dic_real_rms,
