@@ -8,7 +8,8 @@ reading `dic/field.csv`, the truth and the plain route's result in `campaign.csv
 `--renderer femu`, its `femu_NN` realizations of femu's own frames, whose Gaussian
 point-spread function has no lateral phase: the scale should come out near 0), the study
 is run again with the speckle keys added, once per mode (`fitted`: the shift's scale estimated
-with the parameters; `fixed`: the closed form as it is), and this script writes:
+with the parameters; `fixed`: the closed form as it is; `none`: without the keys), and this
+script writes:
 
 - `<out>/parameters.csv`: seed, mode, parameter, truth, identified, error (%), 95 % interval,
   covered, and the shift's scale at the optimum (femu's summary.json);
@@ -18,6 +19,10 @@ with the parameters; `fixed`: the closed form as it is), and this script writes:
   (columns 60-340 px, trusted points), beside the fitted one;
 - a table per mode on stdout: the error range, mean |error| and 95 % coverage of each
   parameter, beside the uncorrected route's.
+
+With `--dic-args` (and `--frames`) the frames are first correlated again by `femu dic` with
+those options (e.g. `"--regularization 32"`) and the studies read that field instead of the
+campaign's; the uncorrected columns stay the campaign's own plain route.
 
     python bench/independent_us/speckle_shift_campaign.py --campaign /tmp/camp_hann \\
         --frequency 9 --resolution 0.907 --femu target/release/femu --out /tmp/ssc_hann
@@ -33,7 +38,7 @@ from scipy.interpolate import griddata
 
 import shear_correction
 
-MODES = ("fitted", "fixed")
+MODES = ("none", "fitted", "fixed")
 PX_PER_MM = 10.0
 
 
@@ -58,7 +63,9 @@ def main():
     ap.add_argument("--frequency", type=float, required=True, help="centre frequency (MHz)")
     ap.add_argument("--resolution", type=float, required=True,
                     help="lateral resolution: FWHM of the point-spread function (mm)")
-    ap.add_argument("--modes", default=",".join(MODES), help="fitted, fixed or both")
+    ap.add_argument("--modes", default="fitted,fixed", help="comma-separated: none, fitted, fixed")
+    ap.add_argument("--dic-args", help="correlate the frames again with these femu dic options "
+                                       "(needs --frames) and fit that field")
     ap.add_argument("--renderer", default="pymust",
                     help="the campaign's realizations to run (pymust, or femu: its own frames)")
     ap.add_argument("--frames", help="folder of the realizations' seed_NN frames (scales.csv)")
@@ -70,6 +77,8 @@ def main():
         if m not in MODES:
             raise SystemExit(f"--modes: unknown mode '{m}' ({', '.join(MODES)})")
     os.makedirs(a.out, exist_ok=True)
+    if a.dic_args and not a.frames:
+        raise SystemExit("--dic-args needs --frames (the frames to correlate again)")
     campaign = [r for r in csv.DictReader(open(os.path.join(a.campaign, "campaign.csv")))
                 if r["renderer"] == a.renderer and r["route"] == "plain"]
     seeds = sorted({int(r["seed"]) for r in campaign})
@@ -79,10 +88,25 @@ def main():
         study = open(os.path.join(src, "plain.toml")).read()
         if "[identification]" not in study:
             raise SystemExit(f"{src}/plain.toml has no [identification] table")
+        field = os.path.join(src, "dic", "field.csv")
+        if a.dic_args:
+            frames = os.path.join(a.frames, f"seed_{seed:02d}")
+            paths = sorted((p for p in os.listdir(frames) if p.startswith("frame_") and p.endswith(".png")),
+                           key=lambda p: int(p[6:-4]))
+            dic = os.path.join(a.out, f"{a.renderer}_{seed:02d}_dic")
+            r = subprocess.run([a.femu, "dic", *[os.path.join(frames, p) for p in paths],
+                                "--pixel-size", str(1 / PX_PER_MM), *a.dic_args.split(),
+                                "--no-figures", "--out", dic, "-q"], capture_output=True, text=True)
+            if r.returncode:
+                raise SystemExit(f"femu dic {frames}: {r.stderr.strip()[-400:]}")
+            if field not in study:
+                raise SystemExit(f"{src}/plain.toml does not read {field}")
+            study = study.replace(field, os.path.abspath(os.path.join(dic, "field.csv")))
+            field = os.path.join(dic, "field.csv")
         for mode in modes:
-            keys = (f"speckle_frequency_mhz = {a.frequency}\n"
-                    f"speckle_resolution_mm = {a.resolution}\n"
-                    f"speckle_shift = \"{mode}\"\n")
+            keys = "" if mode == "none" else (f"speckle_frequency_mhz = {a.frequency}\n"
+                                              f"speckle_resolution_mm = {a.resolution}\n"
+                                              f"speckle_shift = \"{mode}\"\n")
             dst = os.path.join(a.out, f"{a.renderer}_{seed:02d}_{mode}")
             toml = dst + ".toml"
             with open(toml, "w") as fh:
@@ -92,7 +116,7 @@ def main():
             if r.returncode:
                 raise SystemExit(f"femu identify {toml}: {r.stderr.strip()[-400:]}")
             summary = json.load(open(os.path.join(dst, "summary.json")))
-            kappa = summary["speckle_shift"]["scale"]
+            kappa = summary["speckle_shift"]["scale"] if mode != "none" else 0.0
             got = {p["name"]: p for p in csv.DictReader(open(os.path.join(dst, "parameters.csv")))}
             for row in (c for c in campaign if int(c["seed"]) == seed):
                 name, truth = row["parameter"], float(row["truth"])
@@ -115,7 +139,10 @@ def main():
         for seed in seeds:
             frames = os.path.join(a.frames, f"seed_{seed:02d}")
             last = len(json.load(open(os.path.join(frames, "manifest.json")))["truth"])
-            field = os.path.join(a.campaign, f"{a.renderer}_{seed:02d}", "dic", "field.csv")
+            if a.dic_args:
+                field = os.path.join(a.out, f"{a.renderer}_{seed:02d}_dic", "field.csv")
+            else:
+                field = os.path.join(a.campaign, f"{a.renderer}_{seed:02d}", "dic", "field.csv")
             row = {"seed": seed, "true_field": true_scale(
                 field, os.path.join(frames, f"truth_{last}.csv"), a.frequency, a.resolution)}
             for mode in modes:

@@ -761,7 +761,8 @@ def speckle_shift(run_dir):
             if mode == "fitted" and (d / sub / "scales.csv").exists():
                 t = [float(x["true_field"]) for x in csv.DictReader(open(d / sub / "scales.csv"))]
                 scale += f" (true fields: {min(t):.2f} to {max(t):.2f})"
-            what = {"fitted": "shift, scale fitted", "fixed": "shift, closed form (scale 1)"}[mode]
+            what = {"fitted": "shift, scale fitted", "fixed": "shift, closed form (scale 1)",
+                    "none": "without the shift, this field"}[mode]
             out.append(f"| | {what} | {scale} | " + " | ".join(cell(mode, p) for p in params) + " |")
     return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
 
