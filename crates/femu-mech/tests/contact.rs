@@ -6,7 +6,7 @@
 use femu_mech::build::DeckBuilder;
 use femu_mech::contact::{ContactError, RigidContact, RigidCylinder, RigidPlate, TravelControl};
 use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
-use femu_mesh::generate::{self, GeneratedMesh};
+use femu_mesh::generate::GeneratedMesh;
 use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 use std::sync::Arc;
@@ -26,35 +26,6 @@ fn tight() -> SolverOptions {
     }
 }
 
-/// A `w x h` block centred on x = 0 (x in [-w/2, w/2], y in [0, h]), bottom fixed, graded
-/// towards the top centre with `sinh` stretching (smallest spacing at x = 0 and y = h).
-fn graded_block(
-    w: f64,
-    h: f64,
-    nx: usize,
-    ny: usize,
-    beta: f64,
-    kind: ElementKind,
-) -> GeneratedMesh {
-    let mut g = generate::rectangle(1.0, 1.0, nx, ny, kind);
-    for p in g.mesh.nodes.iter_mut() {
-        let xi = 2.0 * p[0] - 1.0;
-        let eta = 1.0 - p[1];
-        let sx = if beta > 0.0 {
-            (beta * xi).sinh() / beta.sinh()
-        } else {
-            xi
-        };
-        let sy = if beta > 0.0 {
-            (beta * eta).sinh() / beta.sinh()
-        } else {
-            eta
-        };
-        *p = [0.5 * w * sx, h * (1.0 - sy)];
-    }
-    g
-}
-
 fn block_model(g: GeneratedMesh, c10: f64, d: f64) -> (Model, Vec<(usize, usize)>) {
     let top = g.surfaces["TOP"].clone();
     let deck = DeckBuilder::new(g)
@@ -68,7 +39,7 @@ fn block_model(g: GeneratedMesh, c10: f64, d: f64) -> (Model, Vec<(usize, usize)
 /// centred above it, pressed under `control`.
 fn plate_on_block(control: TravelControl) -> Model {
     let (mut model, top) = block_model(
-        graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
+        common::graded_block(40.0, 20.0, 40, 20, 0.0, ElementKind::Cpe4h),
         1.75e-3,
         18.0,
     );
@@ -88,7 +59,7 @@ fn solve(model: &Model, options: SolverOptions) -> Solution {
 fn contact_tangent_and_force_equation_match_finite_differences() {
     for (label, cylinder) in [("plate", false), ("cylinder", true)] {
         let (mut model, top) = block_model(
-            graded_block(6.0, 3.0, 6, 3, 0.0, ElementKind::Cpe4),
+            common::graded_block(6.0, 3.0, 6, 3, 0.0, ElementKind::Cpe4),
             1.75e-3,
             18.0,
         );
@@ -327,7 +298,7 @@ fn hertz_line_contact() {
     let force = a_target * a_target * std::f64::consts::PI * e_star / (4.0 * r);
     let a_hertz = (4.0 * force * r / (std::f64::consts::PI * e_star)).sqrt();
     let (mut model, top) = block_model(
-        graded_block(60.0, 30.0, 160, 80, 4.1, ElementKind::Cpe4h),
+        common::graded_block(60.0, 30.0, 160, 80, 4.1, ElementKind::Cpe4h),
         c10,
         d,
     );
@@ -403,7 +374,7 @@ fn hertz_line_contact() {
 #[test]
 fn badly_placed_bodies_are_refused_before_solving() {
     let (model, top) = block_model(
-        graded_block(10.0, 5.0, 4, 2, 0.0, ElementKind::Cpe4),
+        common::graded_block(10.0, 5.0, 4, 2, 0.0, ElementKind::Cpe4),
         1.75e-3,
         18.0,
     );

@@ -1,8 +1,8 @@
 //! Sliding interfaces between deformable regions (node-to-segment contact, frictionless and
 //! with Coulomb friction): the tangent against central differences of the residual, the
 //! frictionless residual against differences of the contact energy, the contact patch test on
-//! a non-matching interface, and the closed form of a block sheared on a block (sticks below
-//! the tangential traction μp, slides at μp).
+//! a non-matching interface, the closed form of a block sheared on a block (sticks below the
+//! tangential traction μp, slides at μp), and Hertz's line contact of two deformable bodies.
 
 use femu_mech::build::DeckBuilder;
 use femu_mech::interface::{Interface, InterfaceKind, Penalty};
@@ -12,6 +12,7 @@ use femu_mesh::generate::{self, GeneratedMesh};
 use femu_mesh::ElementKind;
 use rand::{Rng, SeedableRng};
 
+mod common;
 #[path = "../../../scripts/guide/measure.rs"]
 mod measure;
 
@@ -28,6 +29,12 @@ fn two_blocks_with_margin(w: f64, nx_low: usize, nx_high: usize, margin: f64) ->
     let mut low = generate::rectangle(w + 2.0 * margin, 1.0, nx_low, 2, ElementKind::Cpe4);
     low.mesh.nodes.iter_mut().for_each(|x| x[0] -= margin);
     let high = generate::rectangle(w, 1.0, nx_high, 2, ElementKind::Cpe4);
+    stacked(&low, &high, 1.0)
+}
+
+/// The bodies `low` and `high` (shifted up by `dy`) in one mesh, each with its own nodes: their
+/// element sets `LOW`, `HIGH`, their node sets and surfaces prefixed `LOW_`, `HIGH_`.
+fn stacked(low: &GeneratedMesh, high: &GeneratedMesh, dy: f64) -> GeneratedMesh {
     let mut g = GeneratedMesh::default();
     let m = &mut g.mesh;
     let mut add = |part: &GeneratedMesh,
@@ -62,8 +69,8 @@ fn two_blocks_with_margin(w: f64, nx_low: usize, nx_high: usize, margin: f64) ->
         }
     };
     let mut surfaces = Vec::new();
-    add(&low, 0.0, "LOW", &mut surfaces);
-    add(&high, 1.0, "HIGH", &mut surfaces);
+    add(low, 0.0, "LOW", &mut surfaces);
+    add(high, dy, "HIGH", &mut surfaces);
     g.surfaces = surfaces.into_iter().collect();
     g
 }
@@ -655,4 +662,108 @@ fn material_sensitivities_with_a_sliding_interface() {
     // As the rigid contact's check (tests/sensitivity.rs): central differences with a 5e-4
     // step are accurate to ~1e-7 here, the converged states to ~1e-9 after division by it.
     assert!(worst < 1e-5, "{worst:.3e}");
+}
+
+/// Hertz line contact between two deformable bodies of one Neo-Hookean material (ν = 0.3, small
+/// strain): a body whose bottom is the parabola `y = x²/(2R)` (R = 100 mm, Hertz's own profile
+/// of a cylinder) pressed by a pressure on its top onto a flat block, both 60 x 30 mm and
+/// graded towards the contact, the upper one's bottom the slave surface of a frictionless
+/// interface. Hertz for two bodies of one material: `a = sqrt(4 P R / (π E*))`,
+/// `E* = E / (2 (1 - ν²))`, with `P` the line load for `a` = 1 mm (a/R = 0.01, a spanning
+/// about twenty elements). The contact's resultant equals the load; its half-width from the
+/// second moment of the slave nodes' normal forces (`a²/4` for the elliptical profile) within
+/// 5 % of Hertz, as the rigid-cylinder case of the contact tests.
+#[test]
+fn hertz_contact_between_two_deformable_bodies() {
+    let (c10, nu) = (1.0e-3, 0.3);
+    let e = 2.0 * (2.0 * c10) * (1.0 + nu);
+    let d = 2.0 / (e / (3.0 * (1.0 - 2.0 * nu)));
+    let e_star = e / (2.0 * (1.0 - nu * nu));
+    let (r, a_target, w, h) = (100.0, 1.0, 60.0, 30.0);
+    let force = a_target * a_target * std::f64::consts::PI * e_star / (4.0 * r);
+    let a_hertz = (4.0 * force * r / (std::f64::consts::PI * e_star)).sqrt();
+    let low = common::graded_block(w, h, 120, 60, 4.1, ElementKind::Cpe4h);
+    // The same block turned upside down (a half turn keeps the elements counter-clockwise):
+    // graded towards its bottom centre, its TOP surface now the bottom; then its bottom bent
+    // to the parabola, fading out towards its top.
+    let mut high = common::graded_block(w, h, 120, 60, 4.1, ElementKind::Cpe4h);
+    for x in high.mesh.nodes.iter_mut() {
+        let (xx, yy) = (-x[0], h - x[1]);
+        *x = [xx, yy + (1.0 - yy / h) * xx * xx / (2.0 * r)];
+    }
+    let g = stacked(&low, &high, h);
+    let iface = Interface::new(
+        "HIGH_ON_LOW",
+        &g.mesh,
+        &g.surfaces["HIGH_TOP"],
+        &g.surfaces["LOW_TOP"],
+        InterfaceKind::Frictionless,
+        5.0,
+    )
+    .unwrap();
+    let deck = DeckBuilder::new(g)
+        .material("LOW", c10, d)
+        .material("HIGH", c10, d)
+        .fix("LOW_BOTTOM")
+        .displacement("HIGH_BOTTOM", 0, 0.0)
+        .pressure("HIGH_BOTTOM", force / w)
+        .build();
+    let mut model = Model::from_deck(deck).unwrap();
+    model.interfaces.push(iface);
+    model.step.initial_increment = 0.2;
+    let mut solver = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+    let sol = solver.solve(&model).unwrap();
+    let states = solver.interface_states(&model, &sol.state);
+    let (mut m0, mut m2, mut active) = (0.0, 0.0, 0);
+    for s in &states[0] {
+        let x = model.mesh.nodes[s.node][0] + sol.u[2 * s.node];
+        m0 += s.normal_force;
+        m2 += s.normal_force * x * x;
+        active += usize::from(s.normal_force > 0.0);
+    }
+    let a_fe = 2.0 * (m2 / m0).sqrt();
+    println!(
+        "two-body Hertz: P = {force:.4e} N/mm, resultant {m0:.4e}, a = {a_hertz:.4} mm, FE a = {a_fe:.4} mm ({:+.2} %), {active} active slave nodes",
+        100.0 * (a_fe / a_hertz - 1.0)
+    );
+    // The pressure acts on the deformed top (a follower load) of a body that hardly rotates:
+    // the resultant is the load to the solver's tolerance and the top's tilt.
+    assert!(
+        (m0 / force - 1.0).abs() < 1e-3,
+        "resultant {m0} vs load {force}"
+    );
+    measure::record(
+        "Hertz line contact of two deformable bodies (R = 100 mm, a/R = 0.01): half-width against Hertz, relative difference",
+        (a_fe / a_hertz - 1.0).abs(),
+        "< 0.05",
+        "",
+    );
+    assert!(
+        (a_fe / a_hertz - 1.0).abs() < 0.05,
+        "half-width {a_fe} vs Hertz {a_hertz}"
+    );
+    // The pressure profile p0 sqrt(1 - x²/a²), p0 = 2P/(πa), from each slave node's force over
+    // its tributary length, inside |x| < 0.8 a (its edge is resolved by a few elements only).
+    let iface = &model.interfaces[0];
+    let p0 = 2.0 * force / (std::f64::consts::PI * a_hertz);
+    let mut worst = 0.0f64;
+    for (k, s) in states[0].iter().enumerate() {
+        assert_eq!(s.node, iface.slaves[k]);
+        let x = model.mesh.nodes[s.node][0] + sol.u[2 * s.node];
+        if x.abs() < 0.8 * a_hertz {
+            let exact = p0 * (1.0 - (x / a_hertz).powi(2)).sqrt();
+            worst = worst.max((s.normal_force / iface.tributary[k] - exact).abs() / p0);
+        }
+    }
+    println!(
+        "two-body Hertz: pressure within {:.2} % of p0 inside 0.8 a",
+        100.0 * worst
+    );
+    measure::record(
+        "Hertz line contact of two deformable bodies: pressure against the elliptical profile inside 0.8 a, largest difference / p0",
+        worst,
+        "< 0.1",
+        "",
+    );
+    assert!(worst < 0.1, "pressure off by {worst} of p0");
 }
