@@ -66,6 +66,9 @@ def main():
     ap.add_argument("--modes", default="fitted,fixed", help="comma-separated: none, fitted, fixed")
     ap.add_argument("--dic-args", help="correlate the frames again with these femu dic options "
                                        "(needs --frames) and fit that field")
+    ap.add_argument("--route", default="plain", choices=("plain", "weighted"),
+                    help="the campaign's study to rerun: plain.toml, or weighted.toml (the field's "
+                         "covariance, estimated error)")
     ap.add_argument("--renderer", default="pymust",
                     help="the campaign's realizations to run (pymust, or femu: its own frames)")
     ap.add_argument("--frames", help="folder of the realizations' seed_NN frames (scales.csv)")
@@ -79,15 +82,18 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     if a.dic_args and not a.frames:
         raise SystemExit("--dic-args needs --frames (the frames to correlate again)")
+    if a.dic_args and a.route == "weighted":
+        raise SystemExit("--dic-args fits the new field with the plain study (the weighted one "
+                         "reads the campaign's covariance)")
     campaign = [r for r in csv.DictReader(open(os.path.join(a.campaign, "campaign.csv")))
-                if r["renderer"] == a.renderer and r["route"] == "plain"]
+                if r["renderer"] == a.renderer and r["route"] == a.route]
     seeds = sorted({int(r["seed"]) for r in campaign})
     rows = []
     for seed in seeds:
         src = os.path.join(a.campaign, f"{a.renderer}_{seed:02d}")
-        study = open(os.path.join(src, "plain.toml")).read()
+        study = open(os.path.join(src, f"{a.route}.toml")).read()
         if "[identification]" not in study:
-            raise SystemExit(f"{src}/plain.toml has no [identification] table")
+            raise SystemExit(f"{src}/{a.route}.toml has no [identification] table")
         field = os.path.join(src, "dic", "field.csv")
         if a.dic_args:
             frames = os.path.join(a.frames, f"seed_{seed:02d}")
@@ -100,7 +106,7 @@ def main():
             if r.returncode:
                 raise SystemExit(f"femu dic {frames}: {r.stderr.strip()[-400:]}")
             if field not in study:
-                raise SystemExit(f"{src}/plain.toml does not read {field}")
+                raise SystemExit(f"{src}/{a.route}.toml does not read {field}")
             study = study.replace(field, os.path.abspath(os.path.join(dic, "field.csv")))
             field = os.path.join(dic, "field.csv")
         for mode in modes:
