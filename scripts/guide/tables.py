@@ -734,12 +734,15 @@ def shear_correction(run_dir, what):
 def speckle_shift(run_dir):
     """bench/independent_us/speckle_shift_campaign.py's runs (hann/, default/ of RUN_DIR): per
     frame set and mode (the campaign's plain route without the shift, the scale fitted, the
-    closed form fixed), the range of the fitted scale (and, with scales.csv, of the scale the
-    true fields support) and each fat and quadriceps parameter's error range and 95 % coverage;
-    then the provenance."""
+    closed form fixed; the plain route, then the weighted one: the field's covariance plus the
+    error estimated from a first fit), the range of the fitted scale (and, with scales.csv, of
+    the scale the true fields support) and each fat and quadriceps parameter's error range and
+    95 % coverage; then the provenance."""
     d = ROOT / run_dir
     sets = [("hann", "pymust, apodized (Hann)"), ("default", "pymust, default"),
-            ("femu", "femu's own (Gaussian PSF, no shift)")]
+            ("femu", "femu's own (Gaussian PSF, no shift)"),
+            ("weighted_hann", "pymust, apodized (Hann), weighted route"),
+            ("weighted_default", "pymust, default, weighted route")]
     params = ["C10_FAT", "D_FAT", "C10_QUADRICEPS", "D_QUADRICEPS"]
     out = ["| frames | measurement model | scale κ | " + " | ".join(params) + " |",
            "|---|---|---|" + "---|" * len(params)]
