@@ -185,6 +185,8 @@ speckle_resolution_mm = 0.9
         shift["fitted"].as_bool().unwrap() && kappa.abs() < 0.5,
         "{shift}"
     );
+    let sd = shift["scale_sd"].as_f64().unwrap();
+    assert!(sd > 0.0 && sd.is_finite(), "{shift}");
     let q = estimates(&is1);
     let q = q.iter().find(|e| e.0 == "C10_QUADRICEPS").unwrap();
     assert!((q.1 / 1.75e-3 - 1.0).abs() < 0.1, "{q:?}");

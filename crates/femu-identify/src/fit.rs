@@ -563,6 +563,62 @@ impl Problem {
         self.speckle.as_ref().map(|s| s.kappa)
     }
 
+    /// The fitted speckle-shift scale at `phi` and its standard deviation with the free
+    /// parameters free too: the Gauss–Newton variance of the (p+1)-th unknown,
+    /// `s² / (vᵀv − vᵀJ (JᵀJ)⁻¹ Jᵀv)`, `J` the weighted Jacobian at that scale held, `v` the
+    /// weighted shift (the scale's column), `s²` the residuals' variance factor
+    /// `|r|² / (n − p − 1)` where it exceeds 1 (the Birge ratio's widening of the parameters'
+    /// intervals). `None` unless the scale is fitted. Two forward solves and one sensitivity
+    /// evaluation.
+    pub fn speckle_scale_sd(&mut self, phi: &[f64]) -> Result<Option<(f64, f64)>, FitError> {
+        if !matches!(
+            self.speckle.as_ref().map(|s| s.shift.scale),
+            Some(ShiftScale::Fitted)
+        ) {
+            return Ok(None);
+        }
+        self.residuals(phi, false)?;
+        let kappa = self.speckle_scale().unwrap_or(0.0);
+        let set = |p: &mut Problem, scale| {
+            if let Some(s) = p.speckle.as_mut() {
+                s.shift.scale = scale;
+            }
+        };
+        set(self, ShiftScale::Fixed(kappa));
+        let held = self.residuals(phi, true);
+        set(self, ShiftScale::Fitted);
+        let (r, j) = held?;
+        let j = j.ok_or_else(|| FitError::Speckle("no Jacobian at the held scale".into()))?;
+        let n = self.model.node_count();
+        let u = &self.warm.as_ref().expect("solved just above")[..2 * n];
+        let mut shift = vec![0.0; self.measured.len()];
+        if let Some(s) = &self.speckle {
+            s.add_shift(&self.locations, u, 1.0, &mut shift);
+        }
+        let mut v = self.weigh(&shift);
+        v.resize(r.len(), 0.0); // the actuator term does not see the shift
+        let p = j.len();
+        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+        let jtj: Vec<Vec<f64>> = (0..p)
+            .map(|a| (0..p).map(|b| dot(&j[a], &j[b])).collect())
+            .collect();
+        let jtv: Vec<f64> = j.iter().map(|c| dot(c, &v)).collect();
+        let inv = crate::variance_components::invert_spd(&jtj)
+            .ok_or_else(|| FitError::Speckle("the parameters' normal matrix is singular".into()))?;
+        let explained: f64 = (0..p)
+            .map(|a| (0..p).map(|b| jtv[a] * inv[a][b] * jtv[b]).sum::<f64>())
+            .sum();
+        let schur = dot(&v, &v) - explained;
+        let dof = r.len().saturating_sub(p + 1).max(1);
+        let s2 = (dot(&r, &r) / dof as f64).max(1.0);
+        let sd = if schur > 0.0 {
+            (s2 / schur).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        Ok(Some((kappa, sd)))
+    }
+
     /// Minimizes the loss `loss` of the (whitened) residuals instead of their squares (module
     /// [`crate::weighted`]).
     pub fn with_loss(mut self, loss: Loss) -> Problem {

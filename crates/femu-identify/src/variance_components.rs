@@ -254,7 +254,7 @@ pub fn field_groups(
 
 /// Inverse of a small symmetric positive definite matrix by Cholesky; `None` if not positive
 /// definite.
-fn invert_spd(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+pub(crate) fn invert_spd(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
     let p = a.len();
     let mut l = vec![vec![0.0; p]; p];
     for i in 0..p {

@@ -107,6 +107,10 @@ pub struct SpeckleShiftSummary {
     pub fitted: bool,
     /// The scale κ at the optimum (the measured field with its per-point weights).
     pub scale: f64,
+    /// Its standard deviation with the free parameters free too (a fitted scale), widened by
+    /// the residuals' variance factor where it exceeds 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_sd: Option<f64>,
 }
 
 /// One measurement of an identification.
@@ -754,8 +758,9 @@ pub fn identify_on(
     let speckle_shift = femu_mesh::stop::shielded(|| speckle_at_optimum(&models, &fit, prepared))?;
     if let Some(s) = &speckle_shift {
         progress.note(&format!(
-            "speckle shift under shear: scale {:.3} of the closed form at {} MHz, lateral resolution {} mm ({})",
+            "speckle shift under shear: scale {:.3}{} of the closed form at {} MHz, lateral resolution {} mm ({})",
             s.scale,
+            s.scale_sd.map_or(String::new(), |sd| format!(" (sd {sd:.3})")),
             s.frequency_mhz,
             s.resolution_mm,
             if s.fitted { "fitted" } else { "fixed" }
@@ -856,12 +861,14 @@ fn speckle_at_optimum(
     let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?
         .with_speckle_shift(shift)?;
     femu_identify::fit::LeastSquares::evaluate(&mut p, &phi, false)?;
+    let scale_sd = p.speckle_scale_sd(&phi)?.map(|(_, sd)| sd);
     Ok(Some(SpeckleShiftSummary {
         frequency_mhz: shift.frequency_mhz,
         resolution_mm: shift.resolution_mm,
         sound_speed_m_s: shift.sound_speed_m_s,
         fitted: matches!(shift.scale, ShiftScale::Fitted),
         scale: p.speckle_scale().unwrap_or(0.0),
+        scale_sd,
     }))
 }
 
