@@ -564,12 +564,13 @@ impl Problem {
     }
 
     /// The fitted speckle-shift scale at `phi` and its standard deviation with the free
-    /// parameters free too: the Gauss–Newton variance of the (p+1)-th unknown,
-    /// `s² / (vᵀv − vᵀJ (JᵀJ)⁻¹ Jᵀv)`, `J` the weighted Jacobian at that scale held, `v` the
-    /// weighted shift (the scale's column), `s²` the residuals' variance factor
-    /// `|r|² / (n − p − 1)` where it exceeds 1 (the Birge ratio's widening of the parameters'
-    /// intervals). `None` unless the scale is fitted. Two forward solves and one sensitivity
-    /// evaluation.
+    /// parameters free too, widened as a measured field's parameters are
+    /// ([`crate::misfit_intervals`]): the larger of the Gauss–Newton sd of the (p+1)-th unknown,
+    /// `√(s² / (vᵀv − vᵀJ (JᵀJ)⁻¹ Jᵀv))` (`J` the weighted Jacobian at that scale held, `v` the
+    /// weighted shift, the scale's column; `s²` the residuals' variance factor
+    /// `|r|² / (n − p − 1)` where it exceeds 1), and the block jackknife's over
+    /// [`crate::misfit_intervals::JACKKNIFE_BLOCKS`] depth bands of the rows. `None` unless
+    /// the scale is fitted. Two forward solves and one sensitivity evaluation.
     pub fn speckle_scale_sd(&mut self, phi: &[f64]) -> Result<Option<(f64, f64)>, FitError> {
         if !matches!(
             self.speckle.as_ref().map(|s| s.shift.scale),
@@ -616,7 +617,20 @@ impl Problem {
         } else {
             f64::INFINITY
         };
-        Ok(Some((kappa, sd)))
+        let n_rows = r.len();
+        let blocks = crate::misfit_intervals::JACKKNIFE_BLOCKS
+            .min(n_rows / 2)
+            .max(2);
+        let mut columns = j;
+        columns.push(v);
+        let (jack, _) = crate::idic::uncertainty::group_jackknife(
+            &columns,
+            &r,
+            &|k| k * blocks / n_rows,
+            blocks,
+        );
+        let jk = jack[p] * crate::misfit_intervals::JACKKNIFE_T_FACTOR;
+        Ok(Some((kappa, if jk > sd { jk } else { sd })))
     }
 
     /// Minimizes the loss `loss` of the (whitened) residuals instead of their squares (module
