@@ -16,7 +16,8 @@ script writes:
 - with `--frames` (the realizations' seed_NN folders of render_pymust.py), `<out>/scales.csv`:
   per realization, the scale the true field supports: the least-squares slope of the composed
   field's lateral error (against render_pymust.py's truth) on `c(z) duy/dx` of the true field
-  (columns 60-340 px, trusted points), beside the fitted one;
+  (columns 60-340 px, trusted points), beside the fitted one, its sd and whether its 95 %
+  interval holds the true field's;
 - a table per mode on stdout: the error range, mean |error| and 95 % coverage of each
   parameter, beside the uncorrected route's.
 
@@ -123,6 +124,7 @@ def main():
                 raise SystemExit(f"femu identify {toml}: {r.stderr.strip()[-400:]}")
             summary = json.load(open(os.path.join(dst, "summary.json")))
             kappa = summary["speckle_shift"]["scale"] if mode != "none" else 0.0
+            kappa_sd = summary["speckle_shift"].get("scale_sd") if mode == "fitted" else None
             got = {p["name"]: p for p in csv.DictReader(open(os.path.join(dst, "parameters.csv")))}
             for row in (c for c in campaign if int(c["seed"]) == seed):
                 name, truth = row["parameter"], float(row["truth"])
@@ -132,7 +134,7 @@ def main():
                     "seed": seed, "mode": mode, "parameter": name, "truth": truth,
                     "identified": value, "error_pct": 100 * (value / truth - 1),
                     "ci95_lo": lo, "ci95_hi": hi, "covered": int(lo <= truth <= hi),
-                    "scale": kappa,
+                    "scale": kappa, "scale_sd": "" if kappa_sd is None else kappa_sd,
                     "error_pct_uncorrected": float(row["error_pct"]),
                     "covered_uncorrected": int(row["covered"])})
             print(f"seed {seed} {mode}: scale {kappa:.3f}", flush=True)
@@ -152,7 +154,13 @@ def main():
             row = {"seed": seed, "true_field": true_scale(
                 field, os.path.join(frames, f"truth_{last}.csv"), a.frequency, a.resolution)}
             for mode in modes:
-                row[mode] = next(r["scale"] for r in rows if r["seed"] == seed and r["mode"] == mode)
+                mine = next(r for r in rows if r["seed"] == seed and r["mode"] == mode)
+                row[mode] = mine["scale"]
+                if mode == "fitted":
+                    # Whether the fitted scale's 95 % interval holds the true field's.
+                    row["fitted_sd"] = mine["scale_sd"]
+                    row["fitted_covers"] = int(abs(mine["scale"] - row["true_field"])
+                                               <= 1.96 * mine["scale_sd"])
             scales.append(row)
             print(f"seed {seed}: scale of the true field {row['true_field']:.3f}", flush=True)
         with open(os.path.join(a.out, "scales.csv"), "w", newline="") as fh:

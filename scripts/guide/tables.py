@@ -762,8 +762,17 @@ def speckle_shift(run_dir):
             k = [float(x["scale"]) for x in rows if x["mode"] == mode and x["parameter"] == params[0]]
             scale = f"{min(k):.2f} to {max(k):.2f}" if mode == "fitted" else f"{k[0]:g}"
             if mode == "fitted" and (d / sub / "scales.csv").exists():
-                t = [float(x["true_field"]) for x in csv.DictReader(open(d / sub / "scales.csv"))]
-                scale += f" (true fields: {min(t):.2f} to {max(t):.2f})"
+                sc = list(csv.DictReader(open(d / sub / "scales.csv")))
+                t = [float(x["true_field"]) for x in sc]
+                scale += f" (true fields: {min(t):.2f} to {max(t):.2f}"
+                if sc and "fitted_covers" in sc[0]:
+                    scale += f"; held by {sum(int(x['fitted_covers']) for x in sc)}/{len(sc)} of its 95 % intervals"
+                scale += ")"
+            elif mode == "fitted" and rows and rows[0].get("scale_sd") and sub == "femu":
+                # femu's own frames: no lateral phase, the true scale is 0.
+                held = sum(abs(float(x["scale"])) <= 1.96 * float(x["scale_sd"])
+                           for x in rows if x["mode"] == mode and x["parameter"] == params[0])
+                scale += f" (0 held by {held}/{len(k)} of its 95 % intervals)"
             what = {"fitted": "shift, scale fitted", "fixed": "shift, closed form (scale 1)",
                     "none": "without the shift, this field"}[mode]
             out.append(f"| | {what} | {scale} | " + " | ".join(cell(mode, p) for p in params) + " |")
