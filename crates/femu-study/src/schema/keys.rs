@@ -1397,6 +1397,17 @@ force_n_per_mm = 0.1
             ),
             Item::Key(
                 key(
+                    "speckle_scale",
+                    Ty::Real,
+                    "",
+                    Allowed::Rule(">= 0; with speckle_shift = \"fixed\" only"),
+                    Def::Value("1.0"),
+                    "the scale held with speckle_shift = \"fixed\" (1: the closed form; a scanner's calibrated value)",
+                )
+                .example("1.0", "held scale with speckle_shift = \"fixed\""),
+            ),
+            Item::Key(
+                key(
                     "test",
                     Ty::Text,
                     "",

@@ -142,6 +142,10 @@ fn context(table: &str, key: &str) -> &'static str {
         ("measurement", "speckle_resolution_mm") => {
             "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\nspeckle_frequency_mhz = 9.0\n"
         }
+        ("measurement", "speckle_scale") => {
+            "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\n\
+             speckle_frequency_mhz = 9.0\nspeckle_resolution_mm = 0.9\nspeckle_shift = \"fixed\"\n"
+        }
         ("measurement", "speckle_sound_speed_m_s" | "speckle_shift") => {
             "[measurement]\nsource = \"file\"\nfile = \"field.csv\"\n\
              speckle_frequency_mhz = 9.0\nspeckle_resolution_mm = 0.9\n"

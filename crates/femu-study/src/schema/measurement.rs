@@ -71,8 +71,9 @@ pub struct Speckle {
     pub resolution_mm: f64,
     pub sound_speed_m_s: f64,
     /// The shift's scale fitted with the parameters (`speckle_shift = "fitted"`, the default),
-    /// or held at the closed form's (`"fixed"`).
+    /// or held (`"fixed"`) at `scale` (`speckle_scale`, 1 by default: the closed form's).
     pub fitted: bool,
+    pub scale: f64,
 }
 
 impl Speckle {
@@ -89,7 +90,7 @@ impl Speckle {
             scale: if self.fitted {
                 ShiftScale::Fitted
             } else {
-                ShiftScale::Fixed(1.0)
+                ShiftScale::Fixed(self.scale)
             },
         }
     }
@@ -447,6 +448,7 @@ fn speckle_keys(m: &MeasurementEntry) -> Vec<&'static str> {
             m.speckle_sound_speed_m_s.is_some(),
         ),
         ("speckle_shift", m.speckle_shift.is_some()),
+        ("speckle_scale", m.speckle_scale.is_some()),
     ]
     .into_iter()
     .filter_map(|(k, given)| given.then_some(k))
@@ -502,7 +504,23 @@ fn speckle(
             ))
         }
     };
+    let scale = match (fitted, m.speckle_scale) {
+        (true, Some(_)) => {
+            return Err(err(
+                "speckle_scale",
+                "holds the scale with speckle_shift = \"fixed\" (the default fits it)",
+            ))
+        }
+        (_, Some(k)) if !(k.is_finite() && k >= 0.0) => {
+            return Err(err(
+                "speckle_scale",
+                &format!("must be finite and at least 0, got {k}"),
+            ))
+        }
+        (_, k) => k.unwrap_or_else(|| super::keys::default("measurement", "speckle_scale")),
+    };
     Ok(Some(Speckle {
+        scale,
         frequency_mhz: positive("speckle_frequency_mhz", frequency)?,
         resolution_mm: positive("speckle_resolution_mm", resolution)?,
         sound_speed_m_s: positive(

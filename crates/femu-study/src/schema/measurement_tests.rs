@@ -305,6 +305,14 @@ fn a_measured_files_speckle_shift_is_read_and_checked() {
         s.in_frame(&Frame::model()).scale,
         femu_identify::speckle::ShiftScale::Fixed(1.0)
     );
+    // A held scale of the user's (a calibration).
+    let (s, _) = speckle(
+        "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_shift = \"fixed\"\nspeckle_scale = 0.66\n",
+    );
+    assert_eq!(
+        s.unwrap().in_frame(&Frame::model()).scale,
+        femu_identify::speckle::ShiftScale::Fixed(0.66)
+    );
     for (extra, key, says) in [
         (
             "speckle_frequency_mhz = 9\n",
@@ -330,6 +338,16 @@ fn a_measured_files_speckle_shift_is_read_and_checked() {
             "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_shift = \"free\"\n",
             "speckle_shift",
             "fitted, fixed",
+        ),
+        (
+            "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_scale = 0.5\n",
+            "speckle_scale",
+            "speckle_shift = \"fixed\"",
+        ),
+        (
+            "speckle_frequency_mhz = 9\nspeckle_resolution_mm = 0.9\nspeckle_shift = \"fixed\"\nspeckle_scale = -1\n",
+            "speckle_scale",
+            "at least 0",
         ),
     ] {
         let e = err(&format!("{file}{extra}"));

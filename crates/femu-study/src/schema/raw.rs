@@ -141,6 +141,7 @@ pub(crate) struct MeasurementEntry {
     pub speckle_resolution_mm: Option<f64>,
     pub speckle_sound_speed_m_s: Option<f64>,
     pub speckle_shift: Option<String>,
+    pub speckle_scale: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
