@@ -8,7 +8,8 @@ reading `dic/field.csv`, the truth and the plain route's result in `campaign.csv
 `--renderer femu`, its `femu_NN` realizations of femu's own frames, whose Gaussian
 point-spread function has no lateral phase: the scale should come out near 0), the study
 is run again with the speckle keys added, once per mode (`fitted`: the shift's scale estimated
-with the parameters; `fixed`: the closed form as it is; `none`: without the keys), and this
+with the parameters; `fixed`: the closed form as it is; `true`: held at the scale the true
+field supports, see scales.csv below, with `--frames`; `none`: without the keys), and this
 script writes:
 
 - `<out>/parameters.csv`: seed, mode, parameter, truth, identified, error (%), 95 % interval,
@@ -39,7 +40,7 @@ from scipy.interpolate import griddata
 
 import shear_correction
 
-MODES = ("none", "fitted", "fixed")
+MODES = ("none", "fitted", "fixed", "true")
 PX_PER_MM = 10.0
 
 
@@ -83,6 +84,8 @@ def main():
     os.makedirs(a.out, exist_ok=True)
     if a.dic_args and not a.frames:
         raise SystemExit("--dic-args needs --frames (the frames to correlate again)")
+    if "true" in modes and not a.frames:
+        raise SystemExit("--modes true needs --frames (the true field's scale)")
     if a.dic_args and a.route == "weighted":
         raise SystemExit("--dic-args fits the new field with the plain study (the weighted one "
                          "reads the campaign's covariance)")
@@ -110,10 +113,18 @@ def main():
                 raise SystemExit(f"{src}/{a.route}.toml does not read {field}")
             study = study.replace(field, os.path.abspath(os.path.join(dic, "field.csv")))
             field = os.path.join(dic, "field.csv")
+        held = None
+        if "true" in modes:
+            frames = os.path.join(a.frames, f"seed_{seed:02d}")
+            last = len(json.load(open(os.path.join(frames, "manifest.json")))["truth"])
+            held = true_scale(field, os.path.join(frames, f"truth_{last}.csv"), a.frequency,
+                              a.resolution)
         for mode in modes:
-            keys = "" if mode == "none" else (f"speckle_frequency_mhz = {a.frequency}\n"
-                                              f"speckle_resolution_mm = {a.resolution}\n"
-                                              f"speckle_shift = \"{mode}\"\n")
+            keys = "" if mode == "none" else (
+                f"speckle_frequency_mhz = {a.frequency}\n"
+                f"speckle_resolution_mm = {a.resolution}\n"
+                f"speckle_shift = \"{'fixed' if mode == 'true' else mode}\"\n"
+                + (f"speckle_scale = {held!r}\n" if mode == "true" else ""))
             dst = os.path.join(a.out, f"{a.renderer}_{seed:02d}_{mode}")
             toml = dst + ".toml"
             with open(toml, "w") as fh:

@@ -774,7 +774,10 @@ def speckle_shift(run_dir):
                            for x in rows if x["mode"] == mode and x["parameter"] == params[0])
                 scale += f" (0 held by {held}/{len(k)} of its 95 % intervals)"
             what = {"fitted": "shift, scale fitted", "fixed": "shift, closed form (scale 1)",
-                    "none": "without the shift, this field"}[mode]
+                    "none": "without the shift, this field",
+                    "true": "shift, scale held at the true field's"}[mode]
+            if mode == "true":
+                scale = f"{min(k):.2f} to {max(k):.2f}"
             out.append(f"| | {what} | {scale} | " + " | ".join(cell(mode, p) for p in params) + " |")
     return "\n".join(out) + "\n\n" + provenance(d).strip() + "\n"
 
