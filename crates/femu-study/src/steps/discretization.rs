@@ -218,17 +218,8 @@ fn level_problem(
             p = p.with_travel(t, term.sigma_mm)?;
         }
         // The measured field's speckle shift, as the fit had it (its single block).
-        if let (
-            0,
-            [Prepared {
-                data: PreparedData::Measured(m),
-                ..
-            }],
-        ) = (b, prepared)
-        {
-            if let Some(s) = m.speckle_shift {
-                p = p.with_speckle_shift(s)?;
-            }
+        if let (0, Some((_, s))) = (b, super::measure::measured_speckle(prepared)) {
+            p = p.with_speckle_shift(s)?;
         }
         blocks.push(Block {
             name: record.name.clone(),

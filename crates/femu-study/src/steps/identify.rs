@@ -776,7 +776,7 @@ pub fn identify_on(
             &fit,
             &parameters,
             data.reference_known,
-            speckle_shift.and_then(|s| Some((measured_speckle(prepared)?, s.scale))),
+            speckle_shift.and_then(|s| Some((measure::measured_speckle(prepared)?.1, s.scale))),
             out,
         )
     })?;
@@ -822,36 +822,17 @@ pub fn identify_on(
     write_summary(summary, out, progress)
 }
 
-/// The speckle shift of the study's single measured field, if it has one.
-fn measured_speckle(prepared: &[Prepared]) -> Option<SpeckleShift> {
-    match prepared {
-        [Prepared {
-            data: PreparedData::Measured(m),
-            ..
-        }] => m.speckle_shift,
-        _ => None,
-    }
-}
-
 /// The speckle shift of the study's single measured field (`[measurement] speckle_*`) with its
-/// scale at the optimum: one evaluation of the field's problem there, with its per-point
-/// weights (the scale a weighted fit profiled can differ a little).
+/// scale at the optimum: a held scale as given; a fitted one profiled again there, with the
+/// field's per-point weights (the scale a weighted fit profiled can differ a little), and its sd.
 fn speckle_at_optimum(
     models: &TestModels,
     fit: &JointFit,
     prepared: &[Prepared],
 ) -> Result<Option<SpeckleShiftSummary>> {
-    let (
-        Some(shift),
-        [Prepared {
-            data: PreparedData::Measured(m),
-            ..
-        }],
-    ) = (measured_speckle(prepared), prepared)
-    else {
+    let Some((field, shift)) = measure::measured_speckle(prepared) else {
         return Ok(None);
     };
-    let field = &m.field;
     let Some(best) = fit.campaign.best.first() else {
         return Ok(None);
     };
@@ -860,14 +841,17 @@ fn speckle_at_optimum(
     let phi: Vec<f64> = map.iter().map(|&k| best.theta[k].ln()).collect();
     let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?
         .with_speckle_shift(shift)?;
-    femu_identify::fit::LeastSquares::evaluate(&mut p, &phi, false)?;
-    let scale_sd = p.speckle_scale_sd(&phi)?.map(|(_, sd)| sd);
+    // A held scale is its value; a fitted one is profiled at the optimum with its sd.
+    let (scale, scale_sd) = match p.speckle_scale_sd(&phi)? {
+        Some((kappa, sd)) => (kappa, Some(sd)),
+        None => (p.speckle_scale().unwrap_or(0.0), None),
+    };
     Ok(Some(SpeckleShiftSummary {
         frequency_mhz: shift.frequency_mhz,
         resolution_mm: shift.resolution_mm,
         sound_speed_m_s: shift.sound_speed_m_s,
         fitted: matches!(shift.scale, ShiftScale::Fitted),
-        scale: p.speckle_scale().unwrap_or(0.0),
+        scale,
         scale_sd,
     }))
 }

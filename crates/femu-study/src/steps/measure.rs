@@ -238,6 +238,21 @@ pub fn prepare(
         .collect()
 }
 
+/// The study's single measured field and its speckle shift, when it has one: the
+/// identification's one block that carries the term (the fit, its discretization check, its
+/// figures and summary).
+pub fn measured_speckle(
+    prepared: &[Prepared],
+) -> Option<(&MeasuredField, femu_identify::speckle::SpeckleShift)> {
+    match prepared {
+        [Prepared {
+            data: PreparedData::Measured(m),
+            ..
+        }] => m.speckle_shift.map(|s| (&m.field, s)),
+        _ => None,
+    }
+}
+
 /// A measured-field file made ready to fit, whichever command reads it (`[measurement] file`
 /// or `femu identify --measured`): read; its declared units (`# units: px` or `mm`, as `femu
 /// dic` writes) checked against the study's `frame`; mapped to the model frame; the points that
