@@ -563,15 +563,12 @@ impl Problem {
         self.speckle.as_ref().map(|s| s.kappa)
     }
 
-    /// The fitted speckle-shift scale at `phi` and its standard deviation with the free
-    /// parameters free too, widened as a measured field's parameters are
-    /// ([`crate::misfit_intervals`]): the larger of the Gauss–Newton sd of the (p+1)-th unknown,
-    /// `√(s² / (vᵀv − vᵀJ (JᵀJ)⁻¹ Jᵀv))` (`J` the weighted Jacobian at that scale held, `v` the
-    /// weighted shift, the scale's column; `s²` the residuals' variance factor
-    /// `|r|² / (n − p − 1)` where it exceeds 1), and the block jackknife's over
-    /// [`crate::misfit_intervals::JACKKNIFE_BLOCKS`] depth bands of the rows. `None` unless
-    /// the scale is fitted. Two forward solves and one sensitivity evaluation.
-    pub fn speckle_scale_sd(&mut self, phi: &[f64]) -> Result<Option<(f64, f64)>, FitError> {
+    /// The fitted speckle-shift scale at `phi` with what its standard deviation needs
+    /// ([`crate::misfit_intervals::speckle_scale_sd`]): the weighted residuals and Jacobian
+    /// columns at that scale held, and the scale's own column, the weighted shift `v` (zero on
+    /// the actuator row). `None` unless the scale is fitted. Two forward solves and one
+    /// sensitivity evaluation.
+    pub fn speckle_columns(&mut self, phi: &[f64]) -> Result<Option<SpeckleColumns>, FitError> {
         if !matches!(
             self.speckle.as_ref().map(|s| s.shift.scale),
             Some(ShiftScale::Fitted)
@@ -598,39 +595,12 @@ impl Problem {
         }
         let mut v = self.weigh(&shift);
         v.resize(r.len(), 0.0); // the actuator term does not see the shift
-        let p = j.len();
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        let jtj: Vec<Vec<f64>> = (0..p)
-            .map(|a| (0..p).map(|b| dot(&j[a], &j[b])).collect())
-            .collect();
-        let jtv: Vec<f64> = j.iter().map(|c| dot(c, &v)).collect();
-        let inv = crate::variance_components::invert_spd(&jtj)
-            .ok_or_else(|| FitError::Speckle("the parameters' normal matrix is singular".into()))?;
-        let explained: f64 = (0..p)
-            .map(|a| (0..p).map(|b| jtv[a] * inv[a][b] * jtv[b]).sum::<f64>())
-            .sum();
-        let schur = dot(&v, &v) - explained;
-        let dof = r.len().saturating_sub(p + 1).max(1);
-        let s2 = (dot(&r, &r) / dof as f64).max(1.0);
-        let sd = if schur > 0.0 {
-            (s2 / schur).sqrt()
-        } else {
-            f64::INFINITY
-        };
-        let n_rows = r.len();
-        let blocks = crate::misfit_intervals::JACKKNIFE_BLOCKS
-            .min(n_rows / 2)
-            .max(2);
-        let mut columns = j;
-        columns.push(v);
-        let (jack, _) = crate::idic::uncertainty::group_jackknife(
-            &columns,
-            &r,
-            &|k| k * blocks / n_rows,
-            blocks,
-        );
-        let jk = jack[p] * crate::misfit_intervals::JACKKNIFE_T_FACTOR;
-        Ok(Some((kappa, if jk > sd { jk } else { sd })))
+        Ok(Some(SpeckleColumns {
+            kappa,
+            residual: r,
+            jacobian: j,
+            shift: v,
+        }))
     }
 
     /// Minimizes the loss `loss` of the (whitened) residuals instead of their squares (module
@@ -655,6 +625,17 @@ impl Problem {
         self.warm = Some(sol.state);
         Ok(out)
     }
+}
+
+/// What the fitted speckle-shift scale's sd needs ([`Problem::speckle_columns`]).
+pub struct SpeckleColumns {
+    /// The fitted scale.
+    pub kappa: f64,
+    /// The weighted residuals and Jacobian columns at that scale held.
+    pub residual: Vec<f64>,
+    pub jacobian: Columns,
+    /// The scale's own column: the weighted shift (zero on the actuator row).
+    pub shift: Vec<f64>,
 }
 
 /// The speckle's shift of a [`Problem`]: per located point, `c(z) ∂N_a/∂x_lateral` of its

@@ -19,7 +19,7 @@
 //! Which term set each width is recorded (`Estimate::width_from`).
 
 use crate::campaign::{interval, Estimate};
-use crate::fit::FitResult;
+use crate::fit::{FitError, FitResult, Problem, SpeckleColumns};
 use crate::idic::uncertainty::group_jackknife;
 
 /// Blocks of the jackknife: 16 depth bands of a 40 mm window are 2.5 mm each, two rows of a
@@ -64,6 +64,54 @@ pub fn widen_for_misfit(estimates: &mut [Estimate], best: &FitResult, whitened: 
         e.relative_sd = sd;
         e.ci95 = interval(e.identified, sd, 0.0);
     }
+}
+
+/// The fitted speckle-shift scale of `problem` at `phi` and its standard deviation with the
+/// free parameters free too, widened as a measured field's parameters are: the larger of the
+/// Gauss–Newton sd of the (p+1)-th unknown, `√(s² / (vᵀv − vᵀJ (JᵀJ)⁻¹ Jᵀv))` (`J` the
+/// weighted Jacobian at that scale held, `v` the weighted shift, the scale's column; `s²` the
+/// residuals' variance factor `|r|² / (n − p − 1)` where it exceeds 1), and the block
+/// jackknife's over [`JACKKNIFE_BLOCKS`] depth bands of the rows. `None` unless the scale is
+/// fitted ([`Problem::speckle_columns`]).
+pub fn speckle_scale_sd(
+    problem: &mut Problem,
+    phi: &[f64],
+) -> Result<Option<(f64, f64)>, FitError> {
+    let Some(SpeckleColumns {
+        kappa,
+        residual: r,
+        jacobian: j,
+        shift: v,
+    }) = problem.speckle_columns(phi)?
+    else {
+        return Ok(None);
+    };
+    let p = j.len();
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let jtj: Vec<Vec<f64>> = (0..p)
+        .map(|a| (0..p).map(|b| dot(&j[a], &j[b])).collect())
+        .collect();
+    let jtv: Vec<f64> = j.iter().map(|c| dot(c, &v)).collect();
+    let inv = crate::variance_components::invert_spd(&jtj)
+        .ok_or_else(|| FitError::Speckle("the parameters' normal matrix is singular".into()))?;
+    let explained: f64 = (0..p)
+        .map(|a| (0..p).map(|b| jtv[a] * inv[a][b] * jtv[b]).sum::<f64>())
+        .sum();
+    let schur = dot(&v, &v) - explained;
+    let dof = r.len().saturating_sub(p + 1).max(1);
+    let s2 = (dot(&r, &r) / dof as f64).max(1.0);
+    let sd = if schur > 0.0 {
+        (s2 / schur).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    let n_rows = r.len();
+    let blocks = JACKKNIFE_BLOCKS.min(n_rows / 2).max(2);
+    let mut columns = j;
+    columns.push(v);
+    let (jack, _) = group_jackknife(&columns, &r, &|k| k * blocks / n_rows, blocks);
+    let jk = jack[p] * JACKKNIFE_T_FACTOR;
+    Ok(Some((kappa, if jk > sd { jk } else { sd })))
 }
 
 #[cfg(test)]

@@ -256,7 +256,9 @@ fn the_scale_sd_is_its_spread_over_noise() {
             .unwrap();
         let r = levenberg_marquardt(&mut p, &reference, &LmOptions::default()).unwrap();
         let phi: Vec<f64> = r.theta.iter().map(|t| t.ln()).collect();
-        let (kappa, sd) = p.speckle_scale_sd(&phi).unwrap().unwrap();
+        let (kappa, sd) = femu_identify::misfit_intervals::speckle_scale_sd(&mut p, &phi)
+            .unwrap()
+            .unwrap();
         estimates.push(kappa);
         predicted.push(sd);
     }

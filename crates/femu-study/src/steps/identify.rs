@@ -842,7 +842,7 @@ fn speckle_at_optimum(
     let mut p = Problem::new(model.clone(), SolverOptions::default(), field, bfree)?
         .with_speckle_shift(shift)?;
     // A held scale is its value; a fitted one is profiled at the optimum with its sd.
-    let (scale, scale_sd) = match p.speckle_scale_sd(&phi)? {
+    let (scale, scale_sd) = match femu_identify::misfit_intervals::speckle_scale_sd(&mut p, &phi)? {
         Some((kappa, sd)) => (kappa, Some(sd)),
         None => (p.speckle_scale().unwrap_or(0.0), None),
     };
