@@ -847,6 +847,65 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// Rows per block of [`normal_equations`].
+const NORMAL_BLOCK_ROWS: usize = 4096;
+
+/// The normal equations `A = JᵀJ` and `g = Jᵀr` of the Jacobian columns `j` and the residual
+/// `r`, in one pass over the rows: blocks of [`NORMAL_BLOCK_ROWS`] rows are summed in parallel
+/// (each row's outer product added to the block's upper triangle) and the blocks' sums added in
+/// block order, so the result does not depend on the number of threads. An image
+/// identification's Jacobian has millions of rows: one dot product per entry of `A` would read
+/// every column `n + 1` times, on one thread.
+pub fn normal_equations(j: &[Vec<f64>], r: &[f64]) -> (Vec<Vec<f64>>, Vec<f64>) {
+    use rayon::prelude::*;
+    let n = j.len();
+    let m = r.len();
+    debug_assert!(j.iter().all(|c| c.len() == m));
+    // Per block: the upper triangle of A row by row (n (n + 1) / 2 values), then g.
+    let tri = n * (n + 1) / 2;
+    let blocks = m.div_ceil(NORMAL_BLOCK_ROWS);
+    let sums: Vec<Vec<f64>> = (0..blocks)
+        .into_par_iter()
+        .map(|b| {
+            let rows = b * NORMAL_BLOCK_ROWS..((b + 1) * NORMAL_BLOCK_ROWS).min(m);
+            let mut acc = vec![0.0; tri + n];
+            let mut v = vec![0.0; n];
+            for i in rows {
+                for (vp, c) in v.iter_mut().zip(j) {
+                    *vp = c[i];
+                }
+                let ri = r[i];
+                let mut k = 0;
+                for p in 0..n {
+                    let vp = v[p];
+                    for &vq in &v[p..] {
+                        acc[k] += vp * vq;
+                        k += 1;
+                    }
+                    acc[tri + p] += vp * ri;
+                }
+            }
+            acc
+        })
+        .collect();
+    let mut total = vec![0.0; tri + n];
+    for s in &sums {
+        for (t, v) in total.iter_mut().zip(s) {
+            *t += v;
+        }
+    }
+    let mut a = vec![vec![0.0; n]; n];
+    let mut k = 0;
+    for p in 0..n {
+        for q in p..n {
+            a[p][q] = total[k];
+            a[q][p] = total[k];
+            k += 1;
+        }
+    }
+    (a, total[tri..].to_vec())
+}
+
 /// The trial point of a damped Gauss–Newton step `(A + λ diag A) δ = −g` within the bounds
 /// `lo..hi` (log-parameters): a parameter at a bound whose step would leave it is held there
 /// (its row and column dropped) and the others solved for again, until no held parameter is
@@ -932,10 +991,7 @@ pub fn levenberg_marquardt<P: LeastSquares + ?Sized>(
     for it in 1..=opts.max_iterations {
         iterations = it;
         // Normal equations A = JᵀJ, g = Jᵀr.
-        let a: Vec<Vec<f64>> = (0..n)
-            .map(|p| (0..n).map(|q| dot(&j[p], &j[q])).collect())
-            .collect();
-        let g: Vec<f64> = (0..n).map(|p| dot(&j[p], &r)).collect();
+        let (a, g) = normal_equations(&j, &r);
         if let Some(p) = (0..n).find(|&p| !(a[p][p] > 0.0)) {
             return Err(FitError::Unidentifiable {
                 name: problem.free()[p].name.clone(),
@@ -1128,6 +1184,31 @@ pub fn latin_hypercube(free: &[FreeParameter], n: usize, seed: u64) -> Vec<Vec<f
 mod tests {
     use super::*;
     use femu_mech::material::{MaterialLaw, NeoHookean};
+
+    /// The blocked normal equations against one dot product per entry, over rows that are
+    /// not a multiple of the block (the last block partial) and one block alone.
+    #[test]
+    fn normal_equations_match_the_dot_products() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        for m in [37, 3 * NORMAL_BLOCK_ROWS + 129] {
+            let n = 5;
+            let j: Columns = (0..n)
+                .map(|_| (0..m).map(|_| rng.gen_range(-1.0..1.0)).collect())
+                .collect();
+            let r: Vec<f64> = (0..m).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let (a, g) = normal_equations(&j, &r);
+            for p in 0..n {
+                // Sums of m products of magnitude below 1, reordered: round-off of order
+                // m ε relative to the sum of magnitudes.
+                let tol = 1e-13 * m as f64;
+                assert!((g[p] - dot(&j[p], &r)).abs() < tol, "g[{p}]");
+                for q in 0..n {
+                    assert!((a[p][q] - dot(&j[p], &j[q])).abs() < tol, "a[{p}][{q}]");
+                    assert_eq!(a[p][q], a[q][p]);
+                }
+            }
+        }
+    }
 
     #[test]
     fn latin_hypercube_fills_every_stratum() {
