@@ -15,6 +15,7 @@ use femu_mech::{Model, Solution, SolverOptions, StaticSolver};
 use femu_mesh::locate::PointLocator;
 use femu_mesh::FieldWriter;
 use femu_plot::{bar_chart_png, node_field_png, tile_png, BarChart, FieldPlot};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -743,37 +744,48 @@ fn write_figures(
 ) -> Result<()> {
     let panel_dir = out.join("panels");
     femu_mesh::atomic::create_dir_all(&panel_dir)?;
-    let mut panels: Vec<Vec<PathBuf>> = Vec::new();
-    for (k, name) in names.iter().enumerate() {
-        let hi = results
-            .iter()
-            .flat_map(|r| r.maps[k].iter().cloned())
-            .filter(|v| v.is_finite())
-            .fold(0.0f64, f64::max);
-        let range = (0.0, if hi > 0.0 { hi } else { 1.0 });
-        let mut row = Vec::new();
-        for r in results {
-            let path = panel_dir.join(format!("{}_{name}.png", r.name));
-            node_field_png(
-                &path,
-                &r.model.mesh,
-                None,
-                &r.maps[k],
-                &FieldPlot {
-                    title: format!("{}: S({name}) (Eq. 3, per node)", r.name),
-                    value_label: format!("θ|∂u/∂θ| / rms|u|, θ = {name}"),
-                    range: Some(range),
-                    region_of_element: Some(&r.model.element_region),
-                    width: 700,
-                    height: 540,
-                    ..Default::default()
-                },
-            )
-            .with_context(|| format!("cannot draw {}", path.display()))?;
-            row.push(path);
-        }
-        panels.push(row);
-    }
+    // One panel per parameter and test, drawn in parallel (each its own file).
+    let ranges: Vec<(f64, f64)> = (0..names.len())
+        .map(|k| {
+            let hi = results
+                .iter()
+                .flat_map(|r| r.maps[k].iter().cloned())
+                .filter(|v| v.is_finite())
+                .fold(0.0f64, f64::max);
+            (0.0, if hi > 0.0 { hi } else { 1.0 })
+        })
+        .collect();
+    let panels: Vec<Vec<PathBuf>> = names
+        .iter()
+        .map(|name| {
+            results
+                .iter()
+                .map(|r| panel_dir.join(format!("{}_{name}.png", r.name)))
+                .collect()
+        })
+        .collect();
+    let jobs: Vec<(usize, usize)> = (0..names.len())
+        .flat_map(|k| (0..results.len()).map(move |t| (k, t)))
+        .collect();
+    jobs.par_iter().try_for_each(|&(k, t)| -> Result<()> {
+        let (r, name, path) = (&results[t], &names[k], &panels[k][t]);
+        node_field_png(
+            path,
+            &r.model.mesh,
+            None,
+            &r.maps[k],
+            &FieldPlot {
+                title: format!("{}: S({name}) (Eq. 3, per node)", r.name),
+                value_label: format!("θ|∂u/∂θ| / rms|u|, θ = {name}"),
+                range: Some(ranges[k]),
+                region_of_element: Some(&r.model.element_region),
+                width: 700,
+                height: 540,
+                ..Default::default()
+            },
+        )
+        .with_context(|| format!("cannot draw {}", path.display()))
+    })?;
     let cols = results.len();
     let all: Vec<&Path> = panels.iter().flatten().map(|p| p.as_path()).collect();
     tile_png(&out.join("sensitivity_maps.png"), &all, cols)?;
