@@ -88,8 +88,8 @@ impl PyStudy {
         )
     }
 
-    /// The study `femu demo [--elements N]` runs (4 000 elements by default; above 6 000 the
-    /// identification is multilevel, as `femu demo --full`).
+    /// The study `femu demo [--elements N]` runs (4 000 elements by default; from 3 000 on the
+    /// identification is multilevel, its starts on a coarser thigh, as `femu demo --full`).
     #[staticmethod]
     #[pyo3(signature = (elements = None))]
     fn demo(elements: Option<usize>) -> PyResult<PyStudy> {
