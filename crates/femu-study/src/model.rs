@@ -284,7 +284,7 @@ pub fn gmsh_model(study: &Study, mesh: &Path) -> Result<Model> {
         .model
         .interfaces
         .iter()
-        .find(|i| i.law != crate::interfaces::InterfaceLaw::Tied)
+        .find(|i| i.law != crate::schema::InterfaceLaw::Tied)
     {
         let [a, b] = &i.between;
         return Err(study

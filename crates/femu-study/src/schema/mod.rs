@@ -24,6 +24,7 @@ pub mod files;
 pub mod frames;
 mod geometry;
 mod identification;
+mod interface;
 pub mod keys;
 mod legacy;
 mod lines;
@@ -50,6 +51,7 @@ pub use identification::{
     Discretization, Grouping, IdentificationSpec, Steps, DEFAULT_IMAGE_NORMALIZATION_PX,
     DEFAULT_IMAGE_PAIRING,
 };
+pub use interface::{parse_interfaces, InterfaceLaw, InterfaceSpec};
 pub use keys::{
     ELEMENTS_RANGE, MAX_BOUNDS_FACTOR, MAX_IMAGE_NORMALIZATION_PX, MAX_RENDER_REFINE,
     MIN_IMAGE_NORMALIZATION_PX,
@@ -79,7 +81,7 @@ pub struct ModelSpec {
     /// The study's `[materials]` over the geometry's defaults (Table 1, or a deck's own).
     pub materials: Vec<MaterialSpec>,
     /// `[[interface]]`: the sliding interfaces between regions (none: the mesh as meshed).
-    pub interfaces: Vec<crate::interfaces::InterfaceSpec>,
+    pub interfaces: Vec<InterfaceSpec>,
 }
 
 /// A checked study.
@@ -291,13 +293,13 @@ pub fn parse(text: &str, base: &Path) -> Result<Study, StudyError> {
     Ok(study)
 }
 
-/// The `[[interface]]` tables (see [`crate::interfaces::parse_interfaces`]); a sliding one on
+/// The `[[interface]]` tables (see [`parse_interfaces`]); a sliding one on
 /// a deck is an error (a deck's regions are not split).
 fn parse_interface_tables(
     value: Option<toml::Value>,
     geometry: &Geometry,
     lines: &KeyLines,
-) -> Result<Vec<crate::interfaces::InterfaceSpec>, StudyError> {
+) -> Result<Vec<InterfaceSpec>, StudyError> {
     let Some(value) = value else {
         return Ok(Vec::new());
     };
@@ -307,13 +309,9 @@ fn parse_interface_tables(
         .unwrap_or_default();
     let mut doc = toml::Table::new();
     doc.insert("interface".into(), value);
-    let specs = crate::interfaces::parse_interfaces(&toml::Value::Table(doc))
+    let specs = parse_interfaces(&toml::Value::Table(doc))
         .map_err(|e| StudyError::Study(format!("{e}{line}")))?;
-    if matches!(geometry, Geometry::Deck(_))
-        && specs
-            .iter()
-            .any(|s| s.law != crate::interfaces::InterfaceLaw::Tied)
-    {
+    if matches!(geometry, Geometry::Deck(_)) && specs.iter().any(|s| s.law != InterfaceLaw::Tied) {
         return Err(StudyError::Study(format!(
             "[[interface]]{line}: a sliding interface needs a meshed thigh ([thigh] or [labels]); a [model] deck's regions are not split"
         )));

@@ -16,7 +16,7 @@ pub(crate) struct StudyFile {
     /// law's declared parameters (so any key may appear here).
     #[serde(default)]
     pub materials: BTreeMap<String, BTreeMap<String, toml::Value>>,
-    /// `[[interface]]`: read by `crate::interfaces::parse_interfaces`.
+    /// `[[interface]]`: read by `crate::schema::parse_interfaces`.
     pub interface: Option<toml::Value>,
     /// `None`: no `[[test]]` (the seed's three); `Some([])`: `test = []`, an error.
     pub test: Option<Vec<TestEntry>>,
