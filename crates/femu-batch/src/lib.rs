@@ -11,9 +11,9 @@
 //! - [`task`]: one case, run as a process of its own (`femu batch case DIR NAME`);
 //! - [`local`]: the local runner (child processes, at most `jobs` at once);
 //! - [`slurm`]: the array script, its submission, the queue's state;
-//! - [`status`]: the state of every case from its record and the queue;
+//! - [`status`](mod@status): the state of every case from its record and the queue;
 //! - [`run`](mod@run): `femu batch run`, with `--resume` and `--slurm`;
-//! - [`collect`]: the population table (CSV, JSON) and report;
+//! - [`collect`](mod@collect): the population table (CSV, JSON) and report;
 //! - [`error`]: the crate's one typed [`Error`].
 //!
 //! The crate sits on femu-study (the schema, `femu run`, the typed summaries) and femu-plot;

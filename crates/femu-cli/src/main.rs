@@ -3,6 +3,10 @@
 //! Thin glue: parse arguments, call the library crates, write the output folder, map errors to
 //! messages and a non-zero exit code. Nothing numerical lives here.
 
+// The commands' and options' doc comments are their `--help` text, where `[probe]`, `[thigh]`
+// and the like name tables of a study file, not items of this crate.
+#![allow(rustdoc::broken_intra_doc_links)]
+
 mod batch_cmd;
 mod bench;
 mod convergence_cmd;

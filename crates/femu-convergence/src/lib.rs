@@ -4,7 +4,7 @@
 //! 1e-4 mm (far below the DIC noise of about 1e-2 mm), and only then fixed 25 392 CPE4H
 //! elements.
 //!
-//! A study ([`ConvergenceStudy`], read from TOML by [`ConvergenceStudy::read`]) meshes the
+//! A study ([`ConvergenceStudy`], a study file's `[convergence]` table as femu-study reads it) meshes the
 //! built-in thigh at a sequence of sizes, solves one loading test for each element type, and
 //! compares every mesh with the finest of its type at the same physical points — the DIC grid
 //! ([`DicGrid`]), located in each mesh by [`femu_mesh::PointInterpolation`] — so meshes that

@@ -395,7 +395,7 @@ pub const PLAIN_ITERATION_FACTOR: usize = 3;
 pub const STALLED_INCREMENT_PX: f64 = 0.1;
 
 /// One pass of the ladder of [`correlate_ladder`] with `base`'s options; a ladder whose every
-/// rung failed returns [`DicError::Ladder`] with its attempts.
+/// rung failed returns a [`LadderFailure`] with its attempts.
 #[allow(clippy::too_many_arguments)]
 fn ladder(
     f: &GreyImage,

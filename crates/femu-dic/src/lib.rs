@@ -16,6 +16,9 @@
 //! - [`lab`]: the virtual lab (speckle images warped by known displacement fields).
 //! - [`noise`]: random error from pairs of images of an unloaded specimen.
 
+// The crate's documentation is for its developers (`cargo doc --document-private-items`):
+// its items' docs link to the private constants and functions they build on.
+#![allow(rustdoc::private_intra_doc_links)]
 #![forbid(unsafe_code)]
 
 pub mod anderson;

@@ -848,7 +848,7 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 }
 
 /// Rows per block of [`normal_equations`].
-const NORMAL_BLOCK_ROWS: usize = 4096;
+pub const NORMAL_BLOCK_ROWS: usize = 4096;
 
 /// The normal equations `A = JᵀJ` and `g = Jᵀr` of the Jacobian columns `j` and the residual
 /// `r`, in one pass over the rows: blocks of [`NORMAL_BLOCK_ROWS`] rows are summed in parallel

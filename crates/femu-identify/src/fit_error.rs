@@ -34,7 +34,7 @@ pub enum FitError {
     /// A joint problem that cannot be set up (see [`crate::joint`]).
     #[error("joint problem: {0}")]
     Joint(String),
-    /// The user asked to stop (see [`Problem::with_stop`]).
+    /// The user asked to stop (see [`crate::fit::Problem::with_stop`]).
     #[error("interrupted")]
     Interrupted,
     #[error("measurement covariance: {0}")]

@@ -17,6 +17,9 @@
 //!
 //! Face `Pn` joins local nodes `n` and `n+1` (the last face closes back to node 1).
 
+// The crate's documentation is for its developers (`cargo doc --document-private-items`):
+// its items' docs link to the private constants and functions they build on.
+#![allow(rustdoc::private_intra_doc_links)]
 #![forbid(unsafe_code)]
 
 /// 1 mmHg in MPa (the unit of the seed's contention pressure, 20 mmHg).

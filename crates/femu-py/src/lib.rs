@@ -2,6 +2,8 @@
 //! called from Python with NumPy arrays in and out. No numerics here or in the Python side:
 //! every number comes from the same library functions the `femu` command calls.
 //!
+//! Its modules (private: Python sees only what they register):
+//!
 //! - [`study`]: `Study` (a study file, TOML text, dict or the demo's study, checked by
 //!   `femu_study::schema`), its run (`femu run`) and steps, the typed summaries of a run folder;
 //! - [`model`]: `Model` (built-in thigh, label image from an array, deck): mesh arrays, forward
@@ -15,6 +17,9 @@
 //!
 //! The Python side (`python/femu/`) turns the JSON summaries into dataclasses, draws progress
 //! with tqdm and converts meshes for PyVista and meshio.
+
+// The list above is for the crate's developers (`cargo doc --document-private-items`).
+#![allow(rustdoc::private_intra_doc_links)]
 
 mod convert;
 mod dic;

@@ -16,6 +16,9 @@
 //! identification) and below the command line, which parses arguments and calls one function
 //! of this crate per command.
 
+// The crate's documentation is for its developers (`cargo doc --document-private-items`):
+// its items' docs link to the private functions they build on.
+#![allow(rustdoc::private_intra_doc_links)]
 #![forbid(unsafe_code)]
 
 pub mod commands;

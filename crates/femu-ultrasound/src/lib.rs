@@ -7,7 +7,7 @@
 //!   centre frequency.
 //! - [`tissue`]: scatterer density, backscatter and attenuation per tissue.
 //! - [`phantom`]: random scatterers in the reference mesh, moved by an FE displacement field.
-//! - [`render`]: echoes, attenuation, TGC, envelope, log compression, gain and dynamic range.
+//! - [`render`](mod@render): echoes, attenuation, TGC, envelope, log compression, gain and dynamic range.
 //! - [`stats`]: histograms, saturation, spread, texture against depth, speckle size, paired
 //!   t-tests.
 //! - [`manifest`]: the image manifests of `us-settings` and `us-noise`.

@@ -4,7 +4,7 @@
 //! A B-mode image is the echo of sub-resolution scatterers (cell nuclei, fibres, collagen).
 //! Each tissue gets scatterers at random positions (uniform, its own density) with zero-mean
 //! Gaussian amplitudes (variance set by the tissue's backscatter level, see
-//! [`crate::render`]); interfaces get line scatterers along the mesh faces between regions
+//! [`crate::render`](mod@crate::render)); interfaces get line scatterers along the mesh faces between regions
 //! (fascia), along the skin and along the bone surface. A deformed image moves the **same**
 //! scatterers by the FE displacement interpolated at their reference position with the
 //! mesh's isoparametric map (`femu_mesh::locate`), so a pair of images has a known

@@ -27,7 +27,7 @@
 //!   discretization shift.
 //! - [`pose_term`]: the probe pose's part of the uncertainty (the placement moved within its
 //!   own covariance).
-//! - [`identify`]: coarse to fine, from several starts.
+//! - [`identify`](mod@identify): coarse to fine, from several starts.
 
 pub mod brightness;
 pub mod correction;

@@ -15,7 +15,7 @@ use femu_sparse::LinearSolveError;
 use std::time::Instant;
 
 /// Relative residual below which the last increment's Newton iterations make the contact
-/// multipliers' Uzawa update (see [`StaticSolver::newton`]): 1e-3 is past the active-set
+/// multipliers' Uzawa update (see [`Newton::newton`]): 1e-3 is past the active-set
 /// changes and inside the quadratic regime on the seed's tests, so the gaps the update uses are
 /// those of the converged state to a few digits.
 const EARLY_AUGMENTATION: f64 = 1e-3;
@@ -178,7 +178,7 @@ struct LineSearch {
     correction: Correction,
     /// The energy of the increment's first correction.
     energy0: f64,
-    /// Whether the correction is at round-off level (see [`StaticSolver::newton`]).
+    /// Whether the correction is at round-off level (see [`Newton::newton`]).
     at_round_off: bool,
     /// ‖R‖ at the start of the iteration.
     rnorm: f64,

@@ -111,7 +111,7 @@ impl SolveReport {
     }
 }
 
-/// A converged (or partially converged, see [`SolveError`]) state.
+/// A converged (or partially converged, see [`crate::SolveError`]) state.
 #[derive(Debug, Clone)]
 pub struct Solution {
     /// Nodal displacements, `[ux0, uy0, ux1, uy1, ...]` (mm).

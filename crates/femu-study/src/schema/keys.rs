@@ -668,7 +668,7 @@ pub fn reference_page(tables: &[TableSpec]) -> String {
     out
 }
 
-/// The anchor GitHub gives a `## \`[name]\`` heading.
+/// The anchor GitHub gives a heading `` ## `[name]` ``.
 fn anchor(t: &TableSpec) -> String {
     t.title()
         .chars()
@@ -2293,7 +2293,7 @@ force_n_per_mm = 0.1
     },
 ];
 
-/// [`DEFAULT_IMAGE_NORMALIZATION_PX`] as written in the study file (checked by a unit test).
+/// [`DEFAULT_IMAGE_NORMALIZATION_PX`](super::identification::DEFAULT_IMAGE_NORMALIZATION_PX) as written in the study file (checked by a unit test).
 const DEFAULT_NORMALIZATION_TEXT: &str = "0.75";
 
 #[cfg(test)]
