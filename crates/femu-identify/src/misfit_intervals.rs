@@ -19,7 +19,7 @@
 //! Which term set each width is recorded (`Estimate::width_from`).
 
 use crate::campaign::{interval, Estimate};
-use crate::fit::{FitError, FitResult, Problem, SpeckleColumns};
+use crate::fit::{normal_equations, FitError, FitResult, Problem, SpeckleColumns};
 use crate::idic::uncertainty::group_jackknife;
 
 /// Blocks of the jackknife: 16 depth bands of a 40 mm window are 2.5 mm each, two rows of a
@@ -88,10 +88,8 @@ pub fn speckle_scale_sd(
     };
     let p = j.len();
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-    let jtj: Vec<Vec<f64>> = (0..p)
-        .map(|a| (0..p).map(|b| dot(&j[a], &j[b])).collect())
-        .collect();
-    let jtv: Vec<f64> = j.iter().map(|c| dot(c, &v)).collect();
+    // `JᵀJ` and `Jᵀv`: the normal equations with the shift in place of the residual.
+    let (jtj, jtv) = normal_equations(&j, &v);
     let inv = crate::variance_components::invert_spd(&jtj)
         .ok_or_else(|| FitError::Speckle("the parameters' normal matrix is singular".into()))?;
     let explained: f64 = (0..p)
