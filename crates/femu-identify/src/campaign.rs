@@ -387,6 +387,10 @@ pub struct Campaign {
     /// The named parts of the stacked residual of the full model (see
     /// [`JointProblem::segments`]), for each measurement's share of the information.
     pub layout: Segments,
+    /// The full models' forward states at the end of the first repeat's refinement (one per
+    /// forward model, as [`LeastSquares::states`]; empty without a multilevel refinement): a
+    /// later problem on the same meshes near the optimum starts Newton from them.
+    pub refined_states: Vec<Option<Vec<f64>>>,
 }
 
 /// One start of the optimizer; `coarse`: the first level of a multilevel identification,
@@ -665,6 +669,7 @@ pub fn run_joint(
         reference_travel: travels.first().copied().flatten(),
         blocks: Vec::new(),
         layout: Vec::new(),
+        refined_states: Vec::new(),
     };
     for rep in 0..repeats {
         // A stop between repeats, or one that ends this repeat's virtual experiment (its
@@ -731,6 +736,9 @@ pub fn run_joint(
             on_event(Event::Refining { repeat: rep });
             let refined = problem(false).and_then(|mut p| {
                 let r = fit_start(options.optimizer, &mut p, &best.theta, false)?;
+                if rep == 0 {
+                    out.refined_states = p.states();
+                }
                 Ok((r, p.segments()))
             });
             let (best, layout) = match refined {

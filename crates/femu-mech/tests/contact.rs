@@ -622,3 +622,57 @@ fn thigh_indentation_model(elements: usize) -> Model {
         }),
     )
 }
+
+/// A warm start in a solver that has not solved the model (the discretization check's meshes,
+/// a sensitivity study's perturbed solves): its contact multipliers are estimated from
+/// equilibrium at the given state, so that the converged state of another solver is taken at
+/// once. With zero multipliers the whole contact force is in the residual: here the
+/// indentation then takes 15 Newton iterations (on the 25 557-quad thigh its warm start failed
+/// its line search and the solve followed 13 load increments from zero).
+#[test]
+fn a_new_solver_takes_a_converged_contact_state_at_once() {
+    use femu_mech::loading::Loading;
+    for loading in [
+        Loading::anterior_indentation(0.1),
+        Loading::seed_compression(),
+    ] {
+        let model = common::thigh_model(3000, ElementKind::Cpe4h, &loading);
+        let cold = solve(&model, SolverOptions::default());
+        let mut fresh = StaticSolver::new(&model, SolverOptions::default()).unwrap();
+        let warm = fresh
+            .solve_with(&model, Some(&cold.state), &mut |_| {})
+            .expect("converges");
+        let r = &warm.report;
+        assert!(r.warm_start, "{}", loading.name());
+        assert_eq!(
+            (r.converged_increments, r.cutbacks),
+            (1, 0),
+            "{}: the warm start was not taken",
+            loading.name()
+        );
+        // The state is already converged: at most one correction (rounding of the estimate).
+        assert!(
+            r.newton_iterations <= 1,
+            "{}: {} iterations",
+            loading.name(),
+            r.newton_iterations
+        );
+        let scale = cold.u.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let diff = warm
+            .state
+            .iter()
+            .zip(&cold.state)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        // Both converged to the default residual tolerance: the same state to well within it.
+        assert!(
+            diff <= 1e-6 * scale,
+            "{}: {diff:.3e} of {scale:.3e} mm",
+            loading.name()
+        );
+        assert!(
+            (warm.bodies[0].force - 0.1).abs() < 1e-8,
+            "{}",
+            loading.name()
+        );
+    }
+}

@@ -36,6 +36,12 @@ fn in_contact(trial: f64, eps: f64, element_size: f64) -> bool {
     trial >= -eps * 1e-12 * element_size
 }
 
+/// The gap (a fraction of the body's element size) within which a candidate node of a warm
+/// start counts as touching when its multiplier is estimated from equilibrium
+/// ([`ContactState::estimate_multipliers`]): a converged state's nodes touch within round-off,
+/// a state carried from another mesh of the same outline within its chords' sag.
+pub(crate) const WARM_GAP_FRACTION: f64 = 0.05;
+
 /// Contact state of every rigid body of a model.
 #[derive(Debug)]
 pub(crate) struct ContactState {
@@ -223,6 +229,58 @@ impl ContactState {
                         system.values[self.tt[b]] +=
                             eps * gap.dg_dt * gap.dg_dt - lam * gap.d2g_dtdt;
                     }
+                }
+            }
+        }
+    }
+
+    /// Multiplier estimates from equilibrium at a state `u` solved elsewhere (a warm start in
+    /// a solver that has not solved this model: its multipliers are zero), given the residual
+    /// `residual` assembled at `u` with the current multipliers (dof layout).
+    ///
+    /// At a converged augmented-Lagrangian state the penalty carries almost none of the
+    /// contact force (the penetration is below the force tolerance over ε); the multipliers
+    /// carry it. Zero multipliers leave the whole contact force in the residual (on the
+    /// thigh's indentation the warm start then began at `|R|` ≈ the applied force and failed,
+    /// and the solve followed the load increments from zero). Each free candidate node within
+    /// [`WARM_GAP_FRACTION`] of an element of its body takes the force that balances the
+    /// normal part of the tissue's residual there, `λ = (R_el · ∇g) / |∇g|²` with
+    /// `R_el = R + λ_cur ∇g` (the residual without this node's current contact force), when
+    /// that force pushes the node against the body by more than `force_tolerance` (the residual
+    /// tolerance times the reference force: a node beside the contact zone is balanced to
+    /// within it, and made active with a force of nothing Newton would move it); `λ̂ = λ + ε g`,
+    /// so that `⟨λ̂ - ε g⟩₊ = λ`.
+    pub fn estimate_multipliers(
+        &mut self,
+        model: &Model,
+        u: &[f64],
+        residual: &[f64],
+        force_tolerance: f64,
+    ) {
+        let base = 2 * model.node_count();
+        for (b, c) in model.contacts.iter().enumerate() {
+            let t = c.first_contact + u[base + b];
+            let eps = self.penalties[b];
+            let reach = WARM_GAP_FRACTION * c.element_size;
+            for (k, &n) in c.nodes.iter().enumerate() {
+                let [sx, _, _, sy, ..] = self.slots[b][k];
+                if sx == NONE || sy == NONE {
+                    continue;
+                }
+                let gap = c.body.gap(model.current_position(n, u), t);
+                let norm2 = gap.dg_dx[0] * gap.dg_dx[0] + gap.dg_dx[1] * gap.dg_dx[1];
+                if gap.g > reach || norm2 <= 0.0 {
+                    continue;
+                }
+                let m = &mut self.multipliers[b][k];
+                let current = (*m - eps * gap.g).max(0.0);
+                let tissue = [
+                    residual[2 * n] + current * gap.dg_dx[0],
+                    residual[2 * n + 1] + current * gap.dg_dx[1],
+                ];
+                let lam = (tissue[0] * gap.dg_dx[0] + tissue[1] * gap.dg_dx[1]) / norm2;
+                if lam > force_tolerance {
+                    *m = (lam + eps * gap.g).max(0.0);
                 }
             }
         }

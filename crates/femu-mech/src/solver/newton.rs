@@ -269,7 +269,7 @@ impl<S: NewtonSystem> Newton<'_, S> {
             self.system.init_contact().map_err(SolveError::Undeformed)?;
         }
         if let Some(u0) = initial {
-            if self.warm_start(u0, &mut u, &mut report, on_increment) {
+            if self.warm_start(u0, &mut u, &mut report, on_increment, !keep_contact) {
                 report.lambda = 1.0;
                 report.wall_time_s = t0.elapsed().as_secs_f64();
                 return Ok(self.system.solution(&u, report));
@@ -284,18 +284,31 @@ impl<S: NewtonSystem> Newton<'_, S> {
     }
 
     /// Newton at the full load from `u0` (2 per node, or the whole state); whether it
-    /// converged (`u` then holds the solution). A failure counts as a cut-back.
+    /// converged (`u` then holds the solution). A failure counts as a cut-back. With
+    /// `estimate_multipliers` (penalties just set, multipliers zero) the contact multipliers
+    /// are first estimated from equilibrium at `u0`.
     fn warm_start(
         &mut self,
         u0: &[f64],
         u: &mut Vec<f64>,
         report: &mut SolveReport,
         on_increment: &mut dyn FnMut(&IncrementRecord),
+        estimate_multipliers: bool,
     ) -> bool {
         report.warm_start = true;
         let k = u0.len().min(u.len());
         u[..k].copy_from_slice(&u0[..k]);
         self.system.dofs().set_prescribed(u, 1.0);
+        // A state solved elsewhere: its contact forces are in no multiplier of this solve yet.
+        if estimate_multipliers
+            && self
+                .system
+                .estimate_multipliers(u, self.options.residual_tolerance)
+                .is_err()
+        {
+            report.cutbacks += 1;
+            return false;
+        }
         let mut rec = IncrementRecord::attempt(1, 1.0, 1.0);
         let outcome = self.newton_augmented(u, 1.0, &mut rec);
         rec.converged = outcome.is_ok();

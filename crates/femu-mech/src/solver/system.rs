@@ -51,6 +51,16 @@ pub(crate) trait NewtonSystem {
     fn has_penalties(&self) -> bool {
         false
     }
+    /// Sets the contact multipliers that balance the residual at `u` (a warm start from a
+    /// state this problem has not solved; the penalties are set); forces below
+    /// `residual_tolerance` times the reference force are none.
+    fn estimate_multipliers(
+        &mut self,
+        _u: &[f64],
+        _residual_tolerance: f64,
+    ) -> Result<(), AssemblyError> {
+        Ok(())
+    }
     /// The contact set of the last assembly.
     fn active_set(&self) -> ActiveSet {
         (0, 0)
@@ -208,6 +218,27 @@ impl NewtonSystem for Plane<'_> {
 
     fn has_penalties(&self) -> bool {
         self.contact.has_penalties() && self.contact.interfaces.has_penalties()
+    }
+
+    /// See [`ContactState::estimate_multipliers`] (the rigid bodies; the sliding interfaces'
+    /// multipliers stay zero).
+    fn estimate_multipliers(
+        &mut self,
+        u: &[f64],
+        residual_tolerance: f64,
+    ) -> Result<(), AssemblyError> {
+        if self.model.contacts.is_empty() {
+            return Ok(());
+        }
+        self.assemble(u, 1.0, false)?;
+        let force_tolerance = residual_tolerance * self.norms().1;
+        self.contact.estimate_multipliers(
+            self.model,
+            u,
+            &self.assembly.system.residual,
+            force_tolerance,
+        );
+        Ok(())
     }
 
     fn active_set(&self) -> ActiveSet {

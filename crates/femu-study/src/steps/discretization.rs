@@ -3,10 +3,11 @@
 //! its elements split once and twice, [`DECK_RATIOS`]), the bias
 //! the study's mesh implies (`femu_identify::discretization`), and — with `"refine"` — the
 //! identification continued on the finest of them. The meshes and their solutions are kept with
-//! the study's model for its next identification ([`CheckMeshes`]); on the first check a mesh
-//! starts Newton from the solution of the mesh evaluated before it, carried onto its nodes
-//! (on the 25 557-element thigh of `femu demo --full` the finest mesh's solve took about a
-//! quarter of its time from the load increments; bench/perf/profile_full.txt).
+//! the study's model for its next identification ([`CheckMeshes`]); on the first check the
+//! model's own mesh starts Newton from the fit's last solution on it, and a refined mesh from
+//! the solution of the mesh evaluated before it, carried onto its nodes (on the 25 557-element
+//! thigh of `femu demo --full` the finest mesh's solve took about a quarter of its time from
+//! the load increments; bench/perf/profile_full.txt).
 
 use super::joint::{JointFit, TestModels};
 use super::measure::{Prepared, PreparedData};
@@ -62,11 +63,14 @@ pub struct Checked {
 
 /// The meshes of the check: the model's own and the refined ones (`RATIOS`), each with the
 /// measured tests' models; those of an earlier check on this model (the demo's ungrouped
-/// identification before its grouped one) taken back with their last solutions.
+/// identification before its grouped one) taken back with their last solutions. The model's
+/// own mesh starts from the fit's last solutions on it when there is no earlier check (the
+/// multilevel refinement's: `fitted_states`, one per test).
 fn check_levels(
     inputs: &IdentificationInputs,
     built: &StudyModel,
     models: &TestModels,
+    fitted_states: &[Option<Vec<f64>>],
 ) -> Result<Vec<CachedLevel>> {
     let tests: Vec<String> = models
         .tests
@@ -82,12 +86,24 @@ fn check_levels(
     };
     // Each level: the model's own mesh first, then the refined ones.
     let own = take(1.0);
+    let fitted = || {
+        let fits = fitted_states.len() == models.full.len()
+            && fitted_states
+                .iter()
+                .zip(&models.full)
+                .all(|(s, m)| s.as_ref().is_some_and(|s| s.len() == m.state_len()));
+        if fits {
+            fitted_states.to_vec()
+        } else {
+            Vec::new()
+        }
+    };
     let mut levels = vec![CachedLevel {
         ratio: 1.0,
         tests: tests.clone(),
         elements: models.elements(),
         models: models.full.clone(),
-        states: own.map(|l| l.states).unwrap_or_default(),
+        states: own.map(|l| l.states).unwrap_or_else(fitted),
     }];
     let ratios = match inputs.model.geometry {
         Geometry::Deck(_) => DECK_RATIOS,
@@ -125,7 +141,7 @@ pub fn check(
     progress: &dyn Progress,
 ) -> Result<Checked> {
     let task = progress.task("discretization check on refined meshes", None);
-    let mut levels = check_levels(inputs, built, models)?;
+    let mut levels = check_levels(inputs, built, models, &fit.campaign.refined_states)?;
     let fields: Vec<MeasuredField> = (0..models.tests.len())
         .map(|b| {
             let meshes: Vec<&Model> = levels.iter().map(|l| &l.models[b]).collect();
@@ -271,7 +287,13 @@ fn transferred_state(from: &Model, state: &[f64], to: &Model) -> Option<Vec<f64>
         };
         out.extend_from_slice(&value);
     }
-    out.extend_from_slice(&state[2 * mesh.nodes.len()..]);
+    // Each body at the same place: its travel counts from its first contact, which depends on
+    // the mesh's outline.
+    let travels = &state[2 * mesh.nodes.len()..];
+    for ((t, a), b) in travels.iter().zip(&from.contacts).zip(&to.contacts) {
+        out.push(t + a.first_contact - b.first_contact);
+    }
+    out.extend_from_slice(&travels[from.contacts.len().min(travels.len())..]);
     Some(out)
 }
 
