@@ -177,33 +177,72 @@ fn virtual_segments(
     segments: &[(&[[f64; 2]], f64)],
     rng: &mut rand::rngs::StdRng,
 ) -> Result<Vec<MeasuredField>, CampaignError> {
-    let points: Vec<[f64; 2]> = segments
-        .iter()
-        .flat_map(|(p, _)| p.iter().copied())
-        .collect();
-    if points.is_empty() {
-        return Err(CampaignError::NoGridPoint);
-    }
-    let locator = PointLocator::new(&model.mesh);
-    let inside: Vec<bool> = points
-        .iter()
-        .map(|x| locator.locate(*x).is_some())
-        .collect();
-    let all = MeasuredField {
-        points: points
+    let truth = TruthField::solve(model, free, reference, segments)?;
+    noisy_segments(&truth, segments, rng)
+}
+
+/// The noise-free virtual field of a block: the truth model's displacements at the reference
+/// parameters at its virtual points (in the order of its segments), which of the points lie in
+/// the truth model's mesh, and the solved state. Solved once per identification: each repeat's
+/// realization only draws new noise ([`noisy_segments`]).
+struct TruthField {
+    /// Per virtual point: whether it lies in the mesh.
+    inside: Vec<bool>,
+    /// `[ux, uy]` of each point inside, in order (mm).
+    u: Vec<f64>,
+    /// The truth model's state at the reference parameters.
+    state: Option<Vec<f64>>,
+}
+
+impl TruthField {
+    /// One solve of `model` at `reference` (of `free`) for the points of `segments`.
+    fn solve(
+        model: &Model,
+        free: &[FreeParameter],
+        reference: &[f64],
+        segments: &[(&[[f64; 2]], f64)],
+    ) -> Result<TruthField, CampaignError> {
+        let points: Vec<[f64; 2]> = segments
             .iter()
-            .zip(&inside)
-            .filter(|(_, i)| **i)
-            .map(|(&x, _)| MeasuredPoint {
-                x,
-                u: [0.0; 2],
-                weight: [1.0; 2],
-            })
-            .collect(),
-        comments: vec![],
-    };
-    let mut p = Problem::new(model.clone(), SolverOptions::default(), &all, free.to_vec())?;
-    let u = p.field_at(reference)?;
+            .flat_map(|(p, _)| p.iter().copied())
+            .collect();
+        if points.is_empty() {
+            return Err(CampaignError::NoGridPoint);
+        }
+        let locator = PointLocator::new(&model.mesh);
+        let inside: Vec<bool> = points
+            .iter()
+            .map(|x| locator.locate(*x).is_some())
+            .collect();
+        let all = MeasuredField {
+            points: points
+                .iter()
+                .zip(&inside)
+                .filter(|(_, i)| **i)
+                .map(|(&x, _)| MeasuredPoint {
+                    x,
+                    u: [0.0; 2],
+                    weight: [1.0; 2],
+                })
+                .collect(),
+            comments: vec![],
+        };
+        let mut p = Problem::new(model.clone(), SolverOptions::default(), &all, free.to_vec())?;
+        let u = p.field_at(reference)?;
+        let state = p.states().pop().flatten();
+        Ok(TruthField { inside, u, state })
+    }
+}
+
+/// The virtual measurement of `segments` from their noise-free field `truth`: each set with
+/// seeded Gaussian noise of its own standard deviation, drawn in order from `rng` (two per
+/// point), weighted by `1/σ²`; one field per set.
+fn noisy_segments(
+    truth: &TruthField,
+    segments: &[(&[[f64; 2]], f64)],
+    rng: &mut rand::rngs::StdRng,
+) -> Result<Vec<MeasuredField>, CampaignError> {
+    let (inside, u) = (&truth.inside, &truth.u);
     let mut out = Vec::with_capacity(segments.len());
     let (mut k, mut row) = (0, 0);
     for &(pts, sigma) in segments {
@@ -478,33 +517,19 @@ fn block_seed(seed: u64, b: usize, rep: usize) -> u64 {
 /// Realizes a field block's data for repeat `rep`: measured segments as given, virtual ones
 /// made by the block's truth model at the reference plus seeded noise; the travel measured, or
 /// the reference travel plus seeded noise.
-#[allow(clippy::too_many_arguments)]
 fn realize(
     block: &FieldBlock,
+    truth: Option<&TruthField>,
     b: usize,
     rep: usize,
-    free: &[FreeParameter],
-    free_model: &Model,
-    reference: &[f64],
     seed: u64,
     reference_travel: Option<f64>,
 ) -> Result<Realized, CampaignError> {
-    let truth = block.truth.unwrap_or(block.model);
     let mut rng = rand::rngs::StdRng::seed_from_u64(block_seed(seed, b, rep));
-    let virtual_parts: Vec<(&[[f64; 2]], f64)> = block
-        .segments
-        .iter()
-        .filter_map(|(_, d)| match d {
-            Data::Virtual { points, sigma } => Some((*points, *sigma)),
-            Data::Measured(_) => None,
-        })
-        .collect();
-    let mut virtual_fields = if virtual_parts.is_empty() {
-        Vec::new()
-    } else {
-        let (tfree, map) = joint::block_free(free, free_model, truth);
-        let tref: Vec<f64> = map.iter().map(|&k| reference[k]).collect();
-        virtual_segments(truth, &tfree, &tref, &virtual_parts, &mut rng)?
+    let virtual_parts = virtual_parts(block);
+    let mut virtual_fields = match truth {
+        Some(t) if !virtual_parts.is_empty() => noisy_segments(t, &virtual_parts, &mut rng)?,
+        _ => Vec::new(),
     }
     .into_iter();
     let mut field = MeasuredField::default();
@@ -542,6 +567,36 @@ fn realize(
     })
 }
 
+/// The virtual segments of `block`: points and noise of each.
+fn virtual_parts<'a>(block: &FieldBlock<'a>) -> Vec<(&'a [[f64; 2]], f64)> {
+    block
+        .segments
+        .iter()
+        .filter_map(|(_, d)| match d {
+            Data::Virtual { points, sigma } => Some((*points, *sigma)),
+            Data::Measured(_) => None,
+        })
+        .collect()
+}
+
+/// The noise-free field of `block`'s virtual segments: its truth model (or its model) solved
+/// at the reference parameters; `None` for a block without virtual segments.
+fn truth_field(
+    block: &FieldBlock,
+    free: &[FreeParameter],
+    free_model: &Model,
+    reference: &[f64],
+) -> Result<Option<TruthField>, CampaignError> {
+    let parts = virtual_parts(block);
+    if parts.is_empty() {
+        return Ok(None);
+    }
+    let truth = block.truth.unwrap_or(block.model);
+    let (tfree, map) = joint::block_free(free, free_model, truth);
+    let tref: Vec<f64> = map.iter().map(|&k| reference[k]).collect();
+    TruthField::solve(truth, &tfree, &tref, &parts).map(Some)
+}
+
 /// A field block's data: its field and each segment's points in it.
 pub type RealizedField = (MeasuredField, Vec<Range<usize>>);
 
@@ -566,8 +621,8 @@ pub fn realized_fields(
         .map(|(b, f)| {
             let mut f = f.clone();
             f.travel = None;
-            realize(&f, b, rep, free, free_model, reference, seed, None)
-                .map(|r| (r.field, r.segments))
+            let truth = truth_field(&f, free, free_model, reference)?;
+            realize(&f, truth.as_ref(), b, rep, seed, None).map(|r| (r.field, r.segments))
         })
         .collect()
 }
@@ -575,7 +630,8 @@ pub fn realized_fields(
 /// The FEMU block of `block` on `model` (the block's model or its coarse one) with the data of
 /// one repeat, under the campaign's loss. The `first` field block, when it is one measured
 /// segment (the study's single measured field), takes the options' covariance (weighted FEMU)
-/// and speckle shift.
+/// and speckle shift. `warm`: a state of `model` its first solve starts from.
+#[allow(clippy::too_many_arguments)]
 fn field_problem(
     block: &FieldBlock,
     data: &Realized,
@@ -584,11 +640,15 @@ fn field_problem(
     free_model: &Model,
     options: &CampaignOptions,
     first: bool,
+    warm: Option<&[f64]>,
 ) -> Result<Block, FitError> {
     let (bfree, map) = joint::block_free(free, free_model, model);
     let mut p = Problem::new(model.clone(), SolverOptions::default(), &data.field, bfree)?
         .with_stop(options.stop.clone())
         .with_loss(options.loss);
+    if let Some(state) = warm {
+        p = p.with_warm_start(state.to_vec());
+    }
     if let (true, [(_, Data::Measured(_))]) = (first, block.segments.as_slice()) {
         if let Some(c) = &options.covariance {
             p = p.with_covariance(c)?;
@@ -671,27 +731,28 @@ pub fn run_joint(
         layout: Vec::new(),
         refined_states: Vec::new(),
     };
+    // The noise-free virtual fields, solved once: the repeats draw their noise on them.
+    let mut truths: Option<Vec<Option<TruthField>>> = None;
     for rep in 0..repeats {
         // A stop between repeats, or one that ends this repeat's virtual experiment (its
         // forward solve sees the request), keeps the repeats that finished.
         let realized: Result<Vec<Realized>, CampaignError> = if stop_requested(options) {
             Err(CampaignError::Fit(FitError::Interrupted))
         } else {
-            fields()
-                .enumerate()
-                .map(|(b, f)| {
-                    realize(
-                        f,
-                        b,
-                        rep,
-                        free,
-                        free_model,
-                        reference,
-                        options.seed,
-                        travels[b],
-                    )
-                })
-                .collect()
+            let solved = match truths.take() {
+                Some(t) => Ok(t),
+                None => fields()
+                    .map(|f| truth_field(f, free, free_model, reference))
+                    .collect(),
+            };
+            solved.and_then(|t| {
+                let r = fields()
+                    .enumerate()
+                    .map(|(b, f)| realize(f, t[b].as_ref(), b, rep, options.seed, travels[b]))
+                    .collect();
+                truths = Some(t);
+                r
+            })
         };
         let realized = match realized {
             Ok(r) => r,
@@ -710,6 +771,7 @@ pub fn run_joint(
             // The measured field's covariance and speckle shift belong to the first field block
             // (the study's single [measurement]).
             let mut first = true;
+            let mut b = 0;
             for spec in blocks {
                 stacked.push(match spec {
                     BlockSpec::Field(f) => {
@@ -719,8 +781,16 @@ pub fn run_joint(
                             f.model
                         };
                         let d = data.next().expect("one realization per field block");
-                        let p = field_problem(f, d, model, free, free_model, options, first)?;
+                        // The refinement starts near the reference: Newton from the virtual
+                        // data's solution when they were made on this mesh.
+                        let warm = truths
+                            .as_ref()
+                            .and_then(|t| t[b].as_ref())
+                            .and_then(|t| t.state.as_deref())
+                            .filter(|_| multilevel && !coarse && f.truth.is_none());
+                        let p = field_problem(f, d, model, free, free_model, options, first, warm)?;
                         first = false;
+                        b += 1;
                         p
                     }
                     BlockSpec::Custom { build, .. } => build(coarse)?,
