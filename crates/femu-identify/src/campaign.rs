@@ -177,7 +177,7 @@ fn virtual_segments(
     segments: &[(&[[f64; 2]], f64)],
     rng: &mut rand::rngs::StdRng,
 ) -> Result<Vec<MeasuredField>, CampaignError> {
-    let truth = TruthField::solve(model, free, reference, segments)?;
+    let truth = TruthField::solve(model, free, reference, segments, None)?;
     noisy_segments(&truth, segments, rng)
 }
 
@@ -201,6 +201,7 @@ impl TruthField {
         free: &[FreeParameter],
         reference: &[f64],
         segments: &[(&[[f64; 2]], f64)],
+        warm: Option<&[f64]>,
     ) -> Result<TruthField, CampaignError> {
         let points: Vec<[f64; 2]> = segments
             .iter()
@@ -228,6 +229,9 @@ impl TruthField {
             comments: vec![],
         };
         let mut p = Problem::new(model.clone(), SolverOptions::default(), &all, free.to_vec())?;
+        if let Some(w) = warm {
+            p = p.with_warm_start(w.to_vec());
+        }
         let u = p.field_at(reference)?;
         let state = p.states().pop().flatten();
         Ok(TruthField { inside, u, state })
@@ -307,6 +311,9 @@ pub struct FieldBlock<'a> {
     /// The measured parts, named, in the order of the block's residuals.
     pub segments: Vec<(String, Data<'a>)>,
     pub travel: Option<TravelTerm>,
+    /// A solution of `model` at the reference parameters (another step solved it), from which
+    /// the virtual data's solve starts Newton when `truth` is `None`.
+    pub warm: Option<&'a [f64]>,
 }
 
 /// Builds a block that is not a measured field (grey levels, say) for the coarse model of a
@@ -489,6 +496,7 @@ pub fn run(
         truth: None,
         segments: vec![("measurement".into(), data)],
         travel: options.travel,
+        warm: None,
     };
     run_joint(
         model,
@@ -591,10 +599,13 @@ fn truth_field(
     if parts.is_empty() {
         return Ok(None);
     }
-    let truth = block.truth.unwrap_or(block.model);
+    let (truth, warm) = match block.truth {
+        Some(t) => (t, None),
+        None => (block.model, block.warm),
+    };
     let (tfree, map) = joint::block_free(free, free_model, truth);
     let tref: Vec<f64> = map.iter().map(|&k| reference[k]).collect();
-    TruthField::solve(truth, &tfree, &tref, &parts).map(Some)
+    TruthField::solve(truth, &tfree, &tref, &parts, warm).map(Some)
 }
 
 /// A field block's data: its field and each segment's points in it.

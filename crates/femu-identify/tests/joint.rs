@@ -88,6 +88,7 @@ fn stacked_jacobian_matches_finite_differences() {
         .map(|(m, p)| {
             BlockSpec::Field(FieldBlock {
                 name: "block".into(),
+                warm: None,
                 model: m,
                 coarse: None,
                 truth: None,
@@ -253,6 +254,7 @@ fn noise_free_joint_fit_recovers_every_parameter() {
     let blocks = vec![
         BlockSpec::Field(FieldBlock {
             name: "contention".into(),
+            warm: None,
             model: &contention,
             coarse: None,
             truth: None,
@@ -264,6 +266,7 @@ fn noise_free_joint_fit_recovers_every_parameter() {
         }),
         BlockSpec::Field(FieldBlock {
             name: "compression".into(),
+            warm: None,
             model: &compression,
             coarse: None,
             truth: None,
@@ -347,6 +350,7 @@ fn light_monte_carlo_intervals_cover_the_truth() {
     let blocks = vec![
         BlockSpec::Field(FieldBlock {
             name: "contention".into(),
+            warm: None,
             model: &contention,
             coarse: None,
             truth: None,
@@ -370,6 +374,7 @@ fn light_monte_carlo_intervals_cover_the_truth() {
         }),
         BlockSpec::Field(FieldBlock {
             name: "compression".into(),
+            warm: None,
             model: &compression,
             coarse: None,
             truth: None,
@@ -462,6 +467,7 @@ fn virtual_data_on_a_finer_mesh_leave_out_the_points_it_lacks() {
         .count();
     let blocks = vec![BlockSpec::Field(FieldBlock {
         name: "contention".into(),
+        warm: None,
         model: &model,
         coarse: None,
         truth: Some(&truth),

@@ -135,6 +135,7 @@ fn main() -> Result<()> {
         full: TestModels::new(&inputs, &tied, &prepared_tied)?.full,
         coarse: Vec::new(),
         truth: data.truth,
+        warm: Vec::new(),
     };
     anyhow::ensure!(
         !models.truth.is_empty() && !models.truth[0].interfaces.is_empty(),

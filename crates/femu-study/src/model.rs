@@ -29,6 +29,10 @@ pub struct StudyModel {
     /// The discretization check's meshes and solutions, for the next identification on this
     /// model.
     pub check_meshes: std::sync::Mutex<CheckMeshes>,
+    /// Solutions of loaded copies of the model at the study's own material parameters, by
+    /// loading ([`StudyModel::keep_reference_state`]): the forward step's, from which the
+    /// virtual measurement and the identifications start Newton.
+    pub reference_states: std::sync::Mutex<Vec<(String, Vec<f64>)>>,
 }
 
 /// The meshes of a discretization check and their last solutions, kept with the study's model
@@ -54,6 +58,29 @@ pub(crate) struct CachedLevel {
 }
 
 impl StudyModel {
+    /// Keeps `state`, the solution of the model loaded with `loading` at its own material
+    /// parameters, for later steps ([`StudyModel::reference_state`]).
+    pub fn keep_reference_state(&self, loading: &femu_mech::loading::Loading, state: Vec<f64>) {
+        let key = format!("{loading:?}");
+        let mut kept = self
+            .reference_states
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        kept.retain(|(k, _)| *k != key);
+        kept.push((key, state));
+    }
+
+    /// The solution kept for `loading` ([`StudyModel::keep_reference_state`]), if any.
+    pub fn reference_state(&self, loading: &femu_mech::loading::Loading) -> Option<Vec<f64>> {
+        let key = format!("{loading:?}");
+        self.reference_states
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, s)| s.clone())
+    }
+
     /// A copy of the model with `test` applied on the skin.
     pub fn loaded(&self, test: &femu_mech::loading::Loading) -> Result<Model> {
         let mut model = self.model.clone();
@@ -220,6 +247,7 @@ fn from_thigh(spec: &ModelSpec, thigh: ThighModel, source: String) -> Result<Stu
         thigh: Some(thigh),
         source,
         check_meshes: Default::default(),
+        reference_states: Default::default(),
     })
 }
 
@@ -246,6 +274,7 @@ pub fn build_refined(
             thigh: None,
             source: format!("{} split {times}x", built.source),
             check_meshes: Default::default(),
+            reference_states: Default::default(),
         }));
     }
     let Some(h) = built.thigh.as_ref().map(|t| t.element_size_mm) else {
@@ -271,6 +300,7 @@ fn deck_model(specs: &[MaterialSpec], path: &Path) -> Result<StudyModel> {
         thigh: None,
         source: format!("deck {}", path.display()),
         check_meshes: Default::default(),
+        reference_states: Default::default(),
     })
 }
 

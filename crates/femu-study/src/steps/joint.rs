@@ -24,6 +24,9 @@ pub struct TestModels {
     pub full: Vec<Model>,
     pub coarse: Vec<Model>,
     pub truth: Vec<Model>,
+    /// Per measured test, a solution of its full model at the study's reference parameters
+    /// that an earlier step made ([`StudyModel::reference_state`]).
+    pub warm: Vec<Option<Vec<f64>>>,
 }
 
 impl TestModels {
@@ -68,11 +71,16 @@ impl TestModels {
         } else {
             Vec::new()
         };
+        let warm = tests
+            .iter()
+            .map(|&t| built.reference_state(&inputs.tests[t].loading))
+            .collect();
         Ok(TestModels {
             full: load(built)?,
             tests,
             coarse,
             truth,
+            warm,
         })
     }
 
@@ -121,6 +129,7 @@ pub fn blocks<'a>(
                     })
                     .collect(),
                 travel: mine.iter().find_map(|p| p.travel),
+                warm: models.warm.get(b).and_then(|w| w.as_deref()),
             })
         })
         .collect()

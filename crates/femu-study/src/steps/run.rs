@@ -442,6 +442,12 @@ fn forward_and_sensitivity(
     let mut failed = Vec::new();
     let forward_dir = out.join("forward");
     let mut on_solved = |name: &str, model: &Model, solution: &femu_mech::Solution, solve_s| {
+        // Kept for the measurement and the identifications (a name that two tests share is
+        // ambiguous: not kept).
+        let mut named = inputs.tests.iter().filter(|t| t.loading.name() == name);
+        if let (Some(test), None) = (named.next(), named.next()) {
+            built.keep_reference_state(&test.loading, solution.state.clone());
+        }
         write_solved(
             model,
             solution,
