@@ -63,7 +63,7 @@ enum Command {
     /// The demo, no input needed: the seed's numerical example end to end on the built-in thigh
     /// (sensitivity of the three tests, the compression test measured on a 64 x 64 grid with the
     /// seed's noise, identification ungrouped and grouped from five starts, Fig. 9 errors) and
-    /// its report (report.html) — about 6 s on two cores; --full for the paper scale.
+    /// its report (report.html) — about 5 s on two cores; --full for the paper scale.
     Demo {
         /// Output folder.
         #[arg(long, default_value = "out/demo")]

@@ -39,7 +39,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Elements of the demo's built-in thigh: the whole demo runs in about 6 s on two cores.
+/// Elements of the demo's built-in thigh: the whole demo runs in about 5 s on two cores.
 pub const DEMO_ELEMENTS: usize = 4000;
 /// `femu demo --full`: the seed's scale.
 pub const FULL_ELEMENTS: usize = 25_000;
