@@ -742,29 +742,26 @@ pub fn run_joint(
         layout: Vec::new(),
         refined_states: Vec::new(),
     };
-    // The noise-free virtual fields, solved once: the repeats draw their noise on them.
-    let mut truths: Option<Vec<Option<TruthField>>> = None;
+    // The noise-free virtual fields, one per field block, solved once (empty until then): the
+    // repeats draw their noise on them.
+    let mut truths: Vec<Option<TruthField>> = Vec::new();
     for rep in 0..repeats {
         // A stop between repeats, or one that ends this repeat's virtual experiment (its
         // forward solve sees the request), keeps the repeats that finished.
-        let realized: Result<Vec<Realized>, CampaignError> = if stop_requested(options) {
-            Err(CampaignError::Fit(FitError::Interrupted))
-        } else {
-            let solved = match truths.take() {
-                Some(t) => Ok(t),
-                None => fields()
+        let realized: Result<Vec<Realized>, CampaignError> = (|| {
+            if stop_requested(options) {
+                return Err(CampaignError::Fit(FitError::Interrupted));
+            }
+            if truths.is_empty() {
+                truths = fields()
                     .map(|f| truth_field(f, free, free_model, reference))
-                    .collect(),
-            };
-            solved.and_then(|t| {
-                let r = fields()
-                    .enumerate()
-                    .map(|(b, f)| realize(f, t[b].as_ref(), b, rep, options.seed, travels[b]))
-                    .collect();
-                truths = Some(t);
-                r
-            })
-        };
+                    .collect::<Result<_, _>>()?;
+            }
+            fields()
+                .enumerate()
+                .map(|(b, f)| realize(f, truths[b].as_ref(), b, rep, options.seed, travels[b]))
+                .collect()
+        })();
         let realized = match realized {
             Ok(r) => r,
             Err(_) if stop_requested(options) => {
@@ -778,11 +775,10 @@ pub fn run_joint(
         // The joint problem of this repeat's data on the coarse or the full models.
         let problem = |coarse: bool| -> Result<JointProblem, FitError> {
             let mut stacked = Vec::with_capacity(blocks.len());
-            let mut data = realized.iter();
+            let mut data = realized.iter().zip(&truths);
             // The measured field's covariance and speckle shift belong to the first field block
             // (the study's single [measurement]).
             let mut first = true;
-            let mut b = 0;
             for spec in blocks {
                 stacked.push(match spec {
                     BlockSpec::Field(f) => {
@@ -791,17 +787,15 @@ pub fn run_joint(
                         } else {
                             f.model
                         };
-                        let d = data.next().expect("one realization per field block");
+                        let (d, truth) = data.next().expect("one realization per field block");
                         // The refinement starts near the reference: Newton from the virtual
                         // data's solution when they were made on this mesh.
-                        let warm = truths
+                        let warm = truth
                             .as_ref()
-                            .and_then(|t| t[b].as_ref())
                             .and_then(|t| t.state.as_deref())
                             .filter(|_| multilevel && !coarse && f.truth.is_none());
                         let p = field_problem(f, d, model, free, free_model, options, first, warm)?;
                         first = false;
-                        b += 1;
                         p
                     }
                     BlockSpec::Custom { build, .. } => build(coarse)?,

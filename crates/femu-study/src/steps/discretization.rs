@@ -293,7 +293,6 @@ fn transferred_state(from: &Model, state: &[f64], to: &Model) -> Option<Vec<f64>
     for ((t, a), b) in travels.iter().zip(&from.contacts).zip(&to.contacts) {
         out.push(t + a.first_contact - b.first_contact);
     }
-    out.extend_from_slice(&travels[from.contacts.len().min(travels.len())..]);
     Some(out)
 }
 
